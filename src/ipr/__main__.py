@@ -1,0 +1,5 @@
+import sys
+
+from ipr.cli import main
+
+sys.exit(main())

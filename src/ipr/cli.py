@@ -1,0 +1,259 @@
+"""The ``ipr`` command: one sub-command per job.
+
+Outside tools call these exactly so (the scene contract's interface):
+
+    ipr synth OUT_DIR --kind {static,dynamic} --seed S --count N
+    ipr eval SCENE RESULT [--models DIR] [--json FILE]
+
+Errors in the input are reported as one line naming the file, the problem and the fix, with a
+non-zero exit status and no traceback (``-v`` shows logs, ``-vv`` also tracebacks).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+import time
+from pathlib import Path
+
+from ipr.errors import IprError
+
+log = logging.getLogger("ipr")
+
+EXIT_INPUT_ERROR = 2
+
+
+def _progress():
+    """A rich progress bar on stderr (disabled when stderr is not a terminal)."""
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    console = Console(stderr=True)
+    return Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=console,
+        disable=not console.is_terminal,
+    )
+
+
+def _cmd_synth(args: argparse.Namespace) -> int:
+    from ipr.synth import SynthConfig, generate_scenes
+
+    config = SynthConfig()
+    if args.width or args.height:
+        from dataclasses import replace
+
+        config = replace(
+            config, width=args.width or config.width, height=args.height or config.height
+        )
+    started = time.perf_counter()
+    with _progress() as progress:
+        task = progress.add_task(f"synth {args.kind}", total=args.count)
+        paths = generate_scenes(
+            Path(args.out_dir),
+            kind=args.kind,
+            seed=args.seed,
+            count=args.count,
+            config=config,
+            models_dir=Path(args.models) if args.models else None,
+            overwrite=args.overwrite,
+            progress=lambda done, total: progress.update(task, completed=done),
+        )
+    elapsed = time.perf_counter() - started
+    for path in paths:
+        print(path)
+    log.info("generated %d scenes in %.1f s", len(paths), elapsed)
+    return 0
+
+
+def _cmd_eval(args: argparse.Namespace) -> int:
+    from ipr.metrics import evaluate, format_table
+
+    evaluation = evaluate(
+        Path(args.scene), Path(args.result), models_dir=Path(args.models) if args.models else None
+    )
+    print(format_table(evaluation))
+    if args.json:
+        _write_json_atomically(Path(args.json), evaluation.to_dict())
+    return 0
+
+
+def _cmd_ground_truth(args: argparse.Namespace) -> int:
+    from ipr.result import write_ground_truth_result
+
+    path = write_ground_truth_result(
+        Path(args.scene),
+        Path(args.out),
+        models_dir=Path(args.models) if args.models else None,
+        overwrite=args.overwrite,
+    )
+    print(path)
+    return 0
+
+
+def _cmd_check(args: argparse.Namespace) -> int:
+    from ipr.scene import load_scene
+
+    scene = load_scene(Path(args.scene))
+    height, width = scene.frames[0].shape
+    print(f"{scene.path}: valid scene")
+    print(
+        f"  frames: {len(scene.frames)} ({width}x{height}), world frame from {scene.world_frame_source}"
+    )
+    print(f"  pushes: {len(scene.pushes)}")
+    for number, push in enumerate(scene.pushes):
+        print(
+            f"    {number}: frame {push.before_frame}->{push.after_frame}, "
+            f"{push.distance_m * 100:.1f} cm at {push.speed_m_s * 100:.1f} cm/s"
+        )
+    return 0
+
+
+def _cmd_suite(args: argparse.Namespace) -> int:
+    from ipr.suites import SUITES, suite_scenes
+
+    names = SUITES if args.name == "all" else [args.name]
+    for name in names:
+        with _progress() as progress:
+            task = progress.add_task(f"suite {name}", total=None)
+            scenes = suite_scenes(
+                name,
+                progress=lambda done, total, t=task: progress.update(
+                    t, completed=done, total=total
+                ),
+            )
+        print(f"{name}: {len(scenes)} scenes in {scenes[0].parent if scenes else '-'}")
+    return 0
+
+
+def _write_json_atomically(path: Path, content: dict) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    staging = path.with_name(f".{path.name}.tmp")
+    staging.write_text(json.dumps(content, indent=2, allow_nan=False) + "\n", encoding="utf-8")
+    staging.replace(path)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``ipr`` and its sub-commands."""
+    parser = argparse.ArgumentParser(
+        prog="ipr",
+        description="Complete 3D models of unknown objects in clutter by inverse physics reasoning.",
+    )
+    parser.add_argument(
+        "-v",
+        "--verbose",
+        action="count",
+        default=0,
+        help="log progress (-v) and debugging details with tracebacks (-vv)",
+    )
+    # The same flag after the sub-command; SUPPRESS keeps it from resetting the count above.
+    verbosity = argparse.ArgumentParser(add_help=False)
+    verbosity.add_argument(
+        "-v",
+        "--verbose",
+        action="count",
+        default=argparse.SUPPRESS,
+        help="log progress (-v) and debugging details with tracebacks (-vv)",
+    )
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    add_command = commands.add_parser
+
+    def add_parser(name: str, **kwargs) -> argparse.ArgumentParser:
+        return add_command(name, parents=[verbosity], **kwargs)
+
+    commands.add_parser = add_parser  # type: ignore[method-assign]
+
+    synth = commands.add_parser(
+        "synth",
+        help="generate benchmark scenes with ground truth (MuJoCo)",
+        description="Generate piles of YCB objects (or procedural shapes when the YCB meshes are "
+        "absent) on a table, in a container or behind a front wall, with realistic "
+        "depth noise, pushes (dynamic) and BOP ground truth. Scenes go to "
+        "OUT_DIR/<name>/, shared models to OUT_DIR/models/.",
+    )
+    synth.add_argument("out_dir", metavar="OUT_DIR")
+    synth.add_argument("--kind", choices=["static", "dynamic"], required=True)
+    synth.add_argument("--seed", type=int, default=0, help="base seed (default 0)")
+    synth.add_argument("--count", type=int, default=1, help="number of scenes (default 1)")
+    synth.add_argument("--models", metavar="DIR", help="YCB models folder (default: shared data)")
+    synth.add_argument("--width", type=int, help="image width in pixels (default 640)")
+    synth.add_argument("--height", type=int, help="image height in pixels (default 480)")
+    synth.add_argument("--overwrite", action="store_true", help="replace existing scenes")
+    synth.set_defaults(handler=_cmd_synth)
+
+    evaluate = commands.add_parser(
+        "eval",
+        help="score a result against a scene's ground truth",
+        description="Voxel IoU, precision, recall and F1 (5 mm) in scene space and object space "
+        "(Hungarian matching, objects visible in frame 0 only), per SCENE_FORMAT.md.",
+    )
+    evaluate.add_argument("scene", metavar="SCENE")
+    evaluate.add_argument("result", metavar="RESULT")
+    evaluate.add_argument(
+        "--models", metavar="DIR", help="BOP models folder (default SCENE/../models)"
+    )
+    evaluate.add_argument("--json", metavar="FILE", help="also write the metrics as JSON")
+    evaluate.set_defaults(handler=_cmd_eval)
+
+    ground_truth = commands.add_parser(
+        "ground-truth",
+        help="write a scene's ground truth as a result (an upper bound)",
+        description="Write the ground-truth objects of frame 0 as a result directory per the "
+        "contract: a format reference for outside tools and the metrics' upper bound.",
+    )
+    ground_truth.add_argument("scene", metavar="SCENE")
+    ground_truth.add_argument("-o", "--out", required=True, metavar="OUT")
+    ground_truth.add_argument("--models", metavar="DIR", help="BOP models folder")
+    ground_truth.add_argument("--overwrite", action="store_true")
+    ground_truth.set_defaults(handler=_cmd_ground_truth)
+
+    check = commands.add_parser("check", help="validate a scene directory and summarise it")
+    check.add_argument("scene", metavar="SCENE")
+    check.set_defaults(handler=_cmd_check)
+
+    suite = commands.add_parser(
+        "suite",
+        help="generate (or find cached) benchmark suites",
+        description="Benchmark suites are generated from fixed seeds on first use and cached "
+        "outside the repository ($IPR_CACHE, default ~/.cache/ipr).",
+    )
+    suite.add_argument("name", choices=["ycb-static", "ycb-dynamic", "ycbv-real", "all"])
+    suite.set_defaults(handler=_cmd_suite)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the ``ipr`` command; returns the exit status."""
+    args = build_parser().parse_args(argv)
+    _configure_logging(args.verbose)
+    try:
+        return args.handler(args)
+    except (IprError, ValueError, FileExistsError) as error:
+        if args.verbose >= 2:
+            raise
+        print(f"ipr {args.command}: error: {error}", file=sys.stderr)
+        return EXIT_INPUT_ERROR
+    except KeyboardInterrupt:
+        print("ipr: interrupted", file=sys.stderr)
+        return 130
+
+
+def _configure_logging(verbosity: int) -> None:
+    from rich.logging import RichHandler
+
+    level = logging.WARNING if verbosity == 0 else logging.INFO if verbosity == 1 else logging.DEBUG
+    logging.basicConfig(
+        level=level,
+        format="%(message)s",
+        datefmt="[%X]",
+        handlers=[RichHandler(show_path=False, rich_tracebacks=True)],
+    )
+
+
+if __name__ == "__main__":
+    sys.exit(main())

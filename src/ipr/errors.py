@@ -1,0 +1,26 @@
+"""Errors that reach users: each says what is wrong, in which file, and how to fix it."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+class IprError(Exception):
+    """Base of every error ipr reports to a user (the CLI prints it without a traceback)."""
+
+
+class SceneError(IprError):
+    """A scene directory does not follow the scene contract (``SCENE_FORMAT.md``)."""
+
+    def __init__(self, path: Path | str, problem: str, fix: str = "") -> None:
+        self.path = Path(path)
+        self.problem = problem
+        self.fix = fix
+        message = f"{self.path}: {problem}"
+        if fix:
+            message += f" (fix: {fix})"
+        super().__init__(message)
+
+
+class ResultError(SceneError):
+    """A result directory does not follow the result contract."""

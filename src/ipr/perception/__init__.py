@@ -1,0 +1,1 @@
+"""Perception: from RGB-D frames to partial objects, facets and free space (paper Sec. III)."""
