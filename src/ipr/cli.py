@@ -12,12 +12,12 @@ non-zero exit status and no traceback (``-v`` shows logs, ``-vv`` also traceback
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import sys
 import time
 from pathlib import Path
 
+from ipr.atomic import write_json
 from ipr.errors import IprError
 
 log = logging.getLogger("ipr")
@@ -79,7 +79,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     )
     print(format_table(evaluation))
     if args.json:
-        _write_json_atomically(Path(args.json), evaluation.to_dict())
+        write_json(Path(args.json), evaluation.to_dict())
     return 0
 
 
@@ -129,13 +129,6 @@ def _cmd_suite(args: argparse.Namespace) -> int:
             )
         print(f"{name}: {len(scenes)} scenes in {scenes[0].parent if scenes else '-'}")
     return 0
-
-
-def _write_json_atomically(path: Path, content: dict) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    staging = path.with_name(f".{path.name}.tmp")
-    staging.write_text(json.dumps(content, indent=2, allow_nan=False) + "\n", encoding="utf-8")
-    staging.replace(path)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -11,10 +11,8 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import re
 import shutil
-import tempfile
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,6 +21,7 @@ from typing import Any
 import numpy as np
 from PIL import Image
 
+from ipr.atomic import commit_directory, staging_directory
 from ipr.camera import backproject, invert_transform, make_transform
 from ipr.errors import SceneError
 
@@ -606,19 +605,7 @@ def load_model(models_dir: Path | str, obj_id: int):
 def _atomic_directory(target: Path, overwrite: bool) -> Path:
     if target.exists() and not overwrite:
         raise SceneError(target, "already exists", "choose another folder or allow overwriting")
-    target.parent.mkdir(parents=True, exist_ok=True)
-    return Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
-
-
-def commit_directory(staging: Path, target: Path) -> None:
-    """Move a fully written staging folder into place (replacing ``target`` if it exists)."""
-    if target.exists():
-        backup = target.with_name(f".{target.name}.old-{os.getpid()}")
-        os.replace(target, backup)
-        os.replace(staging, target)
-        shutil.rmtree(backup, ignore_errors=True)
-    else:
-        os.replace(staging, target)
+    return staging_directory(target)
 
 
 def write_scene(

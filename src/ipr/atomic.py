@@ -1,0 +1,41 @@
+"""Atomic output: folders and files are written to a temporary path beside the target and renamed
+into place, so a failed or interrupted run never leaves half-written output."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Any
+
+
+def staging_directory(target: Path) -> Path:
+    """A fresh, world-readable temporary folder beside ``target`` (same filesystem)."""
+    target.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
+    staging.chmod(0o755)  # mkdtemp makes it private; scenes and results are meant to be shared
+    return staging
+
+
+def commit_directory(staging: Path, target: Path) -> None:
+    """Move a fully written staging folder into place (replacing ``target`` if it exists)."""
+    if target.exists():
+        backup = target.with_name(f".{target.name}.old-{os.getpid()}")
+        os.replace(target, backup)
+        os.replace(staging, target)
+        shutil.rmtree(backup, ignore_errors=True)
+    else:
+        os.replace(staging, target)
+
+
+def write_json(path: Path, content: Any) -> None:
+    """Write JSON (no NaN/inf) through a temporary file and a rename."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    staging = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        staging.write_text(json.dumps(content, indent=2, allow_nan=False) + "\n", encoding="utf-8")
+        staging.replace(path)
+    finally:
+        staging.unlink(missing_ok=True)
