@@ -1,0 +1,561 @@
+"""Result directories (``SCENE_FORMAT.md``, "Result directory"): write atomically, read, validate.
+
+A result holds, per reconstructed object, its most probable complete shape (``best.ply``) and
+optionally its weighted shape hypotheses (``hyp_NNN.ply``), all in metres in the world frame at
+the object's frame-0 pose, plus the world-from-camera transforms the method used (so that ground
+truth given in camera frames can be placed in the result's world frame), the method name and
+timings. ``write_ground_truth_result`` builds the oracle result from a scene's ground truth (an
+evaluation-only function: inference never reads ground truth).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ipr.atomic import commit_directory, staging_directory
+from ipr.errors import ResultError
+
+RESULT_FORMAT = "ipr-result/1"
+RESULT_FILE = "result.json"
+#: Tolerance on a sum of hypothesis probabilities being 1.
+PROBABILITY_TOLERANCE = 1e-3
+#: Tolerance on a rotation being orthonormal (|R R^T - I|) with determinant +1.
+RIGID_TOLERANCE = 1e-3
+#: Keys of result.json defined by the contract; any other top-level key is kept in ``extra``.
+RESERVED_KEYS = ("format", "method", "world_from_camera", "objects", "timing_s")
+#: Method name of the oracle result built from ground truth.
+GROUND_TRUTH_METHOD = "ground-truth"
+
+
+@dataclass(frozen=True)
+class HypothesisResult:
+    """One weighted shape hypothesis of an object: mesh file (absolute path) and probability."""
+
+    mesh_path: Path
+    probability: float
+
+
+@dataclass(frozen=True)
+class ObjectResult:
+    """One reconstructed object.
+
+    Attributes:
+        id: the object's id in the result (unique, any integer).
+        mesh_path: absolute path of its most probable shape (world frame, metres, frame-0 pose).
+        probability: marginal posterior of its best hypothesis, in [0, 1].
+        hypotheses: its weighted hypotheses (probabilities sum to 1), possibly empty.
+        mesh: the loaded best mesh (a ``trimesh.Trimesh``) when ``load_result`` read it.
+    """
+
+    id: int
+    mesh_path: Path
+    probability: float
+    hypotheses: tuple[HypothesisResult, ...] = ()
+    mesh: Any = field(default=None, compare=False, repr=False)
+
+    def load_mesh(self) -> Any:
+        """The best mesh as a trimesh (the cached one when available); ResultError if unreadable."""
+        if self.mesh is not None:
+            return self.mesh
+        return read_mesh(self.mesh_path)
+
+
+@dataclass(frozen=True, eq=False)
+class Result:
+    """A validated result directory.
+
+    Attributes:
+        path: the result directory.
+        method: name of the method that produced it (e.g. ``"ipr+action+uniform"``).
+        world_from_camera: frame id -> (4, 4) float64 rigid transform (OpenCV camera to world,
+            metres); frame 0 is always present.
+        objects: the reconstructed objects, in file order.
+        timing_s: named durations in seconds.
+        extra: any further top-level keys of result.json, as parsed JSON.
+    """
+
+    path: Path
+    method: str
+    world_from_camera: dict[int, np.ndarray]
+    objects: tuple[ObjectResult, ...]
+    timing_s: dict[str, float] = field(default_factory=dict)
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+# --------------------------------------------------------------------------------------------
+# Meshes
+
+
+def _to_trimesh(mesh: Any) -> Any:
+    """A trimesh of a trimesh or a (vertices (V, 3), faces (F, 3)) pair (not processed)."""
+    import trimesh
+
+    if isinstance(mesh, trimesh.Trimesh):
+        return mesh
+    if isinstance(mesh, tuple | list) and len(mesh) == 2:
+        vertices, faces = mesh
+        return trimesh.Trimesh(
+            np.asarray(vertices, float).reshape(-1, 3),
+            np.asarray(faces, np.int64).reshape(-1, 3),
+            process=False,
+        )
+    raise TypeError(f"expected a trimesh.Trimesh or a (vertices, faces) pair, got {type(mesh)}")
+
+
+def read_mesh(path: Path | str) -> Any:
+    """Load a triangle mesh file (any trimesh format) with finite vertices and at least one face;
+    ResultError naming the file otherwise."""
+    import trimesh
+
+    path = Path(path)
+    if not path.is_file():
+        raise ResultError(
+            path, "mesh file is missing", "write the mesh or fix its path in result.json"
+        )
+    try:
+        mesh = trimesh.load(path, force="mesh", process=False)
+    except Exception as error:  # trimesh raises many types on corrupt files
+        raise ResultError(
+            path,
+            f"mesh file cannot be read ({type(error).__name__}: {error})",
+            "write a valid triangle mesh (binary PLY)",
+        ) from None
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        raise ResultError(path, "mesh file holds no triangles", "write a triangle mesh")
+    if not np.all(np.isfinite(mesh.vertices)):
+        raise ResultError(path, "mesh vertices contain NaN or inf", "write finite coordinates")
+    return mesh
+
+
+def _check_ply_header(path: Path) -> None:
+    """Cheap readability check of a hypothesis file: exists and, for PLY, has a sane header."""
+    if not path.is_file():
+        raise ResultError(
+            path, "hypothesis mesh file is missing", "write the mesh or fix its path in result.json"
+        )
+    if path.suffix.lower() != ".ply":
+        return
+    with path.open("rb") as handle:
+        head = handle.read(4096)
+    if not head.startswith(b"ply") or b"end_header" not in head or b"element vertex" not in head:
+        raise ResultError(
+            path,
+            "hypothesis mesh is not a valid PLY file (bad header)",
+            "write a valid triangle mesh (binary PLY)",
+        )
+
+
+# --------------------------------------------------------------------------------------------
+# Reading
+
+
+def _read_result_json(path: Path) -> Any:
+    """Parse result.json, rejecting NaN, Infinity and numbers that overflow to inf."""
+    if not path.is_file():
+        raise ResultError(
+            path,
+            "result.json is missing",
+            "pass a result directory written by ipr (it holds result.json)",
+        )
+
+    def reject_constant(name: str) -> Any:
+        raise ResultError(path, f"result.json contains {name}", "write finite numbers only")
+
+    def finite_float(text: str) -> float:
+        value = float(text)
+        if not math.isfinite(value):
+            raise ResultError(
+                path,
+                f"result.json contains the non-finite number {text}",
+                "write finite numbers only",
+            )
+        return value
+
+    try:
+        return json.loads(
+            path.read_text(encoding="utf-8"),
+            parse_constant=reject_constant,
+            parse_float=finite_float,
+        )
+    except json.JSONDecodeError as error:
+        raise ResultError(
+            path,
+            f"result.json is not valid JSON: {error.msg} at line {error.lineno} column {error.colno}",
+            "correct the JSON syntax",
+        ) from None
+    except UnicodeDecodeError:
+        raise ResultError(path, "result.json is not UTF-8 text", "save it as UTF-8 JSON") from None
+
+
+def _number(value: Any, path: Path, where: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ResultError(path, f"{where} must be a number, got {value!r}")
+    if not math.isfinite(value):
+        raise ResultError(path, f"{where} is not finite", "write finite numbers only")
+    return float(value)
+
+
+def _probability(value: Any, path: Path, where: str) -> float:
+    number = _number(value, path, where)
+    if not 0.0 <= number <= 1.0:
+        raise ResultError(
+            path, f"{where} is {number}, outside [0, 1]", "write probabilities in [0, 1]"
+        )
+    return number
+
+
+def check_rigid(matrix: Any, path: Path, where: str) -> np.ndarray:
+    """A (4, 4) float64 rigid transform from nested lists; ResultError naming ``where`` if not."""
+    try:
+        array = np.asarray(matrix, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ResultError(path, f"{where} must be a 4x4 matrix of numbers") from None
+    if array.shape != (4, 4):
+        raise ResultError(
+            path,
+            f"{where} must be a 4x4 matrix, got shape {array.shape}",
+            "write [[r r r t], [r r r t], [r r r t], [0 0 0 1]] in metres",
+        )
+    if not np.all(np.isfinite(array)):
+        raise ResultError(path, f"{where} contains NaN or inf", "write finite numbers only")
+    rotation = array[:3, :3]
+    if (
+        np.abs(array[3] - [0.0, 0.0, 0.0, 1.0]).max() > 1e-6
+        or np.abs(rotation @ rotation.T - np.eye(3)).max() > RIGID_TOLERANCE
+        or np.linalg.det(rotation) < 0
+    ):
+        raise ResultError(
+            path,
+            f"{where} is not a rigid transform",
+            "give an orthonormal rotation (det +1) and last row [0, 0, 0, 1]",
+        )
+    return array
+
+
+def _mesh_path(value: Any, root: Path, json_path: Path, where: str) -> Path:
+    if not isinstance(value, str) or not value:
+        raise ResultError(json_path, f"{where} must be a file path string, got {value!r}")
+    candidate = Path(value)
+    return candidate if candidate.is_absolute() else root / candidate
+
+
+def load_result(path: Path | str, *, load_meshes: bool = True) -> Result:
+    """Read and validate a result directory (or its result.json); ResultError on any problem.
+
+    Checks: result.json exists and parses (no NaN/inf), ``format`` is ``"ipr-result/1"``,
+    ``method`` is a string, ``world_from_camera`` has frame ``"0"`` and only rigid 4x4 matrices,
+    object ids are unique integers, every mesh file exists, probabilities are in [0, 1] and each
+    object's hypotheses sum to 1 (within 1e-3). With ``load_meshes`` the best meshes are read
+    (unreadable or non-finite meshes are errors) and kept in ``ObjectResult.mesh``; hypothesis
+    files are checked for existence and, for PLY, a valid header (they are not fully parsed).
+    """
+    root = Path(path)
+    if root.is_file() and root.name == RESULT_FILE:
+        root = root.parent
+    if not root.is_dir():
+        raise ResultError(root, "result directory not found", "pass the folder holding result.json")
+    json_path = root / RESULT_FILE
+    raw = _read_result_json(json_path)
+    if not isinstance(raw, dict):
+        raise ResultError(json_path, "result.json must be a JSON object")
+    tag = raw.get("format")
+    if tag != RESULT_FORMAT:
+        raise ResultError(
+            json_path, f"unknown or missing format tag {tag!r}", f'set "format": "{RESULT_FORMAT}"'
+        )
+    method = raw.get("method")
+    if not isinstance(method, str) or not method:
+        raise ResultError(json_path, f"'method' must be a non-empty string, got {method!r}")
+
+    cameras = raw.get("world_from_camera")
+    if not isinstance(cameras, dict):
+        raise ResultError(
+            json_path,
+            "'world_from_camera' must map frame ids to 4x4 matrices",
+            'add "world_from_camera": {"0": [[...4x4...]]}',
+        )
+    world_from_camera: dict[int, np.ndarray] = {}
+    for key, matrix in cameras.items():
+        if not str(key).isdigit():
+            raise ResultError(
+                json_path,
+                f"world_from_camera key {key!r} is not a frame id",
+                'use frame ids such as "0"',
+            )
+        world_from_camera[int(key)] = check_rigid(matrix, json_path, f"world_from_camera[{key!r}]")
+    if 0 not in world_from_camera:
+        raise ResultError(
+            json_path,
+            'world_from_camera has no frame "0"',
+            "record the world-from-camera transform of frame 0",
+        )
+
+    timing_raw = raw.get("timing_s", {})
+    if not isinstance(timing_raw, dict):
+        raise ResultError(json_path, "'timing_s' must map names to seconds")
+    timing = {
+        str(name): _number(value, json_path, f"timing_s[{name!r}]")
+        for name, value in timing_raw.items()
+    }
+
+    objects_raw = raw.get("objects")
+    if not isinstance(objects_raw, list):
+        raise ResultError(json_path, "'objects' must be a list", 'write "objects": [] if none')
+    objects = []
+    seen: set[int] = set()
+    for number, item in enumerate(objects_raw):
+        where = f"objects[{number}]"
+        if not isinstance(item, dict):
+            raise ResultError(json_path, f"{where} must be an object with id, mesh, probability")
+        object_id = item.get("id")
+        if isinstance(object_id, bool) or not isinstance(object_id, int):
+            raise ResultError(json_path, f"{where}: 'id' must be an integer, got {object_id!r}")
+        if object_id in seen:
+            raise ResultError(
+                json_path,
+                f"{where}: duplicate object id {object_id}",
+                "give every object a unique id",
+            )
+        seen.add(object_id)
+        where = f"object {object_id}"
+        mesh_path = _mesh_path(item.get("mesh"), root, json_path, f"{where}: 'mesh'")
+        if not mesh_path.is_file():
+            raise ResultError(
+                mesh_path,
+                f"mesh file of {where} is missing (named in {json_path})",
+                "write the mesh or fix its path in result.json",
+            )
+        if "probability" not in item:
+            raise ResultError(json_path, f"{where}: 'probability' is missing")
+        probability = _probability(item["probability"], json_path, f"{where}: probability")
+        mesh = None
+        if load_meshes:
+            try:
+                mesh = read_mesh(mesh_path)
+            except ResultError as error:
+                raise ResultError(
+                    error.path, f"{error.problem} ({where}, named in {json_path})", error.fix
+                ) from None
+        hypotheses_raw = item.get("hypotheses", [])
+        if not isinstance(hypotheses_raw, list):
+            raise ResultError(json_path, f"{where}: 'hypotheses' must be a list")
+        hypotheses = []
+        for index, hypothesis in enumerate(hypotheses_raw):
+            label = f"{where} hypothesis {index}"
+            if not isinstance(hypothesis, dict):
+                raise ResultError(json_path, f"{label} must be an object with mesh, probability")
+            hyp_path = _mesh_path(hypothesis.get("mesh"), root, json_path, f"{label}: 'mesh'")
+            if "probability" not in hypothesis:
+                raise ResultError(json_path, f"{label}: 'probability' is missing")
+            hyp_probability = _probability(
+                hypothesis["probability"], json_path, f"{label}: probability"
+            )
+            try:
+                _check_ply_header(hyp_path)
+            except ResultError as error:
+                raise ResultError(
+                    error.path, f"{error.problem} ({label}, named in {json_path})", error.fix
+                ) from None
+            hypotheses.append(HypothesisResult(hyp_path, hyp_probability))
+        if hypotheses:
+            total = sum(h.probability for h in hypotheses)
+            if abs(total - 1.0) > PROBABILITY_TOLERANCE:
+                raise ResultError(
+                    json_path,
+                    f"{where}: hypothesis probabilities sum to {total:.6g}, not 1",
+                    f"normalise them (tolerance {PROBABILITY_TOLERANCE})",
+                )
+        objects.append(ObjectResult(object_id, mesh_path, probability, tuple(hypotheses), mesh))
+
+    extra = {key: value for key, value in raw.items() if key not in RESERVED_KEYS}
+    return Result(root, method, world_from_camera, tuple(objects), timing, extra)
+
+
+# --------------------------------------------------------------------------------------------
+# Writing
+
+ObjectToWrite = tuple[Any, Sequence[tuple[Any, float]]]
+
+
+def write_result(
+    out_dir: Path | str,
+    method: str,
+    world_from_camera: Mapping[int, np.ndarray] | np.ndarray,
+    objects: Sequence[ObjectToWrite],
+    timing_s: Mapping[str, float] | None = None,
+    extra: Mapping[str, Any] | None = None,
+    *,
+    overwrite: bool = False,
+) -> Path:
+    """Write a result directory atomically (staged beside ``out_dir``, then renamed into place).
+
+    Args:
+        out_dir: the result directory to create (replaced only when ``overwrite``).
+        method: method name recorded in result.json.
+        world_from_camera: frame id -> (4, 4) rigid OpenCV-camera-to-world transform (metres);
+            frame 0 is required. A single (4, 4) array means frame 0.
+        objects: per object k (its id), ``(best_mesh, hypotheses)`` where meshes are trimesh
+            meshes or (vertices, faces) pairs in metres, world frame, frame-0 pose, and
+            ``hypotheses`` is a sequence of ``(mesh, probability)`` summing to 1 (the best
+            included). The object's probability is its largest hypothesis probability. With no
+            hypotheses the best mesh is the only hypothesis, with probability 1.
+        timing_s: named durations in seconds.
+        extra: further JSON-serialisable top-level keys (not those of the contract).
+
+    Writes ``result.json`` and ``objects/<k>/best.ply`` (+ ``hyp_NNN.ply``) as binary PLY.
+    Raises ValueError on invalid inputs and ResultError if ``out_dir`` exists without
+    ``overwrite``. Returns ``out_dir``.
+    """
+    target = Path(out_dir)
+    if isinstance(world_from_camera, np.ndarray):
+        world_from_camera = {0: world_from_camera}
+    cameras = {}
+    for key, matrix in world_from_camera.items():
+        try:
+            cameras[str(int(key))] = check_rigid(matrix, target, f"world_from_camera[{key}]")
+        except ResultError as error:
+            raise ValueError(error.problem) from None
+    if "0" not in cameras:
+        raise ValueError("world_from_camera must contain frame 0")
+    if not isinstance(method, str) or not method:
+        raise ValueError("method must be a non-empty string")
+    timing = {str(name): float(value) for name, value in (timing_s or {}).items()}
+    if not all(math.isfinite(value) for value in timing.values()):
+        raise ValueError("timing_s values must be finite")
+    extra = dict(extra or {})
+    clash = set(extra) & set(RESERVED_KEYS)
+    if clash:
+        raise ValueError(f"extra must not redefine contract keys {sorted(clash)}")
+
+    prepared = []
+    for k, entry in enumerate(objects):
+        best, hypotheses = entry
+        best_mesh = _to_trimesh(best)
+        _check_mesh_for_writing(best_mesh, f"object {k} best mesh")
+        hyps = [(_to_trimesh(mesh), float(p)) for mesh, p in hypotheses]
+        for index, (mesh, p) in enumerate(hyps):
+            _check_mesh_for_writing(mesh, f"object {k} hypothesis {index}")
+            if not (math.isfinite(p) and 0.0 <= p <= 1.0):
+                raise ValueError(f"object {k} hypothesis {index}: probability {p} not in [0, 1]")
+        if hyps and abs(sum(p for _, p in hyps) - 1.0) > PROBABILITY_TOLERANCE:
+            raise ValueError(
+                f"object {k}: hypothesis probabilities sum to {sum(p for _, p in hyps):.6g}, not 1"
+            )
+        prepared.append((best_mesh, hyps))
+
+    if target.exists() and not overwrite:
+        raise ResultError(target, "already exists", "choose another folder or allow overwriting")
+    staging = staging_directory(target)
+    try:
+        entries = []
+        for k, (best_mesh, hyps) in enumerate(prepared):
+            folder = staging / "objects" / str(k)
+            folder.mkdir(parents=True)
+            best_mesh.export(folder / "best.ply", file_type="ply")
+            best_name = f"objects/{k}/best.ply"
+            if hyps:
+                hyp_entries = []
+                for index, (mesh, p) in enumerate(hyps):
+                    name = f"hyp_{index:03d}.ply"
+                    mesh.export(folder / name, file_type="ply")
+                    hyp_entries.append({"mesh": f"objects/{k}/{name}", "probability": p})
+                probability = max(p for _, p in hyps)
+            else:
+                hyp_entries = [{"mesh": best_name, "probability": 1.0}]
+                probability = 1.0
+            entries.append(
+                {"id": k, "mesh": best_name, "probability": probability, "hypotheses": hyp_entries}
+            )
+        document = {
+            "format": RESULT_FORMAT,
+            "method": method,
+            "world_from_camera": {
+                key: matrix.tolist()
+                for key, matrix in sorted(cameras.items(), key=lambda item: int(item[0]))
+            },
+            "objects": entries,
+            "timing_s": timing,
+            **extra,
+        }
+        text = json.dumps(document, indent=1, allow_nan=False)
+        (staging / RESULT_FILE).write_text(text + "\n", encoding="utf-8")
+        commit_directory(staging, target)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    return target
+
+
+def _check_mesh_for_writing(mesh: Any, what: str) -> None:
+    if len(mesh.faces) == 0:
+        raise ValueError(f"{what} has no faces")
+    if not np.all(np.isfinite(mesh.vertices)):
+        raise ValueError(f"{what} has NaN or inf vertices")
+
+
+# --------------------------------------------------------------------------------------------
+# Ground truth (evaluation only)
+
+
+def write_ground_truth_result(
+    scene_path: Path | str,
+    out_dir: Path | str,
+    models_dir: Path | str | None = None,
+    overwrite: bool = False,
+    *,
+    visible_only: bool = True,
+    min_visible_px: int = 100,
+) -> Path:
+    """Write the oracle result of a scene: its ground-truth models at their frame-0 poses.
+
+    The world frame is the one ``ipr.scene.load_scene`` builds for frame 0 (camera poses, or the
+    support plane); each model (BOP, mm -> m) is placed with ``world_from_camera[0] @
+    camera_from_model`` and given probability 1, method ``"ground-truth"``. With
+    ``visible_only`` (default) only objects visible in frame 0 by the metrics' rule
+    (``ipr.metrics.visible_pixel_counts`` >= ``min_visible_px``) are written, so that the oracle
+    scores 1 in both spaces. ``extra["ground_truth"]`` records the scene, the BOP ``obj_id`` of
+    each written object (in object order) and the excluded ones.
+    """
+    from ipr.metrics import frame0_ground_truth, visible_pixel_counts
+    from ipr.scene import load_scene
+
+    scene = load_scene(scene_path)
+    poses, models, models_dir = frame0_ground_truth(scene_path, models_dir)
+    world_from_camera = scene.frames[0].world_from_camera
+    keep = [True] * len(poses)
+    if visible_only:
+        counts, _ = visible_pixel_counts(scene, poses, models)
+        keep = [int(c) >= min_visible_px for c in counts]
+    objects = []
+    for pose, mesh, kept in zip(poses, models, keep, strict=True):
+        if kept:
+            placed = mesh.copy()
+            placed.apply_transform(world_from_camera @ pose.camera_from_model)
+            objects.append((placed, []))
+    extra = {
+        "ground_truth": {
+            "scene": str(Path(scene_path).resolve()),
+            "models_dir": str(Path(models_dir).resolve()),
+            "obj_ids": [pose.obj_id for pose, kept in zip(poses, keep, strict=True) if kept],
+            "excluded_obj_ids": [
+                pose.obj_id for pose, kept in zip(poses, keep, strict=True) if not kept
+            ],
+        }
+    }
+    return write_result(
+        out_dir,
+        GROUND_TRUTH_METHOD,
+        {0: world_from_camera},
+        objects,
+        {"total": 0.0},
+        extra,
+        overwrite=overwrite,
+    )
