@@ -25,8 +25,7 @@ from pathlib import Path
 
 from ipr.data import cache_dir, ycb_models_dir, ycbv_real_dir
 from ipr.errors import IprError
-
-ARRANGEMENTS = ("table", "container", "drawer")
+from ipr.synth import ARRANGEMENTS
 
 
 @dataclass(frozen=True)

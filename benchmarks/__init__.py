@@ -1,0 +1,1 @@
+"""``make bench``: accuracy and speed benchmarks, written to docs/BENCHMARKS.md."""
