@@ -113,14 +113,8 @@ def run(suites: dict[str, list[Path]]) -> str:
             continue
         stats = suite_statistics(scenes)
         rows.append(
-            [
-                name,
-                stats["scenes"],
-                stats["objects"],
-                stats["visible"],
-                stats["frames"],
-                stats["pushes"],
-            ]
+            [name]
+            + [f"{stats[key]:g}" for key in ("scenes", "objects", "visible", "frames", "pushes")]
         )
     lines += [
         markdown_table(
