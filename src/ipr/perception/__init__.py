@@ -1,1 +1,210 @@
-"""Perception: from RGB-D frames to partial objects, facets and free space (paper Sec. III)."""
+"""Perception: from RGB-D frames to tracked partial objects, facets and free space (paper Sec. III).
+
+``perceive_scene(scene)`` runs, per frame: known-plane and robot removal, supervoxels, the
+convexity-weighted graph and spectral clustering (``segmentation``); then tracking across frames
+(``tracking``), facets per object (``facets``) and the free/occupied/unknown voxel map of each
+frame (``free_space``).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ipr.camera import invert_transform
+from ipr.perception.config import PerceptionConfig
+from ipr.perception.facets import object_facets, pixel_areas
+from ipr.perception.free_space import SpaceMap, VoxelGrid, observe_space
+from ipr.perception.tracking import track_segments
+from ipr.perception.types import FrameSegmentation, KnownPlane, PartialObject
+from ipr.scene import Scene
+
+__all__ = ["Perception", "PerceptionConfig", "perceive_scene"]
+
+
+@dataclass(frozen=True, eq=False)
+class Perception:
+    """Everything perception found in a scene.
+
+    Attributes:
+        labels: per frame, (H, W) int32 tracked object ids (0 = background, support, walls,
+            robot); the same id is the same object in every frame.
+        facet_labels: per frame, (H, W) int32 facet numbers (0 = none), unique within a frame.
+        objects: per frame, the partial objects O_{i,t} ordered by id.
+        planes: per frame, the support and walls found.
+        segmentations: per frame, the untracked segmentation with its supervoxel graph.
+        free_space: per frame, the voxel map (None when not computed or no object was found).
+        timing_s: seconds: ``per_frame`` (list; planes to facets, tracking shared out),
+            ``free_space_per_frame`` (list), and totals per step.
+    """
+
+    labels: list[np.ndarray]
+    facet_labels: list[np.ndarray]
+    objects: list[tuple[PartialObject, ...]]
+    planes: list[tuple[KnownPlane, ...]]
+    segmentations: list[FrameSegmentation]
+    free_space: list[SpaceMap | None]
+    timing_s: dict = field(default_factory=dict)
+
+    @property
+    def object_ids(self) -> list[int]:
+        """Every object id seen in any frame, sorted."""
+        return sorted({obj.id for frame_objects in self.objects for obj in frame_objects})
+
+
+def perceive_scene(
+    scene: Scene, config: PerceptionConfig | None = None, *, with_free_space: bool = True
+) -> Perception:
+    """Segment, track and decompose every frame of a scene into partial objects with facets."""
+    from ipr.perception.robot import robot_pixels
+    from ipr.perception.segmentation import segment_frame
+
+    config = config or PerceptionConfig()
+    segment_seconds, segmentations = [], []
+    for frame in scene.frames:
+        started = time.perf_counter()
+        segmentations.append(
+            segment_frame(frame, pushes=scene.pushes, pusher=scene.pusher, config=config)
+        )
+        segment_seconds.append(time.perf_counter() - started)
+
+    started = time.perf_counter()
+    points = [frame.points_world() for frame in scene.frames]
+    labels = track_segments(
+        [s.labels for s in segmentations], points, [f.rgb for f in scene.frames], config.tracking
+    )
+    tracking_seconds = time.perf_counter() - started
+
+    facet_seconds, objects, facet_labels = [], [], []
+    for frame, segmentation, frame_labels, frame_points in zip(
+        scene.frames, segmentations, labels, points, strict=True
+    ):
+        started = time.perf_counter()
+        frame_objects, frame_facets = _partial_objects(
+            frame, segmentation, frame_labels, frame_points, config
+        )
+        objects.append(frame_objects)
+        facet_labels.append(frame_facets)
+        facet_seconds.append(time.perf_counter() - started)
+
+    free_space: list[SpaceMap | None] = [None] * len(scene.frames)
+    free_seconds = [0.0] * len(scene.frames)
+    grid = workspace_grid(objects, config) if with_free_space else None
+    if grid is not None:
+        for index, frame in enumerate(scene.frames):
+            started = time.perf_counter()
+            # The robot is not an obstacle to hypotheses, and space behind it is unknown.
+            ignore = robot_pixels(frame, scene.pushes, scene.pusher, config)
+            free_space[index] = observe_space(
+                frame.depth_m,
+                frame.K,
+                frame.world_from_camera,
+                grid,
+                surface_margin_m=config.surface_margin_m,
+                ignore_mask=ignore,
+            )
+            free_seconds[index] = time.perf_counter() - started
+
+    tracking_share = tracking_seconds / max(len(scene.frames), 1)
+    per_frame = [
+        s + f + tracking_share for s, f in zip(segment_seconds, facet_seconds, strict=True)
+    ]
+    timing = {
+        "per_frame": per_frame,
+        "free_space_per_frame": free_seconds,
+        "segmentation": sum(segment_seconds),
+        "tracking": tracking_seconds,
+        "facets": sum(facet_seconds),
+        "free_space": sum(free_seconds),
+    }
+    return Perception(
+        labels,
+        facet_labels,
+        objects,
+        [s.planes for s in segmentations],
+        segmentations,
+        free_space,
+        timing,
+    )
+
+
+def _partial_objects(
+    frame,
+    segmentation: FrameSegmentation,
+    labels: np.ndarray,
+    points: np.ndarray,
+    config: PerceptionConfig,
+) -> tuple[tuple[PartialObject, ...], np.ndarray]:
+    """Partial objects with facets for one frame's tracked labels; also the facet label image."""
+    height, width = labels.shape
+    flat_labels = labels.reshape(-1)
+    flat_points = points.reshape(-1, 3)
+    flat_rgb = frame.rgb.reshape(-1, 3)
+    supervoxels = segmentation.supervoxels
+    flat_supervoxel = supervoxels.labels.reshape(-1)
+    camera_from_world = invert_transform(frame.world_from_camera)
+    facet_image = np.zeros(height * width, dtype=np.int32)
+    border = np.zeros((height, width), dtype=bool)
+    border[:2, :] = border[-2:, :] = border[:, :2] = border[:, -2:] = True
+    border = border.reshape(-1)
+    next_facet = 1
+    objects = []
+    for object_id in sorted(int(k) for k in np.unique(flat_labels) if k > 0):
+        pixels = np.flatnonzero(flat_labels == object_id)
+        point_supervoxel = flat_supervoxel[pixels]
+        has_supervoxel = point_supervoxel >= 0
+        object_supervoxels = np.unique(point_supervoxel[has_supervoxel])
+        world = flat_points[pixels]
+        camera = world @ camera_from_world[:3, :3].T + camera_from_world[:3, 3]
+        normals_world = np.zeros_like(world)
+        normals_world[has_supervoxel] = supervoxels.normals[point_supervoxel[has_supervoxel]]
+        normals_world[~has_supervoxel] = -frame.world_from_camera[:3, 2]  # facing the camera
+        areas = pixel_areas(camera, normals_world @ camera_from_world[:3, :3].T, frame.K)
+        facets, facet_of_point = object_facets(
+            object_supervoxels,
+            supervoxels.normals,
+            supervoxels.sizes,
+            supervoxels.adjacency,
+            np.where(
+                has_supervoxel,
+                point_supervoxel,
+                object_supervoxels[0] if len(object_supervoxels) else 0,
+            ),
+            world,
+            areas,
+            bandwidth=config.facet_bandwidth,
+        )
+        assigned = facet_of_point >= 0
+        facet_image[pixels[assigned]] = facet_of_point[assigned] + next_facet
+        next_facet += len(facets)
+        objects.append(
+            PartialObject(
+                object_id,
+                frame.index,
+                pixels,
+                world,
+                flat_rgb[pixels],
+                facets,
+                facet_of_point,
+                bool(border[pixels].any()),
+            )
+        )
+    return tuple(objects), facet_image.reshape(height, width)
+
+
+def workspace_grid(
+    objects: list[tuple[PartialObject, ...]], config: PerceptionConfig
+) -> VoxelGrid | None:
+    """One free-space grid for all frames: the objects' bounds plus a margin (None if no object)."""
+    all_points = [obj.points for frame_objects in objects for obj in frame_objects]
+    if not all_points:
+        return None
+    stacked = np.concatenate(all_points)
+    low = np.percentile(stacked, 0.5, axis=0)
+    high = np.percentile(stacked, 99.5, axis=0)
+    margin = config.workspace_margin_m
+    minimum = np.array([low[0] - margin, low[1] - margin, low[2] - 0.05])
+    maximum = np.array([high[0] + margin, high[1] + margin, high[2] + margin])
+    return VoxelGrid.around(minimum, maximum, config.free_space_voxel_m)

@@ -6,8 +6,8 @@ surfaces, outside the image, or where the sensor gave no reading. Instead of mar
 pixel's ray, each voxel centre is projected into the image and compared with the depth there
 (a projective test): the cost is one vectorised pass over the voxels, independent of the image
 size. The test is conservative for *free*: the depth is min-filtered over the voxel's pixel
-footprint, so a voxel is free only if every ray near it went past it, and a missing reading
-nearby never makes a voxel free.
+footprint, so a voxel is free only if every ray through it that returned a reading went past
+it; a footprint with no reading at all stays unknown.
 """
 
 from __future__ import annotations
@@ -20,6 +20,10 @@ from scipy.ndimage import minimum_filter
 from ipr.camera import invert_transform
 
 UNKNOWN, FREE, OCCUPIED = np.uint8(0), np.uint8(1), np.uint8(2)
+#: Min-filter window sizes (pixels, odd) available for voxel footprints.
+FOOTPRINT_WINDOWS = (1, 3, 5, 9, 15)
+#: Window (pixels) within which a missing reading takes the nearest valid depth.
+HOLE_FILL_WINDOW = 7
 
 
 @dataclass(frozen=True, eq=False)
@@ -132,18 +136,36 @@ def observe_space(
     v = np.round(K[1, 1] * camera[:, 1] / safe_z + K[1, 2]).astype(np.int64)
     in_image = in_front & (u >= 0) & (u < width) & (v >= 0) & (v < height)
 
-    # The footprint of a voxel in pixels at the nearest depth of interest bounds the filter size.
-    z_near = float(np.percentile(z[in_image], 5)) if in_image.any() else 1.0
-    footprint = int(np.clip(np.ceil(K[0, 0] * grid.voxel_size_m / max(z_near, 0.05)), 1, 15))
-    # Missing readings (0) dominate the min filter, so free space never leaks through holes.
-    nearest = minimum_filter(depth, size=footprint | 1, mode="nearest")
-
-    state = np.full(len(z), UNKNOWN, dtype=np.uint8)
+    # Conservative "free": the nearest depth over the voxel's pixel footprint must lie beyond it.
+    # The footprint shrinks with distance, so the min filter is precomputed at a few window sizes
+    # and each voxel reads the one that covers it. A missing reading says nothing about where its
+    # ray ended, so it is left out of the minimum (the voxel is covered by its neighbours' rays);
+    # a footprint without any reading stays unknown.
+    valid_depth = np.where(depth > 0, depth, np.inf).astype(np.float32)
+    # Sensors drop readings at depth discontinuities: a missing pixel is assumed to belong to the
+    # nearest surface around it, so free space never leaks past an object's silhouette.
+    nearby = minimum_filter(valid_depth, size=HOLE_FILL_WINDOW, mode="nearest")
+    valid_depth = np.where(depth > 0, valid_depth, nearby)
     index = np.flatnonzero(in_image)
     zi = z[index]
-    observed = depth[v[index], u[index]]
-    observed_near = nearest[v[index], u[index]]
-    free = (observed_near > 0) & (zi < observed_near - surface_margin_m)
+    footprint_px = np.ceil(K[0, 0] * grid.voxel_size_m / np.maximum(zi, 0.05))
+    windows = np.array(FOOTPRINT_WINDOWS)
+    level = np.minimum(np.searchsorted(windows, footprint_px), len(windows) - 1)
+    ui, vi = u[index], v[index]
+    observed_near = np.empty(len(index), dtype=np.float32)
+    for number, window in enumerate(windows):
+        chosen = level == number
+        if chosen.any():
+            nearest = (
+                valid_depth
+                if window == 1
+                else minimum_filter(valid_depth, size=int(window), mode="nearest")
+            )
+            observed_near[chosen] = nearest[vi[chosen], ui[chosen]]
+    observed = depth[vi, ui]
+
+    state = np.full(len(z), UNKNOWN, dtype=np.uint8)
+    free = np.isfinite(observed_near) & (zi < observed_near - surface_margin_m)
     occupied = ~free & (observed > 0) & (np.abs(zi - observed) <= surface_margin_m)
     state[index[free]] = FREE
     state[index[occupied]] = OCCUPIED

@@ -1,0 +1,138 @@
+"""``ipr segment`` output: label images, facet images and overlays a person can check at a glance.
+
+Layout of OUT (written to a temporary folder, then renamed into place):
+
+    labels/NNNNNN.png    uint16; 0 = background or support, k >= 1 = object k (same k in every frame)
+    facets/NNNNNN.png    uint16; 0 = none, f >= 1 = facet f of that frame
+    overlay/NNNNNN.png   RGB with objects tinted by id, facet borders and id labels
+    segmentation.json    per frame: objects (id, pixels, facets, border), planes; timings
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from PIL import Image, ImageDraw
+
+from ipr.atomic import commit_directory, staging_directory, write_json
+from ipr.errors import IprError
+from ipr.perception import Perception
+from ipr.scene import Scene
+
+
+def palette(ids: np.ndarray) -> np.ndarray:
+    """A distinct, deterministic RGB colour (N, 3) uint8 per integer id (golden-angle hues)."""
+    hue = (np.asarray(ids, dtype=np.float64) * 0.618033988749895) % 1.0
+    h6 = hue * 6.0
+    x = 1.0 - np.abs(h6 % 2.0 - 1.0)
+    sector = h6.astype(int) % 6
+    zero, one = np.zeros_like(hue), np.ones_like(hue)
+    table = [
+        (one, x, zero),
+        (x, one, zero),
+        (zero, one, x),
+        (zero, x, one),
+        (x, zero, one),
+        (one, zero, x),
+    ]
+    rgb = np.stack([np.choose(sector, [t[c] for t in table]) for c in range(3)], axis=-1)
+    return (55 + 200 * rgb).astype(np.uint8)
+
+
+def overlay_image(rgb: np.ndarray, labels: np.ndarray, facet_labels: np.ndarray) -> Image.Image:
+    """RGB (H, W, 3) with objects tinted by id, facet borders darkened and ids written."""
+    image = rgb.astype(np.float32) * 0.45
+    objects = labels > 0
+    colours = palette(labels[objects])
+    image[objects] = 0.45 * rgb[objects] + 0.55 * colours
+    # Facet borders: pixels whose right or lower neighbour has another facet.
+    border = np.zeros(labels.shape, dtype=bool)
+    border[:, :-1] |= facet_labels[:, :-1] != facet_labels[:, 1:]
+    border[:-1, :] |= facet_labels[:-1, :] != facet_labels[1:, :]
+    border &= objects
+    image[border] *= 0.35
+    picture = Image.fromarray(np.clip(image, 0, 255).astype(np.uint8))
+    draw = ImageDraw.Draw(picture)
+    for object_id in np.unique(labels[objects]):
+        rows, cols = np.nonzero(labels == object_id)
+        x, y = float(np.median(cols)), float(np.median(rows))
+        draw.rectangle([x - 9, y - 7, x + 9, y + 7], fill=(0, 0, 0))
+        draw.text(
+            (x - 6, y - 6), str(int(object_id)), fill=tuple(int(c) for c in palette([object_id])[0])
+        )
+    return picture
+
+
+def write_segmentation(
+    scene: Scene, perception: Perception, out_dir: Path, *, overwrite: bool = False
+) -> Path:
+    """Write the label, facet and overlay images and a JSON summary; returns ``out_dir``."""
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not overwrite:
+        raise IprError(
+            f"{out_dir}: already exists (fix: choose another folder or pass --overwrite)"
+        )
+    staging = staging_directory(out_dir)
+    try:
+        for name in ("labels", "facets", "overlay"):
+            (staging / name).mkdir()
+        frames = []
+        for frame, labels, facet_labels, objects, planes in zip(
+            scene.frames,
+            perception.labels,
+            perception.facet_labels,
+            perception.objects,
+            perception.planes,
+            strict=True,
+        ):
+            name = f"{frame.index:06d}.png"
+            Image.fromarray(labels.astype(np.uint16)).save(staging / "labels" / name)
+            Image.fromarray(facet_labels.astype(np.uint16)).save(staging / "facets" / name)
+            overlay_image(frame.rgb, labels, facet_labels).save(staging / "overlay" / name)
+            frames.append(
+                {
+                    "frame": frame.index,
+                    "objects": [
+                        {
+                            "id": obj.id,
+                            "pixels": int(obj.pixels.size),
+                            "facets": len(obj.facets),
+                            "facet_area_m2": [round(f.area_m2, 6) for f in obj.facets],
+                            "centroid_m": np.round(obj.centroid, 4).tolist(),
+                            "touches_border": obj.touches_border,
+                        }
+                        for obj in objects
+                    ],
+                    "planes": [
+                        {
+                            "kind": plane.kind,
+                            "normal": np.round(plane.normal, 5).tolist(),
+                            "offset_m": round(float(plane.offset), 5),
+                        }
+                        for plane in planes
+                    ],
+                }
+            )
+        write_json(
+            staging / "segmentation.json",
+            {
+                "format": "ipr-segmentation/1",
+                "scene": str(scene.path),
+                "object_ids": perception.object_ids,
+                "frames": frames,
+                "timing_s": {
+                    key: (
+                        np.round(value, 4).tolist() if isinstance(value, list) else round(value, 4)
+                    )
+                    for key, value in perception.timing_s.items()
+                },
+            },
+        )
+        commit_directory(staging, out_dir)
+    except BaseException:
+        import shutil
+
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    return out_dir
