@@ -1,0 +1,238 @@
+"""Segmentation metrics: hand-made label images give their exact expected scores, the scores do
+not depend on label values, id consistency counts (object, later frame) pairs, and the
+ground-truth masks agree with the generator's visibility counts and with real YCB-Video frames."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import ipr  # noqa: F401  (GL backend before MuJoCo loads)
+from ipr.rendering import Renderer
+from ipr.scene import load_scene, load_visible_pixel_counts
+from ipr.segmentation_metrics import (
+    ground_truth_masks,
+    id_consistency,
+    id_consistency_counts,
+    segmentation_scores,
+)
+
+
+def _two_objects() -> np.ndarray:
+    """(20, 40) labels: object 1 = 10x10 (100 px), object 2 = 10x20 (200 px), rest background."""
+    labels = np.zeros((20, 40), dtype=np.int32)
+    labels[5:15, 0:10] = 1
+    labels[5:15, 10:30] = 2
+    return labels
+
+
+def _blocky_labels(rng: np.random.Generator, count: int, shape=(48, 64)) -> np.ndarray:
+    """Random labels 0..count on 8x8 blocks (so segments are a few hundred pixels)."""
+    blocks = rng.integers(0, count + 1, size=(shape[0] // 8, shape[1] // 8))
+    return np.kron(blocks, np.ones((8, 8), dtype=np.int64)).astype(np.int32)
+
+
+def _figures(scores) -> list[tuple]:
+    return [
+        (row.gt_label, row.gt_px, row.segment_px, row.intersection_px, row.f_measure)
+        for row in scores.objects
+    ]
+
+
+# --------------------------------------------------------------------------------------------
+# segmentation_scores
+
+
+def test_perfect_prediction_scores_one() -> None:
+    truth = _two_objects()
+    predicted = np.where(truth > 0, truth + 40, 0)  # other label values, same segments
+    scores = segmentation_scores(predicted, truth)
+    assert scores.n_visible == 2 and scores.n_segments == 2
+    assert scores.precision == scores.recall == scores.f_measure == scores.share_f75 == 1.0
+    assert [row.matched_label for row in scores.objects] == [41, 42]
+
+
+def test_merged_objects_lose_precision_exactly() -> None:
+    truth = _two_objects()
+    predicted = (truth > 0).astype(np.int32) * 7  # one segment of 300 px covers both
+    rows = segmentation_scores(predicted, truth).objects
+    small, large = rows
+    assert (small.matched_label, large.matched_label) == (7, 7)
+    assert small.segment_px == large.segment_px == 300
+    assert small.precision == pytest.approx(1 / 3) and small.recall == 1.0
+    assert small.f_measure == pytest.approx(0.5)  # 2 * 100 / (300 + 100)
+    assert large.precision == pytest.approx(2 / 3) and large.recall == 1.0
+    assert large.f_measure == pytest.approx(0.8)  # 2 * 200 / (300 + 200)
+    scores = segmentation_scores(predicted, truth)
+    assert scores.share_f75 == 0.5
+    assert scores.f_measure == pytest.approx(0.65)
+
+
+def test_half_split_object_has_recall_one_half() -> None:
+    truth = _two_objects()
+    predicted = truth.copy()
+    predicted[5:15, 20:30] = 3  # the right half of object 2 becomes its own segment
+    large = segmentation_scores(predicted, truth).objects[1]
+    assert large.recall == 0.5 and large.precision == 1.0
+    assert large.f_measure == pytest.approx(2 / 3)
+    assert large.matched_label == 2  # tie in F and intersection: the first (lower) label
+
+
+def test_scores_do_not_depend_on_label_values() -> None:
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        truth = _blocky_labels(rng, 5)
+        predicted = _blocky_labels(rng, 6)
+        reference = segmentation_scores(predicted, truth)
+        permutation = np.concatenate([[0], rng.permutation(6) * 13 + 100])  # 0 stays 0
+        relabelled = segmentation_scores(permutation[predicted], truth)
+        assert _figures(relabelled) == _figures(reference)
+        negative = segmentation_scores(np.where(predicted > 0, predicted, -1), truth)
+        assert _figures(negative) == _figures(reference)  # any label <= 0 is "no segment"
+        gt_permutation = np.concatenate([[0], rng.permutation(5) + 1])
+        permuted_truth = segmentation_scores(predicted, gt_permutation[truth])
+        assert sorted(row[1:] for row in _figures(permuted_truth)) == sorted(
+            row[1:] for row in _figures(reference)
+        )
+        assert permuted_truth.f_measure == pytest.approx(reference.f_measure)
+
+
+def test_matches_a_direct_per_pair_computation() -> None:
+    rng = np.random.default_rng(7)
+    truth = _blocky_labels(rng, 4)
+    predicted = _blocky_labels(rng, 5)
+    for row in segmentation_scores(predicted, truth, min_visible_px=1).objects:
+        gt = truth == row.gt_label
+        best = max(
+            (2 * (gt & (predicted == s)).sum() / ((predicted == s).sum() + gt.sum()), s)
+            for s in range(1, 6)
+            if (predicted == s).any()
+        )
+        assert row.f_measure == pytest.approx(best[0])
+
+
+def test_empty_prediction_scores_zero() -> None:
+    truth = _two_objects()
+    scores = segmentation_scores(np.zeros_like(truth), truth)
+    assert scores.n_segments == 0 and scores.n_visible == 2
+    assert all(row.f_measure == 0.0 and row.matched_label is None for row in scores.objects)
+    assert scores.precision == scores.recall == scores.f_measure == scores.share_f75 == 0.0
+
+
+def test_invisible_objects_are_left_out() -> None:
+    truth = _two_objects()
+    truth[0, 0:99] = 3  # 99 px: below the 100 px threshold
+    scores = segmentation_scores(np.zeros_like(truth), truth)
+    assert [row.gt_label for row in scores.objects] == [1, 2]  # 100 px exactly is visible
+    assert (scores.n_visible, scores.n_invisible) == (2, 1)
+    none = segmentation_scores(truth, np.zeros_like(truth))
+    assert none.n_visible == 0 and math.isnan(none.f_measure)
+    assert json.loads(json.dumps(none.to_dict()))["f_measure"] is None
+
+
+def test_shape_mismatch_is_rejected() -> None:
+    with pytest.raises(ValueError, match="same shape"):
+        segmentation_scores(np.zeros((4, 4), int), np.zeros((4, 5), int))
+
+
+# --------------------------------------------------------------------------------------------
+# id_consistency
+
+
+def test_id_consistency_counts_pairs() -> None:
+    truth = _two_objects()
+    frame0 = np.where(truth > 0, truth + 10, 0)  # object 1 -> id 11, object 2 -> id 12
+    obj_ids = [[5, 9]] * 3
+    assert id_consistency([frame0, frame0, frame0], [truth] * 3, obj_ids) == 1.0
+    swapped = np.where(truth == 1, 12, frame0)  # object 1 takes object 2's id in frame 1 ...
+    swapped = np.where(truth == 2, 11, swapped)  # ... and object 2 takes object 1's id
+    renamed = np.where(truth == 1, 30, frame0)  # object 1 gets a new id
+    assert id_consistency([frame0, renamed], [truth] * 2, obj_ids[:2]) == 0.5
+    assert id_consistency([frame0, swapped], [truth] * 2, obj_ids[:2]) == 0.0
+    counts = id_consistency_counts([frame0, frame0, renamed], [truth] * 3, obj_ids)
+    assert (counts.consistent, counts.counted, counts.share) == (3, 4, 0.75)
+
+
+def test_id_consistency_follows_obj_ids_not_positions() -> None:
+    truth = _two_objects()
+    prediction = np.where(truth > 0, truth + 10, 0)
+    reordered = np.where(truth > 0, 3 - truth, 0)  # frame 1 lists the objects the other way
+    result = id_consistency([prediction] * 2, [truth, reordered], [[5, 9], [9, 5]])
+    assert result == 1.0
+
+
+def test_id_consistency_lost_and_unfound_objects() -> None:
+    truth = _two_objects()
+    frame0 = np.where(truth == 2, 12, 0)  # object 1 is never found: not counted
+    lost = np.zeros_like(truth)  # object 2 lost in frame 1: counted, not consistent
+    counts = id_consistency_counts([frame0, lost], [truth] * 2, [[5, 9]] * 2)
+    assert (counts.consistent, counts.counted) == (0, 1)
+    hidden = np.where(truth == 2, 0, truth)  # object 2 not visible in frame 1: not counted
+    counts = id_consistency_counts([frame0, lost], [truth, hidden], [[5, 9]] * 2)
+    assert counts.counted == 0 and math.isnan(counts.share)
+    merged = np.where(truth > 0, 12, 0)  # frame-0 F of object 2 with a 300 px segment = 0.8
+    assert id_consistency([merged, merged], [truth] * 2, [[5, 9]] * 2) == 1.0
+
+
+# --------------------------------------------------------------------------------------------
+# ground_truth_masks
+
+
+def test_ground_truth_masks_match_generator_counts(tmp_path: Path) -> None:
+    from ipr.synth import SynthConfig, generate_scene
+
+    scene_path = generate_scene(
+        tmp_path,
+        kind="static",
+        seed=1,
+        arrangement="table",
+        config=SynthConfig(width=320, height=240),
+    )
+    labels, obj_ids, visible_px = ground_truth_masks(scene_path, 0)
+    assert labels.shape == (240, 320) and labels.dtype == np.int32
+    gt = json.loads((scene_path / "scene_gt.json").read_text())["0"]
+    assert obj_ids == [item["obj_id"] for item in gt]
+    assert visible_px == np.bincount(labels.ravel(), minlength=len(gt) + 1)[1:].tolist()
+    expected = load_visible_pixel_counts(scene_path)[0]
+    assert sum(count >= 100 for count in expected) >= 3
+    for ours, theirs in zip(visible_px, expected, strict=True):
+        assert abs(ours - theirs) <= max(10, 0.03 * theirs), (visible_px, expected)
+
+    frame = load_scene(scene_path).frames[0]
+    with Renderer(320, 240) as renderer:
+        again, _, _ = ground_truth_masks(scene_path, 0, renderer=renderer, frame=frame)
+    assert np.array_equal(again, labels)
+    truth = segmentation_scores(labels, labels)
+    assert truth.share_f75 == 1.0
+
+
+def test_ground_truth_masks_on_real_frames(shared_data: Path) -> None:
+    scene_path = shared_data / "ycbv_real" / "ycbv_0000"
+    labels, obj_ids, visible_px = ground_truth_masks(scene_path, 0)
+    assert labels.shape == (480, 640)
+    assert len(obj_ids) >= 3
+    assert sum(count >= 1000 for count in visible_px) >= 3, visible_px
+    observed = np.asarray(load_scene(scene_path).frames[0].depth_m)
+    assert (observed[labels > 0] > 0).mean() > 0.8  # the masks lie on measured surfaces
+
+
+def test_ground_truth_masks_hide_objects_behind_generated_walls(tmp_path: Path) -> None:
+    from ipr.synth import SynthConfig, generate_scene
+
+    scene_path = generate_scene(
+        tmp_path,
+        kind="static",
+        seed=4,
+        arrangement="drawer",
+        config=SynthConfig(width=320, height=240),
+    )
+    _, _, visible_px = ground_truth_masks(scene_path, 0)
+    _, _, through_walls = ground_truth_masks(scene_path, 0, walls=False)
+    expected = load_visible_pixel_counts(scene_path)[0]
+    for ours, theirs in zip(visible_px, expected, strict=True):
+        assert abs(ours - theirs) <= max(10, 0.03 * theirs), (visible_px, expected)
+    assert sum(through_walls) > sum(visible_px)  # the drawer front hides some pixels
