@@ -1,0 +1,1106 @@
+"""Hidden-shape hypotheses of partial objects: Algorithm 1 of the paper (Sec. IV-B, IV-C).
+
+An object model is its observed facets plus imagined hidden ones. Each observed facet F (normal
+N out of the object, centre c) is mirrored about its tangent plane L = {x : N . (x - c) = 0} and
+the mirror image is pushed back by a distance d ~ U(D_min, D_max) against N; it becomes a
+hypothesised hidden facet (the far side of the object). The convex hull of all the facets then
+shows new facets (the sides joining front and back); those whose normal is not already present
+are mirrored and pushed in their turn, and so on until no new normal appears or time runs out.
+A hypothesis is the convex hull of everything: a closed convex mesh that contains every observed
+point of the object (all observed points take part in every hull, even those of facets that are
+too small to be mirrored).
+
+Choices made here (the paper leaves them open):
+
+- D_max by ray tracing. From each of a facet's points p a ray runs along -N through the frame's
+  free-space map; it ends at the first voxel seen FREE, where it enters the support (below the
+  plane) or a known wall's slab, or at ``max_depth_m`` (``border_max_depth_m`` for an object
+  cut by the image border, whose hidden part may extend beyond the picture). The mirror image
+  of p lies on the same line, t = 2 N.(p - c) + d behind p, and the paper asks that the space
+  between a facet and its mirror be hidden: 0 <= t <= limit(p), i.e. each ray allows
+  d in [-2 N.(p - c), limit(p) - 2 N.(p - c)]. The lower end matters for curved facets: a
+  smaller d puts the mirrored rim in front of the seen surface.
+- Robustness: the admissible d are those (on cells of the ray step) that violate at most a
+  ``ray_quantile`` share of the rays, so a single noisy voxel shortens one ray, not the facet.
+  The outline matters most: mirroring moves points along N, which is tilted from the camera's
+  rays wherever a facet is curved or oblique, so the mirror of a facet's rim can leave the
+  object's silhouette into seen-free space while most of its rays are fine. The rays from the
+  points within ``rim_width_m`` of the facet's outline (on its tangent plane) therefore form a
+  second set that must be satisfied on its own. D_max is the largest admissible d, and d is
+  drawn uniformly from the admissible d of at least D_min (``min_thickness_m``).
+- Conflicts: a strongly curved facet (a bottle's whole side) can have no d that suits enough
+  rays (its mirrored rim wants d large, its mirrored crest wants d small); then the d with the
+  fewest violations are used (logged) and the unary check below decides.
+- No room (D_max < D_min): the object is thinner than D_min there (a plate, a book lying flat),
+  so d = D_max, floored at ``min_room_m`` so the hypothesis keeps a volume; logged.
+- Sampling: for the observed facets, the uniform variates of the m hypotheses are stratified
+  (one per m-quantile, shuffled per facet). Each d is still uniform marginally, but the
+  m hypotheses cover the whole range, so their volumes are spread even for m = 16.
+- Hull facets: coplanar hull triangles are grouped greedily (largest first) with their
+  neighbours within ``hull_group_deg`` of the seed's normal; groups smaller than
+  ``min_facet_area_m2`` are ignored like small observed facets. "Shares a normal" means within
+  ``normal_merge_deg`` of an observed facet's normal, or of the normal (or its opposite) of a
+  facet already mirrored: the mirror of a facet is the opposite face, so both directions are done.
+- Unary constraints at generation (the checks of ``ipr.constraints`` with this module's
+  tolerances): the hull is clipped at the support plane (exact, convex), so nothing is below it;
+  voxels (the free-space grid's pitch) in seen-free space or inside a wall's slab may not exceed
+  ``free_space_tolerance`` (share) or ``free_space_tolerance_voxels`` (count), whichever is
+  larger, *beyond those the observed points already force* (the hull of a concave object such as
+  a bowl covers seen-free space whatever is hidden). The voxel map calls everything within its
+  surface margin (1 cm) of an observed surface occupied, so it cannot stop growth just in front
+  of a facet; instead every hypothesis is cut at each observed facet's support plane (the
+  object's outermost observed point along N, plus ``facet_tolerance_m``): for a convex object
+  the point with normal N lies on that facet, so nothing of the object is in front of it. A hypothesis that
+  fails is resampled with its observed facets' variates halved each attempt (pulling d towards D_min), at most
+  ``max_attempts`` times; if every attempt fails, the one with the fewest offending voxels is
+  kept with ``feasible=False`` (logged) for the constraint stage to reject.
+- Timeout: after ``timeout_s`` for an object, the remaining hypotheses use one round and one
+  attempt (logged). Output is deterministic for a given rng as long as the timeout is not hit.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import ConvexHull, QhullError
+
+from ipr import voxels
+from ipr.perception.free_space import FREE, SpaceMap
+from ipr.perception.types import KnownPlane, PartialObject
+
+logger = logging.getLogger(__name__)
+
+#: Volumes below this (m^3) are degenerate (flat or collinear point sets).
+_MIN_VOLUME_M3 = 1e-9
+
+
+@dataclass(frozen=True)
+class HypothesisConfig:
+    """Settings of hypothesis generation (metres, square metres, degrees, seconds).
+
+    Attributes:
+        count: m, hypotheses per object (paper: 16-32).
+        min_thickness_m: D_min, the smallest distance between a facet and its mirror image.
+        max_depth_m: cap on D_max (rays stop here), about the largest object size.
+        border_max_depth_m: the cap for objects cut by the image border.
+        min_room_m: floor of d when a facet has no room (D_max below this).
+        min_facet_area_m2: facets (observed or hull) smaller than this are not mirrored
+            (paper: (3 cm)^2); their points stay in every hull.
+        normal_merge_deg: a hull facet within this angle of a normal already handled is skipped.
+        hull_group_deg: hull triangles within this angle of a group's seed triangle (and
+            connected to it) form one hull facet.
+        ray_quantile: share of a facet's rays (of each ray set) an admissible d may violate.
+        max_rays: rays per observed facet (its points subsampled evenly).
+        hull_facet_rays: rays per hull facet (points sampled on its triangles).
+        max_hull_facets: new hull facets mirrored per round at most (the largest): curved
+            outlines give a ring of narrow side facets, each a small change, all costing rays.
+        hull_spacing_m: the hulls inside Algorithm 1's loop and the mirrored point clouds use
+            one point per cell of this size (the final hull keeps every observed point).
+        rim_width_m: observed facets' points this close to their outline form a second ray
+            set that admissible d must satisfy too (0: no rim set).
+        ray_step_m: spacing of the samples along rays (None: the space grid's pitch).
+        max_rounds: rounds of Algorithm 1's repeat loop at most (mirroring, then hull).
+        free_space_tolerance: share of a hypothesis' voxels allowed in seen-free space or walls
+            (beyond what the observed points force), for sensor noise.
+        free_space_tolerance_voxels: the same as a count; the larger of the two applies.
+        support_tolerance_m: hypotheses are cut at the support plane, or at the lowest observed
+            point when lower (every observed point stays inside); points more than this below
+            the plane are logged as outliers.
+        facet_tolerance_m: hypotheses are cut this far in front of each observed facet's
+            outermost point along its normal (seen-free space the voxel map's surface margin
+            cannot resolve).
+        wall_min_thickness_m: walls without a measured thickness are slabs this thick.
+        max_attempts: samples tried per hypothesis before keeping an infeasible one.
+        timeout_s: seconds per object before the remaining hypotheses are simplified.
+        seed: seed used when no rng is given (combined with the object id).
+    """
+
+    count: int = 32
+    min_thickness_m: float = 0.02
+    max_depth_m: float = 0.3
+    border_max_depth_m: float = 0.5
+    min_room_m: float = 0.005
+    min_facet_area_m2: float = 0.03**2
+    normal_merge_deg: float = 25.0
+    hull_group_deg: float = 12.0
+    ray_quantile: float = 0.1
+    ray_step_m: float | None = None
+    rim_width_m: float = 0.01
+    max_rays: int = 96
+    hull_facet_rays: int = 24
+    max_hull_facets: int = 8
+    hull_spacing_m: float = 0.01
+    max_rounds: int = 4
+    free_space_tolerance: float = 0.02
+    free_space_tolerance_voxels: int = 20
+    support_tolerance_m: float = 0.005
+    facet_tolerance_m: float = 0.002
+    wall_min_thickness_m: float = 0.005
+    max_attempts: int = 4
+    timeout_s: float = 2.0
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.count < 1:
+            raise ValueError(f"count must be >= 1, got {self.count}")
+        if not 0 < self.min_room_m <= self.min_thickness_m <= self.max_depth_m:
+            raise ValueError("need 0 < min_room_m <= min_thickness_m <= max_depth_m")
+        if not 0.0 <= self.ray_quantile <= 1.0:
+            raise ValueError(f"ray_quantile must be in [0, 1], got {self.ray_quantile}")
+        if self.max_attempts < 1 or self.max_rounds < 1:
+            raise ValueError("max_attempts and max_rounds must be >= 1")
+
+
+@dataclass(frozen=True, eq=False)
+class ShapeHypothesis:
+    """One complete shape X_i^j of an object: a closed convex mesh, world frame, metres.
+
+    Attributes:
+        object_id: the PartialObject's id.
+        index: j, the hypothesis' index among the object's hypotheses (-1: minimum shape).
+        vertices: (V, 3) float64 hull vertices (m, world).
+        faces: (F, 3) int64 triangles, counter-clockwise seen from outside (outward normals).
+        volume_m3: enclosed volume.
+        distances_m: (K,) the sampled distance d of each mirrored facet, in mirroring order.
+        facet_normals: (K, 3) unit normal N of each mirrored facet.
+        facet_sources: (K,) "observed", "hull" or "object" (all points as one facet) per facet.
+        rounds: rounds of the repeat loop used.
+        attempts: samples drawn before this one was kept.
+        feasible: passed the unary checks at generation (support, walls, free space).
+        free_voxels: voxels in seen-free space beyond ``forced_free_voxels``.
+        wall_voxels: voxels inside known walls beyond those the observed hull has.
+        forced_free_voxels: seen-free voxels of the observed points' own hull (forced).
+        forced_wall_voxels: wall voxels of the observed points' own hull (forced).
+        voxel_keys: sorted ``ipr.voxels`` keys of its voxels at ``voxel_pitch_m`` (None when
+            not voxelised, e.g. without a free-space map).
+        voxel_pitch_m: pitch of ``voxel_keys`` (m).
+    """
+
+    object_id: int
+    index: int
+    vertices: np.ndarray
+    faces: np.ndarray
+    volume_m3: float
+    distances_m: np.ndarray
+    facet_normals: np.ndarray
+    facet_sources: tuple[str, ...] = ()
+    rounds: int = 0
+    attempts: int = 1
+    feasible: bool = True
+    free_voxels: int = 0
+    wall_voxels: int = 0
+    forced_free_voxels: int = 0
+    forced_wall_voxels: int = 0
+    voxel_keys: np.ndarray | None = None
+    voxel_pitch_m: float = voxels.DEFAULT_PITCH_M
+
+    @property
+    def bounds(self) -> np.ndarray:
+        """(2, 3) axis-aligned bounding box [minimum, maximum] (m, world)."""
+        return np.stack([self.vertices.min(axis=0), self.vertices.max(axis=0)])
+
+    @property
+    def mesh(self) -> tuple[np.ndarray, np.ndarray]:
+        """(vertices, faces), the pair ``ipr.voxels`` and ``ipr.result`` accept."""
+        return self.vertices, self.faces
+
+    def face_planes(self) -> np.ndarray:
+        """(F, 4) outward face planes (unit normal, offset): inside iff n . x + offset <= 0."""
+        tri = self.vertices[self.faces]
+        normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        lengths = np.linalg.norm(normals, axis=1)
+        keep = lengths > 1e-15
+        normals = normals[keep] / lengths[keep, None]
+        return np.column_stack([normals, -np.einsum("ij,ij->i", normals, tri[keep, 0])])
+
+    def contains(self, points: np.ndarray, tolerance_m: float = 1e-6) -> np.ndarray:
+        """(N,) bool: which (N, 3) world points lie inside the hull (within ``tolerance_m``)."""
+        planes = self.face_planes()
+        return np.all(points @ planes[:, :3].T + planes[:, 3] <= tolerance_m, axis=1)
+
+    def keys(self, pitch_m: float | None = None) -> np.ndarray:
+        """Voxel keys at ``pitch_m`` (default: the stored pitch); cached ones when they match."""
+        pitch = self.voxel_pitch_m if pitch_m is None else pitch_m
+        if self.voxel_keys is not None and np.isclose(pitch, self.voxel_pitch_m):
+            return self.voxel_keys
+        return voxels.scanline_voxels(self.vertices, self.faces, pitch)
+
+    def to_trimesh(self):
+        """The hull as a ``trimesh.Trimesh`` (not re-processed)."""
+        import trimesh
+
+        return trimesh.Trimesh(self.vertices.copy(), self.faces.copy(), process=False)
+
+
+def hypotheses_to_trimesh(hypotheses: tuple[ShapeHypothesis, ...] | list[ShapeHypothesis]):
+    """Trimesh meshes of a sequence of hypotheses, in order."""
+    return [h.to_trimesh() for h in hypotheses]
+
+
+def volume_spread(hypotheses: tuple[ShapeHypothesis, ...] | list[ShapeHypothesis]) -> dict:
+    """Volumes of an object's hypotheses: min, median, max (m^3) and max / min."""
+    volumes = np.array([h.volume_m3 for h in hypotheses], dtype=float)
+    if volumes.size == 0:
+        return {"min": 0.0, "median": 0.0, "max": 0.0, "ratio": 1.0}
+    return {
+        "min": float(volumes.min()),
+        "median": float(np.median(volumes)),
+        "max": float(volumes.max()),
+        "ratio": float(volumes.max() / max(volumes.min(), 1e-12)),
+    }
+
+
+# --------------------------------------------------------------------------------------------
+# Known planes: the support as a half-space, walls as slabs bounded by their points' outline
+
+
+@dataclass(frozen=True, eq=False)
+class PlaneRegion:
+    """A known plane prepared for fast inside tests.
+
+    Attributes:
+        plane: the KnownPlane.
+        axes: (2, 3) orthonormal in-plane directions.
+        outline: (P, 3) 2-D half-planes (a, b, c) of the wall's points' outline in ``axes``
+            coordinates, inside iff a s + b t + c <= 0; None for an unbounded plane.
+        thickness_m: slab depth behind the visible face (walls).
+    """
+
+    plane: KnownPlane
+    axes: np.ndarray
+    outline: np.ndarray | None
+    thickness_m: float
+
+    @property
+    def is_support(self) -> bool:
+        """True for the support plane (a half-space), False for a wall (a slab)."""
+        return self.plane.kind == "support"
+
+    def in_wall(self, points: np.ndarray, margin_m: float = 0.0) -> np.ndarray:
+        """(N,) bool: (N, 3) points inside the wall's slab, shrunk by ``margin_m`` all round."""
+        distance = self.plane.signed_distance(points)
+        inside = (distance < -margin_m) & (distance > -(self.thickness_m - margin_m))
+        if self.outline is not None and inside.any():
+            st = points[inside] @ self.axes.T
+            lateral = np.all(st @ self.outline[:, :2].T + self.outline[:, 2] <= -margin_m, axis=1)
+            inside[np.flatnonzero(inside)[~lateral]] = False
+        return inside
+
+
+def plane_regions(
+    planes: tuple[KnownPlane, ...], wall_min_thickness_m: float = 0.005
+) -> tuple[PlaneRegion, ...]:
+    """Prepare known planes for inside tests (walls at least ``wall_min_thickness_m`` thick)."""
+    regions = []
+    for plane in planes:
+        normal = np.asarray(plane.normal, float)
+        helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
+        u = np.cross(normal, helper)
+        u /= np.linalg.norm(u)
+        axes = np.stack([u, np.cross(normal, u)])
+        outline = None
+        if plane.kind != "support":
+            points = np.asarray(plane.points, float).reshape(-1, 3)
+            if len(points) >= 3:
+                try:
+                    hull = ConvexHull(points @ axes.T)
+                    outline = hull.equations
+                except (QhullError, ValueError):
+                    logger.warning("wall outline is degenerate; treating the wall as unbounded")
+            else:
+                logger.warning("wall has fewer than 3 points; treating it as unbounded")
+        thickness = max(float(plane.thickness_m), wall_min_thickness_m)
+        regions.append(PlaneRegion(plane, axes, outline, thickness))
+    return tuple(regions)
+
+
+@dataclass(frozen=True)
+class UnaryReport:
+    """Unary constraint measurements of one convex shape.
+
+    Attributes:
+        voxel_count: voxels (centres inside) at the pitch used.
+        free_voxels: of those, voxels seen FREE.
+        wall_voxels: voxels inside a known wall's slab.
+        below_support_m: deepest vertex below a support plane (m, >= 0).
+    """
+
+    voxel_count: int
+    free_voxels: int
+    wall_voxels: int
+    below_support_m: float
+
+
+def unary_report(
+    vertices: np.ndarray,
+    keys: np.ndarray | None,
+    pitch_m: float,
+    space: SpaceMap | None,
+    regions: tuple[PlaneRegion, ...],
+) -> UnaryReport:
+    """Measure a convex shape (vertices (V, 3), voxel ``keys`` at ``pitch_m``) against the space
+    map and known planes. Support: exact from the vertices (the hull's lowest point is one)."""
+    below = 0.0
+    for region in regions:
+        if region.is_support:
+            below = max(below, float(-region.plane.signed_distance(vertices).min()))
+    free = walls = 0
+    count = 0 if keys is None else int(keys.size)
+    if keys is not None and keys.size:
+        centres = voxels.centres(keys, pitch_m)
+        if space is not None:
+            free = int(np.count_nonzero(space.state_at(centres) == FREE))
+        wall_mask = np.zeros(len(centres), dtype=bool)
+        for region in regions:
+            if not region.is_support:
+                wall_mask |= region.in_wall(centres)
+        walls = int(np.count_nonzero(wall_mask))
+    return UnaryReport(count, free, walls, below)
+
+
+def allowed_voxels(voxel_count: int, share: float, count: int) -> int:
+    """Offending voxels tolerated in a shape of ``voxel_count`` voxels: max(share x n, count)."""
+    return max(int(np.floor(share * voxel_count)), int(count))
+
+
+# --------------------------------------------------------------------------------------------
+# Convex hull meshes
+
+
+def convex_mesh(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """Convex hull of (N, 3) points as (vertices (V, 3), outward faces (F, 3), volume m^3);
+    None when the points span no volume (fewer than 4, coplanar or collinear)."""
+    if len(points) < 4:
+        return None
+    try:
+        hull = ConvexHull(points)
+    except (QhullError, ValueError):
+        return None
+    if hull.volume < _MIN_VOLUME_M3:
+        return None
+    return _oriented_mesh(hull)
+
+
+def _oriented_mesh(hull: ConvexHull) -> tuple[np.ndarray, np.ndarray, float]:
+    """Compact, outward-oriented triangle mesh of a scipy hull."""
+    simplices = hull.simplices.copy()
+    tri = hull.points[simplices]
+    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    flip = np.einsum("ij,ij->i", normals, hull.equations[:, :3]) < 0
+    simplices[flip] = simplices[flip][:, [0, 2, 1]]
+    used, inverse = np.unique(simplices, return_inverse=True)
+    return hull.points[used].copy(), inverse.reshape(-1, 3).astype(np.int64), float(hull.volume)
+
+
+def clip_halfspace(
+    vertices: np.ndarray, faces: np.ndarray, normal: np.ndarray, offset: float
+) -> np.ndarray:
+    """Vertices (K, 3) of a convex mesh cut to {x : normal . x + offset >= 0}: the vertices on
+    that side plus the crossings of the mesh's edges with the plane (their hull is the cut)."""
+    distance = vertices @ normal + offset
+    if distance.min() >= 0:
+        return vertices
+    edges = np.unique(
+        np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1),
+        axis=0,
+    )
+    da, db = distance[edges[:, 0]], distance[edges[:, 1]]
+    crossing = (da < 0) != (db < 0)
+    a, b = edges[crossing, 0], edges[crossing, 1]
+    t = (da[crossing] / (da[crossing] - db[crossing]))[:, None]
+    cut = vertices[a] + t * (vertices[b] - vertices[a])
+    return np.concatenate([vertices[distance >= 0], cut])
+
+
+def _thicken(points: np.ndarray, direction: np.ndarray, thickness_m: float) -> np.ndarray:
+    """Points (M, 3) that span a volume: ``points`` plus a copy ``thickness_m`` along
+    -``direction``; if that is still flat (points collinear, or in a plane containing
+    ``direction``), also copies +-``thickness_m``/2 along the two directions across it."""
+    thick = np.concatenate([points, points - thickness_m * direction])
+    if convex_mesh(thick) is not None:
+        return thick
+    across = points - points.mean(axis=0)
+    across -= np.outer(across @ direction, direction)
+    if np.abs(across).max(initial=0.0) > 1e-12:
+        second = np.linalg.svd(across, full_matrices=False)[2][0]
+    else:
+        second = np.cross(direction, np.eye(3)[int(np.argmin(np.abs(direction)))])
+    second /= np.linalg.norm(second)
+    third = np.cross(direction, second)
+    half = 0.5 * thickness_m
+    offsets = [half * second, -half * second, half * third, -half * third]
+    return np.concatenate([thick, *(thick + offset for offset in offsets)])
+
+
+def _thin(points: np.ndarray, spacing_m: float) -> np.ndarray:
+    """One point (the first) per cubic cell of ``spacing_m`` (fewer, coarser hull vertices)."""
+    if spacing_m <= 0 or len(points) < 64:
+        return points
+    cells = np.floor(points / spacing_m).astype(np.int64)
+    _, first = np.unique(cells, axis=0, return_index=True)
+    return points[np.sort(first)]
+
+
+def _extreme_points(points: np.ndarray) -> np.ndarray:
+    """The points that matter for hulls: 3-D hull vertices, or all points when flat."""
+    if len(points) < 5:
+        return points
+    try:
+        return points[ConvexHull(points).vertices]
+    except (QhullError, ValueError):
+        return points
+
+
+# --------------------------------------------------------------------------------------------
+# Generation
+
+
+@dataclass(frozen=True, eq=False)
+class _SourceFacet:
+    """A facet to mirror: unit normal (3,), centre (3,), points to mirror (K, 3), and the d its
+    rays allow: the union of cells [c, c + width) for the lower edges ``cells`` (C,), metres
+    (``_admissible``); ``conflict`` when no d satisfies enough rays (the best compromise)."""
+
+    normal: np.ndarray
+    centre: np.ndarray
+    points: np.ndarray
+    cells: np.ndarray
+    width: float
+    source: str
+    conflict: bool = False
+
+    @property
+    def d_max(self) -> float:
+        """Largest admissible d (m): D_max."""
+        return float(self.cells.max()) + self.width if self.cells.size else 0.0
+
+
+@dataclass(frozen=True, eq=False)
+class _Context:
+    """Everything per object that does not change between hypotheses.
+
+    ``base_points`` are the observed points that matter for hulls (exact), ``loop_points`` the
+    same thinned to one per ``hull_spacing_m`` cell for the hulls inside Algorithm 1's loop.
+    ``cuts`` (C, 4) are half-spaces n . x + offset >= 0 every hypothesis is cut to: the support
+    planes (lowered to the lowest observed point) and the observed facets' support planes.
+    """
+
+    object_id: int
+    base_points: np.ndarray
+    loop_points: np.ndarray
+    observed: tuple[_SourceFacet, ...]
+    space: SpaceMap | None
+    regions: tuple[PlaneRegion, ...]
+    cuts: np.ndarray
+    cap_m: float
+    fallback_normal: np.ndarray
+    forced_free: int
+    forced_wall: int
+    pitch_m: float
+    config: HypothesisConfig
+
+
+def dominant_normal(obj: PartialObject, planes: tuple[KnownPlane, ...]) -> np.ndarray:
+    """(3,) unit direction towards the camera side of the object: area-weighted mean facet normal,
+    else the points' least-spread axis oriented along the support normal (else +z)."""
+    up = np.array([0.0, 0.0, 1.0])
+    for plane in planes:
+        if plane.kind == "support":
+            up = np.asarray(plane.normal, float)
+            break
+    if obj.facets:
+        total = sum(f.area_m2 * np.asarray(f.normal, float) for f in obj.facets)
+        norm = float(np.linalg.norm(total))
+        if norm > 1e-9:
+            return total / norm
+    points = np.asarray(obj.points, float)
+    if len(points) >= 3:
+        _, _, vt = np.linalg.svd(points - points.mean(axis=0), full_matrices=False)
+        normal = vt[-1]
+        return normal if normal @ up >= 0 else -normal
+    return up
+
+
+def _ray_limits(
+    origins: np.ndarray,
+    normal: np.ndarray,
+    space: SpaceMap | None,
+    regions: tuple[PlaneRegion, ...],
+    cap: float,
+    step: float,
+) -> np.ndarray:
+    """Distance (R,) from each origin (R, 3) along -``normal`` to the first blocked point, at
+    most ``cap`` (m): a voxel seen FREE (sampled every ``step``), the support plane (exact) or
+    a wall's slab."""
+    direction = -normal
+    limits = np.full(len(origins), cap)
+    for region in regions:
+        if region.is_support:
+            rate = float(direction @ region.plane.normal)  # d(signed distance) / dt
+            if rate < -1e-9:
+                reach = region.plane.signed_distance(origins) / -rate
+                limits = np.minimum(limits, np.maximum(reach, 0.0))
+    walls = [r for r in regions if not r.is_support]
+    if space is None and not walls:
+        return limits
+    t = (np.arange(int(np.ceil(cap / step))) + 1.0) * step
+    samples = (origins[:, None, :] + t[None, :, None] * direction).reshape(-1, 3)
+    blocked = np.zeros(len(samples), dtype=bool)
+    if space is not None:
+        blocked |= space.state_at(samples) == FREE
+    for region in walls:
+        blocked |= region.in_wall(samples)
+    blocked = blocked.reshape(len(origins), len(t))
+    first = np.argmax(blocked, axis=1)
+    hit = blocked[np.arange(len(origins)), first]
+    sampled = np.where(hit, t[first] - 0.5 * step, cap)
+    return np.minimum(limits, sampled)
+
+
+def _ray_bounds(
+    ray_points: np.ndarray, centre: np.ndarray, normal: np.ndarray, ctx_parts: tuple
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per ray, the range (low (R,), high (R,)) of d that keeps the mirror of its point p in
+    hidden space: the mirror lands t = 2 N.(p - c) + d behind p, and 0 <= t <= limit(p)."""
+    space, regions, cap, step = ctx_parts
+    limits = _ray_limits(ray_points, normal, space, regions, cap, step)
+    offsets = 2.0 * (ray_points - centre) @ normal
+    return -offsets, limits - offsets
+
+
+def _admissible(
+    ray_sets: list[tuple[np.ndarray, np.ndarray]], tolerance: float, step: float
+) -> tuple[np.ndarray, bool]:
+    """Lower edges (C,) of the cells of width ``step`` (from d = 0) whose centre violates at
+    most a ``tolerance`` share of the rays of every set, and whether none did (then the cells
+    with the fewest violations are returned: a compromise)."""
+    highs = [high for _, high in ray_sets if high.size]
+    top = max(float(max(h.max() for h in highs)), step) if highs else step
+    centres = np.arange(0.0, top + step, step) + 0.5 * step
+    worst = np.zeros(len(centres))
+    for low, high in ray_sets:
+        if low.size:
+            outside = (centres[:, None] < low[None, :]) | (centres[:, None] > high[None, :])
+            worst = np.maximum(worst, outside.mean(axis=1))
+    good = worst <= tolerance
+    conflict = not good.any()
+    if conflict:
+        good = worst <= worst.min() + 1e-12
+    return centres[good] - 0.5 * step, conflict
+
+
+def _support_cuts(
+    regions: tuple[PlaneRegion, ...],
+    points: np.ndarray,
+    tolerance_m: float = np.inf,
+    object_id: int = -1,
+) -> list[np.ndarray]:
+    """Half-spaces (4,) n . x + offset >= 0 above each support plane, lowered to the lowest
+    observed point (noisy points slightly below the plane are never cut off); points more than
+    ``tolerance_m`` below it are logged (segmentation outliers: the hull then reaches down)."""
+    cuts = []
+    for region in regions:
+        if region.is_support:
+            lowest = float(region.plane.signed_distance(points).min())
+            if lowest < -tolerance_m:
+                logger.info(
+                    "object %d: observed points %.1f mm below the support; hypotheses reach there",
+                    object_id,
+                    -lowest * 1e3,
+                )
+            level = min(0.0, lowest) - 1e-9
+            cuts.append(np.append(region.plane.normal, region.plane.offset - level))
+    return cuts
+
+
+def _rim_points(points: np.ndarray, normal: np.ndarray, width_m: float) -> np.ndarray:
+    """The points (K, 3) within ``width_m`` of the outline of their projection on the plane
+    across ``normal`` (empty when the projection is degenerate or ``width_m`` <= 0)."""
+    if width_m <= 0 or len(points) < 8:
+        return points[:0]
+    helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
+    u = np.cross(normal, helper)
+    u /= np.linalg.norm(u)
+    flat = np.column_stack([points @ u, points @ np.cross(normal, u)])
+    try:
+        outline = ConvexHull(flat).equations
+    except (QhullError, ValueError):
+        return points[:0]
+    depth = -(flat @ outline[:, :2].T + outline[:, 2]).max(axis=1)  # distance inside
+    return points[depth <= width_m]
+
+
+def _even_subsample(points: np.ndarray, count: int) -> np.ndarray:
+    """At most ``count`` points taken evenly (deterministic) from (N, 3) points."""
+    if len(points) <= count:
+        return points
+    return points[np.linspace(0, len(points) - 1, count).round().astype(np.int64)]
+
+
+def _prepare(
+    obj: PartialObject,
+    space: SpaceMap | None,
+    planes: tuple[KnownPlane, ...],
+    config: HypothesisConfig,
+) -> _Context:
+    """Per-object set-up: observed facets to mirror with their D_max, clip levels, baselines."""
+    points = np.asarray(obj.points, float).reshape(-1, 3)
+    points = points[np.all(np.isfinite(points), axis=1)]
+    if len(points) == 0:
+        raise ValueError(f"object {obj.id} has no finite observed point")
+    regions = plane_regions(planes, config.wall_min_thickness_m)
+    cap = config.border_max_depth_m if obj.touches_border else config.max_depth_m
+    pitch = space.grid.voxel_size_m if space is not None else voxels.DEFAULT_PITCH_M
+    step = config.ray_step_m or pitch
+    ray_parts = (space, regions, cap, step)
+    fallback = dominant_normal(obj, planes)
+
+    used = [
+        f
+        for f in obj.facets
+        if f.area_m2 >= config.min_facet_area_m2
+        and np.isfinite(f.normal).all()
+        and np.linalg.norm(f.normal) > 1e-9
+        and np.isfinite(np.asarray(f.points, float)).all(axis=-1).any()
+    ]
+    if len(used) < len(obj.facets):
+        logger.debug(
+            "object %d: %d of %d facets are below %.1f cm^2 and are not mirrored",
+            obj.id,
+            len(obj.facets) - len(used),
+            len(obj.facets),
+            config.min_facet_area_m2 * 1e4,
+        )
+    sources = []
+    for f in used:
+        facet_points = np.asarray(f.points, float).reshape(-1, 3)
+        facet_points = facet_points[np.all(np.isfinite(facet_points), axis=1)]
+        sources.append((np.asarray(f.normal, float), facet_points, "observed"))
+    if not sources:
+        logger.info(
+            "object %d: no facet of at least %.1f cm^2; mirroring all its points as one facet",
+            obj.id,
+            config.min_facet_area_m2 * 1e4,
+        )
+        sources = [(fallback, points, "object")]
+    observed = []
+    for normal, facet_points, source in sources:
+        normal = normal / np.linalg.norm(normal)
+        centre = facet_points.mean(axis=0)
+        ray_sets = [
+            _ray_bounds(_even_subsample(facet_points, config.max_rays), centre, normal, ray_parts)
+        ]
+        rim = _rim_points(facet_points, normal, config.rim_width_m)
+        if len(rim):
+            # The outline's rays decide whether the mirror leaves the silhouette (module doc).
+            ray_sets.append(
+                _ray_bounds(_even_subsample(rim, config.max_rays), centre, normal, ray_parts)
+            )
+        cells, conflict = _admissible(ray_sets, config.ray_quantile, step)
+        d_max = float(cells.max()) + step
+        if conflict:
+            logger.info(
+                "object %d: no shift of a %s facet keeps its mirror out of seen-free space; "
+                "using the least violating (%.1f-%.1f mm)",
+                obj.id,
+                source,
+                cells.min() * 1e3,
+                d_max * 1e3,
+            )
+        elif d_max < config.min_room_m:
+            logger.info(
+                "object %d: a %s facet has no room behind it (D_max %.1f mm); d = %.1f mm",
+                obj.id,
+                source,
+                d_max * 1e3,
+                config.min_room_m * 1e3,
+            )
+        elif d_max < config.min_thickness_m:
+            logger.debug("object %d: facet thinner than D_min (D_max %.1f mm)", obj.id, d_max * 1e3)
+        mirror_points = _thin(_extreme_points(facet_points), config.hull_spacing_m)
+        observed.append(_SourceFacet(normal, centre, mirror_points, cells, step, source, conflict))
+
+    cuts = _support_cuts(regions, points, config.support_tolerance_m, obj.id)
+    for facet in observed:
+        if facet.source == "observed":
+            # An observed facet is the object's extreme part along its normal N (for a convex
+            # object the point with normal N lies on it): nothing is in front of it. The reach
+            # is taken over all observed points, so that a non-convex object's other parts
+            # (a handle beyond a curved side's plane) are never cut off.
+            reach = float((points @ facet.normal).max()) + config.facet_tolerance_m
+            cuts.append(np.append(-facet.normal, reach))
+    forced_free = forced_wall = 0
+    base = _extreme_points(points)
+    observed_hull = convex_mesh(base)
+    if observed_hull is not None and (space is not None or any(not r.is_support for r in regions)):
+        keys = voxels.scanline_voxels(observed_hull[0], observed_hull[1], pitch)
+        report = unary_report(observed_hull[0], keys, pitch, space, regions)
+        forced_free, forced_wall = report.free_voxels, report.wall_voxels
+        if forced_free or forced_wall:
+            logger.debug(
+                "object %d: its observed hull already has %d free and %d wall voxels",
+                obj.id,
+                forced_free,
+                forced_wall,
+            )
+    return _Context(
+        obj.id,
+        base,
+        _thin(base, config.hull_spacing_m),
+        tuple(observed),
+        space,
+        regions,
+        np.array(cuts).reshape(-1, 4),
+        cap,
+        fallback,
+        forced_free,
+        forced_wall,
+        pitch,
+        config,
+    )
+
+
+def _distance(facet: _SourceFacet, u: float, config: HypothesisConfig) -> float:
+    """d for variate u in [0, 1): uniform over the admissible d at least D_min; when none is
+    (no room), the largest admissible d, at least ``min_room_m``."""
+    lower = np.maximum(facet.cells, config.min_thickness_m)
+    lengths = np.clip(facet.cells + facet.width - lower, 0.0, None)
+    total = float(lengths.sum())
+    if total <= 0:
+        return max(facet.d_max, config.min_room_m)
+    # Inverse CDF of the uniform distribution on the union of cells (monotone in u, so the
+    # stratification of u carries over to d).
+    target = u * total
+    ends = np.cumsum(lengths)
+    index = min(int(np.searchsorted(ends, target, side="right")), len(ends) - 1)
+    return float(lower[index] + (target - (ends[index] - lengths[index])))
+
+
+def _mirror(facet: _SourceFacet, d: float) -> np.ndarray:
+    """The facet's points mirrored about its tangent plane, then moved d against its normal."""
+    n = facet.normal
+    offsets = (facet.points - facet.centre) @ n
+    return facet.points - (2.0 * offsets + d)[:, None] * n
+
+
+def _hull_groups(
+    hull: ConvexHull, cos_group: float, min_area_m2: float
+) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """Facets of a hull of at least ``min_area_m2``, largest first: (unit normal (3,), triangle
+    indices, area m^2) each.
+
+    The largest unassigned triangle claims every unassigned triangle within the angle of its
+    normal, repeatedly; each such set is then split into connected parts (triangles sharing an
+    edge), so two parallel faces are two facets. Vectorised per seed.
+    """
+    normals = hull.equations[:, :3]
+    tri = hull.points[hull.simplices]
+    areas = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    count = len(areas)
+    label = np.full(count, -1, dtype=np.int64)
+    number = 0
+    unassigned = np.arange(count)
+    while unassigned.size and areas[unassigned].sum() >= min_area_m2:
+        seed = unassigned[int(np.argmax(areas[unassigned]))]
+        close = normals[unassigned] @ normals[seed] >= cos_group
+        label[unassigned[close]] = number
+        unassigned = unassigned[~close]
+        number += 1
+    label[unassigned] = np.arange(number, number + unassigned.size)  # too small to matter
+    rows = np.repeat(np.arange(count), 3)
+    cols = hull.neighbors.ravel()
+    same = label[rows] == label[cols]
+    graph = coo_matrix((np.ones(int(same.sum())), (rows[same], cols[same])), shape=(count, count))
+    parts, part = connected_components(graph, directed=False)
+    part_area = np.bincount(part, weights=areas, minlength=parts)
+    part_normal = np.stack(
+        [np.bincount(part, weights=areas * normals[:, k], minlength=parts) for k in range(3)],
+        axis=1,
+    )
+    groups = []
+    for index in np.argsort(-part_area, kind="stable"):
+        if part_area[index] < min_area_m2:
+            break
+        normal = part_normal[index] / (np.linalg.norm(part_normal[index]) + 1e-15)
+        groups.append((normal, np.flatnonzero(part == index), float(part_area[index])))
+    return groups
+
+
+def _hull_source(
+    hull: ConvexHull,
+    normal: np.ndarray,
+    members: np.ndarray,
+    ctx: _Context,
+    rng: np.random.Generator,
+) -> _SourceFacet:
+    """A hull facet as a facet to mirror: its vertices, area-weighted centre and D_max from rays
+    cast from points sampled on it (pulled 15 % towards its centre, off the edges)."""
+    simplices = hull.simplices[members]
+    tri = hull.points[simplices]
+    areas = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    centre = (tri.mean(axis=1) * areas[:, None]).sum(axis=0) / max(areas.sum(), 1e-15)
+    count = ctx.config.hull_facet_rays
+    pick = rng.choice(len(areas), size=count, p=areas / areas.sum())
+    r1, r2 = rng.random(count), rng.random(count)
+    flip = r1 + r2 > 1
+    r1, r2 = np.where(flip, 1 - r1, r1), np.where(flip, 1 - r2, r2)
+    samples = tri[pick, 0] + r1[:, None] * (tri[pick, 1] - tri[pick, 0])
+    samples = samples + r2[:, None] * (tri[pick, 2] - tri[pick, 0])
+    samples = centre + 0.85 * (samples - centre)
+    step = ctx.config.ray_step_m or ctx.pitch_m
+    parts = (ctx.space, ctx.regions, ctx.cap_m, step)
+    cells, conflict = _admissible(
+        [_ray_bounds(samples, centre, normal, parts)], ctx.config.ray_quantile, step
+    )
+    points = hull.points[np.unique(simplices)]
+    return _SourceFacet(normal, centre, points, cells, step, "hull", conflict)
+
+
+@dataclass(frozen=True, eq=False)
+class _Sample:
+    """One run of Algorithm 1: the hull points and what produced them."""
+
+    points: np.ndarray
+    distances: list[float]
+    normals: list[np.ndarray]
+    sources: list[str]
+    rounds: int
+
+
+def _algorithm1(
+    ctx: _Context,
+    observed_u: np.ndarray,
+    rng: np.random.Generator,
+    max_rounds: int,
+) -> _Sample:
+    """Algorithm 1 for one hypothesis: mirror, hull, new hull facets, repeat."""
+    config = ctx.config
+    cos_merge = np.cos(np.radians(config.normal_merge_deg))
+    cos_group = np.cos(np.radians(config.hull_group_deg))
+    cloud = ctx.loop_points
+    hidden: list[np.ndarray] = []  # the hypothesised (mirrored) facets' points
+    handled = [f.normal for f in ctx.observed]
+    distances: list[float] = []
+    normals: list[np.ndarray] = []
+    sources: list[str] = []
+    todo = list(zip(ctx.observed, observed_u, strict=True))
+    rounds = 0
+    while todo:
+        rounds += 1
+        mirrored = []
+        for facet, u in todo:
+            d = _distance(facet, float(u), config)
+            mirrored.append(_mirror(facet, d))
+            handled.extend([facet.normal, -facet.normal])
+            distances.append(d)
+            normals.append(facet.normal)
+            sources.append(facet.source)
+        hidden.extend(mirrored)
+        cloud = np.concatenate([cloud, *mirrored])
+        if rounds >= max_rounds:
+            break
+        try:
+            hull = ConvexHull(cloud)
+        except (QhullError, ValueError):
+            break  # still flat: the final hull is thickened
+        cloud = hull.points[hull.vertices]  # only hull vertices matter from now on
+        known = np.array(handled)
+        todo = []
+        for normal, members, _ in _hull_groups(hull, cos_group, config.min_facet_area_m2):
+            if (known @ normal).max() >= cos_merge:
+                continue
+            if any(f.normal @ normal >= cos_merge for f, _ in todo):
+                continue
+            todo.append((_hull_source(hull, normal, members, ctx, rng), rng.random()))
+            if len(todo) >= config.max_hull_facets:
+                break
+    points = np.concatenate([ctx.base_points, *hidden])
+    return _Sample(points, distances, normals, sources, rounds)
+
+
+def _finish(ctx: _Context, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """Closed convex mesh of the hypothesis' points: thickened if flat, cut at the support."""
+    mesh = convex_mesh(points)
+    if mesh is None:
+        logger.info("object %d: flat hypothesis; thickened by D_min", ctx.object_id)
+        mesh = convex_mesh(_thicken(points, ctx.fallback_normal, ctx.config.min_thickness_m))
+        if mesh is None:  # pragma: no cover - _thicken always spans a volume
+            raise RuntimeError(f"object {ctx.object_id}: cannot build a hull")
+    for cut in ctx.cuts:
+        vertices, faces, _ = mesh
+        if float((vertices @ cut[:3]).min()) + cut[3] < -1e-12:
+            clipped = convex_mesh(clip_halfspace(vertices, faces, cut[:3], float(cut[3])))
+            if clipped is None:
+                logger.info("object %d: a cut would leave no volume; skipped", ctx.object_id)
+                continue
+            mesh = clipped
+    return mesh
+
+
+def _evaluate(
+    ctx: _Context, mesh: tuple[np.ndarray, np.ndarray, float]
+) -> tuple[np.ndarray | None, int, int, bool]:
+    """Voxels, excess free and wall voxels, and feasibility of a mesh."""
+    vertices, faces, _ = mesh
+    needs_voxels = ctx.space is not None or any(not r.is_support for r in ctx.regions)
+    if not needs_voxels:
+        return None, 0, 0, True
+    keys = voxels.scanline_voxels(vertices, faces, ctx.pitch_m)
+    report = unary_report(vertices, keys, ctx.pitch_m, ctx.space, ctx.regions)
+    free = max(report.free_voxels - ctx.forced_free, 0)
+    wall = max(report.wall_voxels - ctx.forced_wall, 0)
+    allowed = allowed_voxels(
+        report.voxel_count, ctx.config.free_space_tolerance, ctx.config.free_space_tolerance_voxels
+    )
+    return keys, free, wall, free <= allowed and wall <= allowed
+
+
+def generate_hypotheses(
+    obj: PartialObject,
+    space: SpaceMap | None,
+    planes: tuple[KnownPlane, ...],
+    config: HypothesisConfig | None = None,
+    rng: np.random.Generator | None = None,
+) -> tuple[ShapeHypothesis, ...]:
+    """``config.count`` complete-shape hypotheses of a partial object (Algorithm 1).
+
+    Args:
+        obj: the observed part (points and facets, world frame, m).
+        space: the frame's free/occupied/unknown voxel map (None: no free-space limit).
+        planes: the frame's support and walls.
+        config: settings (defaults: ``HypothesisConfig()``).
+        rng: random source (default: seeded from ``config.seed`` and the object id).
+
+    Returns:
+        m closed convex hypotheses, each containing every observed point, none below the
+        support; see the module doc for D_max, the no-room rule, resampling and the timeout.
+    """
+    config = config or HypothesisConfig()
+    if rng is None:
+        rng = np.random.default_rng([config.seed, int(obj.id)])
+    started = time.perf_counter()
+    ctx = _prepare(obj, space, planes, config)
+    m = config.count
+    # Stratified variates of the observed facets: column j is a shuffled set of m strata.
+    strata = np.stack([rng.permutation(m) for _ in ctx.observed], axis=1)
+    observed_u = (strata + rng.random(strata.shape)) / m
+    slot_rngs = rng.spawn(m)
+    hypotheses = []
+    timed_out = False
+    for k in range(m):
+        if not timed_out and time.perf_counter() - started > config.timeout_s:
+            timed_out = True
+            logger.warning(
+                "object %d: hypothesis timeout (%.2f s) after %d of %d; the rest are simplified",
+                obj.id,
+                config.timeout_s,
+                k,
+                m,
+            )
+        max_rounds = 1 if timed_out else config.max_rounds
+        attempts = 1 if timed_out else config.max_attempts
+        best = None
+        for attempt in range(attempts):
+            sample = _algorithm1(ctx, observed_u[k] * 0.5**attempt, slot_rngs[k], max_rounds)
+            mesh = _finish(ctx, sample.points)
+            keys, free, wall, feasible = _evaluate(ctx, mesh)
+            candidate = (free + wall, attempt, sample, mesh, keys, free, wall, feasible)
+            if best is None or candidate[0] < best[0]:
+                best = candidate
+            if feasible:
+                best = candidate
+                break
+        assert best is not None
+        _, attempt, sample, mesh, keys, free, wall, feasible = best
+        if not feasible:
+            logger.info(
+                "object %d hypothesis %d: no feasible sample in %d attempts (%d free, %d wall "
+                "voxels); kept as infeasible",
+                obj.id,
+                k,
+                attempts,
+                free,
+                wall,
+            )
+        vertices, faces, volume = mesh
+        hypotheses.append(
+            ShapeHypothesis(
+                object_id=int(obj.id),
+                index=k,
+                vertices=vertices,
+                faces=faces,
+                volume_m3=volume,
+                distances_m=np.array(sample.distances, dtype=float),
+                facet_normals=np.array(sample.normals, dtype=float).reshape(-1, 3),
+                facet_sources=tuple(sample.sources),
+                rounds=sample.rounds,
+                attempts=attempt + 1,
+                feasible=feasible,
+                free_voxels=free,
+                wall_voxels=wall,
+                forced_free_voxels=ctx.forced_free,
+                forced_wall_voxels=ctx.forced_wall,
+                voxel_keys=keys,
+                voxel_pitch_m=ctx.pitch_m,
+            )
+        )
+    logger.debug(
+        "object %d: %d hypotheses in %.3f s, volumes %s",
+        obj.id,
+        m,
+        time.perf_counter() - started,
+        volume_spread(hypotheses),
+    )
+    return tuple(hypotheses)
+
+
+def minimum_shape(
+    obj: PartialObject,
+    planes: tuple[KnownPlane, ...],
+    config: HypothesisConfig | None = None,
+) -> ShapeHypothesis:
+    """The smallest plausible solid from the observed points only.
+
+    The convex hull of the observed points; where it is thinner than D_min along the object's
+    dominant normal (the direction towards the camera, ``dominant_normal``), a copy of the
+    points is added behind them so that it is D_min thick along that normal (flat or collinear
+    point sets are thickened the same way). Cut at the support plane like the hypotheses.
+    Index -1; no voxels.
+    """
+    config = config or HypothesisConfig()
+    points = np.asarray(obj.points, float).reshape(-1, 3)
+    points = points[np.all(np.isfinite(points), axis=1)]
+    if len(points) == 0:
+        raise ValueError(f"object {obj.id} has no finite observed point")
+    normal = dominant_normal(obj, planes)
+    base = _extreme_points(points)
+    extent = float(np.ptp(base @ normal))
+    thickness = 0.0
+    if extent < config.min_thickness_m:
+        thickness = config.min_thickness_m - extent
+        base = np.concatenate([base, base - thickness * normal])
+    if convex_mesh(base) is None:
+        logger.info("object %d: flat observed hull; minimum shape thickened", obj.id)
+        base = _thicken(base, normal, config.min_thickness_m)
+    regions = plane_regions(planes, config.wall_min_thickness_m)
+    cuts = np.array(_support_cuts(regions, points)).reshape(-1, 4)
+    ctx = _Context(
+        obj.id, base, base, (), None, regions, cuts, config.max_depth_m, normal, 0, 0,
+        voxels.DEFAULT_PITCH_M, config,
+    )  # fmt: skip
+    vertices, faces, volume = _finish(ctx, base)
+    return ShapeHypothesis(
+        object_id=int(obj.id),
+        index=-1,
+        vertices=vertices,
+        faces=faces,
+        volume_m3=volume,
+        distances_m=np.array([thickness]),
+        facet_normals=normal[None, :],
+        facet_sources=("minimum",),
+    )

@@ -1,0 +1,123 @@
+"""The Collision Checker: uniform posterior over jointly feasible models."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+from ipr.collision_checker import (
+    CollisionCheckerConfig,
+    _exact_marginals,
+    _gibbs_marginals,
+    collision_checker,
+    write_collision_checker_result,
+)
+from ipr.hypotheses import HypothesisConfig
+from ipr.perception.free_space import FREE, SpaceMap
+from ipr.perception.types import Facet, PartialObject
+from ipr.result import load_result
+
+from .box_scene import GRID, SUPPORT, partial_box, render_view
+
+CONFIG = CollisionCheckerConfig(hypotheses=HypothesisConfig(count=16))
+WALL_Y = 0.10  # the second object's seen front face (m)
+
+
+@pytest.fixture(scope="module")
+def scene():
+    """The box seen from its height (its depth is hidden) and, behind it, the seen front face
+    of a second object at y = 0.10: box hypotheses reaching past it must intersect it."""
+    view = render_view((0.0, -0.5, 0.03))
+    box = partial_box(view, object_id=1)
+    grid = np.stack(
+        np.meshgrid(np.linspace(-0.05, 0.05, 21), [WALL_Y], np.linspace(0.0, 0.04, 9)), -1
+    ).reshape(-1, 3)
+    face = Facet(grid.mean(axis=0), np.array([0.0, -1.0, 0.0]), grid, 0.1 * 0.04)
+    behind = PartialObject(
+        2, 0, np.arange(len(grid)), grid, np.zeros((len(grid), 3), np.uint8), (face,)
+    )
+    return view, (box, behind)
+
+
+def test_hypotheses_that_must_hit_a_neighbour_get_zero_probability(scene):
+    view, objects = scene
+    posteriors = collision_checker(
+        objects, view.space(), (SUPPORT,), CONFIG, np.random.default_rng(0)
+    )
+    assert [p.object_id for p in posteriors] == [1, 2]
+    box = posteriors[0]
+    assert box.probabilities.sum() == pytest.approx(1.0)
+    assert len(box.hypotheses) == 16
+    reach = np.array([h.vertices[:, 1].max() for h in box.hypotheses])
+    through = reach > WALL_Y + CONFIG.constraints.overlap_tolerance_m + 1e-3
+    assert through.any() and (~through).any()  # the test means something
+    assert np.all(box.probabilities[through] == 0)
+    assert np.all(box.probabilities[~through] > 0)
+    assert box.probabilities[box.best] > 0
+    assert box.inference == "exact"
+    # The second object fits behind the short box hypotheses: none of its own is excluded.
+    assert posteriors[1].probabilities.sum() == pytest.approx(1.0)
+    assert np.all(posteriors[1].probabilities > 0)
+
+
+def test_result_directory(scene, tmp_path):
+    view, objects = scene
+    posteriors = collision_checker(objects, None, (SUPPORT,), CONFIG, np.random.default_rng(1))
+    path = write_collision_checker_result(
+        tmp_path / "result", posteriors, {0: view.world_from_camera}, {"total": 1.0}
+    )
+    result = load_result(path)
+    assert result.method == "collision-checker"
+    assert len(result.objects) == 2
+    for obj, posterior in zip(result.objects, posteriors, strict=True):
+        assert sum(h.probability for h in obj.hypotheses) == pytest.approx(1.0, abs=1e-6)
+        assert len(obj.hypotheses) == np.count_nonzero(posterior.probabilities)
+        assert obj.probability == pytest.approx(posterior.probabilities.max(), abs=1e-6)
+
+
+def test_minimum_shape_when_no_hypothesis_is_feasible(scene):
+    _, objects = scene
+    everything_free = SpaceMap(GRID, np.full(GRID.shape, FREE, dtype=np.uint8))
+    (posterior,) = collision_checker(objects[:1], everything_free, (SUPPORT,), CONFIG)
+    assert posterior.inference == "minimum"
+    assert posterior.hypotheses == (posterior.minimum,)
+    assert posterior.probabilities.tolist() == [1.0]
+
+
+def brute_force(sizes, edges):
+    counts = {i: np.zeros(n) for i, n in sizes.items()}
+    nodes = sorted(sizes)
+    for values in itertools.product(*(range(sizes[i]) for i in nodes)):
+        state = dict(zip(nodes, values, strict=True))
+        if all(m[state[a], state[b]] for (a, b), m in edges.items()):
+            for i in nodes:
+                counts[i][state[i]] += 1
+    return {i: c / c.sum() for i, c in counts.items()}
+
+
+def test_exact_and_sampled_marginals_match_enumeration():
+    rng = np.random.default_rng(3)
+    sizes = {1: 5, 2: 4, 3: 6, 4: 3}
+    edges = {pair: rng.random((sizes[pair[0]], sizes[pair[1]])) > 0.35 for pair in
+             [(1, 2), (2, 3), (3, 4), (1, 3)]}  # fmt: skip
+    truth = brute_force(sizes, edges)
+    exact = _exact_marginals(sorted(sizes), edges, sizes)
+    config = CollisionCheckerConfig(gibbs_chains=4, gibbs_sweeps=1500, gibbs_burn_in=20)
+    sampled = _gibbs_marginals(sorted(sizes), edges, sizes, config, rng, np.inf)
+    for i in sizes:
+        assert np.allclose(exact[i], truth[i], atol=1e-12)
+        assert np.abs(sampled[i] - truth[i]).max() < 0.06
+    impossible = {(1, 2): np.zeros((5, 4), dtype=bool)}
+    assert _exact_marginals([1, 2], impossible, sizes) is None
+
+
+def test_tiny_time_budget_still_gives_valid_posteriors(scene):
+    _, objects = scene
+    posteriors = collision_checker(
+        objects, None, (SUPPORT,), CONFIG, np.random.default_rng(2), time_budget_s=0.01
+    )
+    for posterior in posteriors:
+        assert posterior.probabilities.sum() == pytest.approx(1.0)
+        assert posterior.probabilities[posterior.best] > 0

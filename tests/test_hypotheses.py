@@ -1,0 +1,207 @@
+"""Hypothesis generation (Algorithm 1) on a rendered 10 x 6 x 4 cm box standing on a table."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ipr import voxels
+from ipr.hypotheses import (
+    HypothesisConfig,
+    ShapeHypothesis,
+    generate_hypotheses,
+    minimum_shape,
+    volume_spread,
+)
+from ipr.perception.free_space import FREE, SpaceMap
+from ipr.perception.types import Facet, PartialObject
+
+from .box_scene import BOX_HALF, GRID, SUPPORT, box_mesh, merged_space, partial_box, render_view
+
+CONFIG = HypothesisConfig(count=16)
+TOP = 2 * BOX_HALF[2]  # the box's top, z (m)
+BACK = BOX_HALF[1]  # its back face, y (m); the cameras are on -y
+
+
+@pytest.fixture(scope="module")
+def oblique():
+    """Camera above and in front: the top and the front are seen."""
+    view = render_view((0.0, -0.45, 0.40))
+    return partial_box(view), view.space()
+
+
+@pytest.fixture(scope="module")
+def low():
+    """Camera at the box's height: only the front is seen; behind the box is hidden."""
+    view = render_view((0.0, -0.5, 0.03))
+    return view, partial_box(view), view.space()
+
+
+def true_box_keys() -> np.ndarray:
+    return voxels.occupied_voxels(box_mesh())
+
+
+def iou(a: np.ndarray, b: np.ndarray) -> float:
+    common = voxels.intersection_count(a, b)
+    return common / (a.size + b.size - common)
+
+
+def assert_valid(h: ShapeHypothesis, points: np.ndarray) -> None:
+    """Closed, convex with outward faces, the right volume, containing every observed point."""
+    merged, faces = voxels.merge_vertices(h.vertices, h.faces)
+    assert voxels.is_closed(merged, faces)
+    planes = h.face_planes()
+    scale = np.ptp(h.vertices, axis=0).max()
+    assert np.all(h.vertices @ planes[:, :3].T + planes[:, 3] <= 1e-9 * scale + 1e-12)
+    tri = h.vertices[h.faces]
+    signed = np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])).sum() / 6
+    assert signed == pytest.approx(h.volume_m3, rel=1e-6)
+    assert h.volume_m3 > 0
+    assert h.contains(points, tolerance_m=1e-7).all()
+
+
+def test_hypotheses_are_closed_convex_and_contain_all_observed_points(oblique, low):
+    for obj, space in (oblique, low[1:]):
+        hypotheses = generate_hypotheses(obj, space, (SUPPORT,), CONFIG, np.random.default_rng(0))
+        assert len(hypotheses) == CONFIG.count
+        assert [h.index for h in hypotheses] == list(range(CONFIG.count))
+        for h in hypotheses:
+            assert h.object_id == obj.id
+            assert_valid(h, obj.points)
+
+
+def test_nothing_below_support_or_above_the_seen_top(oblique):
+    obj, space = oblique
+    hypotheses = generate_hypotheses(obj, space, (SUPPORT,), CONFIG, np.random.default_rng(1))
+    lowest = min(h.vertices[:, 2].min() for h in hypotheses)
+    highest = max(h.vertices[:, 2].max() for h in hypotheses)
+    assert lowest >= -CONFIG.support_tolerance_m
+    # The top is seen, so the space above it is free: no hypothesis may grow above it.
+    assert highest <= TOP + CONFIG.facet_tolerance_m + 1e-3
+
+
+def test_no_hypothesis_enters_seen_free_space_beyond_tolerance(oblique, low):
+    for obj, space in (oblique, low[1:]):
+        hypotheses = generate_hypotheses(obj, space, (SUPPORT,), CONFIG, np.random.default_rng(2))
+        for h in hypotheses:
+            keys = voxels.occupied_voxels(h.mesh, GRID.voxel_size_m)
+            free = np.count_nonzero(space.state_at(voxels.centres(keys, GRID.voxel_size_m)) == FREE)
+            allowed = max(
+                CONFIG.free_space_tolerance * keys.size, CONFIG.free_space_tolerance_voxels
+            )
+            assert h.feasible
+            assert free - h.forced_free_voxels <= allowed
+
+
+def test_true_box_is_within_the_hypotheses(oblique, low):
+    truth = true_box_keys()
+    for obj, space in (oblique, low[1:]):
+        hypotheses = generate_hypotheses(obj, space, (SUPPORT,), CONFIG, np.random.default_rng(3))
+        assert max(iou(h.keys(), truth) for h in hypotheses) >= 0.7
+
+
+def test_free_space_behind_limits_the_depth(low):
+    view, obj, space = low
+    alone = generate_hypotheses(obj, space, (SUPPORT,), CONFIG, np.random.default_rng(4))
+    # Hidden behind the box, hypotheses reach far back ...
+    assert max(h.vertices[:, 1].max() for h in alone) > BACK + 0.08
+    # ... until a view from above shows the space behind the box to be empty.
+    above = render_view((0.0, 0.0, 0.5), target=(0.0, 0.001, 0.0)).space()
+    seen = merged_space(space, above)
+    limited = generate_hypotheses(obj, seen, (SUPPORT,), CONFIG, np.random.default_rng(4))
+    assert max(h.vertices[:, 1].max() for h in limited) <= BACK + 0.015
+    assert max(iou(h.keys(), true_box_keys()) for h in limited) >= 0.7
+
+
+def test_volumes_vary(low, oblique):
+    hidden = volume_spread(
+        generate_hypotheses(low[1], low[2], (SUPPORT,), CONFIG, np.random.default_rng(5))
+    )
+    assert hidden["ratio"] > 2.0  # back hidden: depths from D_min to far behind
+    seen = volume_spread(
+        generate_hypotheses(*oblique, (SUPPORT,), CONFIG, np.random.default_rng(5))
+    )
+    assert seen["ratio"] > 1.05  # top and front seen: only the bottom is uncertain
+    assert seen["max"] < hidden["max"]
+
+
+def test_deterministic_per_seed(oblique):
+    obj, space = oblique
+    first = generate_hypotheses(obj, space, (SUPPORT,), CONFIG, np.random.default_rng(7))
+    again = generate_hypotheses(obj, space, (SUPPORT,), CONFIG, np.random.default_rng(7))
+    other = generate_hypotheses(obj, space, (SUPPORT,), CONFIG, np.random.default_rng(8))
+    for a, b in zip(first, again, strict=True):
+        assert np.array_equal(a.vertices, b.vertices) and np.array_equal(a.faces, b.faces)
+        assert np.array_equal(a.distances_m, b.distances_m)
+    assert any(
+        not np.array_equal(a.distances_m, b.distances_m) for a, b in zip(first, other, strict=True)
+    )
+
+
+def test_single_tiny_facet_and_flat_or_collinear_points_do_not_crash():
+    rng = np.random.default_rng(0)
+    patch = np.column_stack([rng.uniform(0, 0.01, 30), rng.uniform(0, 0.01, 30), np.full(30, 0.05)])
+    tiny = Facet(patch.mean(axis=0), np.array([0.0, 0.0, 1.0]), patch, 1e-4)
+    line = np.column_stack([np.linspace(0, 0.05, 20), np.zeros(20), np.full(20, 0.03)])
+    cases = [
+        PartialObject(1, 0, np.arange(30), patch, np.zeros((30, 3), np.uint8), (tiny,)),
+        PartialObject(2, 0, np.arange(30), patch, np.zeros((30, 3), np.uint8)),  # no facets
+        PartialObject(3, 0, np.arange(20), line, np.zeros((20, 3), np.uint8)),  # collinear
+        PartialObject(4, 0, np.arange(1), patch[:1], np.zeros((1, 3), np.uint8)),  # one point
+    ]
+    for obj in cases:
+        hypotheses = generate_hypotheses(obj, None, (SUPPORT,), CONFIG, np.random.default_rng(0))
+        for h in hypotheses:
+            assert_valid(h, obj.points)
+            assert h.vertices[:, 2].min() >= -1e-6
+        assert_valid(minimum_shape(obj, (SUPPORT,), CONFIG), obj.points)
+
+
+def test_facet_without_room_gets_the_minimum_distance(low):
+    _, obj, _ = low
+    everything_free = SpaceMap(GRID, np.full(GRID.shape, FREE, dtype=np.uint8))
+    hypotheses = generate_hypotheses(
+        obj, everything_free, (SUPPORT,), CONFIG, np.random.default_rng(0)
+    )
+    for h in hypotheses:
+        assert_valid(h, obj.points)
+        observed = np.array(h.facet_sources) == "observed"
+        assert np.allclose(h.distances_m[observed], CONFIG.min_room_m)
+        assert not h.feasible  # all of it is in seen-free space: kept, but flagged
+
+
+def test_objects_cut_by_the_image_border_may_extend_further(low):
+    _, obj, _ = low
+    inside = generate_hypotheses(obj, None, (SUPPORT,), CONFIG, np.random.default_rng(0))
+    border = PartialObject(
+        obj.id, 0, obj.pixels, obj.points, obj.colours, obj.facets, obj.facet_of_point, True
+    )
+    cut = generate_hypotheses(border, None, (SUPPORT,), CONFIG, np.random.default_rng(0))
+    assert max(h.distances_m[0] for h in inside) <= CONFIG.max_depth_m
+    assert max(h.distances_m[0] for h in cut) > CONFIG.max_depth_m
+
+
+def test_minimum_shape_is_small_thick_and_contains_the_points(oblique, low):
+    for obj, _ in (oblique, low[1:]):
+        smallest = minimum_shape(obj, (SUPPORT,), CONFIG)
+        assert_valid(smallest, obj.points)
+        assert smallest.index == -1
+        assert smallest.volume_m3 <= 8 * np.prod(BOX_HALF) * 1.05
+    # Only the front is seen: the minimum shape is a D_min-thick slab behind it.
+    front_only = minimum_shape(low[1], (SUPPORT,), CONFIG)
+    depth = np.ptp(front_only.vertices[:, 1])
+    assert depth == pytest.approx(CONFIG.min_thickness_m, abs=2e-3)
+
+
+def test_non_convex_object_keeps_parts_beyond_a_facet_plane():
+    """An L-shaped object: its large low facet's plane must not cut off the observed tower."""
+    rng = np.random.default_rng(0)
+    low = np.column_stack([rng.uniform(0, 0.1, 400), rng.uniform(0, 0.06, 400), np.full(400, 0.02)])
+    tower = np.column_stack(
+        [rng.uniform(0.08, 0.1, 100), rng.uniform(0, 0.06, 100), rng.uniform(0.02, 0.06, 100)]
+    )
+    points = np.concatenate([low, tower])
+    facet = Facet(low.mean(axis=0), np.array([0.0, 0.0, 1.0]), low, 0.1 * 0.06)
+    obj = PartialObject(1, 0, np.arange(500), points, np.zeros((500, 3), np.uint8), (facet,))
+    for h in generate_hypotheses(obj, None, (SUPPORT,), CONFIG, np.random.default_rng(0)):
+        assert_valid(h, points)
