@@ -13,10 +13,14 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 import ipr  # noqa: F401  (GL backend before MuJoCo loads)
-from benchmarks import foundation, segmentation
+from benchmarks import foundation, inference, segmentation
 from benchmarks.common import machine_description
 
-SECTIONS = {"foundation": foundation.run, "segmentation": segmentation.run}
+SECTIONS = {
+    "foundation": foundation.run,
+    "segmentation": segmentation.run,
+    "inference": inference.run,
+}
 OUTPUT = Path(__file__).resolve().parents[1] / "docs" / "BENCHMARKS.md"
 
 

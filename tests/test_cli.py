@@ -7,6 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from ipr.cli import EXIT_INPUT_ERROR, main
@@ -95,3 +96,88 @@ def test_eval_json_is_not_half_written_on_error(scene_dir: Path, tmp_path: Path)
     target = tmp_path / "metrics.json"
     assert main(["eval", str(scene_dir), str(tmp_path / "missing"), "--json", str(target)]) != 0
     assert not target.exists()
+
+
+def test_segment_writes_labels_facets_and_overlays(tmp_path: Path, capsys):
+    from PIL import Image
+
+    from ipr.synth import SynthConfig, generate_scene
+
+    scene = generate_scene(
+        tmp_path / "scenes",
+        kind="dynamic",
+        seed=5,
+        arrangement="table",
+        config=SynthConfig(width=320, height=240),
+    )
+    out = tmp_path / "seg"
+    assert main(["segment", str(scene), "-o", str(out)]) == 0
+    summary = json.loads((out / "segmentation.json").read_text())
+    frames = len(summary["frames"])
+    assert frames >= 2
+    ids_per_frame = []
+    for index in range(frames):
+        labels = np.asarray(Image.open(out / "labels" / f"{index:06d}.png"))
+        facets = np.asarray(Image.open(out / "facets" / f"{index:06d}.png"))
+        assert (
+            labels.dtype == np.uint16
+            and labels.shape == (240, 320)
+            and facets.shape == labels.shape
+        )
+        assert Image.open(out / "overlay" / f"{index:06d}.png").size == (320, 240)
+        ids = set(np.unique(labels)) - {0}
+        assert ids == {obj["id"] for obj in summary["frames"][index]["objects"]}
+        assert (facets[labels == 0] == 0).all()  # facets only on objects
+        ids_per_frame.append(ids)
+    # At least three objects, and most ids of frame 0 are still there after the push.
+    assert len(ids_per_frame[0]) >= 3
+    assert len(ids_per_frame[0] & ids_per_frame[1]) >= len(ids_per_frame[0]) - 1
+    # Refuses to overwrite, and leaves nothing half-written.
+    assert main(["segment", str(scene), "-o", str(out)]) == EXIT_INPUT_ERROR
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["scenes", "seg"]
+
+
+def test_infer_collision_checker_end_to_end(tmp_path: Path, capsys):
+    from ipr.result import load_result
+    from ipr.synth import SynthConfig, generate_scene
+
+    scene = generate_scene(
+        tmp_path / "scenes",
+        kind="static",
+        seed=2,
+        arrangement="table",
+        config=SynthConfig(width=320, height=240),
+    )
+    out = tmp_path / "result"
+    assert (
+        main(["infer", str(scene), "-o", str(out), "--method", "collision-checker", "--seed", "1"])
+        == 0
+    )
+    result = load_result(out)
+    assert result.method == "collision-checker" and len(result.objects) >= 2
+    for obj in result.objects:
+        assert abs(sum(h.probability for h in obj.hypotheses) - 1.0) < 1e-6
+        assert obj.load_mesh().is_watertight
+    assert set(result.timing_s) >= {"segmentation", "hypotheses", "inference", "total"}
+    metrics_file = tmp_path / "metrics.json"
+    assert main(["eval", str(scene), str(out), "--json", str(metrics_file)]) == 0
+    metrics = json.loads(metrics_file.read_text())
+    # A real but imperfect reconstruction: well above nothing, below the ground truth.
+    assert 0.2 < metrics["scene_space"]["iou"] < 0.99
+    # Same seed, same answer.
+    again = tmp_path / "again"
+    assert main(["infer", str(scene), "-o", str(again), "--seed", "1"]) == 0
+    first = [o.load_mesh().volume for o in result.objects]
+    second = [o.load_mesh().volume for o in load_result(again).objects]
+    assert np.allclose(first, second)
+
+
+def test_infer_rejects_bad_budget_and_existing_output(scene_dir: Path, tmp_path: Path, capsys):
+    assert (
+        main(["infer", str(scene_dir), "-o", str(tmp_path / "r"), "--time-budget", "-1"])
+        == EXIT_INPUT_ERROR
+    )
+    assert "time-budget" in capsys.readouterr().err
+    (tmp_path / "exists").mkdir()
+    assert main(["infer", str(scene_dir), "-o", str(tmp_path / "exists")]) == EXIT_INPUT_ERROR
+    assert "already exists" in capsys.readouterr().err

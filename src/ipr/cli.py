@@ -96,6 +96,24 @@ def _cmd_ground_truth(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_infer(args: argparse.Namespace) -> int:
+    from ipr.pipeline import infer
+    from ipr.result import load_result
+
+    out = infer(
+        Path(args.scene),
+        Path(args.out),
+        method=args.method,
+        seed=args.seed,
+        time_budget_s=args.time_budget,
+        overwrite=args.overwrite,
+    )
+    result = load_result(out, load_meshes=False)
+    timing = ", ".join(f"{key} {value:.2f} s" for key, value in result.timing_s.items())
+    print(f"{out}: {len(result.objects)} objects ({result.method}; {timing})")
+    return 0
+
+
 def _cmd_segment(args: argparse.Namespace) -> int:
     from ipr.perception import perceive_scene
     from ipr.perception.output import write_segmentation
@@ -225,6 +243,30 @@ def build_parser() -> argparse.ArgumentParser:
     ground_truth.add_argument("--models", metavar="DIR", help="BOP models folder")
     ground_truth.add_argument("--overwrite", action="store_true")
     ground_truth.set_defaults(handler=_cmd_ground_truth)
+
+    infer = commands.add_parser(
+        "infer",
+        help="complete the 3D shapes of a scene's objects (writes a result)",
+        description="Perceive the scene, hypothesise hidden parts (Algorithm 1), apply the "
+        "geometric constraints and infer shape posteriors; writes a result directory "
+        "per SCENE_FORMAT.md (result.json, objects/<k>/best.ply and hypotheses). "
+        "Methods: collision-checker (uniform prior over jointly feasible shapes, "
+        "no physics); the physics-based methods come with the physics stage.",
+    )
+    infer.add_argument("scene", metavar="SCENE")
+    infer.add_argument("-o", "--out", required=True, metavar="OUT")
+    infer.add_argument("--method", default="collision-checker", choices=["collision-checker"])
+    infer.add_argument(
+        "--seed", type=int, default=0, help="seed of every random choice (default 0)"
+    )
+    infer.add_argument(
+        "--time-budget",
+        type=float,
+        metavar="SECONDS",
+        help="wall-clock budget for hypotheses and inference (default: none)",
+    )
+    infer.add_argument("--overwrite", action="store_true", help="replace OUT if it exists")
+    infer.set_defaults(handler=_cmd_infer)
 
     segment = commands.add_parser(
         "segment",

@@ -1,0 +1,21 @@
+"""The configuration of a whole run: one typed object whose sections are the stages' own configs.
+
+Every field has a documented default in its stage's module; ``Config()`` is what ``ipr infer``
+uses. Sections: ``perception`` (``ipr.perception.config``), ``collision_checker`` (hypotheses,
+constraints and the Collision Checker, ``ipr.collision_checker``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from ipr.collision_checker import CollisionCheckerConfig
+from ipr.perception.config import PerceptionConfig
+
+
+@dataclass(frozen=True)
+class Config:
+    """All parameters of a run, with documented defaults in each section."""
+
+    perception: PerceptionConfig = field(default_factory=PerceptionConfig)
+    collision_checker: CollisionCheckerConfig = field(default_factory=CollisionCheckerConfig)
