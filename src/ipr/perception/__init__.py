@@ -73,7 +73,11 @@ def perceive_scene(
     started = time.perf_counter()
     points = [frame.points_world() for frame in scene.frames]
     labels = track_segments(
-        [s.labels for s in segmentations], points, [f.rgb for f in scene.frames], config.tracking
+        [s.labels for s in segmentations],
+        points,
+        [f.rgb for f in scene.frames],
+        config.tracking,
+        frames_depth=[f.depth_m for f in scene.frames],
     )
     tracking_seconds = time.perf_counter() - started
 
@@ -142,6 +146,7 @@ def _partial_objects(
     flat_labels = labels.reshape(-1)
     flat_points = points.reshape(-1, 3)
     flat_rgb = frame.rgb.reshape(-1, 3)
+    valid = frame.depth_m.reshape(-1) > 0
     supervoxels = segmentation.supervoxels
     flat_supervoxel = supervoxels.labels.reshape(-1)
     camera_from_world = invert_transform(frame.world_from_camera)
@@ -152,7 +157,10 @@ def _partial_objects(
     next_facet = 1
     objects = []
     for object_id in sorted(int(k) for k in np.unique(flat_labels) if k > 0):
-        pixels = np.flatnonzero(flat_labels == object_id)
+        # Labels may cover depth holes inside an object; its points come from valid readings.
+        pixels = np.flatnonzero((flat_labels == object_id) & valid)
+        if pixels.size == 0:
+            continue
         point_supervoxel = flat_supervoxel[pixels]
         has_supervoxel = point_supervoxel >= 0
         object_supervoxels = np.unique(point_supervoxel[has_supervoxel])

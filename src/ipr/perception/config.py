@@ -13,18 +13,24 @@ from dataclasses import dataclass, field
 class TrackingConfig:
     """Weights and gates of the matching cost (dimensionless unless stated).
 
+    Defaults were chosen on development scenes (dynamic, seeds 8000-8011), never on a suite.
+
     Attributes:
-        overlap_weight, colour_weight, distance_weight: weights of the three cues.
+        overlap_weight, colour_weight, distance_weight, height_weight: weights of the cues
+            (mask overlap, colour histogram, centroid distance, top height).
         max_motion_m: centroid displacement mapped to the full distance cost (a push moves
             objects up to about this far).
+        height_scale_m: change of top height mapped to the full height cost.
         max_match_cost: above this a segment is a new object.
     """
 
-    overlap_weight: float = 1.0
+    overlap_weight: float = 0.5
     colour_weight: float = 1.0
-    distance_weight: float = 1.0
-    max_motion_m: float = 0.2
-    max_match_cost: float = 1.6
+    distance_weight: float = 0.5
+    height_weight: float = 0.5
+    max_motion_m: float = 0.3
+    height_scale_m: float = 0.05
+    max_match_cost: float = 1.5
 
 
 @dataclass(frozen=True)
@@ -36,12 +42,75 @@ class PerceptionConfig:
         plane_iterations: RANSAC iterations (authors: 1000).
         support_max_tilt_deg: the support plane's normal is within this angle of world z.
         support_clearance_m: points less than this above the support belong to it.
+        support_min_points, support_min_fraction: the support needs at least this many inliers
+            and this share of the frame's valid points.
+        ransac_sample_size: points on which RANSAC hypotheses are scored (a random subset; the
+            winner is refitted by least squares on its inliers).
+        wall_max_candidates: vertical planes examined as possible walls per frame (0 = no walls).
+        wall_iterations: RANSAC iterations per vertical plane.
+        wall_max_points: the wall search uses at most this many points above the support (an
+            even subset), which bounds its cost on close-up frames.
+        wall_min_points: inliers a wall candidate needs.
+        wall_normal_tilt_deg: only points whose (noisy) pixel normal is within this angle of
+            the horizontal vote for vertical planes.
+        wall_min_length_m: a wall's visible run along the support is at least this long (the
+            generator's walls are >= 20 cm; YCB boxes' faces are <= 21 cm, told apart by the
+            other cues).
+        wall_max_gap_m: gaps (occlusions) shorter than this do not break a wall's run.
+        wall_min_height_m, wall_max_height_m: range of a wall's top above the support.
+        wall_support_gap_m: a wall's lowest visible points are within this of the support.
+        wall_max_thickness_m: walls are thinner than this; it is also the slab removed behind a
+            wall's visible face.
+        wall_cap_depth_m: how far behind a wall's face points "capping" it (a box's top) count.
+        wall_max_capped_fraction: share of a wall's length allowed to have such points (objects
+            standing behind a drawer front and rising above it).
+        wall_side_range_m: distance from a wall within which the scene's other points are used
+            for the one-sided test.
+        wall_max_outside_fraction: share of those points allowed on the wall's minority side.
+        wall_partner_min_length_m: shortest run of a wall accepted through a partner wall.
+        wall_partner_separation_m: (min, max) distance between opposite walls of a container.
+        wall_partner_max_top_difference_m: partner walls' tops differ by at most this (a drawer
+            front is 3-5 cm taller than the sides).
+        wall_partner_top_match_m: tops of a wall whose bottom is hidden and of its partner
+            differ by at most this.
+        wall_corner_gap_m: two perpendicular walls meet within this of the ends of their runs.
+        wall_top_margin_m: points up to this above a wall's top (its rim, with noise) are
+            removed with it.
         pusher_margin_m: points within the pusher capsule's radius plus this are removed.
         voxel_size_m: supervoxel voxel resolution (authors' VCCS: 7.5 mm).
         seed_size_m: supervoxel seed spacing (authors' VCCS: 2 cm).
+        normal_radius_px: pixel normals use the neighbours this many pixels away.
+        normal_max_jump_m, normal_max_jump_ratio: a neighbour whose depth differs by more than
+            ``normal_max_jump_m + normal_max_jump_ratio * radius * depth`` is across a
+            discontinuity and not used for the normal.
+        supervoxel_iterations: k-means rounds assigning voxels to seeds.
+        supervoxel_normal_weight: weight of the normal term (1 - cos) against the spatial term
+            (distance / seed size)^2 in the voxel-to-seed distance (VCCS: normal 1, spatial 1).
+        supervoxel_colour_weight: weight of the squared RGB distance (channels in [0, 1]) in
+            that distance (authors' VCCS: 0; 3 gave 0.903 / 0.911 against 0.920 / 0.896 on the
+            development scenes, within their noise, so it stays off).
+        supervoxel_min_points: supervoxel pieces with fewer pixels are merged into a neighbour.
+        supervoxel_max_points: supervoxel statistics use at most this many pixels (an even
+            subset; every kept pixel is still labelled through its voxel).
+        dominant_face_deg: a supervoxel's normal and centre come from its pixels whose normal is
+            within this angle of its dominant direction (0 = all pixels).
         concavity_tolerance_deg: edges flatter than this count as convex (authors' LCCP: 10).
+        sanity_angle_deg, sanity_sigmoid: a convex edge whose centre-to-centre direction is
+            within this angle of the crease line is singular, not convex; with the sigmoid (LCCP)
+            the angle is scaled by 1 / (1 + exp(-0.25 (normal angle - 25))) (authors' code: a
+            fixed 45 degrees; LCCP: 60 with the sigmoid, better on the development scenes).
+        smoothness_threshold: LCCP smoothness slack, in voxel sizes (authors: 0.1).
+        concave_weight: graph weight of concave (or not smooth) edges; convex/flat edges weigh 1.
+        singular_weight: graph weight of convex edges that fail the sanity check.
+        dense_eigen_limit: components up to this many supervoxels use a dense eigensolver.
+        eigengap_floor: noise floor added to the eigenvalues of L_sym before their ratios are
+            compared (the eigengap is the largest ratio of consecutive eigenvalues).
+        kmeans_restarts: k-means initialisations (seeded) on the spectral embedding.
         max_objects: upper bound on the number of objects per frame.
-        min_object_pixels: segments smaller than this are merged into a neighbour or dropped.
+        min_object_pixels: segments with fewer pixels (with depth) are merged into a neighbour
+            or dropped (an object peeking over a drawer front can show ~50).
+        label_fill_px: pixels without depth take the label of the nearest pixel with depth up
+            to this distance in pixels (edge dropout, small holes); 0 = no filling.
         facet_bandwidth: mean-shift bandwidth on unit normals for facets (chord length).
         min_facet_area_m2: facets smaller than this are ignored by hypotheses (paper: (3 cm)^2).
         free_space_voxel_m: free/unknown voxel grid resolution (paper: 5 mm).
@@ -55,12 +124,54 @@ class PerceptionConfig:
     plane_iterations: int = 1000
     support_max_tilt_deg: float = 30.0
     support_clearance_m: float = 0.01
-    pusher_margin_m: float = 0.01
+    support_min_points: int = 200
+    support_min_fraction: float = 0.1
+    ransac_sample_size: int = 1000
+    wall_max_candidates: int = 6
+    wall_max_points: int = 30000
+    wall_iterations: int = 200
+    wall_min_points: int = 100
+    wall_normal_tilt_deg: float = 25.0
+    wall_min_length_m: float = 0.18
+    wall_max_gap_m: float = 0.05
+    wall_min_height_m: float = 0.05
+    wall_max_height_m: float = 0.25
+    wall_support_gap_m: float = 0.03
+    wall_max_thickness_m: float = 0.018
+    wall_cap_depth_m: float = 0.10
+    wall_max_capped_fraction: float = 0.5
+    wall_side_range_m: float = 0.5
+    wall_max_outside_fraction: float = 0.03
+    wall_partner_min_length_m: float = 0.1
+    wall_partner_separation_m: tuple[float, float] = (0.15, 0.55)
+    wall_partner_max_top_difference_m: float = 0.06
+    wall_partner_top_match_m: float = 0.015
+    wall_corner_gap_m: float = 0.04
+    wall_top_margin_m: float = 0.005
+    pusher_margin_m: float = 0.005
     voxel_size_m: float = 0.0075
     seed_size_m: float = 0.02
+    normal_radius_px: int = 2
+    normal_max_jump_m: float = 0.01
+    normal_max_jump_ratio: float = 0.02
+    supervoxel_iterations: int = 3
+    supervoxel_normal_weight: float = 1.0
+    supervoxel_colour_weight: float = 0.0
+    supervoxel_min_points: int = 12
+    supervoxel_max_points: int = 50000
+    dominant_face_deg: float = 30.0
     concavity_tolerance_deg: float = 10.0
+    sanity_angle_deg: float = 60.0
+    sanity_sigmoid: bool = True
+    smoothness_threshold: float = 0.1
+    concave_weight: float = 0.001
+    singular_weight: float = 0.001
+    dense_eigen_limit: int = 400
+    eigengap_floor: float = 0.001
+    kmeans_restarts: int = 4
     max_objects: int = 20
-    min_object_pixels: int = 100
+    min_object_pixels: int = 40
+    label_fill_px: float = 3.0
     facet_bandwidth: float = 0.35
     min_facet_area_m2: float = 0.03**2
     free_space_voxel_m: float = 0.005

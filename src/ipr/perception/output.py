@@ -13,7 +13,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from PIL import Image, ImageDraw
+from PIL import Image, ImageDraw, ImageFont
 
 from ipr.atomic import commit_directory, staging_directory, write_json
 from ipr.errors import IprError
@@ -54,13 +54,15 @@ def overlay_image(rgb: np.ndarray, labels: np.ndarray, facet_labels: np.ndarray)
     image[border] *= 0.35
     picture = Image.fromarray(np.clip(image, 0, 255).astype(np.uint8))
     draw = ImageDraw.Draw(picture)
+    font = ImageFont.load_default(size=max(12, labels.shape[0] // 30))
     for object_id in np.unique(labels[objects]):
         rows, cols = np.nonzero(labels == object_id)
         x, y = float(np.median(cols)), float(np.median(rows))
-        draw.rectangle([x - 9, y - 7, x + 9, y + 7], fill=(0, 0, 0))
-        draw.text(
-            (x - 6, y - 6), str(int(object_id)), fill=tuple(int(c) for c in palette([object_id])[0])
-        )
+        text = str(int(object_id))
+        left, top, right, bottom = draw.textbbox((x, y), text, font=font, anchor="mm")
+        draw.rectangle([left - 3, top - 2, right + 3, bottom + 2], fill=(0, 0, 0))
+        colour = tuple(int(c) for c in palette([object_id])[0])
+        draw.text((x, y), text, fill=colour, font=font, anchor="mm")
     return picture
 
 

@@ -22,12 +22,16 @@ class KnownPlane:
         offset: plane is {x : normal . x + offset = 0}, metres.
         points: (N, 3) inlier points (world, m), subsampled; their hull bounds the plane's extent
             for the physics stage.
+        thickness_m: walls: depth (m) of the static slab behind the visible face (the wall's
+            material: its rim and hidden face), removed with it; 0 for the support (everything
+            below the support is removed anyway).
     """
 
     kind: str
     normal: np.ndarray
     offset: float
     points: np.ndarray
+    thickness_m: float = 0.0
 
     def signed_distance(self, points: np.ndarray) -> np.ndarray:
         """Signed distance (N,) of (N, 3) points to the plane, positive on the normal's side."""
@@ -114,7 +118,9 @@ class FrameSegmentation:
     Attributes:
         frame: frame index.
         labels: (H, W) int32, 0 for background/support/walls/robot, k >= 1 for segment k
-            (per-frame numbering; tracking renumbers).
+            (per-frame numbering; tracking renumbers). Pixels without depth within a few pixels
+            of a segment carry its label (image masks; they have no 3D point, so geometry must
+            also require depth > 0).
         supervoxels: the graph nodes, with ``segment_of_supervoxel`` (M,) their segment (0 = none).
         planes: support and walls found in this frame.
     """

@@ -1,0 +1,437 @@
+"""Supervoxels: small surface patches with a normal, the nodes of the segmentation graph.
+
+The paper over-segments each point cloud into supervoxels before building the convexity graph;
+its authors' code uses PCL's VCCS (voxel 7.5 mm, seed 2 cm, colour weight 0, spatial 1,
+normal 1). This module does the same in vectorised numpy:
+
+1. per-pixel normals from the organised cloud (``organised_normals_at``: image-space
+   neighbours, one-sided at discontinuities);
+2. the kept points are binned into ``voxel_size_m`` voxels (mean position, normal, colour);
+3. one seed per occupied ``seed_size_m`` cell (the voxel nearest the cell centre);
+4. a few k-means rounds assign every voxel to the nearest seed among those of the 27
+   surrounding seed cells, in VCCS's distance ((distance / seed size)^2 + normal weight x
+   (1 - cos of the normals' angle));
+5. each supervoxel is cut into its 26-connected voxel components (so a supervoxel never spans
+   a gap in 3D), and crumbs are merged into the neighbour they touch most;
+6. each supervoxel's centre and normal come from its dominant face (``_dominant_faces``), so
+   that patches straddling a crease do not turn into slivers between two faces.
+
+Adjacency is the 26-neighbourhood of voxels: two supervoxels are adjacent when some of their
+voxels touch, i.e. when their surfaces come within about a voxel of each other in 3D. Pixels on
+either side of a depth discontinuity are centimetres apart in 3D and so never adjacent.
+
+Why voxels rather than superpixels on the organised image: both were tried in the same pipeline
+on the development scenes (36 static and 36 dynamic generated scenes, 640x480, seeds
+7000/7100/8000/8100, none from a benchmark suite). The alternative was a SLIC-like superpixel
+pass on the image (grid cells sized to 2 cm at the foreground's median depth, three k-means
+rounds in pixel position, 3D position and normal, cells split into depth-continuous parts,
+adjacency between image neighbours closer than 1.5 voxels in 3D). Share of objects segmented
+with F >= 0.75, static / dynamic: voxels 0.915 / 0.924, superpixels 0.909 / 0.883. Time of this
+step per 640x480 frame (median of 24 frames, one core): voxels 14 ms, superpixels 80 ms (every
+foreground pixel takes part in the k-means rounds, against one voxel per 10-80 pixels here).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from ipr.perception.config import PerceptionConfig
+from ipr.perception.types import Supervoxels
+from ipr.scene import Frame
+
+# The 13 "forward" offsets of the 26-neighbourhood (the other 13 are their negatives).
+_FORWARD_OFFSETS = np.array(
+    [
+        (dx, dy, dz)
+        for dx in (-1, 0, 1)
+        for dy in (-1, 0, 1)
+        for dz in (-1, 0, 1)
+        if (dx, dy, dz) > (0, 0, 0)
+    ],
+    dtype=np.int64,
+)
+
+
+def organised_normals(
+    depth_m: np.ndarray,
+    K: np.ndarray,
+    config: PerceptionConfig = PerceptionConfig(),  # noqa: B008 (frozen)
+) -> np.ndarray:
+    """Unit surface normals (H, W, 3) float32 in the camera frame, towards the camera; 0 where
+    unknown (no depth, or no usable neighbour). See ``organised_normals_at``."""
+    depth = np.asarray(depth_m, dtype=np.float32)
+    normals = np.zeros((*depth.shape, 3), dtype=np.float32)
+    pixels = np.flatnonzero(depth.reshape(-1) > 0)
+    normals.reshape(-1, 3)[pixels] = organised_normals_at(depth, K, pixels, config)
+    return normals
+
+
+def organised_normals_at(
+    depth_m: np.ndarray,
+    K: np.ndarray,
+    pixels: np.ndarray,
+    config: PerceptionConfig = PerceptionConfig(),  # noqa: B008 (frozen)
+) -> np.ndarray:
+    """Unit normals (P, 3) float32, camera frame, towards the camera, of the flat ``pixels``
+    (P,) of a (H, W) depth image (m) with intrinsics K; rows of 0 where unknown.
+
+    Each pixel's normal is the cross product of the differences between its neighbours
+    ``normal_radius_px`` pixels away horizontally and vertically (image-space neighbours of the
+    organised cloud). A neighbour that has no depth, or whose depth differs from the pixel's by
+    more than ``normal_max_jump_m`` plus ``normal_max_jump_ratio`` of the depth per pixel of
+    offset (a discontinuity: another surface), is replaced by the pixel itself (a one-sided
+    difference); pixels left without a difference in either direction get no normal. Only the
+    requested pixels are computed (the support, most of the image, needs none).
+    """
+    depth = np.asarray(depth_m, dtype=np.float32)
+    height, width = depth.shape
+    pixels = np.asarray(pixels, dtype=np.int64)
+    flat = depth.reshape(-1)
+    rows, cols = pixels // width, pixels % width
+    z = flat[pixels]
+    fx, fy, cx, cy = (
+        np.float32(K[0, 0]),
+        np.float32(K[1, 1]),
+        np.float32(K[0, 2]),
+        np.float32(K[1, 2]),
+    )
+
+    def backproject_at(r: np.ndarray, c: np.ndarray, zz: np.ndarray) -> np.ndarray:
+        return np.stack([(c - cx) / fx * zz, (r - cy) / fy * zz, zz], axis=1)
+
+    centre = backproject_at(rows.astype(np.float32), cols.astype(np.float32), z)
+    r = int(config.normal_radius_px)
+    limit = np.float32(config.normal_max_jump_m) + np.float32(config.normal_max_jump_ratio * r) * z
+
+    def neighbour(dv: int, du: int) -> tuple[np.ndarray, np.ndarray]:
+        """Neighbour points (P, 3) (the pixel itself where unusable) and usability (P,)."""
+        nr, nc = rows + dv, cols + du
+        inside = (nr >= 0) & (nr < height) & (nc >= 0) & (nc < width)
+        index = np.where(inside, nr * width + nc, 0)
+        nz = np.where(inside, flat[index], 0.0).astype(np.float32)
+        ok = inside & (nz > 0) & (np.abs(nz - z) <= limit)
+        points = backproject_at(nr.astype(np.float32), nc.astype(np.float32), nz)
+        return np.where(ok[:, None], points, centre), ok
+
+    right, ok_right = neighbour(0, r)
+    left, ok_left = neighbour(0, -r)
+    down, ok_down = neighbour(r, 0)
+    up, ok_up = neighbour(-r, 0)
+    normal = np.cross(down - up, right - left)
+    norm = np.linalg.norm(normal, axis=1)
+    good = (z > 0) & (ok_right | ok_left) & (ok_down | ok_up) & (norm > 1e-12)
+    normal = np.where(good[:, None], normal / np.maximum(norm, 1e-12)[:, None], 0.0)
+    # Towards the camera (the camera centre is the origin of the camera frame).
+    flip = np.einsum("pc,pc->p", normal, centre) > 0
+    normal[flip] *= -1.0
+    return normal.astype(np.float32)
+
+
+def compute_supervoxels(
+    frame: Frame,
+    keep: np.ndarray,
+    config: PerceptionConfig = PerceptionConfig(),  # noqa: B008 (frozen)
+    *,
+    normals_camera: np.ndarray | None = None,
+    points_world: np.ndarray | None = None,
+) -> Supervoxels:
+    """VCCS-like supervoxels of the pixels of ``frame`` where ``keep`` (H, W) bool is True.
+
+    Pixels without depth are never used. ``normals_camera`` (H, W, 3) (``organised_normals``;
+    only the kept pixels are read) and ``points_world`` (H, W, 3) (``frame.points_world()``)
+    may be passed to avoid recomputing them.
+
+    Supervoxel normals are the smallest principal axis of the points of their dominant face
+    (``_dominant_faces``: a least-squares plane, which noise barely tilts over a 2 cm patch),
+    oriented towards the camera; tiny or degenerate patches use their mean pixel normal.
+    """
+    height, width = frame.shape
+    keep = np.asarray(keep, dtype=bool) & (frame.depth_m > 0)
+    pixels = np.flatnonzero(keep.reshape(-1))
+    rotation = frame.world_from_camera[:3, :3]
+    camera_centre = frame.world_from_camera[:3, 3]
+    labels_image = np.full((height, width), -1, dtype=np.int32)
+    if pixels.size == 0:
+        return _empty(labels_image)
+    if points_world is None:
+        points_world = frame.points_world()
+    all_points = points_world.reshape(-1, 3)[pixels].astype(np.float64)
+    voxel = config.voxel_size_m
+    all_cells = np.floor(all_points / voxel).astype(np.int64)
+    all_cells -= all_cells.min(axis=0) - 1  # >= 1 so that neighbour offsets never wrap
+    dims = all_cells.max(axis=0) + 2
+    all_keys = (all_cells[:, 0] * dims[1] + all_cells[:, 1]) * dims[2] + all_cells[:, 2]
+    # Close-up frames have tens of pixels per voxel: the statistics come from an even subset
+    # of at most supervoxel_max_points pixels, and every pixel then joins its voxel's label.
+    step = -(-len(pixels) // config.supervoxel_max_points)
+    sample = np.arange(0, len(pixels), step)
+    points = all_points[sample]
+    keys = all_keys[sample]
+    if normals_camera is None:
+        camera_normals = organised_normals_at(frame.depth_m, frame.K, pixels[sample], config)
+    else:
+        camera_normals = normals_camera.reshape(-1, 3)[pixels[sample]]
+    pixel_normals = camera_normals.astype(np.float64) @ rotation.T
+    colours = frame.rgb.reshape(-1, 3)[pixels[sample]].astype(np.float64) / 255.0
+
+    # 1. Voxels.
+    voxel_keys, voxel_of_point = np.unique(keys, return_inverse=True)
+    n_voxels = len(voxel_keys)
+    voxel_count = np.bincount(voxel_of_point, minlength=n_voxels).astype(np.float64)
+    voxel_centre = _group_mean(voxel_of_point, points, n_voxels, voxel_count)
+    voxel_normal = _normalise(_group_sum(voxel_of_point, pixel_normals, n_voxels))
+    voxel_colour = _group_mean(voxel_of_point, colours, n_voxels, voxel_count)
+
+    # 2. Voxel adjacency (26-neighbourhood) by looking up the neighbours' keys.
+    strides = np.array([dims[1] * dims[2], dims[2], 1], dtype=np.int64)
+    edge_a, edge_b = [], []
+    for offset in _FORWARD_OFFSETS:
+        target = voxel_keys + int(offset @ strides)
+        found = np.searchsorted(voxel_keys, target)
+        found = np.minimum(found, n_voxels - 1)
+        hit = voxel_keys[found] == target
+        edge_a.append(np.flatnonzero(hit))
+        edge_b.append(found[hit])
+    voxel_edges = np.stack([np.concatenate(edge_a), np.concatenate(edge_b)], axis=1)
+
+    # 3. Seeds: per occupied seed cell, the voxel nearest the cell centre.
+    seed_size = config.seed_size_m
+    seed_cells = np.floor(voxel_centre / seed_size).astype(np.int64)
+    seed_cells -= seed_cells.min(axis=0) - 1
+    seed_dims = seed_cells.max(axis=0) + 2
+    seed_strides = np.array([seed_dims[1] * seed_dims[2], seed_dims[2], 1], dtype=np.int64)
+    seed_keys_of_voxel = seed_cells @ seed_strides
+    to_centre = np.linalg.norm(
+        voxel_centre - (np.floor(voxel_centre / seed_size) + 0.5) * seed_size, axis=1
+    )
+    order = np.lexsort((to_centre, seed_keys_of_voxel))
+    first = np.ones(n_voxels, dtype=bool)
+    first[1:] = seed_keys_of_voxel[order[1:]] != seed_keys_of_voxel[order[:-1]]
+    seed_voxels = order[first]
+    seed_keys = seed_keys_of_voxel[seed_voxels]  # sorted (lexsort's primary key)
+    n_seeds = len(seed_voxels)
+
+    # Candidate seeds of each voxel: those of the 27 seed cells around its own.
+    neighbour_offsets = np.array(
+        [(dx, dy, dz) for dx in (-1, 0, 1) for dy in (-1, 0, 1) for dz in (-1, 0, 1)],
+        dtype=np.int64,
+    )
+    wanted = seed_keys_of_voxel[:, None] + (neighbour_offsets @ seed_strides)[None, :]
+    found = np.minimum(np.searchsorted(seed_keys, wanted), n_seeds - 1)
+    candidates = np.where(seed_keys[found] == wanted, found, -1)  # (V, 27)
+    has = candidates >= 0
+    safe = np.where(has, candidates, 0)
+
+    # 4. k-means rounds in VCCS's distance.
+    seed_centre = voxel_centre[seed_voxels].copy()
+    seed_normal = voxel_normal[seed_voxels].copy()
+    seed_colour = voxel_colour[seed_voxels].copy()
+    assignment = np.zeros(n_voxels, dtype=np.int64)
+    spatial = 1.0 / seed_size**2
+    for _ in range(config.supervoxel_iterations):
+        offsets = voxel_centre[:, None, :] - seed_centre[safe]
+        distance = spatial * np.einsum("vkc,vkc->vk", offsets, offsets)
+        distance += config.supervoxel_normal_weight * (
+            1.0 - np.einsum("vc,vkc->vk", voxel_normal, seed_normal[safe])
+        )
+        if config.supervoxel_colour_weight > 0:
+            colour_offsets = voxel_colour[:, None, :] - seed_colour[safe]
+            distance += config.supervoxel_colour_weight * np.einsum(
+                "vkc,vkc->vk", colour_offsets, colour_offsets
+            )
+        distance[~has] = np.inf
+        assignment = safe[np.arange(n_voxels), np.argmin(distance, axis=1)]
+        weight = voxel_count
+        totals = np.bincount(assignment, weights=weight, minlength=n_seeds)
+        alive = totals > 0
+        seed_centre[alive] = (
+            _group_sum(assignment, voxel_centre * weight[:, None], n_seeds)[alive]
+            / totals[alive, None]
+        )
+        seed_normal[alive] = _normalise(
+            _group_sum(assignment, voxel_normal * weight[:, None], n_seeds)
+        )[alive]
+        seed_colour[alive] = (
+            _group_sum(assignment, voxel_colour * weight[:, None], n_seeds)[alive]
+            / totals[alive, None]
+        )
+
+    # 5. Connected parts of each supervoxel (26-connectivity), then crumbs merged.
+    same = assignment[voxel_edges[:, 0]] == assignment[voxel_edges[:, 1]]
+    graph = coo_matrix(
+        (np.ones(int(same.sum())), (voxel_edges[same, 0], voxel_edges[same, 1])),
+        shape=(n_voxels, n_voxels),
+    )
+    _, parts = connected_components(graph, directed=False)
+    parts = _merge_crumbs(parts, voxel_count * step, voxel_edges, config.supervoxel_min_points)
+    _, supervoxel_of_voxel = np.unique(parts, return_inverse=True)
+    n_supervoxels = int(supervoxel_of_voxel.max()) + 1
+
+    # Per-supervoxel statistics from the (sampled) pixels.
+    supervoxel_of_point = supervoxel_of_voxel[voxel_of_point]
+    counts = np.bincount(supervoxel_of_point, minlength=n_supervoxels)
+    centres = _group_mean(supervoxel_of_point, points, n_supervoxels, counts)
+    mean_normals = _normalise(_group_sum(supervoxel_of_point, pixel_normals, n_supervoxels))
+    if config.dominant_face_deg > 0:
+        centres, normals = _dominant_faces(
+            supervoxel_of_point, points, pixel_normals, mean_normals, counts, config
+        )
+    else:
+        normals = _plane_normals(supervoxel_of_point, points, centres, counts, mean_normals)
+    towards_camera = np.einsum("mc,mc->m", normals, camera_centre - centres) >= 0
+    normals[~towards_camera] *= -1.0
+    mean_colours = _group_mean(supervoxel_of_point, colours, n_supervoxels, counts)
+
+    # Every kept pixel takes the label of its voxel (pixels of voxels that no sampled pixel
+    # reached, a handful at most, stay unlabelled).
+    if step == 1:
+        supervoxel_of_pixel = supervoxel_of_point
+    else:
+        position = np.minimum(np.searchsorted(voxel_keys, all_keys), n_voxels - 1)
+        found = voxel_keys[position] == all_keys
+        supervoxel_of_pixel = np.where(found, supervoxel_of_voxel[position], -1)
+    sizes = np.bincount(supervoxel_of_pixel[supervoxel_of_pixel >= 0], minlength=n_supervoxels)
+    labels_image.reshape(-1)[pixels] = supervoxel_of_pixel
+    pair = supervoxel_of_voxel[voxel_edges]
+    pair = pair[pair[:, 0] != pair[:, 1]]
+    pair = np.unique(np.sort(pair, axis=1), axis=0)
+    return Supervoxels(
+        labels=labels_image,
+        centres=centres,
+        normals=normals,
+        colours=mean_colours,
+        sizes=sizes,
+        adjacency=pair.astype(np.int64),
+    )
+
+
+def _empty(labels: np.ndarray) -> Supervoxels:
+    """Supervoxels of a frame with nothing to segment."""
+    return Supervoxels(
+        labels=labels,
+        centres=np.zeros((0, 3)),
+        normals=np.zeros((0, 3)),
+        colours=np.zeros((0, 3)),
+        sizes=np.zeros(0, dtype=np.int64),
+        adjacency=np.zeros((0, 2), dtype=np.int64),
+    )
+
+
+def _group_sum(groups: np.ndarray, values: np.ndarray, count: int) -> np.ndarray:
+    """(count, C) sums of (N, C) ``values`` per group id (N,)."""
+    return np.stack(
+        [
+            np.bincount(groups, weights=values[:, c], minlength=count)
+            for c in range(values.shape[1])
+        ],
+        axis=1,
+    )
+
+
+def _group_mean(
+    groups: np.ndarray, values: np.ndarray, count: int, sizes: np.ndarray
+) -> np.ndarray:
+    """(count, C) means of (N, C) ``values`` per group id, given the group sizes (count,)."""
+    return _group_sum(groups, values, count) / np.maximum(sizes, 1)[:, None]
+
+
+def _normalise(vectors: np.ndarray) -> np.ndarray:
+    """Rows of (N, 3) scaled to unit length (zero rows stay zero)."""
+    norms = np.linalg.norm(vectors, axis=1, keepdims=True)
+    return np.divide(vectors, norms, out=np.zeros_like(vectors), where=norms > 1e-12)
+
+
+def _merge_crumbs(
+    parts: np.ndarray, voxel_count: np.ndarray, edges: np.ndarray, min_points: int
+) -> np.ndarray:
+    """Relabel parts (V,) with fewer than ``min_points`` points into the adjacent part they
+    share the most voxel contacts with (one pass; isolated crumbs stay on their own)."""
+    n_parts = int(parts.max()) + 1
+    part_size = np.bincount(parts, weights=voxel_count, minlength=n_parts)
+    small = part_size < min_points
+    if not small.any() or len(edges) == 0:
+        return parts
+    a, b = parts[edges[:, 0]], parts[edges[:, 1]]
+    cross = a != b
+    a, b = a[cross], b[cross]
+    src = np.concatenate([a, b])
+    dst = np.concatenate([b, a])
+    pick = small[src] & ~small[dst]
+    if not pick.any():
+        return parts
+    src, dst = src[pick], dst[pick]
+    # Count contacts per (src, dst) and keep the best dst for each small src.
+    key = src * n_parts + dst
+    unique_keys, counts = np.unique(key, return_counts=True)
+    pair_src, pair_dst = unique_keys // n_parts, unique_keys % n_parts
+    order = np.lexsort((-counts, pair_src))
+    first = np.ones(len(order), dtype=bool)
+    first[1:] = pair_src[order[1:]] != pair_src[order[:-1]]
+    target = np.arange(n_parts)
+    target[pair_src[order[first]]] = pair_dst[order[first]]
+    return target[parts]
+
+
+def _plane_normals(
+    groups: np.ndarray,
+    points: np.ndarray,
+    centres: np.ndarray,
+    sizes: np.ndarray,
+    fallback: np.ndarray,
+) -> np.ndarray:
+    """(M, 3) least-squares plane normals of the points of each group (smallest principal axis
+    of the covariance); groups with fewer than 6 points, or whose two smallest spreads are
+    alike (a line or a blob: no plane), use ``fallback`` when it is known."""
+    count = len(centres)
+    local = points - centres[groups]
+    covariance = np.empty((count, 3, 3))
+    for i in range(3):
+        for j in range(i, 3):
+            value = np.bincount(groups, weights=local[:, i] * local[:, j], minlength=count)
+            covariance[:, i, j] = value
+            covariance[:, j, i] = value
+    covariance /= np.maximum(sizes, 1)[:, None, None]
+    eigenvalues, eigenvectors = np.linalg.eigh(covariance)
+    normals = eigenvectors[:, :, 0]
+    # The plane is defined only when the second spread clearly exceeds the thickness.
+    degenerate = (sizes < 6) | (eigenvalues[:, 1] < 4.0 * np.maximum(eigenvalues[:, 0], 1e-12))
+    degenerate &= np.linalg.norm(fallback, axis=1) > 0
+    normals[degenerate] = fallback[degenerate]
+    return normals
+
+
+def _dominant_faces(
+    groups: np.ndarray,
+    points: np.ndarray,
+    pixel_normals: np.ndarray,
+    mean_normals: np.ndarray,
+    sizes: np.ndarray,
+    config: PerceptionConfig,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(M, 3) centres and (M, 3) plane normals of the dominant face of each group.
+
+    A supervoxel that straddles a crease mixes two faces; its least-squares plane lies between
+    them and its edges to both look concave, so it ends up alone as a sliver segment. The
+    dominant face is found from the pixel normals: twice, keep the pixels whose normal is within
+    ``dominant_face_deg`` of the group's mean normal and re-average; the centre and the plane
+    fit then use those pixels only (all pixels when fewer than 6 remain).
+    """
+    count = len(mean_normals)
+    gate = np.cos(np.radians(config.dominant_face_deg))
+    normal = mean_normals
+    inlier = np.ones(len(groups), dtype=bool)
+    for _ in range(2):
+        inlier = np.einsum("pc,pc->p", pixel_normals, normal[groups]) > gate
+        summed = _group_sum(groups[inlier], pixel_normals[inlier], count)
+        normal = np.where(
+            (np.linalg.norm(summed, axis=1) > 1e-12)[:, None], _normalise(summed), normal
+        )
+    inlier_count = np.bincount(groups[inlier], minlength=count)
+    inlier &= (inlier_count >= 6)[groups]
+    inlier |= (inlier_count < 6)[groups]  # groups without a clear face use all their pixels
+    used_sizes = np.bincount(groups[inlier], minlength=count)
+    centres = _group_mean(groups[inlier], points[inlier], count, used_sizes)
+    normals = _plane_normals(groups[inlier], points[inlier], centres, used_sizes, normal)
+    return centres, normals
