@@ -42,6 +42,8 @@ class PerceptionConfig:
         plane_iterations: RANSAC iterations (authors: 1000).
         support_max_tilt_deg: the support plane's normal is within this angle of world z.
         support_clearance_m: points less than this above the support belong to it.
+        min_object_height_m: segments whose 90th-percentile height above the support is lower
+            are support residue (noise, a slightly curved table), not objects.
         support_min_points, support_min_fraction: the support needs at least this many inliers
             and this share of the frame's valid points.
         ransac_sample_size: points on which RANSAC hypotheses are scored (a random subset; the
@@ -124,6 +126,7 @@ class PerceptionConfig:
     plane_iterations: int = 1000
     support_max_tilt_deg: float = 30.0
     support_clearance_m: float = 0.01
+    min_object_height_m: float = 0.015
     support_min_points: int = 200
     support_min_fraction: float = 0.1
     ransac_sample_size: int = 1000
