@@ -1,7 +1,7 @@
 """``make demo``: the main job end to end on a generated scene.
 
-Today the pipeline's finished stages are scene generation, validation and evaluation; the demo
-grows into full inference as the later stages land. Usage: ``python -m ipr.demo OUT_DIR``.
+Generates a dynamic scene, segments it, completes the objects' shapes with the Collision Checker
+(the physics-based methods join when the physics stage lands) and scores the result. Usage: ``python -m ipr.demo OUT_DIR``.
 """
 
 from __future__ import annotations
@@ -14,10 +14,13 @@ DEMO_SEED = 7
 
 
 def run_demo(out_dir: Path) -> int:
-    """Generate a dynamic scene, validate it, score its ground truth; print where things are."""
+    """Generate a dynamic scene, segment it, infer shapes, score them; print where things are."""
     import ipr  # noqa: F401  (GL backend)
     from ipr.data import ycb_models_dir
     from ipr.metrics import evaluate, format_table
+    from ipr.perception import perceive_scene
+    from ipr.perception.output import write_segmentation
+    from ipr.pipeline import infer
     from ipr.result import write_ground_truth_result
     from ipr.scene import load_scene
     from ipr.synth import generate_scene
@@ -38,11 +41,23 @@ def run_demo(out_dir: Path) -> int:
     print(f"  preview: {scene_path / 'preview.png'}")
     scene = load_scene(scene_path)
     print(f"  frames:  {len(scene.frames)}, pushes: {len(scene.pushes)} (validated)")
-    result_path = write_ground_truth_result(scene_path, out_dir / "ground-truth", overwrite=True)
-    print(f"  ground truth written as a result: {result_path}")
-    print(format_table(evaluate(scene_path, result_path)))
+
+    segmentation = write_segmentation(
+        scene, perceive_scene(scene), out_dir / "segmentation", overwrite=True
+    )
+    print(f"  segmentation: {segmentation / 'overlay'} (tracked objects and facets)")
+    print("ipr demo: completing the objects' shapes (Collision Checker) ...")
+    started = time.perf_counter()
+    result_path = infer(scene_path, out_dir / "result", method="collision-checker", overwrite=True)
     print(
-        "ipr demo: done. Open the preview PNG to see the scene; "
+        f"  result:  {result_path}  ({time.perf_counter() - started:.1f} s; "
+        "objects/<k>/best.ply are the completed shapes, world frame, metres)"
+    )
+    print(format_table(evaluate(scene_path, result_path)))
+    truth = write_ground_truth_result(scene_path, out_dir / "ground-truth", overwrite=True)
+    print(f"  ground truth written as a result (the upper bound): {truth}")
+    print(
+        "ipr demo: done. Open the preview and the overlays to see the scene; "
         f"'ipr eval {scene_path} RESULT' scores any result directory against it."
     )
     return 0
