@@ -62,16 +62,22 @@ def perceive_scene(
     from ipr.perception.segmentation import segment_frame
 
     config = config or PerceptionConfig()
-    segment_seconds, segmentations = [], []
+    segment_seconds, segmentations, points = [], [], []
     for frame in scene.frames:
         started = time.perf_counter()
+        points.append(frame.points_world())
         segmentations.append(
-            segment_frame(frame, pushes=scene.pushes, pusher=scene.pusher, config=config)
+            segment_frame(
+                frame,
+                pushes=scene.pushes,
+                pusher=scene.pusher,
+                config=config,
+                points_world=points[-1],
+            )
         )
         segment_seconds.append(time.perf_counter() - started)
 
     started = time.perf_counter()
-    points = [frame.points_world() for frame in scene.frames]
     labels = track_segments(
         [s.labels for s in segmentations],
         points,
@@ -156,11 +162,13 @@ def _partial_objects(
     border = border.reshape(-1)
     next_facet = 1
     objects = []
-    for object_id in sorted(int(k) for k in np.unique(flat_labels) if k > 0):
-        # Labels may cover depth holes inside an object; its points come from valid readings.
-        pixels = np.flatnonzero((flat_labels == object_id) & valid)
-        if pixels.size == 0:
-            continue
+    # Labels may cover depth holes inside an object; its points come from valid readings.
+    labelled = np.flatnonzero((flat_labels > 0) & valid)
+    order = labelled[np.argsort(flat_labels[labelled], kind="stable")]
+    object_ids, starts = np.unique(flat_labels[order], return_index=True)
+    ends = np.append(starts[1:], len(order))
+    for object_id, start, end in zip(object_ids.tolist(), starts, ends, strict=True):
+        pixels = order[start:end]
         point_supervoxel = flat_supervoxel[pixels]
         has_supervoxel = point_supervoxel >= 0
         object_supervoxels = np.unique(point_supervoxel[has_supervoxel])

@@ -90,22 +90,21 @@ def object_facets(
     """
     if len(supervoxel_ids) == 0:
         return (), np.full(len(points_world), -1, dtype=np.int64)
-    local = {int(s): i for i, s in enumerate(supervoxel_ids)}
+    count = len(supervoxel_ids)
+    local = np.full(
+        max(int(supervoxel_ids.max()), int(adjacency.max(initial=0))) + 1, -1, dtype=np.int64
+    )
+    local[supervoxel_ids] = np.arange(count)
     modes = mean_shift_directions(
         supervoxel_normals[supervoxel_ids],
         supervoxel_sizes[supervoxel_ids].astype(float),
         bandwidth,
     )
     # Connected regions of supervoxels that share a normal mode.
-    inside = np.isin(adjacency[:, 0], supervoxel_ids) & np.isin(adjacency[:, 1], supervoxel_ids)
-    pairs = np.array([[local[int(a)], local[int(b)]] for a, b in adjacency[inside]], dtype=np.int64)
-    count = len(supervoxel_ids)
-    if len(pairs):
-        pairs = pairs[modes[pairs[:, 0]] == modes[pairs[:, 1]]]
-    graph = coo_matrix(
-        (np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])) if len(pairs) else ([], ([], [])),
-        shape=(count, count),
-    )
+    pairs = local[adjacency] if len(adjacency) else np.zeros((0, 2), dtype=np.int64)
+    pairs = pairs[(pairs >= 0).all(axis=1)]
+    pairs = pairs[modes[pairs[:, 0]] == modes[pairs[:, 1]]]
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(count, count))
     _, region = connected_components(graph, directed=False)
 
     lookup = np.full(int(supervoxel_ids.max()) + 1, -1, dtype=np.int64)

@@ -45,8 +45,9 @@ def segment_frame(
     pushes: Sequence[Push] = (),
     pusher: Pusher | None = None,
     config: PerceptionConfig = PerceptionConfig(),  # noqa: B008 (frozen)
+    points_world: np.ndarray | None = None,
 ) -> FrameSegmentation:
-    """Segment ``frame`` into objects.
+    """Segment ``frame`` into objects (``points_world``: its (H, W, 3) world points, if known).
 
     Returns labels (H, W) int32 with 0 for background, support, walls, robot and large depth
     holes, and 1..k for the k segments (numbered by decreasing size); pixels without depth near
@@ -63,7 +64,7 @@ def segment_frame(
     if not valid.any():
         return _empty_segmentation(frame, ())
     rng = np.random.default_rng(config.seed)
-    points = frame.points_world()
+    points = frame.points_world() if points_world is None else points_world
     flat_points = points.reshape(-1, 3)
     robot = robot_pixels(frame, pushes, pusher, config, points_world=points)
     usable = np.flatnonzero((valid & ~robot).reshape(-1))
@@ -124,15 +125,25 @@ def drop_support_residue(
         points: (H*W, 3) world points; valid: (H*W,) pixels with a depth reading.
     """
     flat = labels.reshape(-1).copy()
-    segment_of_supervoxel = segment_of_supervoxel.copy()
-    for segment in np.unique(flat[flat > 0]):
-        members = (flat == segment) & valid
-        if not members.any():
-            continue
-        height = np.percentile(support.signed_distance(points[members]), 90)
-        if height < config.min_object_height_m:
-            flat[flat == segment] = 0
-            segment_of_supervoxel[segment_of_supervoxel == segment] = 0
+    # Every 4th pixel estimates the percentile well and quarters the sort.
+    labelled = np.flatnonzero((flat > 0) & valid)[::4]
+    if labelled.size == 0:
+        return labels, segment_of_supervoxel
+    # One sort by (segment, height) gives every segment's 90th percentile (lower value).
+    segment_of_pixel = flat[labelled]
+    heights = support.signed_distance(points[labelled])
+    order = np.lexsort((heights, segment_of_pixel))
+    segments, starts, counts = np.unique(
+        segment_of_pixel[order], return_index=True, return_counts=True
+    )
+    p90 = heights[order][starts + np.floor(0.9 * (counts - 1)).astype(np.int64)]
+    residue = segments[p90 < config.min_object_height_m]
+    if residue.size == 0:
+        return labels, segment_of_supervoxel
+    flat[np.isin(flat, residue)] = 0
+    segment_of_supervoxel = np.where(
+        np.isin(segment_of_supervoxel, residue), 0, segment_of_supervoxel
+    )
     return flat.reshape(labels.shape), segment_of_supervoxel
 
 

@@ -45,24 +45,20 @@ def segment_features(
     """Features of every segment k >= 1 in a (H, W) label image with (H, W, 3) world points,
     (H, W, 3) uint8 colours and the (H, W) depth (m, 0 = no reading; None = all valid)."""
     flat_labels = labels.reshape(-1)
-    order = np.argsort(flat_labels, kind="stable")
-    sorted_labels = flat_labels[order]
-    ids, starts = np.unique(sorted_labels, return_index=True)
-    ends = np.append(starts[1:], len(sorted_labels))
+    labelled = np.flatnonzero(flat_labels > 0)
+    order = labelled[np.argsort(flat_labels[labelled], kind="stable")]
+    ids, starts = np.unique(flat_labels[order], return_index=True)
+    ends = np.append(starts[1:], len(order))
     flat_points = points.reshape(-1, 3)
-    # A pixel without depth back-projects to the camera centre (depth 0 gives the origin of the
-    # camera frame, i.e. the camera position in world).
+    # A pixel without depth back-projects to the camera centre: labels may cover depth holes, so
+    # geometry comes from pixels with a reading.
     valid = np.ones(len(flat_points), dtype=bool) if depth_m is None else depth_m.reshape(-1) > 0
-    bins = (rgb.reshape(-1, 3).astype(np.int64) * COLOUR_BINS) // 256
+    bins = (rgb.reshape(-1, 3)[order].astype(np.int64) * COLOUR_BINS) // 256
     codes = (bins[:, 0] * COLOUR_BINS + bins[:, 1]) * COLOUR_BINS + bins[:, 2]
     features = {}
     for label, start, end in zip(ids, starts, ends, strict=True):
-        if label <= 0:
-            continue
         pixels = order[start:end]
-        histogram = np.bincount(codes[pixels], minlength=COLOUR_BINS**3).astype(np.float64)
-        # Labels may cover depth holes; geometry comes from pixels with a reading (their points
-        # are not at the camera centre).
+        histogram = np.bincount(codes[start:end], minlength=COLOUR_BINS**3).astype(np.float64)
         points_k = flat_points[pixels]
         points_k = points_k[valid[pixels]] if valid[pixels].any() else points_k
         features[int(label)] = SegmentFeatures(
@@ -74,22 +70,46 @@ def segment_features(
     return features
 
 
-def match_cost(known: SegmentFeatures, segment: SegmentFeatures, config: TrackingConfig) -> float:
-    """Cost (>= 0) of explaining ``segment`` as the object last seen as ``known``."""
-    shared = np.intersect1d(known.pixels, segment.pixels, assume_unique=True).size
-    overlap = shared / (known.pixels.size + segment.pixels.size - shared)
+def match_costs(
+    known: dict[int, SegmentFeatures],
+    segments: dict[int, SegmentFeatures],
+    image_size: int,
+    config: TrackingConfig,
+) -> tuple[list[int], list[int], np.ndarray]:
+    """Cost matrix (segments x known objects) of explaining each segment as each known object.
+
+    Mask overlaps come from one map of where each known object was last seen (the most recent
+    sighting wins where two overlap), so all of them cost a single pass over the segments'
+    pixels. Returns the segment ids, the known ids and the (S, K) costs (>= 0).
+    """
+    segment_ids, known_ids = sorted(segments), sorted(known)
+    last_seen = np.zeros(image_size, dtype=np.int64)  # column + 1 of the known object, 0 = none
+    for column, object_id in enumerate(known_ids):
+        last_seen[known[object_id].pixels] = column + 1
+    shared = np.zeros((len(segment_ids), len(known_ids)))
+    for row, segment_id in enumerate(segment_ids):
+        counts = np.bincount(last_seen[segments[segment_id].pixels], minlength=len(known_ids) + 1)
+        shared[row] = counts[1:]
+    segment_sizes = np.array([segments[s].pixels.size for s in segment_ids], dtype=float)
+    known_sizes = np.array([known[o].pixels.size for o in known_ids], dtype=float)
+    overlap = shared / (segment_sizes[:, None] + known_sizes[None, :] - shared)
     # Bhattacharyya distance between colour histograms, in [0, 1].
-    colour = np.sqrt(max(0.0, 1.0 - float(np.sqrt(known.histogram * segment.histogram).sum())))
-    distance = min(
-        float(np.linalg.norm(known.centroid - segment.centroid)) / config.max_motion_m, 1.0
-    )
-    height = min(abs(known.top_m - segment.top_m) / config.height_scale_m, 1.0)
-    return (
+    root_segment = np.sqrt(np.stack([segments[s].histogram for s in segment_ids]))
+    root_known = np.sqrt(np.stack([known[o].histogram for o in known_ids]))
+    colour = np.sqrt(np.clip(1.0 - root_segment @ root_known.T, 0.0, None))
+    centroid_segment = np.stack([segments[s].centroid for s in segment_ids])
+    centroid_known = np.stack([known[o].centroid for o in known_ids])
+    distance = np.linalg.norm(centroid_segment[:, None] - centroid_known[None], axis=-1)
+    top_segment = np.array([segments[s].top_m for s in segment_ids])
+    top_known = np.array([known[o].top_m for o in known_ids])
+    height = np.abs(top_segment[:, None] - top_known[None, :])
+    cost = (
         config.overlap_weight * (1.0 - overlap)
         + config.colour_weight * colour
-        + config.distance_weight * distance
-        + config.height_weight * height
+        + config.distance_weight * np.minimum(distance / config.max_motion_m, 1.0)
+        + config.height_weight * np.minimum(height / config.height_scale_m, 1.0)
     )
+    return segment_ids, known_ids, cost
 
 
 def track_segments(
@@ -113,28 +133,21 @@ def track_segments(
         frames_labels, frames_points, frames_rgb, depths, strict=True
     ):
         segments = segment_features(labels, points, rgb, depth)
-        segment_ids = sorted(segments)
         assignment: dict[int, int] = {}
-        if known and segment_ids:
-            known_ids = sorted(known)
-            cost = np.array(
-                [
-                    [match_cost(known[o], segments[s], config) for o in known_ids]
-                    for s in segment_ids
-                ]
-            )
+        if known and segments:
+            segment_ids, known_ids, cost = match_costs(known, segments, labels.size, config)
             rows, cols = linear_sum_assignment(cost)
             for row, col in zip(rows, cols, strict=True):
                 if cost[row, col] <= config.max_match_cost:
                     assignment[segment_ids[row]] = known_ids[col]
-        relabelled = np.zeros(labels.shape, dtype=np.int32)
-        for segment_id in segment_ids:
+        relabelled = np.zeros(labels.size, dtype=np.int32)
+        for segment_id in sorted(segments):
             object_id = assignment.get(segment_id)
             if object_id is None:
                 object_id = next_id
                 next_id += 1
             next_id = max(next_id, object_id + 1)
-            relabelled.reshape(-1)[segments[segment_id].pixels] = object_id
+            relabelled[segments[segment_id].pixels] = object_id
             known[object_id] = segments[segment_id]
-        tracked.append(relabelled)
+        tracked.append(relabelled.reshape(labels.shape))
     return tracked
