@@ -180,3 +180,54 @@ def test_infer_rejects_bad_budget_and_existing_output(scene_dir: Path, tmp_path:
     (tmp_path / "exists").mkdir()
     assert main(["infer", str(scene_dir), "-o", str(tmp_path / "exists")]) == EXIT_INPUT_ERROR
     assert "already exists" in capsys.readouterr().err
+
+
+def test_segment_and_infer_on_an_empty_table_give_empty_results(tmp_path: Path):
+    from ipr.camera import look_at
+    from ipr.result import load_result
+    from ipr.scene import Frame, write_scene
+
+    K = np.array([[150.0, 0, 79.5], [0, 150.0, 59.5], [0, 0, 1]])
+    world_from_camera = look_at(np.array([0.0, -0.45, 0.45]), np.zeros(3))
+    u, v = np.meshgrid(np.arange(160), np.arange(120))
+    rays = np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones((120, 160))], -1)
+    rays_world = rays @ world_from_camera[:3, :3].T
+    depth = (-world_from_camera[2, 3] / rays_world[..., 2]).astype(np.float32)
+    rgb = np.full((120, 160, 3), 120, np.uint8)
+    scene = write_scene(tmp_path / "empty", [Frame(0, rgb, depth, K, world_from_camera)])
+    assert main(["segment", str(scene), "-o", str(tmp_path / "seg")]) == 0
+    summary = json.loads((tmp_path / "seg" / "segmentation.json").read_text())
+    assert summary["object_ids"] == [] and summary["frames"][0]["planes"][0]["kind"] == "support"
+    assert main(["infer", str(scene), "-o", str(tmp_path / "result")]) == 0
+    assert load_result(tmp_path / "result").objects == ()
+
+
+def test_segment_without_support_plane_fails_clearly(tmp_path: Path):
+    from ipr.scene import Frame, write_scene
+
+    from .conftest import make_frames
+
+    frame = make_frames(1)[0]
+    noise = np.random.default_rng(0).uniform(0.4, 1.5, frame.depth_m.shape).astype(np.float32)
+    scene = write_scene(
+        tmp_path / "noise", [Frame(0, frame.rgb, noise, frame.K, frame.world_from_camera)]
+    )
+    completed = subprocess.run(
+        [sys.executable, "-m", "ipr", "segment", str(scene), "-o", str(tmp_path / "out")],
+        capture_output=True,
+        text=True,
+    )
+    assert completed.returncode == EXIT_INPUT_ERROR
+    assert (
+        "frame 0: no support plane found" in completed.stderr
+        and "Traceback" not in completed.stderr
+    )
+    assert not (tmp_path / "out").exists()
+
+
+def test_synth_rejects_zero_width(tmp_path: Path, capsys):
+    assert (
+        main(["synth", str(tmp_path / "s"), "--kind", "static", "--width", "0"]) == EXIT_INPUT_ERROR
+    )
+    assert "width" in capsys.readouterr().err
+    assert not (tmp_path / "s").exists() or not any((tmp_path / "s").iterdir())

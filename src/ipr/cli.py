@@ -42,28 +42,31 @@ def _progress():
 
 
 def _cmd_synth(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
     from ipr.synth import SynthConfig, generate_scenes
 
-    config = SynthConfig()
-    if args.width or args.height:
-        from dataclasses import replace
-
-        config = replace(
-            config, width=args.width or config.width, height=args.height or config.height
-        )
     started = time.perf_counter()
-    with _progress() as progress:
-        task = progress.add_task(f"synth {args.kind}", total=args.count)
-        paths = generate_scenes(
-            Path(args.out_dir),
-            kind=args.kind,
-            seed=args.seed,
-            count=args.count,
-            config=config,
-            models_dir=Path(args.models) if args.models else None,
-            overwrite=args.overwrite,
-            progress=lambda done, total: progress.update(task, completed=done),
-        )
+    try:
+        config = SynthConfig()
+        if args.width is not None:
+            config = replace(config, width=args.width)
+        if args.height is not None:
+            config = replace(config, height=args.height)
+        with _progress() as progress:
+            task = progress.add_task(f"synth {args.kind}", total=args.count)
+            paths = generate_scenes(
+                Path(args.out_dir),
+                kind=args.kind,
+                seed=args.seed,
+                count=args.count,
+                config=config,
+                models_dir=Path(args.models) if args.models else None,
+                overwrite=args.overwrite,
+                progress=lambda done, total: progress.update(task, completed=done),
+            )
+    except ValueError as error:  # invalid arguments, reported like any input error
+        raise IprError(str(error)) from error
     elapsed = time.perf_counter() - started
     for path in paths:
         print(path)
@@ -303,7 +306,7 @@ def main(argv: list[str] | None = None) -> int:
     _configure_logging(args.verbose)
     try:
         return args.handler(args)
-    except (IprError, ValueError, FileExistsError) as error:
+    except (IprError, FileExistsError) as error:
         if args.verbose >= 2:
             raise
         print(f"ipr {args.command}: error: {error}", file=sys.stderr)

@@ -166,7 +166,7 @@ def _partial_objects(
     labelled = np.flatnonzero((flat_labels > 0) & valid)
     order = labelled[np.argsort(flat_labels[labelled], kind="stable")]
     object_ids, starts = np.unique(flat_labels[order], return_index=True)
-    ends = np.append(starts[1:], len(order))
+    ends = np.append(starts[1:], len(order))[: len(starts)]  # no segments: no ends
     for object_id, start, end in zip(object_ids.tolist(), starts, ends, strict=True):
         pixels = order[start:end]
         point_supervoxel = flat_supervoxel[pixels]

@@ -48,7 +48,7 @@ def segment_features(
     labelled = np.flatnonzero(flat_labels > 0)
     order = labelled[np.argsort(flat_labels[labelled], kind="stable")]
     ids, starts = np.unique(flat_labels[order], return_index=True)
-    ends = np.append(starts[1:], len(order))
+    ends = np.append(starts[1:], len(order))[: len(starts)]  # no segments: no ends
     flat_points = points.reshape(-1, 3)
     # A pixel without depth back-projects to the camera centre: labels may cover depth holes, so
     # geometry comes from pixels with a reading.
