@@ -3,10 +3,12 @@ into place, so a failed or interrupted run never leaves half-written output."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -28,6 +30,19 @@ def commit_directory(staging: Path, target: Path) -> None:
         shutil.rmtree(backup, ignore_errors=True)
     else:
         os.replace(staging, target)
+
+
+@contextlib.contextmanager
+def staged_directory(target: Path) -> Iterator[Path]:
+    """Yield a staging folder for ``target``; move it into place if the block succeeds, remove it
+    if the block raises (so ``target`` is either complete or untouched)."""
+    staging = staging_directory(target)
+    try:
+        yield staging
+        commit_directory(staging, target)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
 
 
 def write_json(path: Path, content: Any) -> None:

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import json
 import math
-import shutil
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from ipr.atomic import commit_directory, staging_directory
+from ipr.atomic import staged_directory
 from ipr.errors import ResultError
 
 RESULT_FORMAT = "ipr-result/1"
@@ -453,8 +452,7 @@ def write_result(
 
     if target.exists() and not overwrite:
         raise ResultError(target, "already exists", "choose another folder or allow overwriting")
-    staging = staging_directory(target)
-    try:
+    with staged_directory(target) as staging:
         entries = []
         for k, (best_mesh, hyps) in enumerate(prepared):
             folder = staging / "objects" / str(k)
@@ -487,10 +485,6 @@ def write_result(
         }
         text = json.dumps(document, indent=1, allow_nan=False)
         (staging / RESULT_FILE).write_text(text + "\n", encoding="utf-8")
-        commit_directory(staging, target)
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
     return target
 
 

@@ -12,7 +12,6 @@ from __future__ import annotations
 import json
 import math
 import re
-import shutil
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,7 +20,7 @@ from typing import Any
 import numpy as np
 from PIL import Image
 
-from ipr.atomic import commit_directory, staging_directory
+from ipr.atomic import staged_directory
 from ipr.camera import backproject, invert_transform, make_transform
 from ipr.errors import SceneError
 
@@ -602,12 +601,6 @@ def load_model(models_dir: Path | str, obj_id: int):
 # Writing
 
 
-def _atomic_directory(target: Path, overwrite: bool) -> Path:
-    if target.exists() and not overwrite:
-        raise SceneError(target, "already exists", "choose another folder or allow overwriting")
-    return staging_directory(target)
-
-
 def write_scene(
     path: Path | str,
     frames: Sequence[Frame],
@@ -628,8 +621,9 @@ def write_scene(
     ``preview.png``) to bytes written alongside.
     """
     target = Path(path)
-    staging = _atomic_directory(target, overwrite)
-    try:
+    if target.exists() and not overwrite:
+        raise SceneError(target, "already exists", "choose another folder or allow overwriting")
+    with staged_directory(target) as staging:
         (staging / "rgb").mkdir()
         (staging / "depth").mkdir()
         cameras: dict[str, Any] = {}
@@ -706,10 +700,6 @@ def write_scene(
             destination = staging / relative
             destination.parent.mkdir(parents=True, exist_ok=True)
             destination.write_bytes(content)
-        commit_directory(staging, target)
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
     return target
 
 

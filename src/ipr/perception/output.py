@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
-from ipr.atomic import commit_directory, staging_directory, write_json
+from ipr.atomic import staged_directory, write_json
 from ipr.errors import IprError
 from ipr.perception import Perception
 from ipr.scene import Scene
@@ -75,8 +75,7 @@ def write_segmentation(
         raise IprError(
             f"{out_dir}: already exists (fix: choose another folder or pass --overwrite)"
         )
-    staging = staging_directory(out_dir)
-    try:
+    with staged_directory(out_dir) as staging:
         for name in ("labels", "facets", "overlay"):
             (staging / name).mkdir()
         frames = []
@@ -131,10 +130,4 @@ def write_segmentation(
                 },
             },
         )
-        commit_directory(staging, out_dir)
-    except BaseException:
-        import shutil
-
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
     return out_dir
