@@ -15,7 +15,7 @@ from ipr.constraints import (
     penetration_depth,
     unary_feasible,
 )
-from ipr.hypotheses import ShapeHypothesis
+from ipr.hypotheses import ShapeHypothesis, UnaryTolerances
 from ipr.perception.free_space import FREE, SpaceMap, VoxelGrid
 from ipr.perception.types import KnownPlane
 
@@ -76,7 +76,7 @@ def test_unary_feasibility_support_free_space_and_walls():
     centres = grid.centres()
     state[centres[..., 0] > 0.15] = FREE  # seen empty beyond x = 0.15
     space = SpaceMap(grid, state)
-    config = ConstraintConfig()
+    config = UnaryTolerances()
     assert unary_feasible(cube(1, 0, [0, 0, 0]), space, (SUPPORT,), config)
     assert not unary_feasible(cube(1, 1, [0, 0, -0.02]), space, (SUPPORT,), config)  # below
     assert unary_feasible(cube(1, 2, [0, 0, -0.004]), space, (SUPPORT,), config)  # noise
@@ -84,9 +84,9 @@ def test_unary_feasibility_support_free_space_and_walls():
     # One 5 mm layer of 20 x 20 voxels out of 8000 pokes into free space: 5 % of the shape.
     poking = cube(1, 4, [0.055, 0, 0])
     assert not unary_feasible(poking, space, (SUPPORT,), config)
-    assert unary_feasible(poking, space, (SUPPORT,), ConstraintConfig(free_space_tolerance=0.06))
+    assert unary_feasible(poking, space, (SUPPORT,), UnaryTolerances(free_space_tolerance=0.06))
     assert unary_feasible(
-        poking, space, (SUPPORT,), ConstraintConfig(free_space_tolerance_voxels=400)
+        poking, space, (SUPPORT,), UnaryTolerances(free_space_tolerance_voxels=400)
     )
     wall = KnownPlane(
         "wall",

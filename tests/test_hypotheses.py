@@ -75,7 +75,7 @@ def test_nothing_below_support_or_above_the_seen_top(oblique):
     hypotheses = generate_hypotheses(obj, space, (SUPPORT,), CONFIG, np.random.default_rng(1))
     lowest = min(h.vertices[:, 2].min() for h in hypotheses)
     highest = max(h.vertices[:, 2].max() for h in hypotheses)
-    assert lowest >= -CONFIG.support_tolerance_m
+    assert lowest >= -CONFIG.unary.support_tolerance_m
     # The top is seen, so the space above it is free: no hypothesis may grow above it.
     assert highest <= TOP + CONFIG.facet_tolerance_m + 1e-3
 
@@ -87,7 +87,8 @@ def test_no_hypothesis_enters_seen_free_space_beyond_tolerance(oblique, low):
             keys = voxels.occupied_voxels(h.mesh, GRID.voxel_size_m)
             free = np.count_nonzero(space.state_at(voxels.centres(keys, GRID.voxel_size_m)) == FREE)
             allowed = max(
-                CONFIG.free_space_tolerance * keys.size, CONFIG.free_space_tolerance_voxels
+                CONFIG.unary.free_space_tolerance * keys.size,
+                CONFIG.unary.free_space_tolerance_voxels,
             )
             assert h.feasible
             assert free - h.forced_free_voxels <= allowed

@@ -139,20 +139,6 @@ def test_faces_and_diagonals_on_column_centres_are_counted_once():
     assert voxels.occupied_voxels(prism, pitch).size == 50 * 4
 
 
-def _winding_number(mesh: trimesh.Trimesh, points: np.ndarray) -> np.ndarray:
-    triangles = mesh.vertices[mesh.faces]
-    a, b, c = (triangles[None, :, i, :] - points[:, None, :] for i in range(3))
-    la, lb, lc = (np.linalg.norm(v, axis=-1) for v in (a, b, c))
-    numerator = np.einsum("ijk,ijk->ij", a, np.cross(b, c))
-    denominator = (
-        la * lb * lc
-        + np.einsum("ijk,ijk->ij", a, b) * lc
-        + np.einsum("ijk,ijk->ij", a, c) * lb
-        + np.einsum("ijk,ijk->ij", b, c) * la
-    )
-    return np.arctan2(numerator, denominator).sum(1) / (2 * np.pi)
-
-
 @pytest.mark.parametrize(("subdivisions", "radius"), [(1, 0.03), (2, 0.04)])
 def test_grid_snapped_mesh_has_exact_parity(subdivisions, radius):
     # Vertices snapped to voxel centres: many columns run through vertices and edges, and many
@@ -168,14 +154,8 @@ def test_grid_snapped_mesh_has_exact_parity(subdivisions, radius):
         axis=-1,
     ).reshape(-1, 3)
     centres = (grid + 0.5) * P
-    winding = np.concatenate(
-        [
-            _winding_number(sphere, chunk)
-            for chunk in np.array_split(centres, max(1, len(grid) // 256))
-        ]
-    )
     occupied = np.isin(voxels.pack(grid), keys)
-    inside = np.abs(np.round(winding)) == 1
+    inside = _winding_inside(sphere, centres)
     disagree = np.flatnonzero(occupied != inside)
     # Only centres lying exactly on the surface (vertex, edge or face) may go either way.
     for index in disagree:

@@ -374,7 +374,9 @@ def collision_checker(
         hyps = generate_hypotheses(obj, space, planes, hypothesis_config, object_rng)
         minima[obj.id] = minimum_shape(obj, planes, hypothesis_config)
         feasible = [
-            k for k, h in enumerate(hyps) if unary_feasible(h, space, planes, config.constraints)
+            k
+            for k, h in enumerate(hyps)
+            if unary_feasible(h, space, planes, config.hypotheses.unary)
         ]
         if not feasible:
             logger.warning("object %d: no feasible hypothesis; using its minimum shape", obj.id)

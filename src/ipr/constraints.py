@@ -39,6 +39,7 @@ import numpy as np
 from ipr import voxels
 from ipr.hypotheses import (
     ShapeHypothesis,
+    UnaryTolerances,
     allowed_voxels,
     plane_regions,
     unary_report,
@@ -59,19 +60,13 @@ class ConstraintConfig:
         overlap_tolerance_m: two objects' shapes may interpenetrate by this penetration depth
             (sensor noise on touching surfaces, about one 5 mm voxel).
         relax_forced_overlap: tolerate overlaps the observations force (module doc).
-        free_space_tolerance: share of a shape's voxels allowed in frame-0 seen-free space or
-            inside walls, beyond those its observed points' own hull has.
-        free_space_tolerance_voxels: the same as a count; the larger of the two applies.
-        support_tolerance_m: how far below the support plane a shape may reach.
-        wall_min_thickness_m: walls without a measured thickness are slabs this thick.
+
+    The unary tolerances (support, seen-free space, walls) are ``UnaryTolerances``, owned by
+    ``HypothesisConfig.unary`` so that generation and checking use the same values.
     """
 
     overlap_tolerance_m: float = 0.005
     relax_forced_overlap: bool = True
-    free_space_tolerance: float = 0.02
-    free_space_tolerance_voxels: int = 20
-    support_tolerance_m: float = 0.005
-    wall_min_thickness_m: float = 0.005
 
 
 # --------------------------------------------------------------------------------------------
@@ -244,12 +239,12 @@ def unary_feasible(
     h: ShapeHypothesis,
     space: SpaceMap | None,
     planes: tuple[KnownPlane, ...],
-    config: ConstraintConfig | None = None,
+    tolerances: UnaryTolerances | None = None,
 ) -> bool:
     """True when ``h`` is not below the support (beyond ``support_tolerance_m``) and has at most
     the tolerated voxels in seen-free space and in walls, beyond those its observed points'
     own hull has (``h.forced_*_voxels``). Voxels at the space grid's pitch (5 mm default)."""
-    config = config or ConstraintConfig()
+    config = tolerances or UnaryTolerances()
     regions = plane_regions(planes, config.wall_min_thickness_m)
     needs_voxels = space is not None or any(not r.is_support for r in regions)
     pitch = space.grid.voxel_size_m if space is not None else voxels.DEFAULT_PITCH_M
@@ -272,14 +267,16 @@ def joint_feasible(
     planes: tuple[KnownPlane, ...],
     config: ConstraintConfig | None = None,
     cache: OverlapCache | None = None,
+    tolerances: UnaryTolerances | None = None,
 ) -> bool:
     """Constraints(X) of a joint model: ``choice`` maps object id -> index into
     ``hypotheses[object id]``; every chosen shape is unary-feasible and no two intersect
-    (pairwise tolerance as in ``compatibility_matrix``, from the objects' full hypothesis lists).
+    (pairwise tolerance as in ``compatibility_matrix``, from the objects' full hypothesis lists;
+    unary ``tolerances`` default to ``UnaryTolerances()``).
     """
     config = config or ConstraintConfig()
     chosen = {i: hypotheses[i][j] for i, j in choice.items()}
-    if not all(unary_feasible(h, space, planes, config) for h in chosen.values()):
+    if not all(unary_feasible(h, space, planes, tolerances) for h in chosen.values()):
         return False
     if cache is None:
         cache = OverlapCache([h for i in choice for h in hypotheses[i]])

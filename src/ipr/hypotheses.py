@@ -62,7 +62,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.sparse import coo_matrix
@@ -77,6 +77,26 @@ logger = logging.getLogger(__name__)
 
 #: Volumes below this (m^3) are degenerate (flat or collinear point sets).
 _MIN_VOLUME_M3 = 1e-9
+
+
+@dataclass(frozen=True)
+class UnaryTolerances:
+    """Tolerances of the unary constraints, for sensor noise (one object at a time).
+
+    Attributes:
+        free_space_tolerance: share of a shape's voxels allowed in frame-0 seen-free space or
+            inside walls, beyond those its observed points' own hull has.
+        free_space_tolerance_voxels: the same as a count; the larger of the two applies.
+        support_tolerance_m: hypotheses are cut at the support plane, or at the lowest observed
+            point when lower (every observed point stays inside); points more than this below
+            the plane are logged as outliers, and a shape reaching further below is infeasible.
+        wall_min_thickness_m: walls without a measured thickness are slabs this thick (m).
+    """
+
+    free_space_tolerance: float = 0.02
+    free_space_tolerance_voxels: int = 20
+    support_tolerance_m: float = 0.005
+    wall_min_thickness_m: float = 0.005
 
 
 @dataclass(frozen=True)
@@ -105,17 +125,12 @@ class HypothesisConfig:
             set that admissible d must satisfy too (0: no rim set).
         ray_step_m: spacing of the samples along rays (None: the space grid's pitch).
         max_rounds: rounds of Algorithm 1's repeat loop at most (mirroring, then hull).
-        free_space_tolerance: share of a hypothesis' voxels allowed in seen-free space or walls
-            (beyond what the observed points force), for sensor noise.
-        free_space_tolerance_voxels: the same as a count; the larger of the two applies.
-        support_tolerance_m: hypotheses are cut at the support plane, or at the lowest observed
-            point when lower (every observed point stays inside); points more than this below
-            the plane are logged as outliers.
         facet_tolerance_m: hypotheses are cut this far in front of each observed facet's
             outermost point along its normal (seen-free space the voxel map's surface margin
             cannot resolve).
-        wall_min_thickness_m: walls without a measured thickness are slabs this thick.
         max_attempts: samples tried per hypothesis before keeping an infeasible one.
+        unary: tolerances of the unary constraints (support, seen-free space, walls), shared
+            with ``ipr.constraints.unary_feasible`` so generation and checking agree.
         timeout_s: seconds per object before the remaining hypotheses are simplified.
         seed: seed used when no rng is given (combined with the object id).
     """
@@ -136,11 +151,8 @@ class HypothesisConfig:
     max_hull_facets: int = 8
     hull_spacing_m: float = 0.01
     max_rounds: int = 4
-    free_space_tolerance: float = 0.02
-    free_space_tolerance_voxels: int = 20
-    support_tolerance_m: float = 0.005
     facet_tolerance_m: float = 0.002
-    wall_min_thickness_m: float = 0.005
+    unary: UnaryTolerances = field(default_factory=UnaryTolerances)
     max_attempts: int = 4
     timeout_s: float = 2.0
     seed: int = 0
@@ -653,7 +665,7 @@ def _prepare(
     points = points[np.all(np.isfinite(points), axis=1)]
     if len(points) == 0:
         raise ValueError(f"object {obj.id} has no finite observed point")
-    regions = plane_regions(planes, config.wall_min_thickness_m)
+    regions = plane_regions(planes, config.unary.wall_min_thickness_m)
     cap = config.border_max_depth_m if obj.touches_border else config.max_depth_m
     pitch = space.grid.voxel_size_m if space is not None else voxels.DEFAULT_PITCH_M
     step = config.ray_step_m or pitch
@@ -725,7 +737,7 @@ def _prepare(
         mirror_points = _thin(_extreme_points(facet_points), config.hull_spacing_m)
         observed.append(_SourceFacet(normal, centre, mirror_points, cells, step, source, conflict))
 
-    cuts = _support_cuts(regions, points, config.support_tolerance_m, obj.id)
+    cuts = _support_cuts(regions, points, config.unary.support_tolerance_m, obj.id)
     for facet in observed:
         if facet.source == "observed":
             # An observed facet is the object's extreme part along its normal N (for a convex
@@ -955,7 +967,9 @@ def _evaluate(
     free = max(report.free_voxels - ctx.forced_free, 0)
     wall = max(report.wall_voxels - ctx.forced_wall, 0)
     allowed = allowed_voxels(
-        report.voxel_count, ctx.config.free_space_tolerance, ctx.config.free_space_tolerance_voxels
+        report.voxel_count,
+        ctx.config.unary.free_space_tolerance,
+        ctx.config.unary.free_space_tolerance_voxels,
     )
     return keys, free, wall, free <= allowed and wall <= allowed
 
@@ -1087,7 +1101,7 @@ def minimum_shape(
     if convex_mesh(base) is None:
         logger.info("object %d: flat observed hull; minimum shape thickened", obj.id)
         base = _thicken(base, normal, config.min_thickness_m)
-    regions = plane_regions(planes, config.wall_min_thickness_m)
+    regions = plane_regions(planes, config.unary.wall_min_thickness_m)
     cuts = np.array(_support_cuts(regions, points)).reshape(-1, 4)
     ctx = _Context(
         obj.id, base, base, (), None, regions, cuts, config.max_depth_m, normal, 0, 0,
