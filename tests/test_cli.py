@@ -231,3 +231,11 @@ def test_synth_rejects_zero_width(tmp_path: Path, capsys):
     )
     assert "width" in capsys.readouterr().err
     assert not (tmp_path / "s").exists() or not any((tmp_path / "s").iterdir())
+
+
+def test_ground_truth_of_a_scene_without_ground_truth_fails_clearly(
+    scene_dir: Path, tmp_path, capsys
+):
+    assert main(["ground-truth", str(scene_dir), "-o", str(tmp_path / "gt")]) == EXIT_INPUT_ERROR
+    assert "has no ground truth" in capsys.readouterr().err
+    assert not (tmp_path / "gt").exists()

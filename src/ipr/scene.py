@@ -540,6 +540,12 @@ def _load_actions(
 def load_ground_truth(path: Path | str) -> dict[int, list[ObjectPose]]:
     """``scene_gt.json`` of a scene: frame id -> object poses (camera from model, metres)."""
     gt_path = Path(path) / "scene_gt.json"
+    if not gt_path.is_file():
+        raise SceneError(
+            gt_path,
+            "this scene has no ground truth (scene_gt.json is missing)",
+            "evaluation needs a scene with BOP ground truth, such as one made by 'ipr synth'",
+        )
     raw = read_json(gt_path, "scene_gt.json")
     if not isinstance(raw, dict):
         raise SceneError(gt_path, "must map frame ids to lists of objects")
