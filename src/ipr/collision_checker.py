@@ -326,50 +326,65 @@ def posterior_medoid(hypotheses: Sequence[ShapeHypothesis], probabilities: np.nd
 # Public API
 
 
-def collision_checker(
+@dataclass(frozen=True, eq=False)
+class PreparedHypotheses:
+    """Hypotheses of every object with their unary and pairwise constraints (shared by the
+    Collision Checker and the physics-based methods).
+
+    Attributes:
+        ids: object ids in the order of the objects given.
+        generated: id -> all generated hypotheses (just the minimum shape when none is
+            unary-feasible).
+        minima: id -> minimum shape.
+        candidates: id -> indices into ``generated[id]`` of the unary-feasible hypotheses.
+        seconds: id -> seconds spent generating.
+        depths: (a, b) -> (len(candidates[a]), len(candidates[b])) penetration depths (m) for
+            interacting pairs (a before b in ``ids``); pairs absent never conflict.
+        thresholds: (a, b) -> the largest allowed depth (m) for that pair.
+    """
+
+    ids: list[int]
+    generated: dict[int, tuple[ShapeHypothesis, ...]]
+    minima: dict[int, ShapeHypothesis]
+    candidates: dict[int, list[int]]
+    seconds: dict[int, float]
+    depths: dict[tuple[int, int], np.ndarray]
+    thresholds: dict[tuple[int, int], float]
+
+
+def prepare_hypotheses(
     objects: tuple[PartialObject, ...],
     space: SpaceMap | None,
     planes: tuple[KnownPlane, ...],
     config: CollisionCheckerConfig | None = None,
     rng: np.random.Generator | None = None,
     time_budget_s: float | None = None,
-) -> list[ObjectPosterior]:
-    """Marginal shape posteriors of the objects of one frame (frame 0) under a uniform prior
-    restricted to jointly feasible models (module doc).
+) -> PreparedHypotheses:
+    """Generate each object's hypotheses and minimum shape, keep the unary-feasible ones and
+    measure the pairwise penetration depths between interacting objects' hypotheses.
 
-    Args:
-        objects: the frame's partial objects (distinct ids).
-        space: the frame's free-space map (None: no free-space constraint).
-        planes: the frame's support and walls.
-        config: settings (defaults: ``CollisionCheckerConfig()``).
-        rng: random source (default: seeded from ``config.hypotheses.seed``).
-        time_budget_s: total seconds; generation gets ``generation_share`` of it (split over
-            the objects, capping their timeouts) and the sampler stops at the end of it.
-
-    Returns:
-        One ObjectPosterior per object, in the order of ``objects``.
+    ``time_budget_s``: generation gets ``generation_share`` of it, split over the objects
+    (capping their timeouts). ``rng`` defaults to one seeded from ``config.hypotheses.seed``;
+    each object draws from its own child stream (``rng.spawn``).
     """
     config = config or CollisionCheckerConfig()
     rng = rng if rng is not None else np.random.default_rng(config.hypotheses.seed)
-    started = time.perf_counter()
     ids = [int(obj.id) for obj in objects]
     if len(set(ids)) != len(ids):
         raise ValueError(f"object ids must be distinct, got {ids}")
     hypothesis_config = config.hypotheses
-    deadline = np.inf
     if time_budget_s is not None:
         per_object = config.generation_share * time_budget_s / max(len(objects), 1)
         hypothesis_config = dataclasses.replace(
             hypothesis_config, timeout_s=min(hypothesis_config.timeout_s, per_object)
         )
-        deadline = started + time_budget_s
-    object_rngs = rng.spawn(len(objects) + 1)
+    object_rngs = rng.spawn(len(objects))
 
     generated: dict[int, tuple[ShapeHypothesis, ...]] = {}
     minima: dict[int, ShapeHypothesis] = {}
     candidates: dict[int, list[int]] = {}  # object -> indices of unary-feasible hypotheses
     seconds: dict[int, float] = {}
-    for obj, object_rng in zip(objects, object_rngs[:-1], strict=True):
+    for obj, object_rng in zip(objects, object_rngs, strict=True):
         begin = time.perf_counter()
         hyps = generate_hypotheses(obj, space, planes, hypothesis_config, object_rng)
         minima[obj.id] = minimum_shape(obj, planes, hypothesis_config)
@@ -416,25 +431,39 @@ def collision_checker(
             threshold = overlap_threshold(matrix, config.constraints, a, b)
             if (matrix > threshold).any():
                 depths[(a, b)], thresholds[(a, b)] = matrix, threshold
+    logger.debug("hypotheses prepared: %d depth queries", cache.queries)
+    return PreparedHypotheses(ids, generated, minima, candidates, seconds, depths, thresholds)
 
+
+def uniform_posteriors(
+    prepared: PreparedHypotheses,
+    config: CollisionCheckerConfig | None = None,
+    rng: np.random.Generator | None = None,
+    deadline: float = np.inf,
+) -> list[ObjectPosterior]:
+    """The Collision Checker's marginals from prepared hypotheses (module doc): uniform over
+    jointly feasible joint models; the Gibbs sampler stops at ``deadline``
+    (``time.perf_counter()`` seconds)."""
+    config = config or CollisionCheckerConfig()
+    rng = rng if rng is not None else np.random.default_rng(config.hypotheses.seed)
+    ids, generated, candidates = prepared.ids, prepared.generated, prepared.candidates
     sizes = {i: len(candidates[i]) for i in ids}
     marginals: dict[int, np.ndarray] = {}
     how: dict[int, str] = {}
-    for component in _components(ids, depths):
+    for component in _components(ids, prepared.depths):
         if len(component) == 1:
             i = component[0]
             marginals[i] = np.full(sizes[i], 1.0 / sizes[i])
             how[i] = "independent"
             continue
         result, method = _component_marginals(
-            component, depths, thresholds, sizes, config, object_rngs[-1], deadline
+            component, prepared.depths, prepared.thresholds, sizes, config, rng, deadline
         )
         for i in component:
             marginals[i], how[i] = result[i], method
 
     posteriors = []
-    for obj in objects:
-        i = int(obj.id)
+    for i in ids:
         hyps = generated[i]
         probabilities = np.zeros(len(hyps))
         probabilities[candidates[i]] = marginals[i]
@@ -446,34 +475,68 @@ def collision_checker(
                 hyps,
                 probabilities,
                 posterior_medoid(hyps, probabilities),
-                minima[i],
+                prepared.minima[i],
                 inference,
-                seconds[i],
+                prepared.seconds[i],
             )
         )
+    return posteriors
+
+
+def collision_checker(
+    objects: tuple[PartialObject, ...],
+    space: SpaceMap | None,
+    planes: tuple[KnownPlane, ...],
+    config: CollisionCheckerConfig | None = None,
+    rng: np.random.Generator | None = None,
+    time_budget_s: float | None = None,
+) -> list[ObjectPosterior]:
+    """Marginal shape posteriors of the objects of one frame (frame 0) under a uniform prior
+    restricted to jointly feasible models (module doc).
+
+    Args:
+        objects: the frame's partial objects (distinct ids).
+        space: the frame's free-space map (None: no free-space constraint).
+        planes: the frame's support and walls.
+        config: settings (defaults: ``CollisionCheckerConfig()``).
+        rng: random source (default: seeded from ``config.hypotheses.seed``).
+        time_budget_s: total seconds; generation gets ``generation_share`` of it (split over
+            the objects, capping their timeouts) and the sampler stops at the end of it.
+
+    Returns:
+        One ObjectPosterior per object, in the order of ``objects``.
+    """
+    config = config or CollisionCheckerConfig()
+    rng = rng if rng is not None else np.random.default_rng(config.hypotheses.seed)
+    started = time.perf_counter()
+    deadline = np.inf if time_budget_s is None else started + time_budget_s
+    generation_rng, sampler_rng = rng.spawn(2)
+    prepared = prepare_hypotheses(objects, space, planes, config, generation_rng, time_budget_s)
+    posteriors = uniform_posteriors(prepared, config, sampler_rng, deadline)
     logger.debug(
-        "collision checker: %d objects in %.3f s (%d depth queries)",
-        len(objects),
-        time.perf_counter() - started,
-        cache.queries,
+        "collision checker: %d objects in %.3f s", len(objects), time.perf_counter() - started
     )
     return posteriors
 
 
-def write_collision_checker_result(
+def write_posterior_result(
     out_dir: Path | str,
     posteriors: Sequence[ObjectPosterior],
     world_from_camera: Mapping[int, np.ndarray],
     timing_s: Mapping[str, float] | None = None,
     *,
+    method: str = METHOD,
+    extra: Mapping | None = None,
+    extra_files: Mapping[str, bytes] | None = None,
     overwrite: bool = False,
 ) -> Path:
-    """Write the Collision Checker's result directory (``ipr.result.write_result``, method
-    "collision-checker"): per object its output shape as ``best.ply`` and its hypotheses with
-    non-zero probability (renormalised against rounding) as weighted hypotheses.
+    """Write a result directory (``ipr.result.write_result``) from per-object posteriors: per
+    object its output shape as ``best.ply`` and its hypotheses with non-zero probability
+    (renormalised against rounding) as weighted hypotheses.
 
     ``world_from_camera``: frame id -> (4, 4) OpenCV camera-to-world (frame 0 required).
-    ``extra["collision_checker"]`` records each object's id, inference mode and volumes.
+    ``extra["objects_summary"]`` records each object's id, inference mode and volumes;
+    ``extra`` adds further keys and ``extra_files`` further files (name -> bytes).
     """
     from ipr.result import write_result
 
@@ -484,13 +547,14 @@ def write_collision_checker_result(
         hypotheses = [
             (posterior.hypotheses[k].mesh, float(w)) for k, w in zip(keep, weights, strict=True)
         ]
-        objects.append((posterior.best_hypothesis.mesh, hypotheses))
+        best_probability = float(posterior.probabilities[posterior.best])
+        objects.append((posterior.best_hypothesis.mesh, hypotheses, best_probability))
         summary.append(
             {
                 "object_id": posterior.object_id,
                 "inference": posterior.inference,
                 "hypotheses": len(posterior.hypotheses),
-                "feasible": int(keep.size),
+                "nonzero": int(keep.size),
                 "best_volume_m3": posterior.best_hypothesis.volume_m3,
                 "volumes_m3": volume_spread(posterior.hypotheses),
                 "generation_s": posterior.generation_s,
@@ -498,10 +562,25 @@ def write_collision_checker_result(
         )
     return write_result(
         out_dir,
-        METHOD,
+        method,
         dict(world_from_camera),
         objects,
         timing_s,
-        {"collision_checker": summary},
+        {"objects_summary": summary, **dict(extra or {})},
+        extra_files=extra_files,
         overwrite=overwrite,
+    )
+
+
+def write_collision_checker_result(
+    out_dir: Path | str,
+    posteriors: Sequence[ObjectPosterior],
+    world_from_camera: Mapping[int, np.ndarray],
+    timing_s: Mapping[str, float] | None = None,
+    *,
+    overwrite: bool = False,
+) -> Path:
+    """``write_posterior_result`` for the Collision Checker (method "collision-checker")."""
+    return write_posterior_result(
+        out_dir, posteriors, world_from_camera, timing_s, overwrite=overwrite
     )

@@ -2,7 +2,8 @@
 
 Every field has a documented default in its stage's module; ``Config()`` is what ``ipr infer``
 uses. Sections: ``perception`` (``ipr.perception.config``), ``collision_checker`` (hypotheses,
-constraints and the Collision Checker, ``ipr.collision_checker``).
+constraints and the Collision Checker, ``ipr.collision_checker``), ``inference`` (physics,
+likelihood and tree sampling, ``ipr.inference``).
 """
 
 from __future__ import annotations
@@ -10,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from ipr.collision_checker import CollisionCheckerConfig
+from ipr.inference import InferenceConfig
 from ipr.perception.config import PerceptionConfig
 
 
@@ -19,3 +21,4 @@ class Config:
 
     perception: PerceptionConfig = field(default_factory=PerceptionConfig)
     collision_checker: CollisionCheckerConfig = field(default_factory=CollisionCheckerConfig)
+    inference: InferenceConfig = field(default_factory=InferenceConfig)

@@ -2,93 +2,160 @@
 
 ``run_pipeline(scene, config, method=...)`` is the one entry point the CLI and the Python API
 share: perception of every frame, hypotheses for the objects of frame 0 (the initial scene the
-result describes), then the chosen inference method.
+result describes), then the chosen inference method: the Collision Checker, or one of the
+physics-based methods of ``ipr.inference`` (default ``ipr+action+uniform``, the full method).
+
+Time budget: ``time_budget_s`` covers the whole run; hypotheses get their share of what is left
+after perception and inference the rest. Without one, hypotheses run to their own timeouts and
+inference gets ``config.inference.budget_per_object_s`` per object.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import logging
+import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from ipr.config import Config
 from ipr.errors import IprError
+from ipr.methods import DEFAULT_METHOD, METHODS
 from ipr.scene import Scene, load_scene
 
 log = logging.getLogger(__name__)
 
-#: Inference methods available now (the physics-based methods arrive with the physics stage).
-METHODS = ("collision-checker",)
-
 
 @dataclass(frozen=True, eq=False)
 class PipelineResult:
-    """What a run produced: per-object posteriors, the perception, and seconds per stage."""
+    """What a run produced: per-object posteriors, the perception, seconds per stage, and
+    method-specific details (``summary``: samples, fallback, ...)."""
 
     method: str
     posteriors: list
     perception: object
     timing_s: dict[str, float]
+    summary: dict = field(default_factory=dict)
 
 
 def run_pipeline(
     scene: Scene,
     config: Config | None = None,
     *,
-    method: str = "collision-checker",
+    method: str = DEFAULT_METHOD,
     seed: int = 0,
     time_budget_s: float | None = None,
+    workers: int | None = None,
+    samples: int | None = None,
 ) -> PipelineResult:
-    """Perceive the scene and infer complete shapes of the objects of frame 0."""
-    from ipr.collision_checker import collision_checker
+    """Perceive the scene and infer complete shapes of the objects of frame 0.
+
+    ``samples`` fixes the number of joint models the physics-based methods sample (then only
+    ``time_budget_s``, if given, can stop them earlier): the same seed and samples give the
+    same result with any number of ``workers``.
+    """
+    from ipr.collision_checker import collision_checker, prepare_hypotheses
+    from ipr.inference import infer_shapes
+    from ipr.likelihood import observed_frames
     from ipr.perception import perceive_scene
 
     if method not in METHODS:
         raise IprError(f"unknown method {method!r}; available: {', '.join(METHODS)}")
-    if time_budget_s is not None and time_budget_s <= 0:
+    if time_budget_s is not None and not time_budget_s > 0:
         raise IprError(f"--time-budget must be positive, got {time_budget_s}")
+    if workers is not None and workers < 1:
+        raise IprError(f"--workers must be at least 1, got {workers}")
+    if samples is not None and samples < 1:
+        raise IprError(f"--samples must be at least 1, got {samples}")
     config = config or Config()
+    if samples is not None:
+        config = dataclasses.replace(
+            config, inference=dataclasses.replace(config.inference, max_samples=samples)
+        )
     started = time.perf_counter()
+    deadline = None if time_budget_s is None else started + time_budget_s
     perception = perceive_scene(scene, config.perception)
     perceived = time.perf_counter()
     objects = perception.objects[0]
     if not objects:
         log.warning("%s: no object found in frame 0; the result is empty", scene.path)
-    remaining = None if time_budget_s is None else max(time_budget_s - (perceived - started), 1e-3)
-    posteriors = collision_checker(
-        objects,
-        perception.free_space[0],
-        perception.planes[0],
-        config.collision_checker,
-        rng=np.random.default_rng(seed),
-        time_budget_s=remaining,
-    )
-    finished = time.perf_counter()
-    generation = float(sum(p.generation_s for p in posteriors))
-    timing = {
-        "segmentation": perceived - started,
-        "hypotheses": generation,
-        "inference": max(finished - perceived - generation, 0.0),
-        "total": finished - started,
-    }
-    return PipelineResult(method, posteriors, perception, timing)
+    remaining = None if deadline is None else max(deadline - perceived, 1e-3)
+    rng = np.random.default_rng(seed)
+    summary: dict = {}
+    if method == "collision-checker":
+        posteriors = collision_checker(
+            objects,
+            perception.free_space[0],
+            perception.planes[0],
+            config.collision_checker,
+            rng=rng,
+            time_budget_s=remaining,
+        )
+        finished = time.perf_counter()
+        generation = float(sum(p.generation_s for p in posteriors))
+        timing = {
+            "segmentation": perceived - started,
+            "hypotheses": generation,
+            "inference": max(finished - perceived - generation, 0.0),
+        }
+    else:
+        prepared = prepare_hypotheses(
+            objects,
+            perception.free_space[0],
+            perception.planes[0],
+            config.collision_checker,
+            rng,
+            remaining,
+        )
+        generated = time.perf_counter()
+        observed = observed_frames(
+            scene.frames, perception.labels, config.inference.likelihood.decimation
+        )
+        outcome = infer_shapes(
+            prepared,
+            perception.planes[0],
+            observed,
+            method=method,
+            pusher=scene.pusher,
+            pushes=scene.pushes,
+            config=config.inference,
+            collision_checker_config=config.collision_checker,
+            seed=seed,
+            deadline=deadline,
+            workers=workers,
+        )
+        finished = time.perf_counter()
+        posteriors = outcome.posteriors
+        summary = {**outcome.summary}
+        timing = {
+            "segmentation": perceived - started,
+            "hypotheses": generated - perceived,
+            "inference": finished - generated,
+            **{f"inference_{name}": value for name, value in outcome.timing_s.items()},
+        }
+    timing["total"] = time.perf_counter() - started
+    return PipelineResult(method, posteriors, perception, timing, summary)
 
 
 def infer(
     scene_path: Path | str,
     out_dir: Path | str,
     *,
-    method: str = "collision-checker",
+    method: str = DEFAULT_METHOD,
     seed: int = 0,
     time_budget_s: float | None = None,
+    workers: int | None = None,
+    samples: int | None = None,
     config: Config | None = None,
     overwrite: bool = False,
 ) -> Path:
-    """Load a scene, run the pipeline and write the result directory (atomically)."""
-    from ipr.collision_checker import write_collision_checker_result
+    """Load a scene, run the pipeline and write the result directory (atomically), with
+    ``completion.png``: frame 0's RGB beside the completed objects seen from its camera."""
+    from ipr.collision_checker import write_posterior_result
+    from ipr.report import completion_png
 
     out_dir = Path(out_dir)
     if out_dir.exists() and not overwrite:
@@ -96,8 +163,37 @@ def infer(
             f"{out_dir}: already exists (fix: choose another folder or pass --overwrite)"
         )
     scene = load_scene(scene_path)
-    result = run_pipeline(scene, config, method=method, seed=seed, time_budget_s=time_budget_s)
-    world_from_camera = {frame.index: frame.world_from_camera for frame in scene.frames}
-    return write_collision_checker_result(
-        out_dir, result.posteriors, world_from_camera, result.timing_s, overwrite=overwrite
+    result = run_pipeline(
+        scene,
+        config,
+        method=method,
+        seed=seed,
+        time_budget_s=time_budget_s,
+        workers=workers,
+        samples=samples,
     )
+    world_from_camera = {frame.index: frame.world_from_camera for frame in scene.frames}
+    extra = {"inference": _json_ready(result.summary)} if result.summary else {}
+    return write_posterior_result(
+        out_dir,
+        result.posteriors,
+        world_from_camera,
+        result.timing_s,
+        method=result.method,
+        extra=extra,
+        extra_files={"completion.png": completion_png(scene.frames[0], result.posteriors)},
+        overwrite=overwrite,
+    )
+
+
+def _json_ready(value):
+    """Plain JSON values (non-finite floats become None)."""
+    if isinstance(value, dict):
+        return {str(k): _json_ready(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_json_ready(v) for v in value]
+    if isinstance(value, float | np.floating):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, np.integer):
+        return int(value)
+    return value

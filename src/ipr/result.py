@@ -381,7 +381,11 @@ def load_result(path: Path | str, *, load_meshes: bool = True) -> Result:
 # --------------------------------------------------------------------------------------------
 # Writing
 
-ObjectToWrite = tuple[Any, Sequence[tuple[Any, float]]]
+#: (best mesh, [(hypothesis mesh, probability), ...]) or the same with the best mesh's
+#: marginal probability as a third element.
+ObjectToWrite = (
+    tuple[Any, Sequence[tuple[Any, float]]] | tuple[Any, Sequence[tuple[Any, float]], float]
+)
 
 
 def write_result(
@@ -392,6 +396,7 @@ def write_result(
     timing_s: Mapping[str, float] | None = None,
     extra: Mapping[str, Any] | None = None,
     *,
+    extra_files: Mapping[str, bytes] | None = None,
     overwrite: bool = False,
 ) -> Path:
     """Write a result directory atomically (staged beside ``out_dir``, then renamed into place).
@@ -404,10 +409,14 @@ def write_result(
         objects: per object k (its id), ``(best_mesh, hypotheses)`` where meshes are trimesh
             meshes or (vertices, faces) pairs in metres, world frame, frame-0 pose, and
             ``hypotheses`` is a sequence of ``(mesh, probability)`` summing to 1 (the best
-            included). The object's probability is its largest hypothesis probability. With no
-            hypotheses the best mesh is the only hypothesis, with probability 1.
+            included). The object's probability (the contract: the marginal posterior of its
+            best hypothesis) is the optional third element, else its largest hypothesis
+            probability. With no hypotheses the best mesh is the only hypothesis, with
+            probability 1.
         timing_s: named durations in seconds.
         extra: further JSON-serialisable top-level keys (not those of the contract).
+        extra_files: further files, relative name -> content (reports, images); names must stay
+            inside the directory and not collide with the contract's files.
 
     Writes ``result.json`` and ``objects/<k>/best.ply`` (+ ``hyp_NNN.ply``) as binary PLY.
     Raises ValueError on invalid inputs and ResultError if ``out_dir`` exists without
@@ -434,9 +443,20 @@ def write_result(
     if clash:
         raise ValueError(f"extra must not redefine contract keys {sorted(clash)}")
 
+    files = {}
+    for name, content in (extra_files or {}).items():
+        relative = Path(name)
+        if relative.is_absolute() or ".." in relative.parts or not relative.parts:
+            raise ValueError(f"extra file name {name!r} must be a relative path inside the result")
+        if relative.parts[0] in ("objects", RESULT_FILE):
+            raise ValueError(f"extra file name {name!r} collides with the result's own files")
+        files[relative] = bytes(content)
     prepared = []
     for k, entry in enumerate(objects):
-        best, hypotheses = entry
+        best, hypotheses = entry[0], entry[1]
+        stated = float(entry[2]) if len(entry) > 2 else None
+        if stated is not None and not (math.isfinite(stated) and 0.0 <= stated <= 1.0):
+            raise ValueError(f"object {k}: best probability {stated} not in [0, 1]")
         best_mesh = _to_trimesh(best)
         _check_mesh_for_writing(best_mesh, f"object {k} best mesh")
         hyps = [(_to_trimesh(mesh), float(p)) for mesh, p in hypotheses]
@@ -448,13 +468,16 @@ def write_result(
             raise ValueError(
                 f"object {k}: hypothesis probabilities sum to {sum(p for _, p in hyps):.6g}, not 1"
             )
-        prepared.append((best_mesh, hyps))
+        prepared.append((best_mesh, hyps, stated))
 
     if target.exists() and not overwrite:
         raise ResultError(target, "already exists", "choose another folder or allow overwriting")
     with staged_directory(target) as staging:
         entries = []
-        for k, (best_mesh, hyps) in enumerate(prepared):
+        for relative, content in files.items():
+            (staging / relative).parent.mkdir(parents=True, exist_ok=True)
+            (staging / relative).write_bytes(content)
+        for k, (best_mesh, hyps, stated) in enumerate(prepared):
             folder = staging / "objects" / str(k)
             folder.mkdir(parents=True)
             best_mesh.export(folder / "best.ply", file_type="ply")
@@ -465,7 +488,7 @@ def write_result(
                     name = f"hyp_{index:03d}.ply"
                     mesh.export(folder / name, file_type="ply")
                     hyp_entries.append({"mesh": f"objects/{k}/{name}", "probability": p})
-                probability = max(p for _, p in hyps)
+                probability = stated if stated is not None else max(p for _, p in hyps)
             else:
                 hyp_entries = [{"mesh": best_name, "probability": 1.0}]
                 probability = 1.0

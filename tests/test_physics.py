@@ -1,0 +1,120 @@
+"""The physics world: gravity, pushes, stability candidates, rendering at reduced resolution."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import ipr  # noqa: F401  (GL backend before MuJoCo loads)
+from ipr.camera import look_at
+from ipr.perception.types import KnownPlane
+from ipr.physics import (
+    Body,
+    PhysicsConfig,
+    build_world,
+    decimated_camera,
+    decimated_pixels,
+)
+from ipr.rendering import Renderer, render_depth_and_ids
+from ipr.scene import Push, Pusher
+from tests.box_scene import SUPPORT, box_mesh
+
+STANDING = box_mesh(np.array([0.05, 0.03, 0.02]), np.array([0.0, 0.0, 0.02]))
+
+
+def test_a_supported_box_stays_and_an_unsupported_one_falls_by_its_gap():
+    floating = box_mesh(np.array([0.03, 0.03, 0.02]), np.array([0.2, 0.0, 0.07]))  # 5 cm gap
+    world = build_world([Body(*STANDING), Body(*floating)], [SUPPORT])
+    assert world.settle()
+    moved = world.displacements()
+    assert moved[0] < 0.002
+    assert moved[1] == pytest.approx(0.05, abs=0.004)
+    # Its pose says where it went: straight down.
+    assert world.poses()[1][:3, 3] == pytest.approx([0.0, 0.0, -0.05], abs=0.004)
+
+
+def test_gravity_follows_a_tilted_support_normal():
+    normal = np.array([0.0, np.sin(0.3), np.cos(0.3)])
+    tilted = KnownPlane("support", normal, 0.0, SUPPORT.points)
+    world = build_world([], [tilted])
+    assert np.asarray(world.model.opt.gravity) == pytest.approx(-9.81 * normal)
+
+
+def test_candidates_ignore_each_other_but_rest_on_static_context():
+    # Two overlapping candidates on a static box: alone, each would be stable.
+    low = box_mesh(np.array([0.02, 0.02, 0.01]), np.array([0.0, 0.0, 0.05]))
+    high = box_mesh(np.array([0.02, 0.02, 0.015]), np.array([0.005, 0.0, 0.055]))
+    bodies = [
+        Body(*STANDING, dynamic=False),
+        Body(*low, candidate=True),
+        Body(*high, candidate=True),
+    ]
+    world = build_world(bodies, [SUPPORT])
+    world.settle(0.3)
+    moved = world.displacements()
+    assert moved[0] == 0.0 and moved[1] < 0.002 and moved[2] < 0.002
+    # As ordinary bodies the same two shapes overlap and shove each other apart.
+    shoved = build_world([Body(*STANDING, dynamic=False), Body(*low), Body(*high)], [SUPPORT])
+    shoved.settle(0.3)
+    assert shoved.displacements()[1:].max() > 0.003
+
+
+def test_a_push_moves_the_box_along_its_direction_and_a_miss_moves_nothing():
+    push = Push(0, 1, np.array([-0.15, 0.0, 0.03]), np.array([1.0, 0.0, 0.0]), 0.12, 0.05)
+    world = build_world([Body(*STANDING)], [SUPPORT], pusher=Pusher())
+    world.settle()
+    assert world.push(push) == pytest.approx(0.12)
+    # The capsule (r = 1 cm) meets the box face at x = -0.05 after 9 cm: 3 cm of push.
+    shift = world.poses()[0][:3, 3]
+    assert shift[0] == pytest.approx(0.03, abs=0.006) and abs(shift[1]) < 0.005
+    miss = Push(0, 1, np.array([-0.15, 0.2, 0.03]), np.array([1.0, 0.0, 0.0]), 0.12, 0.05)
+    world = build_world([Body(*STANDING)], [SUPPORT], pusher=Pusher())
+    world.settle()
+    world.push(miss)
+    assert world.displacements()[0] < 0.001 and not world.exploded
+
+
+def test_walls_hold_objects_back():
+    wall_points = np.array([[0.08, y, z] for y in (-0.2, 0.2) for z in (0.0, 0.2)])
+    wall = KnownPlane("wall", np.array([-1.0, 0.0, 0.0]), 0.08, wall_points, 0.02)
+    push = Push(0, 1, np.array([-0.15, 0.0, 0.03]), np.array([1.0, 0.0, 0.0]), 0.2, 0.05)
+    free = build_world([Body(*STANDING)], [SUPPORT], pusher=Pusher())
+    free.push(push)
+    walled = build_world([Body(*STANDING)], [SUPPORT, wall], pusher=Pusher())
+    walled.push(push)
+    # Without the wall the box travels ~11 cm; the wall at x = 0.08 stops its face there.
+    assert free.poses()[0][0, 3] > 0.08
+    assert walled.poses()[0][0, 3] < 0.035
+
+
+def test_flung_objects_are_flagged():
+    world = build_world([Body(*STANDING)], [SUPPORT], PhysicsConfig(flung_m=0.3))
+    world.data.qpos[:3] += [0.0, 0.0, 1.0]  # teleported a metre up
+    import mujoco
+
+    mujoco.mj_forward(world.model, world.data)
+    assert world.flung()[0] and np.isinf(world.displacements()[0])
+
+
+def test_decimated_rendering_samples_the_full_image():
+    K = np.array([[300.0, 0.0, 159.5], [0.0, 300.0, 119.5], [0.0, 0.0, 1.0]])
+    pose = look_at(np.array([0.1, -0.4, 0.35]), np.array([0.0, 0.0, 0.02]))
+    full, full_index = render_depth_and_ids([STANDING], [None], K, 320, 240, pose)
+    camera = decimated_camera(K, 320, 240, pose, 4)
+    world = build_world([Body(*STANDING)], [SUPPORT], cameras=[camera])
+    with Renderer(camera.width, camera.height) as renderer:
+        depth, index = world.render(renderer, world.cameras[0])
+    assert depth.shape == (60, 80)
+    sampled = decimated_pixels(full, 4)
+    sampled_index = decimated_pixels(full_index, 4)
+    agree = (index >= 0) == (sampled_index >= 0)
+    assert agree.mean() > 0.995 and (index >= 0).sum() > 100
+    both = (index >= 0) & (sampled_index >= 0)
+    assert np.abs(depth[both] - sampled[both]).max() < 1e-3
+
+
+def test_config_rejects_nonsense():
+    with pytest.raises(ValueError, match="timestep_s"):
+        PhysicsConfig(timestep_s=0.0)
+    with pytest.raises(ValueError, match="friction"):
+        PhysicsConfig(friction=-1.0)
