@@ -240,3 +240,60 @@ def test_ground_truth_of_a_scene_without_ground_truth_fails_clearly(
     assert main(["ground-truth", str(scene_dir), "-o", str(tmp_path / "gt")]) == EXIT_INPUT_ERROR
     assert "has no ground truth" in capsys.readouterr().err
     assert not (tmp_path / "gt").exists()
+
+
+def test_infer_default_method_writes_the_full_result_and_is_reproducible(tmp_path: Path, capsys):
+    from PIL import Image
+
+    from ipr.result import load_result
+    from ipr.synth import SynthConfig, generate_scene
+
+    scene = generate_scene(
+        tmp_path / "scenes",
+        kind="dynamic",
+        seed=4,
+        arrangement="table",
+        config=SynthConfig(width=320, height=240),
+    )
+    runs = []
+    for workers in ("1", "2"):
+        out = tmp_path / f"result-{workers}"
+        args = ["infer", str(scene), "-o", str(out), "--samples", "3", "--workers", workers]
+        assert main(args) == 0
+        assert "3 samples" in capsys.readouterr().out
+        result = load_result(out)
+        assert result.method == "ipr+action+uniform" and len(result.objects) >= 2
+        details = result.extra["inference"]
+        assert details["samples"] == 3 and details["fallback"] is None
+        assert details["pushes_replayed"] >= 1 and details["frames_compared"] >= 2
+        assert set(result.timing_s) >= {"segmentation", "hypotheses", "inference", "total"}
+        for obj in result.objects:
+            assert abs(sum(h.probability for h in obj.hypotheses) - 1.0) < 1e-6
+            assert obj.load_mesh().is_watertight
+        with Image.open(out / "completion.png") as picture:
+            assert picture.size == (640, 240)  # the input beside the completed objects
+        runs.append([o.load_mesh().volume for o in result.objects])
+    assert np.allclose(runs[0], runs[1])  # same seed and samples, any number of workers
+
+
+def test_infer_with_a_budget_too_small_for_one_sample_falls_back_and_says_so(
+    tmp_path: Path, capsys
+):
+    from ipr.result import load_result
+    from ipr.synth import SynthConfig, generate_scene
+
+    scene = generate_scene(
+        tmp_path / "scenes", kind="static", seed=5, config=SynthConfig(width=320, height=240)
+    )
+    out = tmp_path / "result"
+    assert main(["infer", str(scene), "-o", str(out), "--time-budget", "0.05"]) == 0
+    assert "Collision Checker" in capsys.readouterr().out
+    assert load_result(out).extra["inference"]["fallback"]
+
+
+def test_infer_rejects_bad_worker_and_sample_counts(scene_dir: Path, tmp_path: Path, capsys):
+    for flag in ("--workers", "--samples"):
+        with pytest.raises(SystemExit) as exit_info:
+            main(["infer", str(scene_dir), "-o", str(tmp_path / "r"), flag, "0"])
+        assert exit_info.value.code == 2
+        assert "at least 1" in capsys.readouterr().err
