@@ -118,3 +118,19 @@ def test_config_rejects_nonsense():
         PhysicsConfig(timestep_s=0.0)
     with pytest.raises(ValueError, match="friction"):
         PhysicsConfig(friction=-1.0)
+
+
+def test_drop_measures_falls_but_not_the_shove_that_resolves_an_overlap():
+    floating = box_mesh(np.array([0.03, 0.03, 0.02]), np.array([0.2, 0.0, 0.07]))  # 5 cm gap
+    # Overlaps the static box by 4 mm sideways, resting on the table.
+    overlapping = box_mesh(np.array([0.03, 0.03, 0.02]), np.array([0.076, 0.0, 0.02]))
+    bodies = [
+        Body(*STANDING, dynamic=False),
+        Body(*floating, candidate=True),
+        Body(*overlapping, candidate=True),
+    ]
+    world = build_world(bodies, [SUPPORT])
+    world.settle(0.3)
+    drops, moved = world.drops(), world.displacements()
+    assert drops[1] == pytest.approx(0.05, abs=0.004)
+    assert moved[2] > 0.002 and drops[2] < 0.001

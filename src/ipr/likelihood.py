@@ -44,7 +44,7 @@ class LikelihoodConfig:
         occlusion_margin_m: an observed surface this much nearer than the prediction hides it.
     """
 
-    alpha_per_m: float = 0.5
+    alpha_per_m: float = 2.0
     decimation: int = 4
     error_cap_m: float = 0.1
     occlusion_margin_m: float = 0.01

@@ -148,6 +148,7 @@ class World:
     pusher_mocap: int = -1
     origins: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     exploded: bool = False
+    initial_com: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
     # ----------------------------------------------------------------------------------------
     # State
@@ -179,6 +180,22 @@ class World:
             moved[k] = float(np.linalg.norm(now - body.vertices, axis=1).mean())
         moved[self.flung()] = np.inf
         return moved
+
+    def drops(self) -> np.ndarray:
+        """(n,) how far (m, >= 0) the centre of mass of each shape fell along gravity since
+        frame 0: the potential energy it released per unit mass and g (0 for static shapes;
+        inf for flung shapes, and for all when the simulation exploded). Unlike
+        ``displacements`` it ignores the sideways shove that resolves a small initial overlap."""
+        if self.exploded:
+            return np.full(len(self.bodies), np.inf)
+        gravity = np.asarray(self.model.opt.gravity, float)
+        down = gravity / max(np.linalg.norm(gravity), 1e-12)
+        result = np.zeros(len(self.bodies))
+        dynamic = np.flatnonzero(self.body_ids >= 0)
+        moved = self.data.xipos[self.body_ids[dynamic]] - self.initial_com[dynamic]
+        result[dynamic] = np.maximum(moved @ down, 0.0)
+        result[self.flung()] = np.inf
+        return result
 
     def _check(self) -> bool:
         """Mark the world exploded when the state is not finite or MuJoCo found it unstable."""
@@ -455,6 +472,9 @@ def build_world(
         object_of_geom[model.geom(f"shape_{k}").id] = k
     pusher_geom = model.geom("pusher").id if pusher is not None else -1
     pusher_mocap = int(model.body_mocapid[model.body("pusher").id]) if pusher is not None else -1
+    initial_com = np.zeros((len(bodies), 3))
+    dynamic = body_ids >= 0
+    initial_com[dynamic] = data.xipos[body_ids[dynamic]]
     return World(
         model,
         data,
@@ -466,6 +486,7 @@ def build_world(
         pusher_geom,
         pusher_mocap,
         origins,
+        initial_com=initial_com,
     )
 
 
