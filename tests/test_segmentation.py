@@ -16,7 +16,13 @@ from ipr.camera import look_at
 from ipr.perception.config import PerceptionConfig
 from ipr.perception.planes import find_known_planes, static_geometry_mask
 from ipr.perception.robot import robot_pixels
-from ipr.perception.segmentation import SegmentationError, edge_weights, segment_frame
+from ipr.perception.segmentation import (
+    SegmentationError,
+    edge_weights,
+    fill_label_holes,
+    kmeans_labels,
+    segment_frame,
+)
 from ipr.perception.supervoxels import compute_supervoxels, organised_normals
 from ipr.scene import Frame, Push, Pusher, load_scene
 from ipr.synth import SynthConfig, generate_scene
@@ -338,3 +344,39 @@ def test_boxes_on_a_table_are_not_walls():
         viewpoint=frame.world_from_camera[:3, 3],
     )
     assert [p.kind for p in planes] == ["support"]
+
+
+def test_label_holes_take_the_label_of_the_nearest_valid_pixel_within_reach():
+    rng = np.random.default_rng(5)
+    labels = np.zeros((40, 50), np.int32)
+    labels[5:25, 5:20] = 1
+    labels[10:30, 22:40] = 2
+    valid = rng.random(labels.shape) > 0.3  # scattered dropouts
+    valid[12:24, 24:36] = False  # a hole larger than the reach inside segment 2
+    reach = 2.5
+    filled = fill_label_holes(np.where(valid, labels, 0), valid, reach)
+    rows, cols = np.nonzero(valid)
+    for r, c in zip(*np.nonzero(~valid), strict=True):
+        distance = np.hypot(rows - r, cols - c)
+        nearest = distance.min()
+        if nearest > reach:
+            assert filled[r, c] == 0
+        else:  # one of the equally near valid pixels (ties may go either way)
+            assert filled[r, c] in set(labels[rows, cols][distance == nearest].tolist())
+    assert (filled[valid] == labels[valid]).all()
+    assert filled[18, 30] == 0  # the centre of the large hole stays empty
+
+
+def test_kmeans_labels_finds_separated_clusters_reproducibly():
+    rng = np.random.default_rng(2)
+    centres = np.eye(3)
+    points = np.concatenate(
+        [c + rng.normal(0.0, 0.05, (n, 3)) for c, n in zip(centres, (30, 5, 60), strict=True)]
+    )
+    truth = np.repeat([0, 1, 2], (30, 5, 60))
+    labels = kmeans_labels(points, 3, restarts=4, seed=0)
+    # The same partition (cluster numbers are arbitrary).
+    assert len({(t, l) for t, l in zip(truth, labels, strict=True)}) == 3
+    assert np.array_equal(labels, kmeans_labels(points, 3, restarts=4, seed=0))
+    assert (kmeans_labels(points, 1, restarts=4, seed=0) == 0).all()
+    assert sorted(kmeans_labels(points[:2], 3, restarts=1, seed=0).tolist()) == [0, 1]

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ipr.perception.config import TrackingConfig
 from ipr.perception.facets import mean_shift_directions, object_facets, pixel_areas
-from ipr.perception.tracking import track_segments
+from ipr.perception.tracking import assign_segments, track_segments
 
 
 def _frame(squares: dict[int, tuple[int, int, tuple[int, int, int]]], shape=(80, 120)):
@@ -46,6 +47,86 @@ def test_same_colour_objects_are_told_apart_by_position():
     tracked = track_segments(*map(list, zip(first, second, strict=True)))
     assert tracked[1][14, 10] == tracked[0][12, 12]
     assert tracked[1][14, 84] == tracked[0][12, 82]
+
+
+BROWN, GREY = (120, 60, 20), (130, 130, 130)
+
+
+def _boxes(boxes, shape=(120, 240)):
+    """Label image, world points (1 px = 1 mm on a plane) and colours for coloured boxes
+    {label: (row, col, height, width, colour)}; a colour (top colour, bottom colour, share)
+    paints the box's top ``share`` of rows with the first."""
+    labels = np.zeros(shape, np.int32)
+    rgb = np.full((*shape, 3), 128, np.uint8)
+    for label, (row, col, height, width, colour) in boxes.items():
+        labels[row : row + height, col : col + width] = label
+        if isinstance(colour[0], tuple):
+            top, bottom, share = colour
+            split = row + round(share * height)
+            rgb[row:split, col : col + width] = top
+            rgb[split : row + height, col : col + width] = bottom
+        else:
+            rgb[row : row + height, col : col + width] = colour
+    v, u = np.mgrid[: shape[0], : shape[1]]
+    points = np.stack([u * 0.001, v * 0.001, np.zeros(shape)], axis=-1)
+    return labels, points, rgb
+
+
+def _track(frames, config=None):
+    return track_segments(*map(list, zip(*frames, strict=True)), config)
+
+
+def test_a_toppled_object_keeps_its_id_by_elimination():
+    # A yellow and brown box is pushed 7 cm and topples: it now shows a grey face with a strip
+    # of yellow. Its cost to its old self is above the first-stage gate (the former single
+    # gated assignment gave it a new id); the others stay, so it is the one left to match.
+    still = {1: (10, 10, 15, 15, RED), 2: (10, 60, 15, 15, BLUE)}
+    first = _boxes({**still, 3: (60, 100, 30, 30, (YELLOW, BROWN, 0.5))})
+    second = _boxes({**still, 3: (60, 170, 30, 30, (YELLOW, GREY, 0.05))})
+    tracked = _track([first, second])
+    assert tracked[1][75, 185] == tracked[0][75, 115]
+    assert tracked[1][12, 12] == tracked[0][12, 12] and tracked[1][12, 62] == tracked[0][12, 62]
+
+
+def test_a_small_revealed_object_does_not_take_the_id_of_a_large_one_that_moved():
+    # A large yellow box is pushed 4 cm; a small yellow object it hid shows up where it stood.
+    # Overlap and colour favour the small one; the visible size says the box moved.
+    first = _boxes({1: (10, 10, 15, 15, RED), 2: (60, 100, 30, 30, YELLOW)})
+    second = _boxes(
+        {1: (10, 10, 15, 15, RED), 2: (60, 140, 30, 30, YELLOW), 3: (70, 110, 8, 8, YELLOW)}
+    )
+    tracked = _track([first, second])
+    box = tracked[0][75, 115]
+    assert tracked[1][75, 155] == box
+    assert tracked[1][73, 113] not in (box, tracked[0][12, 12])
+
+
+def test_an_object_is_recognised_by_an_earlier_sighting():
+    # Frame 1 shows only a strip of the yellow box (the rest hidden); in frame 2 the box is whole
+    # again, nudged by 1 cm, and a yellow strip-like object appears next to it. Against the last
+    # sighting (the strip) the new strip looks more like the box than the box itself does.
+    red = {1: (10, 10, 15, 15, RED)}
+    first = _boxes({**red, 2: (60, 100, 30, 30, YELLOW)})
+    second = _boxes({**red, 2: (60, 100, 6, 30, YELLOW)})
+    third = _boxes({**red, 2: (60, 110, 30, 30, YELLOW), 3: (40, 100, 6, 30, YELLOW)})
+    box = _track([first, second, third])[0][75, 115]
+    assert _track([first, second, third])[2][75, 125] == box
+    assert _track([first, second, third], TrackingConfig(max_sightings=1))[2][75, 125] != box
+
+
+def test_assignment_gates_the_first_stage_and_matches_leftovers_second():
+    cost = np.array(
+        [
+            [0.2, 2.0, 2.5],  # segment 0: clearly object 0
+            [1.9, 2.6, 2.9],  # segment 1: nothing below the gate; object 2 is the one left
+            [2.0, 1.0, 3.5],  # segment 2: object 1
+            [3.6, 3.7, 3.8],  # segment 3: too far from everything: a new object
+        ]
+    )
+    pairs = {tuple(pair) for pair in assign_segments(cost, 1.5, 3.0).tolist()}
+    assert pairs == {(0, 0), (2, 1), (1, 2)}
+    assert {tuple(pair) for pair in assign_segments(cost, 1.5, 0.0).tolist()} == {(0, 0), (2, 1)}
+    assert assign_segments(np.zeros((0, 2)), 1.5, 3.0).shape == (0, 2)
 
 
 def test_mean_shift_groups_normals_by_direction():

@@ -167,17 +167,25 @@ def _partial_objects(
     order = labelled[np.argsort(flat_labels[labelled], kind="stable")]
     object_ids, starts = np.unique(flat_labels[order], return_index=True)
     ends = np.append(starts[1:], len(order))[: len(starts)]  # no segments: no ends
+    # Per-pixel quantities of all objects in one pass each (objects are slices of ``order``):
+    # real frames have a dozen small segments besides the objects, and per-object calls cost.
+    world_all = flat_points[order]
+    camera_all = world_all @ camera_from_world[:3, :3].T + camera_from_world[:3, 3]
+    supervoxel_all = flat_supervoxel[order]
+    has_all = supervoxel_all >= 0
+    normals_all = np.empty_like(world_all)
+    normals_all[:] = -frame.world_from_camera[:3, 2]  # no supervoxel: facing the camera
+    normals_all[has_all] = supervoxels.normals[supervoxel_all[has_all]]
+    areas_all = pixel_areas(camera_all, normals_all @ camera_from_world[:3, :3].T, frame.K)
+    rgb_all = flat_rgb[order]
+    border_all = border[order]
     for object_id, start, end in zip(object_ids.tolist(), starts, ends, strict=True):
         pixels = order[start:end]
-        point_supervoxel = flat_supervoxel[pixels]
-        has_supervoxel = point_supervoxel >= 0
+        point_supervoxel = supervoxel_all[start:end]
+        has_supervoxel = has_all[start:end]
         object_supervoxels = np.unique(point_supervoxel[has_supervoxel])
-        world = flat_points[pixels]
-        camera = world @ camera_from_world[:3, :3].T + camera_from_world[:3, 3]
-        normals_world = np.zeros_like(world)
-        normals_world[has_supervoxel] = supervoxels.normals[point_supervoxel[has_supervoxel]]
-        normals_world[~has_supervoxel] = -frame.world_from_camera[:3, 2]  # facing the camera
-        areas = pixel_areas(camera, normals_world @ camera_from_world[:3, :3].T, frame.K)
+        world = world_all[start:end]
+        areas = areas_all[start:end]
         facets, facet_of_point = object_facets(
             object_supervoxels,
             supervoxels.normals,
@@ -201,10 +209,10 @@ def _partial_objects(
                 frame.index,
                 pixels,
                 world,
-                flat_rgb[pixels],
+                rgb_all[start:end],
                 facets,
                 facet_of_point,
-                bool(border[pixels].any()),
+                bool(border_all[start:end].any()),
             )
         )
     return tuple(objects), facet_image.reshape(height, width)

@@ -27,9 +27,10 @@ def mean_shift_directions(
     """
     modes = normals.copy()
     for _ in range(iterations):
-        kernel = np.exp(
-            -np.sum((modes[:, None, :] - normals[None, :, :]) ** 2, axis=-1) / (2 * bandwidth**2)
-        )
+        # |m - n|^2 = 2 - 2 m.n for unit vectors: one matrix product instead of an (N, N, 3)
+        # difference array.
+        squared = np.maximum(2.0 - 2.0 * (modes @ normals.T), 0.0)
+        kernel = np.exp(-squared / (2 * bandwidth**2))
         kernel *= weights[None, :]
         shifted = kernel @ normals
         shifted /= np.linalg.norm(shifted, axis=1, keepdims=True) + 1e-12
@@ -37,18 +38,19 @@ def mean_shift_directions(
         modes = shifted
         if converged:
             break
-    # Merge modes closer than half a bandwidth, heaviest first, so labels are deterministic.
+    # Merge modes closer than half a bandwidth, heaviest first, so labels are deterministic: each
+    # normal joins the first centre (in creation order) near its mode, and a normal near none
+    # becomes a centre.
     order = np.argsort(-weights, kind="stable")
-    centres: list[np.ndarray] = []
-    label = np.empty(len(normals), dtype=np.int64)
+    label = np.full(len(normals), -1, dtype=np.int64)
+    count = 0
     for index in order:
-        for number, centre in enumerate(centres):
-            if np.linalg.norm(modes[index] - centre) < bandwidth / 2:
-                label[index] = number
-                break
-        else:
-            label[index] = len(centres)
-            centres.append(modes[index])
+        if label[index] >= 0:
+            continue
+        near = (np.linalg.norm(modes - modes[index], axis=1) < bandwidth / 2) & (label < 0)
+        label[near] = count
+        label[index] = count
+        count += 1
     return label
 
 

@@ -157,7 +157,7 @@ def compute_supervoxels(
         return _empty(labels_image)
     if points_world is None:
         points_world = frame.points_world()
-    all_points = points_world.reshape(-1, 3)[pixels].astype(np.float64)
+    all_points = np.asarray(points_world.reshape(-1, 3)[pixels], dtype=np.float64)
     voxel = config.voxel_size_m
     all_cells = np.floor(all_points / voxel).astype(np.int64)
     all_cells -= all_cells.min(axis=0) - 1  # >= 1 so that neighbour offsets never wrap
@@ -231,16 +231,20 @@ def compute_supervoxels(
     assignment = np.zeros(n_voxels, dtype=np.int64)
     spatial = 1.0 / seed_size**2
     for _ in range(config.supervoxel_iterations):
-        offsets = voxel_centre[:, None, :] - seed_centre[safe]
-        distance = spatial * np.einsum("vkc,vkc->vk", offsets, offsets)
-        distance += config.supervoxel_normal_weight * (
-            1.0 - np.einsum("vc,vkc->vk", voxel_normal, seed_normal[safe])
-        )
-        if config.supervoxel_colour_weight > 0:
-            colour_offsets = voxel_colour[:, None, :] - seed_colour[safe]
-            distance += config.supervoxel_colour_weight * np.einsum(
-                "vkc,vkc->vk", colour_offsets, colour_offsets
+        # Summed one coordinate at a time from (V, 27) gathers of seed columns: 3.5 times
+        # faster than einsum over (V, 27, 3) gathers (small inner dimensions), same arithmetic.
+        distance = np.full(safe.shape, config.supervoxel_normal_weight)
+        for axis in range(3):
+            offset = voxel_centre[:, axis, None] - seed_centre[:, axis][safe]
+            distance += spatial * offset * offset
+            distance -= (
+                config.supervoxel_normal_weight
+                * voxel_normal[:, axis, None]
+                * seed_normal[:, axis][safe]
             )
+            if config.supervoxel_colour_weight > 0:
+                colour_offset = voxel_colour[:, axis, None] - seed_colour[:, axis][safe]
+                distance += config.supervoxel_colour_weight * colour_offset * colour_offset
         distance[~has] = np.inf
         assignment = safe[np.arange(n_voxels), np.argmin(distance, axis=1)]
         weight = voxel_count
