@@ -307,7 +307,7 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         metavar="SECONDS",
         help="wall-clock budget of the whole run; the best answer so far is written when it "
-        "runs out (default: 2 s of inference per object after the hypotheses)",
+        "runs out (default: 1.75 s of inference per object after the hypotheses)",
     )
     infer.add_argument("--overwrite", action="store_true", help="replace OUT if it exists")
     infer.set_defaults(handler=_cmd_infer)

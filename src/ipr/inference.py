@@ -115,7 +115,8 @@ class InferenceConfig:
         neighbour_margin_m: objects whose candidate envelopes are this close interact in
             stability tests.
         budget_per_object_s: default inference budget (s) per object when no time budget is
-            given (hypotheses and perception come on top).
+            given (hypotheses and perception come on top: about 0.5 s per object more, so that
+            a whole run stays within 3 s per object on two cores).
         max_samples: stop after this many samples (None: only the budget stops).
         workers: processes evaluating samples (None: all cores; 1: in this process).
         size_prior_exponent: the size prior's exponent (module doc).
@@ -130,7 +131,7 @@ class InferenceConfig:
     likelihood: LikelihoodConfig = field(default_factory=LikelihoodConfig)
     stability_alpha_per_m: float = 100.0
     neighbour_margin_m: float = 0.02
-    budget_per_object_s: float = 2.0
+    budget_per_object_s: float = 1.75
     max_samples: int | None = None
     workers: int | None = None
     size_prior_exponent: float = 1.0
