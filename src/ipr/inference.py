@@ -449,6 +449,8 @@ class Sampler:
 # Running samples in this process or in a pool of workers
 
 _WORKER: Sampler | None = None
+#: Seconds to wait past the deadline for samples in flight to stop themselves.
+_GRACE_S = 10.0
 
 
 def _init_worker(problem: InferenceProblem) -> None:
@@ -458,8 +460,9 @@ def _init_worker(problem: InferenceProblem) -> None:
 
 
 def _worker_task(task: tuple[int, tuple[int, ...] | None, float]) -> SampleResult | None:
-    index, choice, deadline_in = task
-    deadline = time.perf_counter() + deadline_in
+    index, choice, monotonic_deadline = task
+    # time.monotonic is one clock for every process of the machine; perf_counter may not be.
+    deadline = time.perf_counter() + (monotonic_deadline - time.monotonic())
     try:
         if choice is None:
             return _WORKER.sample(index, deadline)
@@ -505,47 +508,59 @@ def run_samples(
             sampler.close()
         return sorted(results, key=lambda r: r.index)
 
+    if time.perf_counter() >= deadline:
+        return results
     # A fork server starts workers from a clean process (no GL context inherited).
     context = multiprocessing.get_context("forkserver")
     context.set_forkserver_preload(["ipr.inference"])
     finished: queue.Queue = queue.Queue()
+    monotonic_deadline = time.monotonic() + min(deadline - time.perf_counter(), 1e9)
     pool = context.Pool(workers, initializer=_init_worker, initargs=(problem,))
+    in_flight = 0
+    clean = False
     try:
-        in_flight = 0
         exhausted = False
         while True:
             while not exhausted and in_flight < 2 * workers:
                 task = next(tasks, None)
-                if task is None:
-                    exhausted = True
-                    break
-                remaining = deadline - time.perf_counter()
-                if remaining <= 0:
+                if task is None or time.perf_counter() >= deadline:
                     exhausted = True
                     break
                 pool.apply_async(
                     _worker_task,
-                    ((task[0], task[1], remaining if math.isfinite(remaining) else 1e9),),
+                    ((task[0], task[1], monotonic_deadline),),
                     callback=finished.put,
                     error_callback=finished.put,
                 )
                 in_flight += 1
             if in_flight == 0:
                 break
-            remaining = deadline - time.perf_counter()
-            if remaining <= 0:
-                break
+            # Past the deadline, wait for the tasks in flight: each stops itself at the
+            # deadline (between stability tests and pushes), so this takes a fraction of a
+            # second; terminating workers instead can hang CPython's pool (a killed worker may
+            # hold the task queue's lock).
+            wait = deadline - time.perf_counter()
+            if wait <= 0:
+                exhausted = True
+                wait = _GRACE_S
             try:
-                outcome = finished.get(timeout=min(remaining, 3600.0))
+                outcome = finished.get(timeout=min(max(wait, 0.0), 3600.0) + 0.05)
             except queue.Empty:
-                break
+                if exhausted:
+                    break  # stragglers past the grace period: terminated below
+                continue
             in_flight -= 1
             if isinstance(outcome, BaseException):
                 raise outcome
             if outcome is not None:
                 results.append(outcome)
+        clean = in_flight == 0
     finally:
-        pool.terminate()
+        if clean:
+            pool.close()
+        else:
+            logger.warning("sampling workers did not stop in time; terminating them")
+            pool.terminate()
         pool.join()
     return sorted(results, key=lambda r: r.index)
 

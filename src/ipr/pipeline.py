@@ -55,7 +55,9 @@ def run_pipeline(
 
     ``samples`` fixes the number of joint models the physics-based methods sample (then only
     ``time_budget_s``, if given, can stop them earlier): the same seed and samples give the
-    same result with any number of ``workers``.
+    same result with any number of ``workers``. More than one worker (the default on a
+    multi-core machine) starts a process pool: as with any Python multiprocessing, a script
+    calling this must guard its entry point with ``if __name__ == "__main__":``.
     """
     from ipr.collision_checker import collision_checker, prepare_hypotheses
     from ipr.inference import infer_shapes
