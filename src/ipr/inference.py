@@ -675,11 +675,7 @@ def marginals(
     exhaustive enumeration); None when no sample has a positive weight."""
     if not any(math.isfinite(r.log_likelihood) for r in results):
         return None
-    if joint or problem.config.weighting == "joint":
-        joint = np.array([r.log_weight for r in results])
-        log_weights = np.repeat(joint[:, None], problem.count, axis=1)
-    else:
-        log_weights = object_log_weights(results, problem)
+    log_weights = sample_log_weights(results, problem, joint=joint)
     estimates = []
     for k, candidates in enumerate(problem.candidates):
         column = log_weights[:, k]
@@ -690,9 +686,22 @@ def marginals(
     return estimates
 
 
-def effective_sample_size(results: Sequence[SampleResult]) -> float:
-    """Kish's effective sample size of the importance weights."""
-    log_weights = np.array([r.log_weight for r in results if math.isfinite(r.log_weight)])
+def sample_log_weights(
+    results: Sequence[SampleResult], problem: InferenceProblem, *, joint: bool = False
+) -> np.ndarray:
+    """(S, n) log importance weights per sample and object: per object
+    (``object_log_weights``), or the joint weight repeated for every object when ``joint`` or
+    ``InferenceConfig.weighting`` is "joint"."""
+    if joint or problem.config.weighting == "joint":
+        joint_weights = np.array([r.log_weight for r in results], dtype=float)
+        return np.repeat(joint_weights[:, None], problem.count, axis=1)
+    return object_log_weights(results, problem)
+
+
+def effective_sample_size(log_weights: np.ndarray) -> float:
+    """Kish's effective sample size of (S,) log importance weights (0 when none is finite)."""
+    log_weights = np.asarray(log_weights, float)
+    log_weights = log_weights[np.isfinite(log_weights)]
     if log_weights.size == 0:
         return 0.0
     weights = np.exp(log_weights - log_weights.max())
@@ -838,7 +847,16 @@ def infer_shapes(
     summary = {
         "samples": len(samples),
         "impossible_samples": len(samples) - len(finite),
-        "effective_sample_size": effective_sample_size(samples),
+        "effective_sample_size": float(
+            np.median(
+                [
+                    effective_sample_size(column)
+                    for column in sample_log_weights(samples, problem, joint=variant.exhaustive).T
+                ]
+            )
+        )
+        if samples and problem.count
+        else 0.0,
         "stability_tests": int(sum(r.stability_tests for r in samples)),
         "workers": workers,
         "pushes_replayed": len(problem.pushes),
