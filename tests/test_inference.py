@@ -3,6 +3,7 @@ parallel sampling, exhaustive validation, fallbacks."""
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
@@ -197,3 +198,44 @@ def test_stability_of_the_true_box_with_the_default_physics():
     world = build_world([Body(TRUE_BOX.vertices, TRUE_BOX.faces)], [SUPPORT])
     world.settle()
     assert world.displacements()[0] < 0.002
+
+
+def test_exhaustive_refuses_scenes_it_cannot_enumerate():
+    from ipr.errors import IprError
+    from ipr.inference import InferenceProblem, exhaustive_models
+
+    observed = _push_scene()
+    problem = InferenceProblem(
+        ids=(1, 2, 3, 4, 5),
+        candidates=((TRUE_BOX, DEEP_BOX),) * 5,
+        minima=(TRUE_BOX,) * 5,
+        compatible={},
+        neighbours=((),) * 5,
+        log_prior=(np.log([0.5, 0.5]),) * 5,
+        planes=(SUPPORT,),
+        pusher=None,
+        pushes=(),
+        observed=observed,
+        config=InferenceConfig(),
+        seed=0,
+    )
+    with pytest.raises(IprError, match="at most 4 objects"):
+        exhaustive_models(problem)
+    small = InferenceConfig(max_exhaustive_objects=5, max_exhaustive_models=10)
+    with pytest.raises(IprError, match="32 joint models"):
+        exhaustive_models(dataclasses.replace(problem, config=small))
+
+
+def test_completion_image_shows_the_input_beside_the_completed_objects():
+    from ipr.collision_checker import uniform_posteriors
+    from ipr.report import completion_image
+
+    frame, _ = _frame(0, (0.0, -0.35, 0.3))
+    posteriors = uniform_posteriors(_prepared(TRUE_BOX, TOP_SLAB))
+    image = completion_image(frame, posteriors)
+    assert image.shape == (HEIGHT, 2 * WIDTH, 3)
+    assert np.array_equal(image[:, :WIDTH], frame.rgb)
+    right = image[:, WIDTH:].astype(int)
+    coloured = np.ptp(right, axis=2) > 30  # the object colour, not the grey backdrop
+    assert 500 < coloured.sum() < 0.5 * WIDTH * HEIGHT
+    assert np.ptp(completion_image(frame, [])[:, WIDTH:].astype(int), axis=2).max() <= 1

@@ -292,3 +292,26 @@ def test_ground_truth_result(ycbv_scene, tmp_path):
         assert math.isclose(obj.mesh.volume, model.volume, rel_tol=1e-4)
     with pytest.raises(ResultError, match="already exists"):
         write_ground_truth_result(ycbv_scene, out)
+
+
+def test_extra_files_are_written_inside_the_result_and_checked(tmp_path):
+    box = _box(0.05)
+    out = write_result(
+        tmp_path / "r",
+        "test",
+        {0: WORLD_FROM_CAMERA},
+        [(box, [(box, 0.7), (_box(0.06), 0.3)], 0.7)],
+        extra_files={"completion.png": b"png", "reports/summary.txt": b"ok"},
+    )
+    assert (out / "completion.png").read_bytes() == b"png"
+    assert (out / "reports" / "summary.txt").read_bytes() == b"ok"
+    assert load_result(out).objects[0].probability == pytest.approx(0.7)
+    for name in ("../escape.txt", "/abs.txt", "objects/0/x.ply", "result.json"):
+        with pytest.raises(ValueError, match="extra file name"):
+            write_result(
+                tmp_path / "bad", "test", {0: WORLD_FROM_CAMERA}, [(box, [])],
+                extra_files={name: b"x"},
+            )  # fmt: skip
+        assert not (tmp_path / "bad").exists()
+    with pytest.raises(ValueError, match="best probability"):
+        write_result(tmp_path / "bad", "test", {0: WORLD_FROM_CAMERA}, [(box, [], 1.5)])
