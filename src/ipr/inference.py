@@ -605,12 +605,12 @@ def build_problem(
     position_of = {i: k for k, i in enumerate(ids)}
     compatible = {}
     for (a, b), depths in prepared.depths.items():
+        if prepared.generated[a][0].index == -1 or prepared.generated[b][0].index == -1:
+            continue  # an object reduced to its minimum shape constrains nothing
         pa, pb = position_of[a], position_of[b]
         # Depth matrices index the unary-feasible hypotheses; restrict to the candidates.
         rows = np.searchsorted(prepared.candidates[a], indices[pa])
         cols = np.searchsorted(prepared.candidates[b], indices[pb])
-        if prepared.generated[a][0].index == -1 or prepared.generated[b][0].index == -1:
-            continue  # an object reduced to its minimum shape constrains nothing
         matrix = depths[np.ix_(rows, cols)] <= prepared.thresholds[(a, b)]
         if not matrix.all():
             compatible[(pa, pb) if pa < pb else (pb, pa)] = matrix if pa < pb else matrix.T

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -175,7 +174,7 @@ def infer(
         samples=samples,
     )
     world_from_camera = {frame.index: frame.world_from_camera for frame in scene.frames}
-    extra = {"inference": _json_ready(result.summary)} if result.summary else {}
+    extra = {"inference": result.summary} if result.summary else {}
     return write_posterior_result(
         out_dir,
         result.posteriors,
@@ -186,16 +185,3 @@ def infer(
         extra_files={"completion.png": completion_png(scene.frames[0], result.posteriors)},
         overwrite=overwrite,
     )
-
-
-def _json_ready(value):
-    """Plain JSON values (non-finite floats become None)."""
-    if isinstance(value, dict):
-        return {str(k): _json_ready(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_json_ready(v) for v in value]
-    if isinstance(value, float | np.floating):
-        return float(value) if math.isfinite(value) else None
-    if isinstance(value, np.integer):
-        return int(value)
-    return value
