@@ -115,19 +115,22 @@ def run_pipeline(
         observed = observed_frames(
             scene.frames, perception.labels, config.inference.likelihood.decimation
         )
-        outcome = infer_shapes(
-            prepared,
-            perception.planes[0],
-            observed,
-            method=method,
-            pusher=scene.pusher,
-            pushes=scene.pushes,
-            config=config.inference,
-            collision_checker_config=config.collision_checker,
-            seed=seed,
-            deadline=deadline,
-            workers=workers,
-        )
+        try:
+            outcome = infer_shapes(
+                prepared,
+                perception.planes[0],
+                observed,
+                method=method,
+                pusher=scene.pusher,
+                pushes=scene.pushes,
+                config=config.inference,
+                collision_checker_config=config.collision_checker,
+                seed=seed,
+                deadline=deadline,
+                workers=workers,
+            )
+        except IprError as error:  # say which scene the method refused
+            raise IprError(f"{scene.path}: {error}") from None
         finished = time.perf_counter()
         posteriors = outcome.posteriors
         summary = {**outcome.summary}
