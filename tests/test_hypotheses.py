@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -206,3 +208,41 @@ def test_non_convex_object_keeps_parts_beyond_a_facet_plane():
     obj = PartialObject(1, 0, np.arange(500), points, np.zeros((500, 3), np.uint8), (facet,))
     for h in generate_hypotheses(obj, None, (SUPPORT,), CONFIG, np.random.default_rng(0)):
         assert_valid(h, points)
+
+
+def _without_lowest(obj: PartialObject, below_m: float, lift_m: float = 0.0) -> PartialObject:
+    """``obj`` without its points below ``below_m`` (as the support's RANSAC band takes them),
+    everything raised by ``lift_m``."""
+    keep = obj.points[:, 2] >= below_m
+    lift = np.array([0.0, 0.0, lift_m])
+    facets = tuple(
+        Facet(f.centre + lift, f.normal, f.points[f.points[:, 2] >= below_m] + lift, f.area_m2)
+        for f in obj.facets
+    )
+    return PartialObject(
+        obj.id, obj.frame, obj.pixels[keep], obj.points[keep] + lift, obj.colours[keep],
+        facets, obj.facet_of_point[keep], obj.touches_border,
+    )  # fmt: skip
+
+
+def test_shapes_whose_points_stop_short_of_the_support_rest_on_it(oblique):
+    """The support band took the box's lowest centimetre: hypotheses and the minimum shape
+    still reach the table (z = 0); without the snap they float; an object whose lowest point
+    is far above the support (resting on something else) is not extended."""
+    obj, space = oblique
+    cut = _without_lowest(obj, 0.012)
+    assert cut.points[:, 2].min() >= 0.012
+    for config in (CONFIG, dataclasses.replace(CONFIG, support_snap_m=0.0)):
+        shapes = [
+            *generate_hypotheses(cut, space, (SUPPORT,), config),
+            minimum_shape(cut, (SUPPORT,), config),
+        ]
+        lowest = np.array([h.vertices[:, 2].min() for h in shapes])
+        if config.support_snap_m > 0:
+            assert np.all(np.abs(lowest) <= 1e-6)
+            for h in shapes:
+                assert_valid(h, cut.points)
+        else:  # the minimum shape and hypotheses with a short mirrored top float
+            assert lowest[-1] >= 0.011 and np.sum(lowest >= 0.011) >= 3
+    raised = minimum_shape(_without_lowest(obj, 0.0, lift_m=0.05), (SUPPORT,), CONFIG)
+    assert raised.vertices[:, 2].min() >= 0.049
