@@ -8,8 +8,9 @@ process, and scores, against each object's matched ground truth (benchmark code 
 inference never does):
 
 - the Collision Checker's output (posterior medoid);
-- the IPR estimate per alpha, with every frame (the full method) and with frame 0 only (the
-  gravity-only variants), from the same samples (alpha only weighs them);
+- the IPR estimate per weighting (``InferenceConfig.weighting``) and alpha, with every frame
+  (the full method) and with frame 0 only (the gravity-only variants), from the same samples
+  (alpha and the weighting only weigh them);
 - the best of each object's candidates (oracle) and of the candidates the sampler visited.
 
 Figures are mean object IoU over the visible ground-truth objects (unmatched objects count 0),
@@ -91,16 +92,29 @@ def measure_scene(path: Path, samples: int) -> dict:
     }
 
 
-def estimate_iou(scene: dict, alpha: float, frames: int | None) -> dict[int, float]:
-    """IoU of the IPR output per matched object with ``alpha`` and the first ``frames``."""
+def estimate_iou(
+    scene: dict,
+    alpha: float,
+    frames: int | None,
+    weighting: str = "hypothesis",
+    prior: str = "uniform",
+) -> dict[int, float]:
+    """IoU of the IPR output per matched object with ``alpha``, the first ``frames``,
+    ``weighting`` (``InferenceConfig.weighting``) and ``prior`` ("uniform" or "size")."""
     import dataclasses
 
     from ipr.collision_checker import posterior_medoid
-    from ipr.inference import marginals
+    from ipr.inference import marginals, size_log_prior
 
     problem = scene["problem"]
+    if prior == "size":
+        log_prior = tuple(
+            size_log_prior(c, problem.config.size_prior_exponent) for c in problem.candidates
+        )
+        problem = dataclasses.replace(problem, log_prior=log_prior)
     config = dataclasses.replace(
         problem.config,
+        weighting=weighting,
         likelihood=dataclasses.replace(problem.config.likelihood, alpha_per_m=alpha),
     )
     problem = dataclasses.replace(problem, config=config)
@@ -149,10 +163,19 @@ def main(argv: list[str] | None = None) -> int:
             for s in scenes
         ])),
     ]  # fmt: skip
-    for frames, label in ((None, "every frame"), (1, "frame 0 only")):
-        for alpha in ALPHAS:
-            values = [estimate_iou(s, alpha, frames) for s in scenes]
-            rows.append((f"IPR, {label}, alpha {alpha:g}", mean_over_truths(scenes, values)))
+    rows.append(("IPR hypothesis, every frame, alpha 2, size prior", mean_over_truths(
+        scenes, [estimate_iou(s, 2.0, None, "hypothesis", "size") for s in scenes]
+    )))  # fmt: skip
+    rows.append(("IPR object, every frame, alpha 2, size prior", mean_over_truths(
+        scenes, [estimate_iou(s, 2.0, None, "object", "size") for s in scenes]
+    )))  # fmt: skip
+    for weighting in ("hypothesis", "object"):
+        for frames, label in ((None, "every frame"), (1, "frame 0 only")):
+            for alpha in ALPHAS:
+                values = [estimate_iou(s, alpha, frames, weighting) for s in scenes]
+                rows.append(
+                    (f"IPR {weighting}, {label}, alpha {alpha:g}", mean_over_truths(scenes, values))
+                )
     truths = sum(s["truths"] for s in scenes)
     print(f"\n{len(scenes)} scenes, {truths} visible objects, {args.samples} samples per scene")
     for label, value in rows:

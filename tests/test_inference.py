@@ -239,3 +239,66 @@ def test_completion_image_shows_the_input_beside_the_completed_objects():
     coloured = np.ptp(right, axis=2) > 30  # the object colour, not the grey backdrop
     assert 500 < coloured.sum() < 0.5 * WIDTH * HEIGHT
     assert np.ptp(completion_image(frame, [])[:, WIDTH:].astype(int), axis=2).max() <= 1
+
+
+def _fabricated_problem(count: int, compatible: dict | None = None, weighting="hypothesis"):
+    """A problem of ``count`` objects with two candidates each, for estimators alone."""
+    from ipr.inference import InferenceProblem
+
+    return InferenceProblem(
+        ids=tuple(range(1, count + 1)),
+        candidates=((TRUE_BOX, DEEP_BOX),) * count,
+        minima=(TRUE_BOX,) * count,
+        compatible=compatible or {},
+        neighbours=((),) * count,
+        log_prior=(np.log([0.5, 0.5]),) * count,
+        planes=(SUPPORT,),
+        pusher=None,
+        pushes=(),
+        observed=_push_scene(),
+        config=InferenceConfig(weighting=weighting),
+        seed=0,
+    )
+
+
+def _result(index: int, choice, norms, log_q):
+    from ipr.inference import SampleResult
+
+    norms = np.asarray(norms, float)[None, :]
+    return SampleResult(index, tuple(choice), float(sum(log_q)), -1.0, 0.0, 0.0, 0, norms, log_q)
+
+
+def test_hypothesis_weighting_scores_each_candidate_by_its_own_evidence_not_its_draws():
+    from ipr.inference import marginals
+
+    # Candidate 0 was drawn nine times, candidate 1 once (exploration 0.9 / 0.1), and
+    # candidate 1 fits better by 0.01 of depth error norm.
+    results = [_result(s, (0,), [0.05], (np.log(0.9),)) for s in range(9)]
+    results.append(_result(9, (1,), [0.04], (np.log(0.1),)))
+    problem = _fabricated_problem(1)
+    scale = problem.config.likelihood.alpha_per_m * problem.observed.decimation
+    estimate = marginals(results, problem)[0]
+    assert estimate[1] / estimate[0] == pytest.approx(np.exp(scale * 0.01))
+    # Algorithm 2's per-object update reaches the same ratio only through the draw counts.
+    per_object = marginals(results, _fabricated_problem(1, weighting="object"))[0]
+    assert per_object[1] / per_object[0] == pytest.approx(np.exp(scale * 0.01))
+    # A candidate never drawn gets no probability.
+    assert marginals(results[:9], problem)[0] == pytest.approx([1.0, 0.0])
+
+
+def test_hypothesis_weighting_respects_the_pairwise_constraints():
+    from ipr.inference import marginals
+
+    # Object 0's candidate 0 cannot coexist with object 1's candidate 1.
+    compatible = {(0, 1): np.array([[True, False], [True, True]])}
+    problem = _fabricated_problem(2, compatible)
+    norms = {(0, 0): [0.01, 0.05], (1, 0): [0.03, 0.05], (1, 1): [0.03, 0.02]}
+    results = [_result(s, c, n, (0.0, 0.0)) for s, (c, n) in enumerate(norms.items())]
+    estimate = marginals(results, problem)
+    scale = problem.config.likelihood.alpha_per_m * problem.observed.decimation
+    # Exact: unary factors from the mean own terms, summed over the feasible pairs only.
+    u0 = np.exp(-scale * np.array([0.01, 0.03]))
+    u1 = np.exp(-scale * np.array([0.05, 0.02]))
+    feasible = compatible[(0, 1)] * np.outer(u0, u1)
+    assert estimate[0] == pytest.approx(feasible.sum(1) / feasible.sum())
+    assert estimate[1] == pytest.approx(feasible.sum(0) / feasible.sum())

@@ -152,8 +152,12 @@ def _exact_marginals(
     edges: Mapping[tuple[int, int], np.ndarray],
     sizes: Mapping[int, int],
     max_table: float = np.inf,
+    unary: Mapping[int, np.ndarray] | None = None,
 ) -> dict[int, np.ndarray] | None:
     """Exact marginals by variable elimination (one min-degree elimination per object).
+
+    ``unary`` (optional) gives each object's non-negative factor over its values (default:
+    ones, the uniform distribution over feasible assignments).
 
     Each step multiplies the factors that hold the eliminated object and sums it out in one
     ``numpy.einsum`` over their variables (cost: the table's size); tables are rescaled to a
@@ -161,7 +165,11 @@ def _exact_marginals(
     is feasible, and raises ``_TooLarge`` when a table would exceed ``max_table`` entries.
     """
     position = {node: number for number, node in enumerate(nodes)}
-    base = [((position[i],), np.ones(sizes[i])) for i in nodes]
+    unary = unary or {}
+    base = [
+        ((position[i],), np.asarray(unary.get(i, np.ones(sizes[i])), dtype=np.float64))
+        for i in nodes
+    ]
     base += [
         ((position[a], position[b]), matrix.astype(np.float64)) for (a, b), matrix in edges.items()
     ]
@@ -192,7 +200,7 @@ def _exact_marginals(
             factors = [f for f in factors if variable not in f[0]] + [(tuple(out), table / peak)]
             remaining.discard(variable)
         counts = np.ones(sizes[node])
-        for variables, table in factors:
+        for variables, table in factors:  # the kept object's own unary factor is among them
             counts = counts * (table if variables else float(table))
         total = float(counts.sum())
         if total <= 0:

@@ -21,15 +21,20 @@ of some jointly feasible model) are candidates. Then, repeated until the time bu
 2. **Simulation of the full model** under gravity (settling) and, for the ``+action`` variants,
    the recorded pushes; the depth images rendered from each frame's camera give the likelihood
    (``ipr.likelihood``, Eq. 2). A simulation that explodes or flings an object scores 0.
-3. **Importance weights.** Eq. 2's exponent is a sum over objects, so each object's marginal
-   weighs a sample by its own term: w_i = P(O_i | X, mu) P(X_i) / q_i, with q_i the exploration
-   probability with which X_i was drawn (Algorithm 2's per-object update, line 30). The
-   estimate of P(X_i^j | O, mu) is the self-normalised sum of w_i over the samples that chose j.
-   ``weighting="joint"`` uses the full w = P(O | X, mu) P(X) / q(X) for every object instead
-   (q(X) the product of the draws' exploration probabilities; the object order is a
-   deterministic function of earlier draws): consistent for the joint posterior, but at the
-   sample counts a budget allows its effective sample size was about 1 on development scenes
-   and its shapes were worse (docs/DESIGN_NOTES.md).
+3. **From samples to marginals** (``InferenceConfig.weighting``). Eq. 2's exponent is a sum over
+   objects, so each object's evidence is its own term. Default ``"hypothesis"``: each
+   candidate's likelihood is the mean over the samples that chose it of exp(its own term);
+   with the priors as unary factors and the pairwise constraints as 0/1 factors, the marginals
+   follow by exact variable elimination (as the Collision Checker's do). Candidates no sample
+   chose get no probability, as with importance weights. The exploration probabilities decide what is visited,
+   not how much it weighs, so rare draws do not carry huge weights. ``"object"``: Algorithm
+   2's per-object update, w_i = P(O_i | X, mu) P(X_i) / q_i with q_i the exploration
+   probability with which X_i was drawn; the estimate of P(X_i^j | O, mu) is the
+   self-normalised sum of w_i over the samples that chose j. ``"joint"``: the full
+   w = P(O | X, mu) P(X) / q(X) for every object (q(X) the product of the draws' exploration
+   probabilities; the object order is a deterministic function of earlier draws): consistent
+   for the joint posterior, but at the sample counts a budget allows its effective sample size
+   was about 1 on development scenes and its shapes were worse (docs/DESIGN_NOTES.md).
 
 Priors: ``uniform``, or ``size``: P(X_i^j) proportional to volume(X_i^j)^-size_prior_exponent
 (smaller models are more probable, the paper's informed prior), normalised per object.
@@ -63,6 +68,9 @@ from ipr.collision_checker import (
     CollisionCheckerConfig,
     ObjectPosterior,
     PreparedHypotheses,
+    _components,
+    _exact_marginals,
+    _TooLarge,
     posterior_medoid,
     uniform_posteriors,
 )
@@ -102,6 +110,10 @@ VARIANTS: dict[str, Variant] = {
 assert tuple(VARIANTS) == PHYSICS_METHODS, "ipr.methods lists the same methods"
 
 
+#: How samples become marginals (``InferenceConfig.weighting``).
+WEIGHTINGS = ("hypothesis", "object", "joint")
+
+
 @dataclass(frozen=True)
 class InferenceConfig:
     """Settings of IPR inference (module doc).
@@ -122,9 +134,14 @@ class InferenceConfig:
         size_prior_exponent: the size prior's exponent (module doc).
         max_exhaustive_objects: largest scene ``exhaustive`` accepts.
         max_exhaustive_models: largest number of joint models ``exhaustive`` accepts.
-        weighting: "object" (each object's marginal weighs samples by its own likelihood term,
-            prior and exploration probability, as Algorithm 2's per-object update does) or
-            "joint" (every object by the joint weight; module doc).
+        weighting: how samples become marginals (module doc, step 3): "hypothesis" (each
+            candidate's own likelihood term averaged over the samples that chose it, combined
+            with the priors and the pairwise constraints by exact elimination), "object" (each
+            object's marginal weighs samples by its own likelihood term, prior and exploration
+            probability, Algorithm 2's per-object update) or "joint" (every object by the
+            joint weight).
+        max_factor_table: largest table (entries) of the exact elimination of "hypothesis"
+            weighting; larger components combine their objects' factors independently.
     """
 
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)
@@ -137,8 +154,9 @@ class InferenceConfig:
     size_prior_exponent: float = 1.0
     max_exhaustive_objects: int = 4
     max_exhaustive_models: int = 20_000
-    weighting: str = "object"
+    weighting: str = "hypothesis"
     stability_measure: str = "drop"
+    max_factor_table: float = 1e6
 
     def __post_init__(self) -> None:
         if not self.stability_alpha_per_m >= 0:
@@ -149,8 +167,8 @@ class InferenceConfig:
             raise ValueError("max_samples must be at least 1")
         if self.workers is not None and self.workers < 1:
             raise ValueError("workers must be at least 1")
-        if self.weighting not in ("object", "joint"):
-            raise ValueError(f"weighting must be 'object' or 'joint', got {self.weighting!r}")
+        if self.weighting not in WEIGHTINGS:
+            raise ValueError(f"weighting must be one of {WEIGHTINGS}, got {self.weighting!r}")
 
 
 # --------------------------------------------------------------------------------------------
@@ -667,14 +685,72 @@ def object_log_weights(results: Sequence[SampleResult], problem: InferenceProble
     return weights
 
 
+def hypothesis_log_likelihoods(
+    results: Sequence[SampleResult], problem: InferenceProblem
+) -> list[np.ndarray]:
+    """Per object, (m_k,) the log of the mean over the samples that chose each candidate of
+    exp(its own Eq. 2 term) (module doc, step 3); NaN for candidates no sample chose."""
+    config = problem.config.likelihood
+    scale = config.alpha_per_m * problem.observed.decimation
+    terms: list[list[list[float]]] = [[[] for _ in c] for c in problem.candidates]
+    for result in results:
+        if result.norms is None:
+            continue
+        own = -scale * result.norms.sum(axis=0)
+        for k, j in enumerate(result.choice):
+            terms[k][j].append(float(own[k]))
+    return [
+        np.array([np.logaddexp.reduce(t) - math.log(len(t)) if t else math.nan for t in per_object])
+        for per_object in terms
+    ]
+
+
+def factor_marginals(unary_log: Sequence[np.ndarray], problem: InferenceProblem) -> list:
+    """Marginals of P(X) proportional to prod_k exp(unary_log[k][X_k]) times the pairwise
+    constraints (``problem.compatible``), exact by variable elimination per connected group of
+    interacting objects; a group whose tables would exceed ``max_factor_table`` (or that has
+    no feasible assignment) combines its unary factors alone."""
+    nodes = list(range(problem.count))
+    unary = {k: np.exp(u - np.max(u)) for k, u in enumerate(unary_log)}
+    sizes = {k: len(c) for k, c in enumerate(problem.candidates)}
+    estimates: dict[int, np.ndarray] = {}
+    for component in _components(nodes, problem.compatible):
+        edges = {
+            pair: matrix
+            for pair, matrix in problem.compatible.items()
+            if pair[0] in component and pair[1] in component
+        }
+        result = None
+        if len(component) > 1 and len(component) <= 52:
+            try:
+                result = _exact_marginals(
+                    component, edges, sizes, problem.config.max_factor_table, unary
+                )
+            except _TooLarge:
+                result = None
+        for k in component:
+            estimates[k] = result[k] if result else unary[k] / unary[k].sum()
+    return [estimates[k] for k in nodes]
+
+
 def marginals(
     results: Sequence[SampleResult], problem: InferenceProblem, *, joint: bool = False
 ) -> list[np.ndarray] | None:
-    """Self-normalised importance estimates of each object's marginal over its candidates
-    (``InferenceConfig.weighting``, or the joint weight when ``joint``: exact marginals for an
-    exhaustive enumeration); None when no sample has a positive weight."""
+    """Each object's marginal over its candidates (``InferenceConfig.weighting``; the joint
+    weight when ``joint``: exact marginals for an exhaustive enumeration); None when no
+    sample has a positive weight."""
     if not any(math.isfinite(r.log_likelihood) for r in results):
         return None
+    if not joint and problem.config.weighting == "hypothesis":
+        unary = []
+        for k, means in enumerate(hypothesis_log_likelihoods(results, problem)):
+            # Candidates no sample chose get no probability, as with importance weights (every
+            # sample's own choice is jointly feasible, so the constraints stay satisfiable); an
+            # object whose samples all failed keeps its prior.
+            chosen = np.isfinite(means)
+            evidence = np.where(chosen, means, -np.inf) if chosen.any() else np.zeros(len(means))
+            unary.append(evidence + problem.log_prior[k])
+        return factor_marginals(unary, problem)
     log_weights = sample_log_weights(results, problem, joint=joint)
     estimates = []
     for k, candidates in enumerate(problem.candidates):
