@@ -1,12 +1,17 @@
 """Run every benchmark and rewrite docs/BENCHMARKS.md (``make bench``).
 
 Usage: ``python -m benchmarks.run [--only SECTION ...]``. Suites are generated on first use and
-cached (see ``ipr.suites``); figures are medians over each suite's scenes.
+cached (see ``ipr.suites``); figures are medians over each suite's scenes. Each section sits
+between ``<!-- section: NAME -->`` and ``<!-- end section: NAME -->`` in the page; ``--only``
+reruns the named sections and keeps the others as the page has them (a section the page lacks
+is appended).
 """
 
 from __future__ import annotations
 
 import argparse
+import re
+import subprocess
 import sys
 import time
 from datetime import UTC, datetime
@@ -22,6 +27,34 @@ SECTIONS = {
     "inference": inference.run,
 }
 OUTPUT = Path(__file__).resolve().parents[1] / "docs" / "BENCHMARKS.md"
+
+
+def code_version() -> str:
+    """The checked-out commit (short hash; "+changes" when the tree differs from it)."""
+    root = OUTPUT.parents[1]
+    try:
+        commit = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True, text=True
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no"],
+            cwd=root, capture_output=True, text=True,
+        ).stdout.strip()  # fmt: skip
+    except OSError:
+        return "unknown"
+    return (commit or "unknown") + ("+changes" if dirty else "")
+
+
+def marked(name: str, text: str) -> str:
+    """A section's text between its markers, with when and from which commit it was run."""
+    stamp = f"_Section run on {datetime.now(UTC):%Y-%m-%d %H:%M} UTC at commit {code_version()}._"
+    return f"<!-- section: {name} -->\n{text.rstrip()}\n\n{stamp}\n<!-- end section: {name} -->\n"
+
+
+def kept_sections(page: str) -> dict[str, str]:
+    """Name -> marked text of every section of an existing page."""
+    pattern = re.compile(r"<!-- section: (\w+) -->\n.*?<!-- end section: \1 -->\n", re.S)
+    return {match.group(1): match.group(0) for match in pattern.finditer(page)}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -43,11 +76,14 @@ def main(argv: list[str] | None = None) -> int:
         f"Machine: {machine_description()}.",
         "",
     ]
+    previous = kept_sections(OUTPUT.read_text(encoding="utf-8")) if OUTPUT.exists() else {}
     for name, section in SECTIONS.items():
         if args.only and name not in args.only:
+            if name in previous:
+                parts.append(previous[name])
             continue
         print(f"bench: {name} ...", flush=True)
-        parts.append(section(suites))
+        parts.append(marked(name, section(suites)))
     parts.append(f"_Total benchmark time: {time.perf_counter() - started:.0f} s._\n")
     staging = OUTPUT.with_suffix(".md.tmp")
     staging.write_text("\n".join(parts), encoding="utf-8")
