@@ -6,7 +6,13 @@ import numpy as np
 
 from ipr.perception.config import TrackingConfig
 from ipr.perception.facets import mean_shift_directions, object_facets, pixel_areas
-from ipr.perception.tracking import assign_segments, track_segments
+from ipr.perception.tracking import (
+    assign_segments,
+    prefer_larger_objects,
+    prefer_larger_pieces,
+    segment_features,
+    track_segments,
+)
 
 
 def _frame(squares: dict[int, tuple[int, int, tuple[int, int, int]]], shape=(80, 120)):
@@ -111,7 +117,11 @@ def test_an_object_is_recognised_by_an_earlier_sighting():
     third = _boxes({**red, 2: (60, 110, 30, 30, YELLOW), 3: (40, 100, 6, 30, YELLOW)})
     box = _track([first, second, third])[0][75, 115]
     assert _track([first, second, third])[2][75, 125] == box
-    assert _track([first, second, third], TrackingConfig(max_sightings=1))[2][75, 125] != box
+    # With the last sighting only, the strip takes the box's id; the rule that gives an id to
+    # the larger of two nearby pieces would hand it back, so it is off here.
+    last_only = TrackingConfig(max_sightings=1, larger_piece_takes_id=False)
+    assert _track([first, second, third], last_only)[2][75, 125] != box
+    assert _track([first, second, third], TrackingConfig(max_sightings=1))[2][75, 125] == box
 
 
 def test_assignment_gates_the_first_stage_and_matches_leftovers_second():
@@ -127,6 +137,45 @@ def test_assignment_gates_the_first_stage_and_matches_leftovers_second():
     assert pairs == {(0, 0), (2, 1), (1, 2)}
     assert {tuple(pair) for pair in assign_segments(cost, 1.5, 0.0).tolist()} == {(0, 0), (2, 1)}
     assert assign_segments(np.zeros((0, 2)), 1.5, 3.0).shape == (0, 2)
+
+
+def test_the_larger_piece_of_a_split_object_takes_its_id():
+    # Object 7 was split into a small piece (segment 1, matched to it) and a larger one next to
+    # it (segment 2, left to start a new object); segment 3 is another new object far away.
+    labels, points, rgb = _boxes(
+        {1: (60, 100, 6, 30, YELLOW), 2: (66, 100, 24, 30, YELLOW), 3: (10, 200, 20, 20, RED)}
+    )
+    segments = segment_features(labels, points, rgb)
+    cost = np.array([[0.5, 3.0], [2.0, 3.0], [2.0, 3.0]])  # columns: objects 7 and 8
+    config = TrackingConfig()
+    assert prefer_larger_pieces({1: 7}, cost, [1, 2, 3], [7, 8], segments, config) == {2: 7}
+    # Not when the larger piece resembles the object less than ``piece_max_cost`` asks...
+    dear = cost.copy()
+    dear[1, 0] = config.piece_max_cost + 0.1
+    assert prefer_larger_pieces({1: 7}, dear, [1, 2, 3], [7, 8], segments, config) == {1: 7}
+    # ... nor when it is far from the matched piece (segment 3, 12 cm away), nor smaller.
+    far = np.array([[0.5, 3.0], [3.0, 3.0], [2.0, 3.0]])
+    assert prefer_larger_pieces({1: 7}, far, [1, 2, 3], [7, 8], segments, config) == {1: 7}
+    assert prefer_larger_pieces({2: 7}, cost, [1, 2, 3], [7, 8], segments, config) == {2: 7}
+
+
+def test_a_whole_object_takes_the_id_of_its_larger_earlier_piece():
+    # Objects 7 (large) and 8 (small) were two pieces of one box; now it is whole (segment 1)
+    # and the assignment gave it the small piece's id. Object 9 is elsewhere, unmatched.
+    pieces = segment_features(*_boxes({7: (60, 100, 24, 30, YELLOW), 8: (84, 100, 6, 30, YELLOW)}))
+    far = segment_features(*_boxes({9: (10, 10, 30, 30, YELLOW)}))
+    latest = {7: pieces[7], 8: pieces[8], 9: far[9]}
+    config = TrackingConfig()
+    cost = np.array([[1.7, 1.6, 1.65], [3.0, 3.0, 3.0]])  # columns: objects 7, 8, 9
+    assert prefer_larger_objects({1: 8}, cost, [1, 2], [7, 8, 9], latest, config) == {1: 7}
+    # Not when the larger piece fits clearly worse than the matched one ...
+    worse = cost + np.array([[config.piece_cost_margin + 0.2, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    assert prefer_larger_objects({1: 8}, worse, [1, 2], [7, 8, 9], latest, config) == {1: 8}
+    # ... nor for an object far from the matched one (9 is larger and cheaper but 11 cm away),
+    # nor when the other piece is not clearly larger.
+    without_7 = cost[:, 1:]
+    assert prefer_larger_objects({1: 8}, without_7, [1, 2], [8, 9], latest, config) == {1: 8}
+    assert prefer_larger_objects({1: 7}, cost, [1, 2], [7, 8, 9], latest, config) == {1: 7}
 
 
 def test_mean_shift_groups_normals_by_direction():

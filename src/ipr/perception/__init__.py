@@ -63,7 +63,7 @@ def perceive_scene(
 
     config = config or PerceptionConfig()
     segment_seconds, segmentations, points = [], [], []
-    for frame in scene.frames:
+    for position, frame in enumerate(scene.frames):
         started = time.perf_counter()
         points.append(frame.points_world())
         segmentations.append(
@@ -73,6 +73,7 @@ def perceive_scene(
                 pusher=scene.pusher,
                 config=config,
                 points_world=points[-1],
+                previous=(scene.frames[position - 1], segmentations[-1]) if position else None,
             )
         )
         segment_seconds.append(time.perf_counter() - started)

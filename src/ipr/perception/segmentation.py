@@ -29,6 +29,12 @@ from ipr.perception.config import PerceptionConfig
 from ipr.perception.planes import find_support_plane, find_walls, static_geometry_mask
 from ipr.perception.robot import robot_pixels
 from ipr.perception.supervoxels import compute_supervoxels, organised_normals_at
+from ipr.perception.temporal import (
+    SupervoxelChange,
+    compare_frames,
+    consistent_walls,
+    supervoxel_anchors,
+)
 from ipr.perception.types import FrameSegmentation, KnownPlane, Supervoxels
 from ipr.scene import Frame, Push, Pusher
 
@@ -44,8 +50,13 @@ def segment_frame(
     pusher: Pusher | None = None,
     config: PerceptionConfig = PerceptionConfig(),  # noqa: B008 (frozen)
     points_world: np.ndarray | None = None,
+    previous: tuple[Frame, FrameSegmentation] | None = None,
 ) -> FrameSegmentation:
     """Segment ``frame`` into objects (``points_world``: its (H, W, 3) world points, if known).
+
+    With ``previous`` (the frame before and its segmentation), surfaces that did not move since
+    that frame keep their earlier grouping (``config.temporal_anchoring``; ``anchor_parts``) and
+    the walls found there stay (``config.temporal_walls``; ``ipr.perception.temporal``).
 
     Returns labels (H, W) int32 with 0 for background, support, walls, robot and large depth
     holes, and 1..k for the k segments (numbered by decreasing size); pixels without depth near
@@ -79,6 +90,20 @@ def segment_frame(
     # of the points above it (``wall_max_points``), so only those need normals here.
     above = usable[support.signed_distance(usable_points) >= config.support_clearance_m]
     above_points = flat_points[above]
+    frame_change = None
+    if previous is not None and (config.temporal_anchoring or config.temporal_walls):
+        previous_frame, previous_segmentation = previous
+        frame_change = compare_frames(
+            points,
+            frame.depth_m,
+            previous_frame.depth_m,
+            previous_segmentation.labels,
+            previous_frame.K,
+            previous_frame.world_from_camera,
+            config,
+            K=frame.K,
+            world_from_camera=frame.world_from_camera,
+        )
     wall_sample = above[:: -(-len(above) // config.wall_max_points)] if len(above) else above
     wall_normals = organised_normals_at(frame.depth_m, frame.K, wall_sample, config)
     walls = find_walls(
@@ -89,13 +114,26 @@ def segment_frame(
         normals=wall_normals @ frame.world_from_camera[:3, :3].T.astype(np.float32),
         viewpoint=frame.world_from_camera[:3, 3],
     )
+    if frame_change is not None and config.temporal_walls and previous[1].planes:
+        walls = consistent_walls(
+            tuple(plane for plane in previous[1].planes if plane.kind == "wall"),
+            walls,
+            support,
+            above,
+            above_points,
+            frame_change.state,
+            config,
+        )
     planes = (support, *walls)
     keep = np.zeros(height * width, dtype=bool)
     keep[above[~static_geometry_mask(above_points, planes, config)]] = True
     supervoxels = compute_supervoxels(
         frame, keep.reshape(height, width), config, points_world=points
     )
-    segment_of_supervoxel = cluster_supervoxels(supervoxels, config)
+    change = None
+    if frame_change is not None and config.temporal_anchoring:
+        change = supervoxel_anchors(supervoxels, frame_change, config)
+    segment_of_supervoxel = cluster_supervoxels(supervoxels, config, change)
     lookup = np.append(segment_of_supervoxel, 0).astype(np.int32)  # label -1 -> last -> 0
     labels = fill_label_holes(lookup[supervoxels.labels], valid | robot, config.label_fill_px)
     labels, segment_of_supervoxel = drop_support_residue(
@@ -285,11 +323,14 @@ def edge_weights(supervoxels: Supervoxels, config: PerceptionConfig) -> np.ndarr
     return weights
 
 
-def cluster_supervoxels(supervoxels: Supervoxels, config: PerceptionConfig) -> np.ndarray:
+def cluster_supervoxels(
+    supervoxels: Supervoxels, config: PerceptionConfig, change: SupervoxelChange | None = None
+) -> np.ndarray:
     """(M,) int32 segment of each supervoxel: 0 = none (too small), 1..k by decreasing size.
 
     Spectral clustering per connected component of the adjacency graph; clusters that k-means
-    left in pieces are split into their connected parts; segments smaller than
+    left in pieces are split into their connected parts; with ``change`` (the comparison with
+    the previous frame) the anchors are imposed (``anchor_parts``); segments smaller than
     ``min_object_pixels`` join the neighbouring segment they are most strongly connected to,
     or are dropped when they touch none.
     """
@@ -318,7 +359,75 @@ def cluster_supervoxels(supervoxels: Supervoxels, config: PerceptionConfig) -> n
     _, parts = connected_components(
         _symmetric(pairs[inside], np.ones(int(inside.sum())), count), directed=False
     )
+    if change is not None:
+        parts = anchor_parts(parts, change, pairs, weights)
     return _absorb_small(parts, supervoxels, pairs, weights, config)
+
+
+def anchor_parts(
+    parts: np.ndarray, change: SupervoxelChange, pairs: np.ndarray, weights: np.ndarray
+) -> np.ndarray:
+    """(M,) int64 parts with the previous frame's static segments imposed.
+
+    The supervoxels anchored to one previous segment (``change.anchor``) form one part,
+    wherever the clustering put them: an object that did not move is grouped as before, and
+    two that did not move are not merged. The free supervoxels of a part that held anchored
+    ones are split into their connected pieces; a piece rejoins the anchored group it shares
+    the most edge weight with in that part when at least as many of its pixels are compatible
+    with a static object (revealed, or unchanged) as not (arrived, or still covered by a
+    segment that moved); the pieces that join no group (a pushed object clustered with a
+    static one it now touches) form one new part per former part. Parts without anchored
+    supervoxels are left alone.
+
+    Args:
+        parts: (M,) int part of each supervoxel (>= 0); pairs: (E, 2) adjacency;
+            weights: (E,) edge weights.
+    """
+    anchor = change.anchor
+    anchored = anchor > 0
+    if not anchored.any():
+        return parts
+    count = len(parts)
+    first_new = int(parts.max()) + 1
+    _, group = np.unique(anchor[anchored], return_inverse=True)
+    n_groups = int(group.max()) + 1
+    group_of = np.full(count, -1, dtype=np.int64)
+    group_of[anchored] = group
+    result = parts.astype(np.int64).copy()
+    result[anchored] = first_new + group
+    touched = np.zeros(first_new, dtype=bool)
+    touched[parts[anchored]] = True
+    free = ~anchored & touched[parts]
+    if not free.any():
+        return result
+    a, b = pairs[:, 0], pairs[:, 1]
+    same_part = parts[a] == parts[b]
+    inside = free[a] & free[b] & same_part
+    _, piece = connected_components(
+        _symmetric(pairs[inside], np.ones(int(inside.sum())), count), directed=False
+    )
+    pieces, piece_index = np.unique(piece[free], return_inverse=True)
+    local = np.full(count, -1, dtype=np.int64)
+    local[free] = piece_index
+    compatible = np.bincount(piece_index, weights=change.compatible_px[free], minlength=len(pieces))
+    incompatible = np.bincount(
+        piece_index, weights=change.incompatible_px[free], minlength=len(pieces)
+    )
+    # Edge weight from each free piece to each anchored group, within the same part.
+    strength = np.zeros((len(pieces), n_groups))
+    for x, y in ((a, b), (b, a)):
+        link = same_part & free[x] & anchored[y]
+        np.add.at(strength, (local[x[link]], group_of[y[link]]), weights[link])
+    joins = (strength.max(axis=1) > 0) & (compatible >= incompatible)
+    # Pieces that join no group stay together as their part's remainder (the clustering put
+    # them together; they may touch only through the anchored object, e.g. seen on both sides).
+    part_of_piece = np.zeros(len(pieces), dtype=np.int64)
+    part_of_piece[piece_index] = parts[free]
+    target = np.where(
+        joins, first_new + np.argmax(strength, axis=1), first_new + n_groups + part_of_piece
+    )
+    result[free] = target[piece_index]
+    return result
 
 
 def spectral_clusters(weights: csr_matrix, config: PerceptionConfig) -> np.ndarray:
