@@ -228,29 +228,24 @@ def supervoxel_anchors(
     near = change.near.reshape(-1)[member] if change.near is not None else np.zeros(sv.size, bool)
     shifted = (pixel_state == ARRIVED) & near & stayed[pixel_label]
     compatible = np.bincount(
-        sv,
-        weights=(pixel_state == REVEALED) | (is_unchanged & label_stayed) | shifted,
-        minlength=count,
+        sv[(pixel_state == REVEALED) | (is_unchanged & label_stayed) | shifted], minlength=count
     ).astype(np.int64)
     incompatible = np.bincount(
-        sv,
-        weights=((pixel_state == ARRIVED) & ~shifted) | (is_unchanged & ~label_stayed),
+        sv[((pixel_state == ARRIVED) & ~shifted) | (is_unchanged & ~label_stayed)],
         minlength=count,
     ).astype(np.int64)
-    # Unchanged pixels of segments that stayed, per (supervoxel, segment).
+    # Unchanged pixels of segments that stayed, per (supervoxel, segment): a dense count table
+    # (supervoxels x previous labels, small) instead of sorting the pixels' keys.
     kept = is_unchanged & stayed[pixel_label]
     if kept.any():
-        key = sv[kept] * n_labels + pixel_label[kept]
-        keys, votes = np.unique(key, return_counts=True)
-        owner, owner_label = keys // n_labels, keys % n_labels
-        # The most voted segment of each supervoxel (keys are sorted by supervoxel).
-        order = np.lexsort((-votes, owner))
-        first = np.ones(order.size, dtype=bool)
-        first[1:] = owner[order][1:] != owner[order][:-1]
-        best = order[first]
+        table = np.bincount(
+            sv[kept] * n_labels + pixel_label[kept], minlength=count * n_labels
+        ).reshape(count, n_labels)
+        best_label = np.argmax(table, axis=1)  # ties: the lowest label
+        votes = table[np.arange(count), best_label]
         pixels = np.bincount(sv, minlength=count)
-        enough = votes[best] >= config.temporal_anchor_fraction * pixels[owner[best]]
-        anchor[owner[best][enough]] = owner_label[best][enough]
+        enough = (votes > 0) & (votes >= config.temporal_anchor_fraction * pixels)
+        anchor[enough] = best_label[enough]
     return SupervoxelChange(anchor, compatible, incompatible)
 
 
