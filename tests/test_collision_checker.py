@@ -9,9 +9,9 @@ import pytest
 
 from ipr.collision_checker import (
     CollisionCheckerConfig,
-    _exact_marginals,
     _gibbs_marginals,
     collision_checker,
+    exact_marginals,
     write_collision_checker_result,
 )
 from ipr.hypotheses import HypothesisConfig
@@ -103,14 +103,14 @@ def test_exact_and_sampled_marginals_match_enumeration():
     edges = {pair: rng.random((sizes[pair[0]], sizes[pair[1]])) > 0.35 for pair in
              [(1, 2), (2, 3), (3, 4), (1, 3)]}  # fmt: skip
     truth = brute_force(sizes, edges)
-    exact = _exact_marginals(sorted(sizes), edges, sizes)
+    exact = exact_marginals(sorted(sizes), edges, sizes)
     config = CollisionCheckerConfig(gibbs_chains=4, gibbs_sweeps=1500, gibbs_burn_in=20)
     sampled = _gibbs_marginals(sorted(sizes), edges, sizes, config, rng, np.inf)
     for i in sizes:
         assert np.allclose(exact[i], truth[i], atol=1e-12)
         assert np.abs(sampled[i] - truth[i]).max() < 0.06
     impossible = {(1, 2): np.zeros((5, 4), dtype=bool)}
-    assert _exact_marginals([1, 2], impossible, sizes) is None
+    assert exact_marginals([1, 2], impossible, sizes) is None
 
 
 def test_tiny_time_budget_still_gives_valid_posteriors(scene):

@@ -147,7 +147,7 @@ def _elimination_table(nodes: list[int], edges: Mapping[tuple[int, int], np.ndar
     return largest
 
 
-def _exact_marginals(
+def exact_marginals(
     nodes: list[int],
     edges: Mapping[tuple[int, int], np.ndarray],
     sizes: Mapping[int, int],
@@ -162,7 +162,7 @@ def _exact_marginals(
     Each step multiplies the factors that hold the eliminated object and sums it out in one
     ``numpy.einsum`` over their variables (cost: the table's size); tables are rescaled to a
     maximum of 1, since only normalised marginals are needed. Returns None when no assignment
-    is feasible, and raises ``_TooLarge`` when a table would exceed ``max_table`` entries.
+    is feasible, and raises ``TableTooLarge`` when a table would exceed ``max_table`` entries.
     """
     position = {node: number for number, node in enumerate(nodes)}
     unary = unary or {}
@@ -187,7 +187,7 @@ def _exact_marginals(
             variable = min(remaining, key=lambda v: (np.prod([size_of[u] for u in scope(v)]), v))
             union = sorted(scope(variable))
             if float(np.prod([size_of[u] for u in union], dtype=float)) > max_table:
-                raise _TooLarge
+                raise TableTooLarge
             involved = [f for f in factors if variable in f[0]]
             out = [u for u in union if u != variable]
             operands: list = []
@@ -209,7 +209,7 @@ def _exact_marginals(
     return marginals
 
 
-class _TooLarge(Exception):
+class TableTooLarge(Exception):
     """Variable elimination would need a table above the configured size."""
 
 
@@ -255,7 +255,9 @@ def _gibbs_marginals(
     return {i: counts[i] / counts[i].sum() for i in nodes}
 
 
-def _components(nodes: list[int], edges: Mapping[tuple[int, int], np.ndarray]) -> list[list[int]]:
+def interaction_components(
+    nodes: list[int], edges: Mapping[tuple[int, int], np.ndarray]
+) -> list[list[int]]:
     """Connected components (sorted lists) of the interaction graph."""
     parent = {i: i for i in nodes}
 
@@ -290,9 +292,9 @@ def _component_marginals(
         exact = _elimination_table(component, edges, sizes) <= config.max_exact_table
         if exact and len(component) <= 52:  # einsum's sublist format has 52 indices
             try:
-                marginals = _exact_marginals(component, edges, sizes, config.max_exact_table)
+                marginals = exact_marginals(component, edges, sizes, config.max_exact_table)
                 how = "exact"
-            except _TooLarge:
+            except TableTooLarge:
                 exact = False
         if not exact or len(component) > 52:
             marginals = _gibbs_marginals(component, edges, sizes, config, rng, deadline)
@@ -458,7 +460,7 @@ def uniform_posteriors(
     sizes = {i: len(candidates[i]) for i in ids}
     marginals: dict[int, np.ndarray] = {}
     how: dict[int, str] = {}
-    for component in _components(ids, prepared.depths):
+    for component in interaction_components(ids, prepared.depths):
         if len(component) == 1:
             i = component[0]
             marginals[i] = np.full(sizes[i], 1.0 / sizes[i])

@@ -68,9 +68,9 @@ from ipr.collision_checker import (
     CollisionCheckerConfig,
     ObjectPosterior,
     PreparedHypotheses,
-    _components,
-    _exact_marginals,
-    _TooLarge,
+    TableTooLarge,
+    exact_marginals,
+    interaction_components,
     posterior_medoid,
     uniform_posteriors,
 )
@@ -714,7 +714,7 @@ def factor_marginals(unary_log: Sequence[np.ndarray], problem: InferenceProblem)
     unary = {k: np.exp(u - np.max(u)) for k, u in enumerate(unary_log)}
     sizes = {k: len(c) for k, c in enumerate(problem.candidates)}
     estimates: dict[int, np.ndarray] = {}
-    for component in _components(nodes, problem.compatible):
+    for component in interaction_components(nodes, problem.compatible):
         edges = {
             pair: matrix
             for pair, matrix in problem.compatible.items()
@@ -723,10 +723,10 @@ def factor_marginals(unary_log: Sequence[np.ndarray], problem: InferenceProblem)
         result = None
         if len(component) > 1 and len(component) <= 52:
             try:
-                result = _exact_marginals(
+                result = exact_marginals(
                     component, edges, sizes, problem.config.max_factor_table, unary
                 )
-            except _TooLarge:
+            except TableTooLarge:
                 result = None
         for k in component:
             estimates[k] = result[k] if result else unary[k] / unary[k].sum()
