@@ -246,3 +246,8 @@ def test_shapes_whose_points_stop_short_of_the_support_rest_on_it(oblique):
             assert lowest[-1] >= 0.011 and np.sum(lowest >= 0.011) >= 3
     raised = minimum_shape(_without_lowest(obj, 0.0, lift_m=0.05), (SUPPORT,), CONFIG)
     assert raised.vertices[:, 2].min() >= 0.049
+
+
+def test_a_negative_support_snap_is_refused():
+    with pytest.raises(ValueError, match="support_snap_m"):
+        HypothesisConfig(support_snap_m=-0.01)

@@ -181,6 +181,11 @@ class HypothesisConfig:
             raise ValueError(f"ray_quantile must be in [0, 1], got {self.ray_quantile}")
         if self.max_attempts < 1 or self.max_rounds < 1:
             raise ValueError("max_attempts and max_rounds must be >= 1")
+        if not (self.support_snap_m >= 0 and self.support_band_m >= 0):
+            raise ValueError(
+                f"support_snap_m and support_band_m must be >= 0 (0 disables the snap), got "
+                f"{self.support_snap_m} and {self.support_band_m}"
+            )
 
 
 @dataclass(frozen=True, eq=False)

@@ -167,6 +167,8 @@ class InferenceConfig:
             raise ValueError("max_samples must be at least 1")
         if self.workers is not None and self.workers < 1:
             raise ValueError("workers must be at least 1")
+        if not self.max_factor_table >= 1:
+            raise ValueError(f"max_factor_table must be >= 1, got {self.max_factor_table}")
         if self.weighting not in WEIGHTINGS:
             raise ValueError(f"weighting must be one of {WEIGHTINGS}, got {self.weighting!r}")
 
@@ -767,7 +769,8 @@ def sample_log_weights(
 ) -> np.ndarray:
     """(S, n) log importance weights per sample and object: per object
     (``object_log_weights``), or the joint weight repeated for every object when ``joint`` or
-    ``InferenceConfig.weighting`` is "joint"."""
+    ``InferenceConfig.weighting`` is "joint". With "hypothesis" weighting these per-object
+    weights only serve as the effective-sample-size diagnostic of the summary."""
     if joint or problem.config.weighting == "joint":
         joint_weights = np.array([r.log_weight for r in results], dtype=float)
         return np.repeat(joint_weights[:, None], problem.count, axis=1)

@@ -39,9 +39,9 @@ class LikelihoodConfig:
 
     Attributes:
         alpha_per_m: alpha of Eq. 2 (1/m), the weight of the depth error norm. 0.2 on two
-            development sets of 44 and 46 objects, where IoU fell as alpha rose from 0.05 to
-            10 (docs/DESIGN_NOTES.md): the depth evidence is weak and noisy, so it should
-            tilt, not decide.
+            development sets of 44 and 46 objects, where IoU was highest at 0.05-0.2 and fell
+            as alpha rose to 10 (docs/DESIGN_NOTES.md): the depth evidence is weak and noisy,
+            so it should tilt, not decide.
         decimation: images are compared at 1/decimation of the input resolution.
         error_cap_m: largest per-pixel depth error (m).
         occlusion_margin_m: an observed surface this much nearer than the prediction hides it.
