@@ -8,6 +8,8 @@ from ipr.perception.config import TrackingConfig
 from ipr.perception.facets import mean_shift_directions, object_facets, pixel_areas
 from ipr.perception.tracking import (
     assign_segments,
+    contact_pixels,
+    merged_features,
     prefer_larger_objects,
     prefer_larger_pieces,
     segment_features,
@@ -176,6 +178,97 @@ def test_a_whole_object_takes_the_id_of_its_larger_earlier_piece():
     without_7 = cost[:, 1:]
     assert prefer_larger_objects({1: 8}, without_7, [1, 2], [8, 9], latest, config) == {1: 8}
     assert prefer_larger_objects({1: 7}, cost, [1, 2], [7, 8, 9], latest, config) == {1: 7}
+
+
+def test_an_object_split_into_touching_halves_keeps_one_id_on_both():
+    # A yellow box is pushed 2 cm and the segmentation cuts it into two halves; alone, either
+    # half resembles the box about as well (same colour, half the size), so one would take its
+    # id and the other start a new object. Together they are the box: both get its id.
+    red = {1: (10, 10, 15, 15, RED)}
+    first = _boxes({**red, 2: (60, 100, 30, 30, YELLOW)})
+    second = _boxes({**red, 2: (60, 120, 15, 30, YELLOW), 3: (75, 120, 15, 30, YELLOW)})
+    tracked = _track([first, second])
+    box = tracked[0][75, 115]
+    assert tracked[1][65, 135] == box and tracked[1][85, 135] == box
+    assert tracked[1][12, 12] == tracked[0][12, 12]
+    # The switch is what joins them: without it the halves carry two ids.
+    apart = _track([first, second], TrackingConfig(merge_split_pieces=False))
+    assert apart[1][65, 135] != apart[1][85, 135]
+
+
+def test_an_object_cut_in_three_is_joined_piece_by_piece():
+    red = {1: (10, 10, 15, 15, RED)}
+    first = _boxes({**red, 2: (60, 100, 30, 30, YELLOW)})
+    strips = {k: (50 + 10 * k, 120, 10, 30, YELLOW) for k in (2, 3, 4)}  # rows 70-99
+    second = _boxes({**red, **strips})
+    tracked = _track([first, second])
+    box = tracked[0][75, 115]
+    assert tracked[1][75, 135] == tracked[1][85, 135] == tracked[1][95, 135] == box
+    # With two candidate pieces only the first join is possible.
+    pair = _track([first, second], TrackingConfig(merge_candidates=2))
+    assert len({pair[1][75, 135], pair[1][85, 135], pair[1][95, 135]}) == 2
+
+
+def test_touching_pieces_of_another_colour_or_depth_are_not_joined():
+    red = {1: (10, 10, 15, 15, RED)}
+    # Frame 0 took a yellow and a green object for one; frame 1 shows them apart. Their union
+    # resembles that segment better than either does, but different colours say two objects.
+    first = _boxes({**red, 2: (60, 100, 30, 30, (YELLOW, GREEN, 0.5))})
+    second = _boxes({**red, 2: (60, 120, 15, 30, YELLOW), 3: (75, 120, 15, 30, GREEN)})
+    tracked = _track([first, second])
+    assert tracked[1][65, 135] != tracked[1][85, 135]
+    assert tracked[0][75, 115] in (tracked[1][65, 135], tracked[1][85, 135])
+    glued = _track([first, second], TrackingConfig(merge_max_colour=1.0))
+    assert glued[1][65, 135] == glued[1][85, 135]
+
+    # A yellow box, and below its (nudged, half-hidden) upper half a yellow piece 5 cm in
+    # front: it occludes the box rather than meeting it, so it is another object.
+    first = _boxes({**red, 2: (60, 100, 30, 30, YELLOW)})
+    labels, points, rgb = _boxes(
+        {**red, 2: (60, 120, 15, 30, YELLOW), 3: (75, 120, 15, 30, YELLOW)}
+    )
+    points = points.copy()
+    points[labels == 3, 2] += 0.05
+    tracked = _track([first, (labels, points, rgb)])
+    assert tracked[1][65, 135] != tracked[1][85, 135]
+    glued = _track([first, (labels, points, rgb)], TrackingConfig(merge_contact_gap_m=1.0))
+    assert glued[1][65, 135] == glued[1][85, 135]
+
+
+def test_contact_counts_neighbouring_pixel_pairs_whose_surfaces_meet():
+    labels, points, _ = _boxes(
+        {1: (10, 10, 5, 4, RED), 2: (15, 10, 5, 4, RED), 3: (10, 14, 3, 3, RED)}
+    )
+    flat = points.reshape(-1, 3)
+    pixels = {k: np.flatnonzero(labels.reshape(-1) == k) for k in (1, 2, 3)}
+    width = labels.shape[1]
+    assert contact_pixels(pixels[1], pixels[2], width, flat, 0.01) == 4  # a 4-pixel seam
+    assert contact_pixels(pixels[2], pixels[1], width, flat, 0.01) == 4
+    assert contact_pixels(pixels[1], pixels[3], width, flat, 0.01) == 3  # side by side
+    assert contact_pixels(pixels[2], pixels[3], width, flat, 0.01) == 0  # diagonal only
+    lifted = flat.copy()
+    lifted[pixels[2], 2] += 0.02  # a step of 2 cm between the two: one occludes the other
+    assert contact_pixels(pixels[1], pixels[2], width, lifted, 0.01) == 0
+    # Pixels without depth (all at the camera centre) do not make a contact.
+    valid = np.ones(len(flat), dtype=bool)
+    valid[pixels[1][-4:]] = valid[pixels[2][:4]] = False  # both rows along the seam
+    holes = flat.copy()
+    holes[~valid] = 0.0
+    assert contact_pixels(pixels[1], pixels[2], width, holes, 0.01) == 4
+    assert contact_pixels(pixels[1], pixels[2], width, holes, 0.01, valid) == 0
+    # No wrap-around between the last column of one row and the first of the next.
+    grid = np.zeros((24, 3))
+    assert contact_pixels(np.array([11]), np.array([12]), 6, grid, 0.01) == 0
+
+
+def test_merged_features_pool_histograms_and_areas():
+    labels, points, rgb = _boxes({1: (10, 10, 10, 10, RED), 2: (20, 10, 10, 30, BLUE)})
+    features = segment_features(labels, points, rgb)
+    union = merged_features(features[1], features[2])
+    whole = segment_features(np.where(labels > 0, 1, 0), points, rgb)[1]
+    assert np.allclose(union.histogram, whole.histogram)
+    assert np.allclose(union.centroid, whole.centroid)
+    assert union.area == whole.area and np.array_equal(np.sort(union.pixels), whole.pixels)
 
 
 def test_mean_shift_groups_normals_by_direction():

@@ -10,8 +10,6 @@ parallel faces (the two ends of a bottle) share a normal but are different facet
 from __future__ import annotations
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 from ipr.perception.types import Facet
 
@@ -26,14 +24,22 @@ def mean_shift_directions(
     set-up (scikit-learn's MeanShift costs about 20 ms per call even on 30 points).
     """
     modes = normals.copy()
+    scale = 2 * bandwidth**2
     for _ in range(iterations):
         # |m - n|^2 = 2 - 2 m.n for unit vectors: one matrix product instead of an (N, N, 3)
-        # difference array.
-        squared = np.maximum(2.0 - 2.0 * (modes @ normals.T), 0.0)
-        kernel = np.exp(-squared / (2 * bandwidth**2))
+        # difference array. In place, with the same roundings as
+        # exp(-max(2 - 2 m.n, 0) / (2 bandwidth^2)): objects have a few to a few hundred
+        # supervoxels, so the temporaries' allocations cost as much as the arithmetic.
+        kernel = modes @ normals.T
+        kernel *= -2.0
+        kernel += 2.0
+        np.maximum(kernel, 0.0, out=kernel)
+        np.negative(kernel, out=kernel)
+        kernel /= scale
+        np.exp(kernel, out=kernel)
         kernel *= weights[None, :]
         shifted = kernel @ normals
-        shifted /= np.linalg.norm(shifted, axis=1, keepdims=True) + 1e-12
+        shifted /= _row_norms(shifted) + 1e-12
         converged = np.abs(shifted - modes).max() < 1e-5
         modes = shifted
         if converged:
@@ -47,11 +53,17 @@ def mean_shift_directions(
     for index in order:
         if label[index] >= 0:
             continue
-        near = (np.linalg.norm(modes - modes[index], axis=1) < bandwidth / 2) & (label < 0)
+        near = (_row_norms(modes - modes[index])[:, 0] < bandwidth / 2) & (label < 0)
         label[near] = count
         label[index] = count
         count += 1
     return label
+
+
+def _row_norms(vectors: np.ndarray) -> np.ndarray:
+    """(N, 1) Euclidean lengths of the rows of (N, 3) ``vectors``: np.linalg.norm's own
+    arithmetic (sum of squares along the row, square root) without its per-call overhead."""
+    return np.sqrt(np.add.reduce(vectors * vectors, axis=1, keepdims=True))
 
 
 def pixel_areas(points_camera: np.ndarray, normals_camera: np.ndarray, K: np.ndarray) -> np.ndarray:
@@ -62,11 +74,18 @@ def pixel_areas(points_camera: np.ndarray, normals_camera: np.ndarray, K: np.nda
     depth is least reliable).
     """
     z = points_camera[:, 2]
-    rays = points_camera / np.linalg.norm(points_camera, axis=1, keepdims=True)
-    tilt = np.abs(rays[:, 2]) / np.maximum(
-        np.abs(np.einsum("ij,ij->i", rays, normals_camera)), 0.25
-    )
-    return z**2 / (K[0, 0] * K[1, 1]) * tilt
+    rays = points_camera / _row_norms(points_camera)
+    # In place (one pixel per object point, tens of thousands per frame), with the arithmetic
+    # of z^2 / (fx fy) * (|r_z| / max(|r . n|, 0.25)).
+    facing = np.einsum("ij,ij->i", rays, normals_camera)
+    np.abs(facing, out=facing)
+    np.maximum(facing, 0.25, out=facing)
+    tilt = np.abs(rays[:, 2])
+    tilt /= facing
+    area = z**2
+    area /= K[0, 0] * K[1, 1]
+    area *= tilt
+    return area
 
 
 def object_facets(
@@ -106,29 +125,54 @@ def object_facets(
     pairs = local[adjacency] if len(adjacency) else np.zeros((0, 2), dtype=np.int64)
     pairs = pairs[(pairs >= 0).all(axis=1)]
     pairs = pairs[modes[pairs[:, 0]] == modes[pairs[:, 1]]]
-    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(count, count))
-    _, region = connected_components(graph, directed=False)
+    region = _components(pairs, count)
 
     lookup = np.full(int(supervoxel_ids.max()) + 1, -1, dtype=np.int64)
     lookup[supervoxel_ids] = region
     point_region = lookup[point_supervoxel]
     facets, facet_of_point = [], np.full(len(points_world), -1, dtype=np.int64)
+    region_normals = supervoxel_normals[supervoxel_ids]
+    region_weights = supervoxel_sizes[supervoxel_ids].astype(float)
     for number in range(region.max() + 1):
-        members = point_region == number
-        if not members.any():
+        members = np.flatnonzero(point_region == number)
+        if members.size == 0:
             continue
-        weights = supervoxel_sizes[supervoxel_ids[region == number]].astype(float)
-        normal = (supervoxel_normals[supervoxel_ids[region == number]] * weights[:, None]).sum(
-            axis=0
-        )
+        in_region = region == number
+        weights = region_weights[in_region]
+        normal = (region_normals[in_region] * weights[:, None]).sum(axis=0)
         normal /= np.linalg.norm(normal) + 1e-12
         facet_of_point[members] = len(facets)
-        facets.append(
-            Facet(
-                points_world[members].mean(axis=0),
-                normal,
-                points_world[members],
-                float(point_areas[members].sum()),
-            )
-        )
+        points = points_world[members]
+        facets.append(Facet(points.mean(axis=0), normal, points, float(point_areas[members].sum())))
     return tuple(facets), facet_of_point
+
+
+def _components(pairs: np.ndarray, count: int) -> np.ndarray:
+    """(count,) int64 connected component of each node of the undirected graph with edges
+    (E, 2) ``pairs``, numbered as scipy's ``connected_components`` numbers them: in the order
+    of each component's smallest node.
+
+    Min-label hooking with pointer jumping: every node ends up pointing at the smallest node
+    of its component. The graphs here (one object's supervoxels) have a few to a few hundred
+    nodes, where scipy's sparse-matrix set-up costs several times the work itself.
+    """
+    parent = np.arange(count)
+    if len(pairs) == 0:
+        return parent
+    a, b = pairs[:, 0], pairs[:, 1]
+    while True:
+        root_a, root_b = parent[a], parent[b]
+        differ = root_a != root_b
+        if not differ.any():
+            break
+        root_a, root_b = root_a[differ], root_b[differ]
+        low = np.minimum(root_a, root_b)
+        # Each root hooks under the smallest root it is linked to (roots only decrease).
+        np.minimum.at(parent, root_a, low)
+        np.minimum.at(parent, root_b, low)
+        while True:  # point every node at its root
+            grand = parent[parent]
+            if np.array_equal(grand, parent):
+                break
+            parent = grand
+    return np.unique(parent, return_inverse=True)[1]

@@ -75,8 +75,9 @@ def fit_plane_ransac(
     offsets = -np.einsum("ij,ij->i", normals, triples[valid, 0])
     best, best_count = None, -1
     for start in range(0, len(normals), 250):
-        distances = np.abs(sample @ normals[start : start + 250].T + offsets[start : start + 250])
-        counts = (distances < threshold_m).sum(axis=0)
+        distances = sample @ normals[start : start + 250].T
+        distances += offsets[start : start + 250]
+        counts = (np.abs(distances, out=distances) < threshold_m).sum(axis=0)
         index = int(np.argmax(counts))
         if counts[index] > best_count:
             best, best_count = start + index, int(counts[index])
@@ -87,7 +88,7 @@ def fit_plane_ransac(
     # spares two of the three passes over all ~300000 points (3.5 ms).
     refit_points = points[:: max(1, len(points) // 50000)]
     for _ in range(2):  # least-squares refits on the inliers
-        inliers = np.flatnonzero(np.abs(refit_points @ normal + offset) < threshold_m)
+        inliers = np.flatnonzero(_plane_distances(refit_points, normal, offset) < threshold_m)
         if len(inliers) < 3:
             return None
         used = refit_points[inliers[:: max(1, len(inliers) // 20000)]]
@@ -99,10 +100,19 @@ def fit_plane_ransac(
             break  # the refit would leave the allowed orientations: keep the hypothesis
         normal = refit
         offset = -float(normal @ centroid)
-    inliers = np.flatnonzero(np.abs(points @ normal + offset) < threshold_m)
+    inliers = np.flatnonzero(_plane_distances(points, normal, offset) < threshold_m)
     if len(inliers) < min_inliers:
         return None
     return Plane(normal, offset, inliers)
+
+
+def _plane_distances(points: np.ndarray, normal: np.ndarray, offset: float) -> np.ndarray:
+    """Unsigned distances (N,) in metres of (N, 3) points to the plane (unit normal, offset):
+    ``np.abs(points @ normal + offset)``, computed in place (one (N,) array instead of three:
+    this runs over the ~300000 points of a 640x480 frame)."""
+    distances = points @ normal
+    distances += offset
+    return np.abs(distances, out=distances)
 
 
 # --------------------------------------------------------------------------------------------
@@ -166,7 +176,9 @@ def find_support_plane(
     up, offset = plane.normal, plane.offset
     if up[2] < 0:
         up, offset = -up, -offset
-    return KnownPlane("support", up, offset, _subsample(points[plane.inliers], rng))
+    # The same random subset as _subsample(points[plane.inliers], rng), without first
+    # gathering all of the inliers (most of the frame).
+    return KnownPlane("support", up, offset, points[_subsample_indices(plane.inliers, rng)])
 
 
 def static_geometry_mask(
@@ -222,10 +234,18 @@ def static_geometry_mask(
 _FACING_COS = float(np.cos(np.radians(30.0)))
 
 
-def _facing(normals: np.ndarray, direction: np.ndarray) -> np.ndarray:
+def _facing(
+    normals: np.ndarray, direction: np.ndarray, unknown: np.ndarray | None = None
+) -> np.ndarray:
     """(N,) bool: normals (N, 3) within 30 degrees of +-direction, or unknown (zero: pixels
-    seen at a grazing angle, whose neighbours all look like discontinuities)."""
-    return (np.abs(normals @ direction) > _FACING_COS) | ~normals.any(axis=1)
+    seen at a grazing angle, whose neighbours all look like discontinuities).
+
+    ``unknown`` (N,) bool, ``~normals.any(axis=1)``, may be passed when known: that row test
+    costs several times the dot products (the wall search asks it about the same points two
+    dozen times per frame)."""
+    if unknown is None:
+        unknown = ~normals.any(axis=1)
+    return (np.abs(normals @ direction) > _FACING_COS) | unknown
 
 
 def _subsample(points: np.ndarray, rng: np.random.Generator, count: int = 2000) -> np.ndarray:
@@ -233,6 +253,17 @@ def _subsample(points: np.ndarray, rng: np.random.Generator, count: int = 2000) 
     if len(points) <= count:
         return points.copy()
     return points[np.sort(rng.choice(len(points), count, replace=False))]
+
+
+def _subsample_indices(
+    indices: np.ndarray, rng: np.random.Generator, count: int = 2000
+) -> np.ndarray:
+    """At most ``count`` of the (N,) ``indices``: the entries ``_subsample`` would pick from an
+    (N, 3) array (same random draws), so that ``points[_subsample_indices(indices, rng)]``
+    equals ``_subsample(points[indices], rng)``."""
+    if len(indices) <= count:
+        return indices
+    return indices[np.sort(rng.choice(len(indices), count, replace=False))]
 
 
 def find_walls(
@@ -274,33 +305,46 @@ def find_walls(
         # points, so this bounds the cost on close-up frames without changing the decisions.
         context = context[:: -(-len(context) // config.wall_max_points)]
     points, height = points[context], height[context]
-    normals = None if normals is None else normals[context]
+    unknown = normals_up = None
+    if normals is not None:
+        # Per-point quantities that every candidate's tests reuse, computed once. float64:
+        # products with the float64 directions are computed in float64 anyway (same values).
+        normals = np.asarray(normals[context], dtype=np.float64)
+        unknown = ~normals.any(axis=1)
+        normals_up = normals @ up
     above = height < config.wall_max_height_m + 0.05
     pool_mask = above.copy()
     if normals is not None:
         # Vertical surfaces only (pixel normals are noisy: a generous tilt).
-        pool_mask &= np.abs(normals @ up) < np.sin(np.radians(config.wall_normal_tilt_deg))
+        pool_mask &= np.abs(normals_up) < np.sin(np.radians(config.wall_normal_tilt_deg))
     pool = np.flatnonzero(pool_mask)
+    basis = np.linalg.svd(np.eye(3) - np.outer(up, up))[0][:, :2]  # horizontal directions
     margin = config.plane_threshold_m
     candidates: list[dict] = []
     for _ in range(config.wall_max_candidates):
         if len(pool) < config.wall_min_points:
             break
         plane = _fit_vertical_plane(
-            points[pool], None if normals is None else normals[pool], up, config, rng
+            points[pool],
+            None if normals is None else normals[pool],
+            up,
+            config,
+            rng,
+            unknown=None if unknown is None else unknown[pool],
+            basis=basis,
         )
         if plane is None:
             break
         normal, offset = plane
         if normal @ viewpoint + offset < 0:  # face the camera
             normal, offset = -normal, -offset
-        cues = _wall_cues(points, normals, height, normal, offset, up, config)
+        cues = _wall_cues(points, normals, height, normal, offset, up, config, unknown, normals_up)
         if cues is not None:
             candidates.append(cues)
         depth = points[pool] @ normal + offset
         done = (depth < 2 * margin) & (depth > -(config.wall_max_thickness_m + 2 * margin))
         if normals is not None:  # surfaces crossing the slab stay in the pool
-            done &= _facing(normals[pool], normal)
+            done &= _facing(normals[pool], normal, unknown[pool])
         pool = pool[~done]
     return tuple(
         KnownPlane(
@@ -426,13 +470,18 @@ def _fit_vertical_plane(
     up: np.ndarray,
     config: PerceptionConfig,
     rng: np.random.Generator,
+    *,
+    unknown: np.ndarray | None = None,
+    basis: np.ndarray | None = None,
 ) -> tuple[np.ndarray, float] | None:
     """RANSAC plane containing the ``up`` direction (a vertical plane) through (N, 3) points.
 
     Hypotheses come from pairs of points (the plane through both, parallel to ``up``); with
     ``normals``, a point counts as an inlier only when its normal is within 30 degrees of the
     plane's (so that the crossing faces of other objects do not vote). Returns (unit normal,
-    offset) refitted by least squares in the horizontal directions, or None.
+    offset) refitted by least squares in the horizontal directions, or None. ``unknown``
+    (N,) bool (``~normals.any(axis=1)``) and ``basis`` (3, 2) (two horizontal unit directions,
+    from the SVD of the projection orthogonal to ``up``) may be passed when already known.
     """
     threshold = config.plane_threshold_m
     count = len(points)
@@ -448,19 +497,27 @@ def _fit_vertical_plane(
         return None
     normal = normal[valid] / norms[valid, None]
     offset = -np.einsum("ij,ij->i", normal, points[pairs[valid, 0]])
-    distances = np.abs(sample @ normal.T + offset)
-    votes = distances < threshold
+    # (sample, hypotheses) arrays in place: np.abs(sample @ normal.T + offset) < threshold.
+    distances = sample @ normal.T
+    distances += offset
+    votes = np.abs(distances, out=distances) < threshold
     if normals is not None:
         sample_normals = normals[sample_index]
-        unknown = ~sample_normals.any(axis=1)
-        votes &= (np.abs(sample_normals @ normal.T) > _FACING_COS) | unknown[:, None]
+        sample_unknown = ~sample_normals.any(axis=1) if unknown is None else unknown[sample_index]
+        facing = sample_normals @ normal.T
+        facing = np.abs(facing, out=facing) > _FACING_COS
+        facing |= sample_unknown[:, None]
+        votes &= facing
     best = int(np.argmax(votes.sum(axis=0)))
     best_normal, best_offset = normal[best], float(offset[best])
-    basis = np.linalg.svd(np.eye(3) - np.outer(up, up))[0][:, :2]  # horizontal directions
+    if basis is None:
+        basis = np.linalg.svd(np.eye(3) - np.outer(up, up))[0][:, :2]  # horizontal directions
+    if normals is not None and unknown is None:
+        unknown = ~normals.any(axis=1)
     for _ in range(2):
         inliers = np.abs(points @ best_normal + best_offset) < threshold
         if normals is not None:
-            inliers &= _facing(normals, best_normal)
+            inliers &= _facing(normals, best_normal, unknown)
         if inliers.sum() < config.wall_min_points:
             return None
         flat = points[np.flatnonzero(inliers)[:: max(1, int(inliers.sum()) // 5000)]] @ basis
@@ -482,11 +539,14 @@ def _wall_cues(
     offset: float,
     up: np.ndarray,
     config: PerceptionConfig,
+    unknown: np.ndarray | None = None,
+    normals_up: np.ndarray | None = None,
 ) -> dict | None:
     """Measurements of the vertical plane (normal, offset) used by ``_select_walls``.
 
     ``pts`` (N, 3), ``normals`` (N, 3) or None and ``h`` (N,): the points above the support and
-    their heights above it. Returns the plane, its run (along-axis, range and length, m), top and
+    their heights above it; ``unknown`` (N,) bool (``~normals.any(axis=1)``) and ``normals_up``
+    (N,) (``normals @ up``) may be passed when already known. Returns the plane, its run (along-axis, range and length, m), top and
     bottom (m above the support), thickness (m), capped and outside fractions and the run's face
     points; None when the plane has too few inliers or cannot be a wall (a run shorter than
     ``wall_partner_min_length_m`` or a top outside the wall heights, which ``_select_walls``
@@ -498,7 +558,9 @@ def _wall_cues(
     s = pts @ along
     on_plane = (np.abs(depth) < threshold) & (h < config.wall_max_height_m + threshold)
     if normals is not None:  # surfaces crossing the plane are not part of it
-        on_plane &= _facing(normals, normal)
+        if normals_up is None:
+            normals_up = normals @ up
+        on_plane &= _facing(normals, normal, unknown)
     if on_plane.sum() < config.wall_min_points:
         return None
     s_in, h_in = s[on_plane], h[on_plane]
@@ -536,7 +598,7 @@ def _wall_cues(
             & (depth > -(config.wall_max_thickness_m + threshold))
             & (s >= s_lo)
             & (s <= s_hi)
-            & (normals @ up > np.cos(np.radians(30.0)))
+            & (normals_up > np.cos(np.radians(30.0)))
             & (h > config.wall_min_height_m - threshold)
         )
         rim_bins = np.unique(((s[rim] - s_lo) / 0.02).astype(np.int64))
@@ -562,7 +624,7 @@ def _wall_cues(
         & (s <= s_hi)
     )
     if normals is not None:
-        behind &= normals @ up > np.cos(np.radians(30.0))
+        behind &= normals_up > np.cos(np.radians(30.0))
     cap_bin = 0.02
     n_bins = max(1, int(np.ceil((s_hi - s_lo) / cap_bin)))
     capped_counts = np.bincount(

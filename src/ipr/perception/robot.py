@@ -46,12 +46,12 @@ def robot_pixels(
     centres += [p.end_m for p in pushes if p.after_frame == frame.index]
     if not centres:
         return mask
-    valid = np.flatnonzero(frame.depth_m.reshape(-1) > 0)
-    if valid.size == 0:
+    valid = frame.depth_m.reshape(-1) > 0
+    if not valid.any():
         return mask
     if points_world is None:
         points_world = frame.points_world()
-    points = points_world.reshape(-1, 3)[valid]
+    points = points_world.reshape(-1, 3)
     axis = np.asarray(pusher.axis, dtype=np.float64)
     axis = axis / np.linalg.norm(axis)
     half = max(pusher.length_m / 2.0 - pusher.radius_m, 0.0)  # centre to the caps' centres
@@ -61,13 +61,19 @@ def robot_pixels(
         centre = np.asarray(centre, dtype=np.float64)
         a, b = centre - half * axis, centre + half * axis
         # Cheap bounding-box test first: only points near the capsule need the exact distance.
+        # One coordinate at a time, on the strided column of the whole image first and then
+        # only on the survivors: no (N, 3) gather or temporaries of the ~300000 valid points.
         low, high = np.minimum(a, b) - reach, np.maximum(a, b) + reach
-        candidates = np.flatnonzero(np.all((points >= low) & (points <= high), axis=1))
+        x = points[:, 0]
+        candidates = np.flatnonzero(valid & (x >= low[0]) & (x <= high[0]))
+        for coordinate in (1, 2):
+            values = points[candidates, coordinate]
+            candidates = candidates[(values >= low[coordinate]) & (values <= high[coordinate])]
         if candidates.size == 0:
             continue
         offsets = points[candidates] - a
         t = np.clip(offsets @ axis, 0.0, 2.0 * half)
         distance = np.linalg.norm(offsets - t[:, None] * axis, axis=1)
         inside[candidates[distance <= reach]] = True
-    mask.reshape(-1)[valid[inside]] = True
+    mask.reshape(-1)[inside] = True
     return mask

@@ -88,45 +88,70 @@ def organised_normals_at(
     depth = np.asarray(depth_m, dtype=np.float32)
     height, width = depth.shape
     pixels = np.asarray(pixels, dtype=np.int64)
-    flat = depth.reshape(-1)
-    rows, cols = pixels // width, pixels % width
-    z = flat[pixels]
+    r = int(config.normal_radius_px)
+    # A border of r zero-depth pixels makes every neighbour lookup an in-bounds read: outside
+    # the image reads as "no depth", which is what the bounds test gave (one gather per
+    # neighbour instead of bounds masks, clamped indices and selects).
+    padded = np.zeros((height + 2 * r, width + 2 * r), dtype=np.float32)
+    padded[r : r + height, r : r + width] = depth
+    padded_width = width + 2 * r
+    flat = padded.reshape(-1)
+    rows, cols = np.divmod(pixels, width)
+    at = (rows + r) * padded_width + (cols + r)  # the pixels' flat indices in ``padded``
+    z = flat[at]
     fx, fy, cx, cy = (
         np.float32(K[0, 0]),
         np.float32(K[1, 1]),
         np.float32(K[0, 2]),
         np.float32(K[1, 2]),
     )
-
-    def backproject_at(r: np.ndarray, c: np.ndarray, zz: np.ndarray) -> np.ndarray:
-        return np.stack([(c - cx) / fx * zz, (r - cy) / fy * zz, zz], axis=1)
-
-    centre = backproject_at(rows.astype(np.float32), cols.astype(np.float32), z)
-    r = int(config.normal_radius_px)
+    # Back-projection x = (c - cx) / fx * z, y = (r - cy) / fy * z, in float32 as before; the
+    # per-pixel factors are shared by the pixel and its neighbours in the same row or column.
+    rows_f, cols_f = rows.astype(np.float32), cols.astype(np.float32)
+    x_factor = (cols_f - cx) / fx
+    y_factor = (rows_f - cy) / fy
+    centre_x, centre_y = x_factor * z, y_factor * z
     limit = np.float32(config.normal_max_jump_m) + np.float32(config.normal_max_jump_ratio * r) * z
 
-    def neighbour(dv: int, du: int) -> tuple[np.ndarray, np.ndarray]:
-        """Neighbour points (P, 3) (the pixel itself where unusable) and usability (P,)."""
-        nr, nc = rows + dv, cols + du
-        inside = (nr >= 0) & (nr < height) & (nc >= 0) & (nc < width)
-        index = np.where(inside, nr * width + nc, 0)
-        nz = np.where(inside, flat[index], 0.0).astype(np.float32)
-        ok = inside & (nz > 0) & (np.abs(nz - z) <= limit)
-        points = backproject_at(nr.astype(np.float32), nc.astype(np.float32), nz)
-        return np.where(ok[:, None], points, centre), ok
+    def neighbour_depth(shift: int) -> tuple[np.ndarray, np.ndarray]:
+        """Depth (P,) float32 of the neighbour ``shift`` flat padded pixels away (the pixel's
+        own where unusable) and its usability (P,) bool."""
+        nz = flat[at + shift]
+        ok = (nz > 0) & (np.abs(nz - z) <= limit)
+        return np.where(ok, nz, z), ok
 
-    right, ok_right = neighbour(0, r)
-    left, ok_left = neighbour(0, -r)
-    down, ok_down = neighbour(r, 0)
-    up, ok_up = neighbour(-r, 0)
-    normal = np.cross(down - up, right - left)
-    norm = np.linalg.norm(normal, axis=1)
+    # Horizontal neighbours share the pixel's row (its y factor), vertical ones its column.
+    z_right, ok_right = neighbour_depth(r)
+    z_left, ok_left = neighbour_depth(-r)
+    z_down, ok_down = neighbour_depth(r * padded_width)
+    z_up, ok_up = neighbour_depth(-r * padded_width)
+    x_right = np.where(ok_right, (cols_f + np.float32(r) - cx) / fx * z_right, centre_x)
+    x_left = np.where(ok_left, (cols_f - np.float32(r) - cx) / fx * z_left, centre_x)
+    y_down = np.where(ok_down, (rows_f + np.float32(r) - cy) / fy * z_down, centre_y)
+    y_up = np.where(ok_up, (rows_f - np.float32(r) - cy) / fy * z_up, centre_y)
+    # a = down - up, b = right - left; normal = a x b (the component formulas of np.cross).
+    a0 = x_factor * z_down - x_factor * z_up
+    a1 = y_down - y_up
+    a2 = z_down - z_up
+    b0 = x_right - x_left
+    b1 = y_factor * z_right - y_factor * z_left
+    b2 = z_right - z_left
+    n0, n1, n2 = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+    # |n| as np.linalg.norm(axis=1) computes it in float32 (squares summed in axis order, same
+    # roundings), without its slow strided reduction over (P, 3).
+    squared = n0 * n0
+    squared += n1 * n1
+    squared += n2 * n2
+    norm = np.sqrt(squared)
+    normal = np.stack([n0, n1, n2], axis=1)
     good = (z > 0) & (ok_right | ok_left) & (ok_down | ok_up) & (norm > 1e-12)
-    normal = np.where(good[:, None], normal / np.maximum(norm, 1e-12)[:, None], 0.0)
+    normal /= np.maximum(norm, 1e-12)[:, None]
+    normal[~good] = 0.0
     # Towards the camera (the camera centre is the origin of the camera frame).
+    centre = np.stack([centre_x, centre_y, z], axis=1)
     flip = np.einsum("pc,pc->p", normal, centre) > 0
     normal[flip] *= -1.0
-    return normal.astype(np.float32)
+    return normal
 
 
 def compute_supervoxels(
@@ -159,9 +184,12 @@ def compute_supervoxels(
         points_world = frame.points_world()
     all_points = np.asarray(points_world.reshape(-1, 3)[pixels], dtype=np.float64)
     voxel = config.voxel_size_m
-    all_cells = np.floor(all_points / voxel).astype(np.int64)
-    all_cells -= all_cells.min(axis=0) - 1  # >= 1 so that neighbour offsets never wrap
-    dims = all_cells.max(axis=0) + 2
+    scaled = all_points / voxel
+    all_cells = np.floor(scaled, out=scaled).astype(np.int64)
+    # Column by column: numpy's axis-0 reductions of an (N, 3) array are ten times slower.
+    low = np.array([all_cells[:, axis].min() for axis in range(3)])
+    all_cells -= low - 1  # >= 1 so that neighbour offsets never wrap
+    dims = np.array([all_cells[:, axis].max() for axis in range(3)]) + 2
     all_keys = (all_cells[:, 0] * dims[1] + all_cells[:, 1]) * dims[2] + all_cells[:, 2]
     # Close-up frames have tens of pixels per voxel: the statistics come from an even subset
     # of at most supervoxel_max_points pixels, and every pixel then joins its voxel's label.
@@ -174,10 +202,12 @@ def compute_supervoxels(
     else:
         camera_normals = normals_camera.reshape(-1, 3)[pixels[sample]]
     pixel_normals = camera_normals.astype(np.float64) @ rotation.T
-    colours = frame.rgb.reshape(-1, 3)[pixels[sample]].astype(np.float64) / 255.0
+    colours = frame.rgb.reshape(-1, 3)[pixels[sample]].astype(np.float64)
+    colours /= 255.0
 
     # 1. Voxels.
-    voxel_keys, voxel_of_point = np.unique(keys, return_inverse=True)
+    voxels = _VoxelIndex(keys, int(np.prod(dims)))
+    voxel_keys, voxel_of_point = voxels.keys, voxels.of_keys
     n_voxels = len(voxel_keys)
     voxel_count = np.bincount(voxel_of_point, minlength=n_voxels).astype(np.float64)
     voxel_centre = _group_mean(voxel_of_point, points, n_voxels, voxel_count)
@@ -188,10 +218,8 @@ def compute_supervoxels(
     strides = np.array([dims[1] * dims[2], dims[2], 1], dtype=np.int64)
     edge_a, edge_b = [], []
     for offset in _FORWARD_OFFSETS:
-        target = voxel_keys + int(offset @ strides)
-        found = np.searchsorted(voxel_keys, target)
-        found = np.minimum(found, n_voxels - 1)
-        hit = voxel_keys[found] == target
+        found = voxels.find(voxel_keys + int(offset @ strides))
+        hit = found >= 0
         edge_a.append(np.flatnonzero(hit))
         edge_b.append(found[hit])
     voxel_edges = np.stack([np.concatenate(edge_a), np.concatenate(edge_b)], axis=1)
@@ -219,8 +247,16 @@ def compute_supervoxels(
         dtype=np.int64,
     )
     wanted = seed_keys_of_voxel[:, None] + (neighbour_offsets @ seed_strides)[None, :]
-    found = np.minimum(np.searchsorted(seed_keys, wanted), n_seeds - 1)
-    candidates = np.where(seed_keys[found] == wanted, found, -1)  # (V, 27)
+    n_seed_cells = int(np.prod(seed_dims))
+    if n_seed_cells <= _DENSE_CELLS_MAX:
+        # A dense cell -> seed table (the seed grid is ~50 times coarser than the voxel grid):
+        # one gather instead of a binary search for each of the V x 27 keys.
+        seed_table = np.full(n_seed_cells, -1, dtype=np.int64)
+        seed_table[seed_keys] = np.arange(n_seeds)
+        candidates = seed_table[wanted]  # (V, 27)
+    else:
+        found = np.minimum(np.searchsorted(seed_keys, wanted), n_seeds - 1)
+        candidates = np.where(seed_keys[found] == wanted, found, -1)  # (V, 27)
     has = candidates >= 0
     safe = np.where(has, candidates, 0)
 
@@ -230,22 +266,36 @@ def compute_supervoxels(
     seed_colour = voxel_colour[seed_voxels].copy()
     assignment = np.zeros(n_voxels, dtype=np.int64)
     spatial = 1.0 / seed_size**2
+    missing = ~has
+    # (V, 27) work arrays reused by every round: each is megabytes, and fresh temporaries of
+    # that size cost page faults on every allocation (about half of this loop's time).
+    distance = np.empty(safe.shape)
+    gathered = np.empty(safe.shape)
+    term = np.empty(safe.shape)
     for _ in range(config.supervoxel_iterations):
         # Summed one coordinate at a time from (V, 27) gathers of seed columns: 3.5 times
-        # faster than einsum over (V, 27, 3) gathers (small inner dimensions), same arithmetic.
-        distance = np.full(safe.shape, config.supervoxel_normal_weight)
+        # faster than einsum over (V, 27, 3) gathers (small inner dimensions). In place, with
+        # the arithmetic (and so the roundings) of
+        # w_n + sum over axes of (spatial * offset * offset - (w_n * n_voxel) * n_seed).
+        distance.fill(config.supervoxel_normal_weight)
         for axis in range(3):
-            offset = voxel_centre[:, axis, None] - seed_centre[:, axis][safe]
-            distance += spatial * offset * offset
-            distance -= (
-                config.supervoxel_normal_weight
-                * voxel_normal[:, axis, None]
-                * seed_normal[:, axis][safe]
+            np.take(seed_centre[:, axis], safe, out=gathered)
+            offset = np.subtract(voxel_centre[:, axis, None], gathered, out=gathered)
+            np.multiply(offset, spatial, out=term)
+            term *= offset
+            distance += term
+            np.take(seed_normal[:, axis], safe, out=gathered)
+            np.multiply(
+                config.supervoxel_normal_weight * voxel_normal[:, axis, None], gathered, out=term
             )
+            distance -= term
             if config.supervoxel_colour_weight > 0:
-                colour_offset = voxel_colour[:, axis, None] - seed_colour[:, axis][safe]
-                distance += config.supervoxel_colour_weight * colour_offset * colour_offset
-        distance[~has] = np.inf
+                np.take(seed_colour[:, axis], safe, out=gathered)
+                offset = np.subtract(voxel_colour[:, axis, None], gathered, out=gathered)
+                np.multiply(offset, config.supervoxel_colour_weight, out=term)
+                term *= offset
+                distance += term
+        distance[missing] = np.inf
         assignment = safe[np.arange(n_voxels), np.argmin(distance, axis=1)]
         weight = voxel_count
         totals = np.bincount(assignment, weights=weight, minlength=n_seeds)
@@ -293,14 +343,17 @@ def compute_supervoxels(
     if step == 1:
         supervoxel_of_pixel = supervoxel_of_point
     else:
-        position = np.minimum(np.searchsorted(voxel_keys, all_keys), n_voxels - 1)
-        found = voxel_keys[position] == all_keys
-        supervoxel_of_pixel = np.where(found, supervoxel_of_voxel[position], -1)
+        position = voxels.find(all_keys)
+        supervoxel_of_pixel = np.where(position >= 0, supervoxel_of_voxel[position], -1)
     sizes = np.bincount(supervoxel_of_pixel[supervoxel_of_pixel >= 0], minlength=n_supervoxels)
     labels_image.reshape(-1)[pixels] = supervoxel_of_pixel
-    pair = supervoxel_of_voxel[voxel_edges]
-    pair = pair[pair[:, 0] != pair[:, 1]]
-    pair = np.unique(np.sort(pair, axis=1), axis=0)
+    first, second = supervoxel_of_voxel[voxel_edges[:, 0]], supervoxel_of_voxel[voxel_edges[:, 1]]
+    between = first != second
+    first, second = first[between], second[between]
+    # Distinct (low, high) pairs in lexicographic order, via one int64 key per pair: a 1-D
+    # unique is several times faster than np.unique(axis=0) on rows, same result.
+    key = np.unique(np.minimum(first, second) * n_supervoxels + np.maximum(first, second))
+    pair = np.stack([key // n_supervoxels, key % n_supervoxels], axis=1)
     return Supervoxels(
         labels=labels_image,
         centres=centres,
@@ -309,6 +362,45 @@ def compute_supervoxels(
         sizes=sizes,
         adjacency=pair.astype(np.int64),
     )
+
+
+#: Above this many cells in the voxel grid's bounding box, voxels are indexed by sorting their
+#: keys instead of through a dense cell table (16 MB of int32 at this size; the real 640x480
+#: frames need 0.1-0.7 million cells).
+_DENSE_CELLS_MAX = 4_000_000
+
+
+class _VoxelIndex:
+    """The distinct voxel keys among some points, and lookups of keys among them.
+
+    ``keys`` (V,) int64: the sorted distinct keys of the (N,) int64 point keys (each in
+    [0, ``n_cells``)); ``of_keys`` (N,) int64: each point's voxel (position in ``keys``), as
+    ``np.unique(point_keys, return_inverse=True)`` gives them. ``find(targets)``: the voxel of
+    each key in [0, ``n_cells``), -1 where no point has that key.
+
+    When the grid's bounding box is small enough (``_DENSE_CELLS_MAX``), a dense table from
+    cell to voxel replaces the sort and the binary searches: lookups become one gather, about
+    five times faster on the ~100000 kept pixels and ~13 x 20000 neighbour keys of a frame.
+    """
+
+    def __init__(self, point_keys: np.ndarray, n_cells: int) -> None:
+        if n_cells > _DENSE_CELLS_MAX:
+            self.keys, self.of_keys = np.unique(point_keys, return_inverse=True)
+            self._table = None
+            return
+        occupied = np.zeros(n_cells, dtype=bool)
+        occupied[point_keys] = True
+        self.keys = np.flatnonzero(occupied)
+        self._table = np.full(n_cells, -1, dtype=np.int32)
+        self._table[self.keys] = np.arange(len(self.keys), dtype=np.int32)
+        self.of_keys = self._table[point_keys].astype(np.int64)
+
+    def find(self, targets: np.ndarray) -> np.ndarray:
+        """(T,) int64 voxel of each of the (T,) int64 keys ``targets``, -1 where none."""
+        if self._table is not None:
+            return self._table[targets].astype(np.int64)
+        found = np.minimum(np.searchsorted(self.keys, targets), len(self.keys) - 1)
+        return np.where(self.keys[found] == targets, found, -1)
 
 
 def _empty(labels: np.ndarray) -> Supervoxels:
@@ -389,11 +481,13 @@ def _plane_normals(
     of the covariance); groups with fewer than 6 points, or whose two smallest spreads are
     alike (a line or a blob: no plane), use ``fallback`` when it is known."""
     count = len(centres)
-    local = points - centres[groups]
+    # Column by column (contiguous (N,) arrays rather than strided columns of (N, 3)): the
+    # same differences and products as points - centres[groups].
+    local = [points[:, axis] - centres[groups, axis] for axis in range(3)]
     covariance = np.empty((count, 3, 3))
     for i in range(3):
         for j in range(i, 3):
-            value = np.bincount(groups, weights=local[:, i] * local[:, j], minlength=count)
+            value = np.bincount(groups, weights=local[i] * local[j], minlength=count)
             covariance[:, i, j] = value
             covariance[:, j, i] = value
     covariance /= np.maximum(sizes, 1)[:, None, None]
@@ -426,16 +520,21 @@ def _dominant_faces(
     gate = np.cos(np.radians(config.dominant_face_deg))
     normal = mean_normals
     inlier = np.ones(len(groups), dtype=bool)
+    inlier_groups = groups
     for _ in range(2):
         inlier = np.einsum("pc,pc->p", pixel_normals, normal[groups]) > gate
-        summed = _group_sum(groups[inlier], pixel_normals[inlier], count)
+        inlier_groups = groups[inlier]
+        summed = _group_sum(inlier_groups, pixel_normals[inlier], count)
         normal = np.where(
             (np.linalg.norm(summed, axis=1) > 1e-12)[:, None], _normalise(summed), normal
         )
-    inlier_count = np.bincount(groups[inlier], minlength=count)
-    inlier &= (inlier_count >= 6)[groups]
-    inlier |= (inlier_count < 6)[groups]  # groups without a clear face use all their pixels
-    used_sizes = np.bincount(groups[inlier], minlength=count)
-    centres = _group_mean(groups[inlier], points[inlier], count, used_sizes)
-    normals = _plane_normals(groups[inlier], points[inlier], centres, used_sizes, normal)
+    inlier_count = np.bincount(inlier_groups, minlength=count)
+    clear = inlier_count >= 6
+    # Groups without a clear face use all their pixels.
+    inlier = np.where(clear[groups], inlier, True)
+    # Each selection gathered once (tens of thousands of pixels), shared by the fits below.
+    used_groups, used_points = groups[inlier], points[inlier]
+    used_sizes = np.bincount(used_groups, minlength=count)
+    centres = _group_mean(used_groups, used_points, count, used_sizes)
+    normals = _plane_normals(used_groups, used_points, centres, used_sizes, normal)
     return centres, normals

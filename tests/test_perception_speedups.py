@@ -1,0 +1,211 @@
+"""The faster perception routines give exactly what the straightforward versions gave.
+
+Each reference below is the earlier implementation (kept here only to pin the results): the
+speed-ups reorder work, reuse buffers and replace sorts and sparse graphs by tables and numpy
+loops, but must not change a single bit of the output.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from ipr.camera import look_at
+from ipr.perception import supervoxels as supervoxels_module
+from ipr.perception.config import PerceptionConfig
+from ipr.perception.facets import _components, mean_shift_directions, pixel_areas
+from ipr.perception.robot import robot_pixels
+from ipr.perception.supervoxels import _VoxelIndex, compute_supervoxels, organised_normals_at
+from ipr.scene import Frame, Push, Pusher
+
+K = np.array([[300.0, 0.0, 79.5], [0.0, 300.0, 59.5], [0.0, 0.0, 1.0]])
+
+
+def _frame(seed: int = 0, shape: tuple[int, int] = (120, 160)) -> Frame:
+    """A noisy table (z = 0) with two boxes, seen obliquely; a few dropped depth readings."""
+    height, width = shape
+    world_from_camera = look_at(np.array([0.35, -0.45, 0.55]), np.zeros(3))
+    u, v = np.meshgrid(np.arange(width), np.arange(height))
+    rays = np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones(u.shape)], -1)
+    rays = rays.reshape(-1, 3) @ world_from_camera[:3, :3].T
+    origin = world_from_camera[:3, 3]
+    depth = -origin[2] / rays[:, 2]
+    for centre, half in (((0.0, 0.0, 0.04), (0.05, 0.03, 0.04)), ((0.1, 0.05, 0.03), (0.03,) * 3)):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t1 = (np.subtract(centre, half) - origin) / rays
+            t2 = (np.add(centre, half) - origin) / rays
+        near = np.nanmax(np.minimum(t1, t2), axis=1)
+        far = np.nanmin(np.maximum(t1, t2), axis=1)
+        hit = (near <= far) & (near > 0) & (near < depth)
+        depth = np.where(hit, near, depth)
+    rng = np.random.default_rng(seed)
+    depth = depth + rng.normal(0.0, 0.001, depth.shape)
+    depth[rng.random(depth.shape) < 0.02] = 0.0
+    depth = np.where(depth > 0, depth, 0.0).reshape(height, width).astype(np.float32)
+    rgb = rng.integers(0, 255, (height, width, 3), dtype=np.uint8)
+    return Frame(0, rgb, depth, K, world_from_camera)
+
+
+def _reference_normals(depth_m, K, pixels, config):
+    """The earlier ``organised_normals_at`` (bounds masks and (P, 3) selects)."""
+    depth = np.asarray(depth_m, dtype=np.float32)
+    height, width = depth.shape
+    pixels = np.asarray(pixels, dtype=np.int64)
+    flat = depth.reshape(-1)
+    rows, cols = pixels // width, pixels % width
+    z = flat[pixels]
+    fx, fy, cx, cy = (
+        np.float32(K[0, 0]),
+        np.float32(K[1, 1]),
+        np.float32(K[0, 2]),
+        np.float32(K[1, 2]),
+    )
+
+    def backproject_at(r, c, zz):
+        return np.stack([(c - cx) / fx * zz, (r - cy) / fy * zz, zz], axis=1)
+
+    centre = backproject_at(rows.astype(np.float32), cols.astype(np.float32), z)
+    r = int(config.normal_radius_px)
+    limit = np.float32(config.normal_max_jump_m) + np.float32(config.normal_max_jump_ratio * r) * z
+
+    def neighbour(dv, du):
+        nr, nc = rows + dv, cols + du
+        inside = (nr >= 0) & (nr < height) & (nc >= 0) & (nc < width)
+        index = np.where(inside, nr * width + nc, 0)
+        nz = np.where(inside, flat[index], 0.0).astype(np.float32)
+        ok = inside & (nz > 0) & (np.abs(nz - z) <= limit)
+        points = backproject_at(nr.astype(np.float32), nc.astype(np.float32), nz)
+        return np.where(ok[:, None], points, centre), ok
+
+    right, ok_right = neighbour(0, r)
+    left, ok_left = neighbour(0, -r)
+    down, ok_down = neighbour(r, 0)
+    up, ok_up = neighbour(-r, 0)
+    normal = np.cross(down - up, right - left)
+    norm = np.linalg.norm(normal, axis=1)
+    good = (z > 0) & (ok_right | ok_left) & (ok_down | ok_up) & (norm > 1e-12)
+    normal = np.where(good[:, None], normal / np.maximum(norm, 1e-12)[:, None], 0.0)
+    flip = np.einsum("pc,pc->p", normal, centre) > 0
+    normal[flip] *= -1.0
+    return normal.astype(np.float32)
+
+
+def test_organised_normals_are_bit_identical_to_the_reference():
+    config = PerceptionConfig()
+    for seed in range(3):
+        frame = _frame(seed)
+        pixels = np.arange(frame.depth_m.size)  # every pixel: borders, holes and edges too
+        fast = organised_normals_at(frame.depth_m, frame.K, pixels, config)
+        reference = _reference_normals(frame.depth_m, frame.K, pixels, config)
+        assert fast.dtype == np.float32
+        np.testing.assert_array_equal(fast, reference)
+
+
+def test_components_number_like_scipy():
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        count = int(rng.integers(1, 60))
+        pairs = rng.integers(0, count, size=(int(rng.integers(0, 2 * count)), 2))
+        graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), (count, count))
+        _, expected = connected_components(graph, directed=False)
+        np.testing.assert_array_equal(_components(pairs, count), expected)
+
+
+def _reference_mean_shift(normals, weights, bandwidth, iterations=30):
+    """The earlier ``mean_shift_directions``."""
+    modes = normals.copy()
+    for _ in range(iterations):
+        squared = np.maximum(2.0 - 2.0 * (modes @ normals.T), 0.0)
+        kernel = np.exp(-squared / (2 * bandwidth**2))
+        kernel *= weights[None, :]
+        shifted = kernel @ normals
+        shifted /= np.linalg.norm(shifted, axis=1, keepdims=True) + 1e-12
+        converged = np.abs(shifted - modes).max() < 1e-5
+        modes = shifted
+        if converged:
+            break
+    order = np.argsort(-weights, kind="stable")
+    label = np.full(len(normals), -1, dtype=np.int64)
+    count = 0
+    for index in order:
+        if label[index] >= 0:
+            continue
+        near = (np.linalg.norm(modes - modes[index], axis=1) < bandwidth / 2) & (label < 0)
+        label[near] = count
+        label[index] = count
+        count += 1
+    return label
+
+
+def test_mean_shift_is_bit_identical_to_the_reference():
+    rng = np.random.default_rng(1)
+    for _ in range(50):
+        count = int(rng.integers(1, 80))
+        axes = np.eye(3)[rng.integers(0, 3, count)] + rng.normal(0.0, 0.15, (count, 3))
+        normals = axes / np.linalg.norm(axes, axis=1, keepdims=True)
+        weights = rng.integers(1, 200, count).astype(float)
+        np.testing.assert_array_equal(
+            mean_shift_directions(normals, weights, 0.35),
+            _reference_mean_shift(normals, weights, 0.35),
+        )
+
+
+def test_pixel_areas_are_bit_identical_to_the_reference():
+    rng = np.random.default_rng(2)
+    points = rng.normal(0.0, 0.2, (5000, 3)) + [0.0, 0.0, 0.8]
+    normals = rng.normal(size=(5000, 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    rays = points / np.linalg.norm(points, axis=1, keepdims=True)
+    tilt = np.abs(rays[:, 2]) / np.maximum(np.abs(np.einsum("ij,ij->i", rays, normals)), 0.25)
+    expected = points[:, 2] ** 2 / (K[0, 0] * K[1, 1]) * tilt
+    np.testing.assert_array_equal(pixel_areas(points, normals, K), expected)
+
+
+@pytest.mark.parametrize("n_cells", [50, 10**9])  # the dense table and the sorted keys
+def test_voxel_index_matches_unique_and_lookup(n_cells):
+    rng = np.random.default_rng(3)
+    keys = rng.integers(0, 50, 400)
+    index = _VoxelIndex(keys, n_cells)
+    expected_keys, expected_inverse = np.unique(keys, return_inverse=True)
+    np.testing.assert_array_equal(index.keys, expected_keys)
+    np.testing.assert_array_equal(index.of_keys, expected_inverse)
+    assert index.of_keys.dtype == np.int64
+    found = index.find(np.arange(50))
+    expected = np.full(50, -1)
+    expected[expected_keys] = np.arange(len(expected_keys))
+    np.testing.assert_array_equal(found, expected)
+
+
+def test_supervoxels_are_the_same_with_and_without_dense_tables(monkeypatch):
+    frame = _frame(4)
+    points = frame.points_world()
+    keep = (points[..., 2] > 0.01) & (frame.depth_m > 0)
+    config = PerceptionConfig(supervoxel_max_points=3000)  # a subsample: the pixel lookup too
+    dense = compute_supervoxels(frame, keep, config, points_world=points)
+    monkeypatch.setattr(supervoxels_module, "_DENSE_CELLS_MAX", 0)
+    sorted_keys = compute_supervoxels(frame, keep, config, points_world=points)
+    assert dense.count > 5
+    for name in ("labels", "centres", "normals", "colours", "sizes", "adjacency"):
+        np.testing.assert_array_equal(getattr(dense, name), getattr(sorted_keys, name))
+
+
+def test_robot_pixels_are_the_points_inside_the_capsule():
+    frame = _frame(5)
+    pusher = Pusher(radius_m=0.01, length_m=0.1, axis=np.array([0.0, 0.0, 1.0]))
+    # Where the pusher stands before the push that follows frame 0: on the front box's face.
+    push = Push(0, 1, np.array([0.0, -0.035, 0.05]), np.array([0.0, 1.0, 0.0]), 0.05, 0.1)
+    config = PerceptionConfig()
+    mask = robot_pixels(frame, [push], pusher, config)
+    # Reference: the exact capsule distance of every valid pixel.
+    points = frame.points_world().reshape(-1, 3)
+    half = pusher.length_m / 2.0 - pusher.radius_m
+    a = np.array(push.start_m) - [0.0, 0.0, half]
+    t = np.clip((points - a) @ [0.0, 0.0, 1.0], 0.0, 2.0 * half)
+    distance = np.linalg.norm(points - a - t[:, None] * [0.0, 0.0, 1.0], axis=1)
+    expected = (distance <= pusher.radius_m + config.pusher_margin_m) & (
+        frame.depth_m.reshape(-1) > 0
+    )
+    assert expected.any()
+    np.testing.assert_array_equal(mask.reshape(-1), expected)
