@@ -125,7 +125,7 @@ def _cmd_infer(args: argparse.Namespace) -> int:
         overwrite=args.overwrite,
     )
     result = load_result(out, load_meshes=False)
-    shown = ("segmentation", "hypotheses", "inference", "total")
+    shown = ("segmentation", "fusion", "hypotheses", "inference", "total")
     timing = ", ".join(
         f"{key} {value:.2f} s" for key, value in result.timing_s.items() if key in shown
     )

@@ -1,7 +1,8 @@
 """The configuration of a whole run: one typed object whose sections are the stages' own configs.
 
 Every field has a documented default in its stage's module; ``Config()`` is what ``ipr infer``
-uses. Sections: ``perception`` (``ipr.perception.config``), ``collision_checker`` (hypotheses,
+uses. Sections: ``perception`` (``ipr.perception.config``), ``fusion`` (later views registered
+into frame 0 for the methods that use the pushes, ``ipr.fusion``), ``collision_checker`` (hypotheses,
 constraints and the Collision Checker, ``ipr.collision_checker``), ``inference`` (physics,
 likelihood and tree sampling, ``ipr.inference``).
 """
@@ -11,6 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from ipr.collision_checker import CollisionCheckerConfig
+from ipr.fusion import FusionConfig
 from ipr.inference import InferenceConfig
 from ipr.perception.config import PerceptionConfig
 
@@ -20,5 +22,6 @@ class Config:
     """All parameters of a run, with documented defaults in each section."""
 
     perception: PerceptionConfig = field(default_factory=PerceptionConfig)
+    fusion: FusionConfig = field(default_factory=FusionConfig)
     collision_checker: CollisionCheckerConfig = field(default_factory=CollisionCheckerConfig)
     inference: InferenceConfig = field(default_factory=InferenceConfig)

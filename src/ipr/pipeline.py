@@ -4,10 +4,14 @@
 share: perception of every frame, hypotheses for the objects of frame 0 (the initial scene the
 result describes), then the chosen inference method: the Collision Checker, or one of the
 physics-based methods of ``ipr.inference`` (default ``ipr+action+uniform``, the full method).
+The methods that use the pushes' evidence (``+action`` and ``exhaustive``) also register what
+the later frames saw of each object into frame 0 (``ipr.fusion``) before the hypotheses; the
+others see frame 0 only, as their likelihood does.
 
 Time budget: ``time_budget_s`` covers the whole run; hypotheses get their share of what is left
-after perception and inference the rest. Without one, hypotheses run to their own timeouts and
-inference gets ``config.inference.budget_per_object_s`` per object.
+after perception and fusion, and inference the rest. Without one, hypotheses run to their own
+timeouts and inference gets ``config.inference.budget_per_object_s`` per object, less what
+fusion took per object (at most half of it).
 """
 
 from __future__ import annotations
@@ -59,7 +63,8 @@ def run_pipeline(
     calling this must guard its entry point with ``if __name__ == "__main__":``.
     """
     from ipr.collision_checker import collision_checker, prepare_hypotheses
-    from ipr.inference import infer_shapes
+    from ipr.fusion import fuse_views
+    from ipr.inference import VARIANTS, infer_shapes
     from ipr.likelihood import observed_frames
     from ipr.perception import perceive_scene
 
@@ -83,9 +88,30 @@ def run_pipeline(
     objects = perception.objects[0]
     if not objects:
         log.warning("%s: no object found in frame 0; the result is empty", scene.path)
-    remaining = None if deadline is None else max(deadline - perceived, 1e-3)
-    rng = np.random.default_rng(seed)
     summary: dict = {}
+    if method in VARIANTS and VARIANTS[method].actions and config.fusion.enabled:
+        support = next((p for p in perception.planes[0] if p.kind == "support"), None)
+        objects, fused = fuse_views(
+            perception.objects, perception.free_space, support, config.fusion
+        )
+        summary["fused_views"] = {str(k): frames for k, frames in sorted(fused.items())}
+    fused_at = time.perf_counter()
+    if (
+        objects
+        and fused_at - perceived > 0
+        and deadline is None
+        and not config.inference.max_samples
+    ):
+        # Fusion's time comes out of the default inference budget (at most half of it), so
+        # that a default run costs what it did without fusion (about 3 s per object).
+        per_object = config.inference.budget_per_object_s
+        spent = min((fused_at - perceived) / len(objects), per_object / 2)
+        config = dataclasses.replace(
+            config,
+            inference=dataclasses.replace(config.inference, budget_per_object_s=per_object - spent),
+        )
+    remaining = None if deadline is None else max(deadline - fused_at, 1e-3)
+    rng = np.random.default_rng(seed)
     if method == "collision-checker":
         posteriors = collision_checker(
             objects,
@@ -133,10 +159,11 @@ def run_pipeline(
             raise IprError(f"{scene.path}: {error}") from None
         finished = time.perf_counter()
         posteriors = outcome.posteriors
-        summary = {**outcome.summary}
+        summary = {**summary, **outcome.summary}
         timing = {
             "segmentation": perceived - started,
-            "hypotheses": generated - perceived,
+            "fusion": fused_at - perceived,
+            "hypotheses": generated - fused_at,
             "inference": finished - generated,
             **{f"inference_{name}": value for name, value in outcome.timing_s.items()},
         }
