@@ -266,7 +266,10 @@ def test_infer_default_method_writes_the_full_result_and_is_reproducible(tmp_pat
         details = result.extra["inference"]
         assert details["samples"] == 3 and details["fallback"] is None
         assert details["pushes_replayed"] >= 1 and details["frames_compared"] >= 2
-        assert set(result.timing_s) >= {"segmentation", "hypotheses", "inference", "total"}
+        assert set(result.timing_s) >= {"segmentation", "fusion", "hypotheses", "inference"}
+        # Each object the pushes moved is fused with the later frames that saw it.
+        assert set(details["fused_views"]) <= {str(obj.id) for obj in result.objects}
+        assert all(set(frames) <= {1, 2, 3} for frames in details["fused_views"].values())
         for obj in result.objects:
             assert abs(sum(h.probability for h in obj.hypotheses) - 1.0) < 1e-6
             assert obj.load_mesh().is_watertight

@@ -94,7 +94,10 @@ def run_pipeline(
         objects, fused = fuse_views(
             perception.objects, perception.free_space, support, config.fusion
         )
-        summary["fused_views"] = {str(k): frames for k, frames in sorted(fused.items())}
+        # Keyed like the result's objects (their position), listing the later frames fused.
+        summary["fused_views"] = {
+            str(position): fused[obj.id] for position, obj in enumerate(objects) if obj.id in fused
+        }
     fused_at = time.perf_counter()
     if (
         objects

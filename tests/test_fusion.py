@@ -1,0 +1,162 @@
+"""View fusion: a later frame's view of a moved object registered into frame 0 (ipr.fusion)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial import ConvexHull
+
+from ipr.camera import backproject
+from ipr.fusion import FusionConfig, fuse_views, register_view
+from ipr.perception.free_space import FREE, SpaceMap
+from ipr.perception.types import Facet, PartialObject
+from tests.box_scene import BOX_HALF, SUPPORT, K, box_mesh, partial_box, render_view
+
+EYE = (0.2, -0.35, 0.3)
+
+
+def _motion(angle_deg: float, shift) -> np.ndarray:
+    """(4, 4) world transform: turn about the vertical through the box's centre, then shift."""
+    angle = np.radians(angle_deg)
+    turn = np.eye(4)
+    turn[:2, :2] = [[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]]
+    move = np.eye(4)
+    move[:3, 3] = shift
+    return move @ turn
+
+
+def _moved_view(motion: np.ndarray, object_id: int = 1):
+    """The box moved by ``motion``, rendered from EYE, as a partial object of frame 1 (facets
+    by nearest face in the box's own frame) and that frame's free-space map."""
+    vertices, faces = box_mesh()
+    moved = vertices @ motion[:3, :3].T + motion[:3, 3]
+    view = render_view(EYE, box=(moved, faces))
+    mask = (view.index == 0) & (view.depth > 0)
+    camera = backproject(view.depth, K)[mask]
+    points = camera @ view.world_from_camera[:3, :3].T + view.world_from_camera[:3, 3]
+    local = (points - motion[:3, 3]) @ motion[:3, :3]  # back in the box's frame
+    local = (local - [0.0, 0.0, BOX_HALF[2]]) / BOX_HALF
+    axis = np.argmax(np.abs(local), axis=1)
+    face = axis * 2 + (local[np.arange(len(local)), axis] > 0)
+    facets = []
+    for number in np.unique(face):
+        members = face == number
+        if members.sum() < 10:
+            continue
+        normal = np.zeros(3)
+        normal[number // 2] = 1.0 if number % 2 else -1.0
+        in_plane = np.delete(local[members] * BOX_HALF, number // 2, axis=1)
+        facets.append(
+            Facet(
+                points[members].mean(axis=0),
+                motion[:3, :3] @ normal,
+                points[members],
+                float(ConvexHull(in_plane).volume),
+            )
+        )
+    pixels = np.flatnonzero(mask.ravel())
+    colours = np.zeros((len(points), 3), dtype=np.uint8)
+    obj = PartialObject(object_id, 1, pixels, points, colours, tuple(facets))
+    return obj, view.space()
+
+
+def _faces(points: np.ndarray) -> np.ndarray:
+    """Face (N,) in 0..5 of the box at its frame-0 pose nearest to each world point."""
+    local = (points - [0.0, 0.0, BOX_HALF[2]]) / BOX_HALF
+    axis = np.argmax(np.abs(local), axis=1)
+    return axis * 2 + (local[np.arange(len(local)), axis] > 0)
+
+
+def _box_surface_distance(points: np.ndarray) -> np.ndarray:
+    """Distance (N,) of world points to the surface of the box at its frame-0 pose (m)."""
+    local = np.abs(points - [0.0, 0.0, BOX_HALF[2]]) - BOX_HALF
+    outside = np.linalg.norm(np.maximum(local, 0.0), axis=1)
+    inside = np.minimum(local.max(axis=1), 0.0)
+    return outside + np.abs(inside)
+
+
+@pytest.fixture(scope="module")
+def views():
+    first = render_view(EYE)
+    reference = partial_box(first)
+    motion = _motion(70.0, [0.04, 0.03, 0.0])
+    later, later_space = _moved_view(motion)
+    return reference, first.space(), later, later_space, motion
+
+
+def test_a_turned_and_shifted_view_registers_onto_the_first(views):
+    reference, space, later, later_space, motion = views
+    registration = register_view(later.points, reference.points, SUPPORT.normal, space, later_space)
+    assert registration is not None
+    assert registration.overlap > 0.5 and registration.rmse_m < 0.003
+    assert registration.free_share < 0.03 and registration.reverse_free_share < 0.03
+    transform = registration.frame0_from_frame
+    registered = later.points @ transform[:3, :3].T + transform[:3, 3]
+    # On the box's frame-0 surface (a box's half-turn symmetry may be chosen: either is right).
+    assert np.median(_box_surface_distance(registered)) < 0.002
+    assert np.percentile(_box_surface_distance(registered), 95) < 0.005
+    # Unregistered, the later view is centimetres away from it.
+    assert np.percentile(_box_surface_distance(later.points), 90) > 0.02
+
+
+def test_fusion_adds_the_sides_frame_0_did_not_see(views):
+    reference, space, later, later_space, _ = views
+    (fused,), used = fuse_views([(reference,), (later,)], [space, later_space], SUPPORT)
+    assert used == {1: [1]}
+    added = len(fused.points) - len(reference.points)
+    assert added >= 30
+    assert np.array_equal(fused.points[: len(reference.points)], reference.points)
+    assert (fused.pixels[len(reference.points) :] == -1).all()
+    assert len(fused.pixels) == len(fused.points) == len(fused.colours)
+    assert len(fused.facet_of_point) == len(fused.points)
+    new = fused.points[len(reference.points) :]
+    assert np.percentile(_box_surface_distance(new), 95) < 0.005
+    assert (SUPPORT.signed_distance(new) > 0).all()
+    # Frame 0 saw the box from one side: the fused points cover a face it did not see.
+    seen, added_faces = _faces(reference.points), _faces(new)
+    unseen = [f for f in range(6) if (seen == f).sum() < 5]
+    assert any((added_faces == f).sum() >= 30 for f in unseen)
+    # A face the later frame shows for the first time joins as a facet, turned into frame 0.
+    assert len(fused.facets) > len(reference.facets)
+    for facet in fused.facets[len(reference.facets) :]:
+        assert abs(np.linalg.norm(facet.normal) - 1.0) < 1e-9
+        assert np.median(_box_surface_distance(facet.points)) < 0.003
+
+
+def test_a_view_that_lands_in_seen_free_space_is_not_fused(views):
+    reference, space, later, later_space, _ = views
+    everything_free = SpaceMap(space.grid, np.full(space.state.shape, FREE, dtype=np.uint8))
+    assert (
+        register_view(later.points, reference.points, SUPPORT.normal, everything_free, None) is None
+    )
+    (fused,), used = fuse_views([(reference,), (later,)], [everything_free, later_space], SUPPORT)
+    assert used == {} and fused is reference
+
+
+def test_another_object_under_the_same_id_is_not_fused(views):
+    reference, space, *_ = views
+    # A long flat bar seen where the box was (a tracking swap): it cannot lie on the box
+    # without leaving its silhouette, through space frame 0 saw to be empty.
+    bar = render_view(EYE, box=box_mesh(np.array([0.12, 0.01, 0.01]), np.array([0.0, 0.05, 0.01])))
+    mask = (bar.index == 0) & (bar.depth > 0)
+    camera = backproject(bar.depth, K)[mask]
+    points = camera @ bar.world_from_camera[:3, :3].T + bar.world_from_camera[:3, 3]
+    assert len(points) > 100
+    assert register_view(points, reference.points, SUPPORT.normal, space, bar.space()) is None
+
+
+def test_no_later_frame_or_no_object_leaves_frame_0_as_it_is(views):
+    reference, space, *_ = views
+    (same,), used = fuse_views([(reference,)], [space], SUPPORT)
+    assert same is reference and used == {}
+    assert fuse_views([], [], None) == ((), {})
+    assert fuse_views([(), ()], [None, None], SUPPORT) == ((), {})
+
+
+def test_fusion_settings_are_validated():
+    with pytest.raises(ValueError):
+        FusionConfig(fine_gate_m=0.1, coarse_gate_m=0.05)
+    with pytest.raises(ValueError):
+        FusionConfig(min_overlap=1.5)
+    with pytest.raises(ValueError):
+        FusionConfig(yaw_starts=0)
