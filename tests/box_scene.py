@@ -66,13 +66,23 @@ def render_view(eye, target=(0.0, 0.0, 0.02), box=None) -> View:
     return View(depth, index, pose)
 
 
-def partial_box(view: View, object_id: int = 1, touches_border: bool = False) -> PartialObject:
-    """The box's observed points with one facet per visible face (by nearest face plane)."""
+def partial_box(
+    view: View,
+    object_id: int = 1,
+    touches_border: bool = False,
+    motion: np.ndarray | None = None,
+    frame: int = 0,
+) -> PartialObject:
+    """The box's observed points with one facet per visible face (by nearest face plane).
+
+    ``motion``: (4, 4) world transform the box was moved by before ``view`` was rendered
+    (None: the box at its place); faces are found in the box's own frame, normals turned."""
+    motion = np.eye(4) if motion is None else np.asarray(motion, float)
     mask = (view.index == 0) & (view.depth > 0)
     camera = backproject(view.depth, K)[mask]
     points = camera @ view.world_from_camera[:3, :3].T + view.world_from_camera[:3, 3]
     centre = np.array([0.0, 0.0, BOX_HALF[2]])
-    local = (points - centre) / BOX_HALF
+    local = ((points - motion[:3, 3]) @ motion[:3, :3] - centre) / BOX_HALF
     axis = np.argmax(np.abs(local), axis=1)
     sign = np.sign(local[np.arange(len(local)), axis])
     face = axis * 2 + (sign > 0)
@@ -84,17 +94,20 @@ def partial_box(view: View, object_id: int = 1, touches_border: bool = False) ->
         normal = np.zeros(3)
         normal[number // 2] = 1.0 if number % 2 else -1.0
         facet_points = points[members]
-        in_plane = np.delete(facet_points, number // 2, axis=1)
+        in_plane = np.delete(local[members] * BOX_HALF, number // 2, axis=1)
         facet_of_point[members] = len(facets)
         facets.append(
             Facet(
-                facet_points.mean(axis=0), normal, facet_points, float(ConvexHull(in_plane).volume)
+                facet_points.mean(axis=0),
+                motion[:3, :3] @ normal,
+                facet_points,
+                float(ConvexHull(in_plane).volume),
             )
         )
     pixels = np.flatnonzero(mask.ravel())
     colours = np.zeros((len(points), 3), dtype=np.uint8)
     return PartialObject(
-        object_id, 0, pixels, points, colours, tuple(facets), facet_of_point, touches_border
+        object_id, frame, pixels, points, colours, tuple(facets), facet_of_point, touches_border
     )
 
 

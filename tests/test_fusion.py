@@ -4,12 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy.spatial import ConvexHull
 
 from ipr.camera import backproject
 from ipr.fusion import FusionConfig, fuse_views, register_view
 from ipr.perception.free_space import FREE, SpaceMap
-from ipr.perception.types import Facet, PartialObject
 from tests.box_scene import BOX_HALF, SUPPORT, K, box_mesh, partial_box, render_view
 
 EYE = (0.2, -0.35, 0.3)
@@ -25,39 +23,12 @@ def _motion(angle_deg: float, shift) -> np.ndarray:
     return move @ turn
 
 
-def _moved_view(motion: np.ndarray, object_id: int = 1):
-    """The box moved by ``motion``, rendered from EYE, as a partial object of frame 1 (facets
-    by nearest face in the box's own frame) and that frame's free-space map."""
+def _moved_view(motion: np.ndarray):
+    """The box moved by ``motion``, rendered from EYE: a partial object of frame 1 and that
+    frame's free-space map."""
     vertices, faces = box_mesh()
-    moved = vertices @ motion[:3, :3].T + motion[:3, 3]
-    view = render_view(EYE, box=(moved, faces))
-    mask = (view.index == 0) & (view.depth > 0)
-    camera = backproject(view.depth, K)[mask]
-    points = camera @ view.world_from_camera[:3, :3].T + view.world_from_camera[:3, 3]
-    local = (points - motion[:3, 3]) @ motion[:3, :3]  # back in the box's frame
-    local = (local - [0.0, 0.0, BOX_HALF[2]]) / BOX_HALF
-    axis = np.argmax(np.abs(local), axis=1)
-    face = axis * 2 + (local[np.arange(len(local)), axis] > 0)
-    facets = []
-    for number in np.unique(face):
-        members = face == number
-        if members.sum() < 10:
-            continue
-        normal = np.zeros(3)
-        normal[number // 2] = 1.0 if number % 2 else -1.0
-        in_plane = np.delete(local[members] * BOX_HALF, number // 2, axis=1)
-        facets.append(
-            Facet(
-                points[members].mean(axis=0),
-                motion[:3, :3] @ normal,
-                points[members],
-                float(ConvexHull(in_plane).volume),
-            )
-        )
-    pixels = np.flatnonzero(mask.ravel())
-    colours = np.zeros((len(points), 3), dtype=np.uint8)
-    obj = PartialObject(object_id, 1, pixels, points, colours, tuple(facets))
-    return obj, view.space()
+    view = render_view(EYE, box=(vertices @ motion[:3, :3].T + motion[:3, 3], faces))
+    return partial_box(view, motion=motion, frame=1), view.space()
 
 
 def _faces(points: np.ndarray) -> np.ndarray:

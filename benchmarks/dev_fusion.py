@@ -1,0 +1,112 @@
+"""Development measurement of view fusion (docs/DESIGN_NOTES.md, "View fusion").
+
+Usage: ``python -m benchmarks.dev_fusion [--seed 9100] [--count 10]``.
+
+Generates (or reuses) development dynamic scenes with ``ipr synth`` seeds from ``--seed`` (never
+the benchmark suites), and scores the Collision Checker's answer on frame 0's partial objects
+with and without the later views fused into them (``ipr.fusion``), against the ground truth of
+the visible objects (benchmark code may read it; inference never does). Prints the mean object
+IoU per scene and over all visible objects (unmatched objects count 0, as in ``ipr eval``'s
+object space), how many objects a view was fused into, and the time fusion took.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def _matched_iou(posteriors: list, truths: list[np.ndarray]) -> float:
+    """Sum over the one-to-one best matches of the best hypotheses' IoU with the truths."""
+    from scipy.optimize import linear_sum_assignment
+
+    from ipr import voxels
+
+    if not posteriors or not truths:
+        return 0.0
+    iou = np.zeros((len(posteriors), len(truths)))
+    for i, posterior in enumerate(posteriors):
+        keys = posterior.best_hypothesis.keys()
+        for j, truth in enumerate(truths):
+            common = voxels.intersection_count(keys, truth)
+            iou[i, j] = common / (keys.size + truth.size - common)
+    rows, columns = linear_sum_assignment(-iou)
+    return float(iou[rows, columns].sum())
+
+
+def measure_scene(path: Path) -> dict:
+    """Summed matched IoU without and with fusion, visible truths, fused objects, seconds."""
+    from ipr import voxels
+    from ipr.collision_checker import collision_checker
+    from ipr.fusion import fuse_views
+    from ipr.metrics import frame0_ground_truth, visible_pixel_counts
+    from ipr.perception import perceive_scene
+    from ipr.scene import load_scene
+
+    scene = load_scene(path)
+    perception = perceive_scene(scene)
+    poses, models, _ = frame0_ground_truth(path)
+    counts, _ = visible_pixel_counts(path, poses, models)
+    world_from_camera = scene.frames[0].world_from_camera
+    truths = [
+        voxels.occupied_voxels(
+            model, voxels.DEFAULT_PITCH_M, world_from_camera @ pose.camera_from_model
+        )
+        for pose, model, count in zip(poses, models, counts, strict=True)
+        if count >= 100
+    ]
+    support = next((p for p in perception.planes[0] if p.kind == "support"), None)
+    started = time.perf_counter()
+    fused, used = fuse_views(perception.objects, perception.free_space, support)
+    seconds = time.perf_counter() - started
+    scores = {}
+    for name, objects in (("frame 0", perception.objects[0]), ("fused", fused)):
+        posteriors = collision_checker(
+            objects, perception.free_space[0], perception.planes[0], rng=np.random.default_rng(0)
+        )
+        scores[name] = _matched_iou(posteriors, truths)
+    return {
+        "scores": scores,
+        "truths": len(truths),
+        "objects": len(fused),
+        "fused": len(used),
+        "seconds": seconds,
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--seed", type=int, default=9100)
+    parser.add_argument("--count", type=int, default=10)
+    parser.add_argument("--scenes", type=Path, default=Path("/tmp/ipr-dev-inference"))
+    args = parser.parse_args(argv)
+    import ipr  # noqa: F401  (GL backend before MuJoCo loads)
+    from ipr.synth import generate_scenes
+
+    folder = args.scenes / f"dynamic-{args.seed}-{args.count}"
+    if not folder.exists():
+        generate_scenes(folder, kind="dynamic", seed=args.seed, count=args.count)
+    rows = []
+    for path in sorted(p for p in folder.iterdir() if (p / "scene_camera.json").exists()):
+        row = measure_scene(path)
+        rows.append(row)
+        per = {k: v / max(row["truths"], 1) for k, v in row["scores"].items()}
+        print(f"{path.name}: " + ", ".join(f"{k} {v:.3f}" for k, v in per.items()), flush=True)
+    truths = max(sum(r["truths"] for r in rows), 1)
+    objects = sum(r["objects"] for r in rows)
+    print(f"\n{len(rows)} scenes, {truths} visible objects, Collision Checker mean object IoU:")
+    for name in ("frame 0", "fused"):
+        print(f"  {name:8s} {sum(r['scores'][name] for r in rows) / truths:.3f}")
+    print(
+        f"views fused into {sum(r['fused'] for r in rows)} of {objects} objects; "
+        f"fusion {sum(r['seconds'] for r in rows) / max(objects, 1):.2f} s per object"
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
