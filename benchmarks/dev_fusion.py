@@ -42,7 +42,7 @@ def measure_scene(path: Path) -> dict:
     """Summed matched IoU without and with fusion, visible truths, fused objects, seconds."""
     from ipr import voxels
     from ipr.collision_checker import collision_checker
-    from ipr.fusion import fuse_views
+    from ipr.fusion import fuse_views, tracked_free_spaces
     from ipr.metrics import frame0_ground_truth, visible_pixel_counts
     from ipr.perception import perceive_scene
     from ipr.scene import load_scene
@@ -61,21 +61,37 @@ def measure_scene(path: Path) -> dict:
     ]
     support = next((p for p in perception.planes[0] if p.kind == "support"), None)
     started = time.perf_counter()
-    fused, used = fuse_views(perception.objects, perception.free_space, support)
+    fused = fuse_views(perception.objects, perception.free_space, support)
     seconds = time.perf_counter() - started
+    tracked = tracked_free_spaces(fused, perception.free_space)
     scores = {}
-    for name, objects in (("frame 0", perception.objects[0]), ("fused", fused)):
+    for name, objects, spaces in _variants(perception.objects[0], fused.objects, tracked):
         posteriors = collision_checker(
-            objects, perception.free_space[0], perception.planes[0], rng=np.random.default_rng(0)
+            objects,
+            perception.free_space[0],
+            perception.planes[0],
+            rng=np.random.default_rng(0),
+            object_spaces=spaces,
         )
         scores[name] = _matched_iou(posteriors, truths)
     return {
         "scores": scores,
         "truths": len(truths),
-        "objects": len(fused),
-        "fused": len(used),
+        "objects": len(fused.objects),
+        "fused": len(fused.fused_frames),
+        "tracked": len(tracked),
         "seconds": seconds,
     }
+
+
+def _variants(frame0: tuple, fused: tuple, tracked: dict) -> list[tuple[str, tuple, dict]]:
+    """(name, objects, per-object spaces) of the compared inputs."""
+    return [
+        ("frame 0", frame0, {}),
+        ("fused", fused, {}),
+        ("tracked free", frame0, tracked),
+        ("fused+tracked", fused, tracked),
+    ]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -99,10 +115,11 @@ def main(argv: list[str] | None = None) -> int:
     truths = max(sum(r["truths"] for r in rows), 1)
     objects = sum(r["objects"] for r in rows)
     print(f"\n{len(rows)} scenes, {truths} visible objects, Collision Checker mean object IoU:")
-    for name in ("frame 0", "fused"):
-        print(f"  {name:8s} {sum(r['scores'][name] for r in rows) / truths:.3f}")
+    for name in rows[0]["scores"] if rows else ():
+        print(f"  {name:14s} {sum(r['scores'][name] for r in rows) / truths:.3f}")
     print(
-        f"views fused into {sum(r['fused'] for r in rows)} of {objects} objects; "
+        f"views fused into {sum(r['fused'] for r in rows)} of {objects} objects, "
+        f"later free space for {sum(r['tracked'] for r in rows)}; "
         f"fusion {sum(r['seconds'] for r in rows) / max(objects, 1):.2f} s per object"
     )
     return 0

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from ipr.camera import backproject
-from ipr.fusion import FusionConfig, fuse_views, register_view
-from ipr.perception.free_space import FREE, SpaceMap
+from ipr.fusion import FusedViews, FusionConfig, fuse_views, register_view, tracked_free_spaces
+from ipr.perception.free_space import FREE, UNKNOWN, SpaceMap
 from tests.box_scene import BOX_HALF, SUPPORT, K, box_mesh, partial_box, render_view
 
 EYE = (0.2, -0.35, 0.3)
@@ -72,8 +72,9 @@ def test_a_turned_and_shifted_view_registers_onto_the_first(views):
 
 def test_fusion_adds_the_sides_frame_0_did_not_see(views):
     reference, space, later, later_space, _ = views
-    (fused,), used = fuse_views([(reference,), (later,)], [space, later_space], SUPPORT)
-    assert used == {1: [1]}
+    views_fused = fuse_views([(reference,), (later,)], [space, later_space], SUPPORT)
+    (fused,), used = views_fused.objects, views_fused.fused_frames
+    assert used == {1: [1]} and set(views_fused.motions) == {1}
     added = len(fused.points) - len(reference.points)
     assert added >= 30
     assert np.array_equal(fused.points[: len(reference.points)], reference.points)
@@ -100,8 +101,9 @@ def test_a_view_that_lands_in_seen_free_space_is_not_fused(views):
     assert (
         register_view(later.points, reference.points, SUPPORT.normal, everything_free, None) is None
     )
-    (fused,), used = fuse_views([(reference,), (later,)], [everything_free, later_space], SUPPORT)
-    assert used == {} and fused is reference
+    views_fused = fuse_views([(reference,), (later,)], [everything_free, later_space], SUPPORT)
+    (fused,) = views_fused.objects
+    assert views_fused.fused_frames == {} and views_fused.motions == {} and fused is reference
 
 
 def test_another_object_under_the_same_id_is_not_fused(views):
@@ -118,10 +120,10 @@ def test_another_object_under_the_same_id_is_not_fused(views):
 
 def test_no_later_frame_or_no_object_leaves_frame_0_as_it_is(views):
     reference, space, *_ = views
-    (same,), used = fuse_views([(reference,)], [space], SUPPORT)
-    assert same is reference and used == {}
-    assert fuse_views([], [], None) == ((), {})
-    assert fuse_views([(), ()], [None, None], SUPPORT) == ((), {})
+    alone = fuse_views([(reference,)], [space], SUPPORT)
+    assert alone.objects == (reference,) and alone.fused_frames == {} and alone.motions == {}
+    assert fuse_views([], [], None) == FusedViews((), {}, {})
+    assert fuse_views([(), ()], [None, None], SUPPORT) == FusedViews((), {}, {})
 
 
 def test_fusion_settings_are_validated():
@@ -131,3 +133,39 @@ def test_fusion_settings_are_validated():
         FusionConfig(min_overlap=1.5)
     with pytest.raises(ValueError):
         FusionConfig(yaw_starts=0)
+
+
+def _inside_box(points: np.ndarray, margin_m: float = 0.0) -> np.ndarray:
+    """(N,) True for world points inside the box at its frame-0 pose, shrunk by ``margin_m``."""
+    local = np.abs(points - [0.0, 0.0, BOX_HALF[2]])
+    return np.all(local < BOX_HALF - margin_m, axis=1)
+
+
+def test_later_free_space_reaches_frame_0_through_the_registered_motion(views):
+    reference, space, later, later_space, _ = views
+    fused = fuse_views([(reference,), (later,)], [space, later_space], SUPPORT)
+    tracked = tracked_free_spaces(fused, [space, later_space])
+    assert set(tracked) == {1}
+    seen = tracked[1]
+    centres = space.grid.centres().reshape(-1, 3)
+    frame0 = space.state_at(centres)
+    combined = seen.state_at(centres)
+    # What frame 0 saw stands; only its hidden voxels can turn free.
+    assert np.array_equal(combined[frame0 != UNKNOWN], frame0[frame0 != UNKNOWN])
+    # The box's own hidden inside is never free: the box was there in the later frame too.
+    inside = _inside_box(centres, margin_m=0.006)
+    assert inside.sum() > 200
+    assert np.count_nonzero(combined[inside] == FREE) <= 0.01 * inside.sum()
+    # Behind the box (hidden in frame 0, outside it) the turned box's view shows empty space.
+    near = np.all(np.abs(centres - [0.0, 0.0, 0.03]) < [0.1, 0.1, 0.025], axis=1)
+    behind = near & (frame0 == UNKNOWN) & ~_inside_box(centres, margin_m=-0.015)
+    assert behind.sum() > 100
+    assert np.count_nonzero(combined[behind] == FREE) > 0.2 * behind.sum()
+
+
+def test_an_object_without_a_registered_later_view_keeps_frame_0s_space(views):
+    reference, space, later, later_space, _ = views
+    everything_free = SpaceMap(space.grid, np.full(space.state.shape, FREE, dtype=np.uint8))
+    fused = fuse_views([(reference,), (later,)], [everything_free, later_space], SUPPORT)
+    assert tracked_free_spaces(fused, [everything_free, later_space]) == {}
+    assert tracked_free_spaces(FusedViews((), {}, {1: {1: np.eye(4)}}), [None, later_space]) == {}

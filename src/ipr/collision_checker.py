@@ -58,7 +58,7 @@ from ipr.hypotheses import (
     minimum_shape,
     volume_spread,
 )
-from ipr.perception.free_space import SpaceMap
+from ipr.perception.free_space import SeenSpace, SpaceMap
 from ipr.perception.types import KnownPlane, PartialObject
 
 logger = logging.getLogger(__name__)
@@ -369,9 +369,14 @@ def prepare_hypotheses(
     config: CollisionCheckerConfig | None = None,
     rng: np.random.Generator | None = None,
     time_budget_s: float | None = None,
+    object_spaces: Mapping[int, SeenSpace] | None = None,
 ) -> PreparedHypotheses:
     """Generate each object's hypotheses and minimum shape, keep the unary-feasible ones and
     measure the pairwise penetration depths between interacting objects' hypotheses.
+
+    ``object_spaces``: per object id, the seen-free space to use for that object instead of
+    ``space`` (``ipr.fusion.tracked_free_spaces``: later frames' free space through the
+    object's registered motion).
 
     ``time_budget_s``: generation gets ``generation_share`` of it, split over the objects
     (capping their timeouts). ``rng`` defaults to one seeded from ``config.hypotheses.seed``;
@@ -396,12 +401,13 @@ def prepare_hypotheses(
     seconds: dict[int, float] = {}
     for obj, object_rng in zip(objects, object_rngs, strict=True):
         begin = time.perf_counter()
-        hyps = generate_hypotheses(obj, space, planes, hypothesis_config, object_rng)
+        seen = (object_spaces or {}).get(obj.id, space)
+        hyps = generate_hypotheses(obj, seen, planes, hypothesis_config, object_rng)
         minima[obj.id] = minimum_shape(obj, planes, hypothesis_config)
         feasible = [
             k
             for k, h in enumerate(hyps)
-            if unary_feasible(h, space, planes, config.hypotheses.unary)
+            if unary_feasible(h, seen, planes, config.hypotheses.unary)
         ]
         if not feasible:
             logger.warning("object %d: no feasible hypothesis; using its minimum shape", obj.id)
@@ -500,6 +506,7 @@ def collision_checker(
     config: CollisionCheckerConfig | None = None,
     rng: np.random.Generator | None = None,
     time_budget_s: float | None = None,
+    object_spaces: Mapping[int, SeenSpace] | None = None,
 ) -> list[ObjectPosterior]:
     """Marginal shape posteriors of the objects of one frame (frame 0) under a uniform prior
     restricted to jointly feasible models (module doc).
@@ -512,6 +519,8 @@ def collision_checker(
         rng: random source (default: seeded from ``config.hypotheses.seed``).
         time_budget_s: total seconds; generation gets ``generation_share`` of it (split over
             the objects, capping their timeouts) and the sampler stops at the end of it.
+        object_spaces: per object id, a seen-free space replacing ``space`` for that object
+            (``prepare_hypotheses``).
 
     Returns:
         One ObjectPosterior per object, in the order of ``objects``.
@@ -521,7 +530,9 @@ def collision_checker(
     started = time.perf_counter()
     deadline = np.inf if time_budget_s is None else started + time_budget_s
     generation_rng, sampler_rng = rng.spawn(2)
-    prepared = prepare_hypotheses(objects, space, planes, config, generation_rng, time_budget_s)
+    prepared = prepare_hypotheses(
+        objects, space, planes, config, generation_rng, time_budget_s, object_spaces
+    )
     posteriors = uniform_posteriors(prepared, config, sampler_rng, deadline)
     logger.debug(
         "collision checker: %d objects in %.3f s", len(objects), time.perf_counter() - started

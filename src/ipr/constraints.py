@@ -44,7 +44,7 @@ from ipr.hypotheses import (
     plane_regions,
     unary_report,
 )
-from ipr.perception.free_space import SpaceMap
+from ipr.perception.free_space import SeenSpace
 from ipr.perception.types import KnownPlane
 
 logger = logging.getLogger(__name__)
@@ -237,7 +237,7 @@ def overlap_threshold(
 
 def unary_feasible(
     h: ShapeHypothesis,
-    space: SpaceMap | None,
+    space: SeenSpace | None,
     planes: tuple[KnownPlane, ...],
     tolerances: UnaryTolerances | None = None,
 ) -> bool:
@@ -263,7 +263,7 @@ def unary_feasible(
 def joint_feasible(
     choice: Mapping[int, int],
     hypotheses: Mapping[int, Sequence[ShapeHypothesis]],
-    space: SpaceMap | None,
+    space: SeenSpace | None,
     planes: tuple[KnownPlane, ...],
     config: ConstraintConfig | None = None,
     cache: OverlapCache | None = None,

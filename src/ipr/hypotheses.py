@@ -76,7 +76,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import ConvexHull, QhullError
 
 from ipr import voxels
-from ipr.perception.free_space import FREE, SpaceMap
+from ipr.perception.free_space import FREE, SeenSpace
 from ipr.perception.types import KnownPlane, PartialObject
 
 logger = logging.getLogger(__name__)
@@ -372,7 +372,7 @@ def unary_report(
     vertices: np.ndarray,
     keys: np.ndarray | None,
     pitch_m: float,
-    space: SpaceMap | None,
+    space: SeenSpace | None,
     regions: tuple[PlaneRegion, ...],
 ) -> UnaryReport:
     """Measure a convex shape (vertices (V, 3), voxel ``keys`` at ``pitch_m``) against the space
@@ -526,7 +526,7 @@ class _Context:
     base_points: np.ndarray
     loop_points: np.ndarray
     observed: tuple[_SourceFacet, ...]
-    space: SpaceMap | None
+    space: SeenSpace | None
     regions: tuple[PlaneRegion, ...]
     cuts: np.ndarray
     cap_m: float
@@ -561,7 +561,7 @@ def dominant_normal(obj: PartialObject, planes: tuple[KnownPlane, ...]) -> np.nd
 def _ray_limits(
     origins: np.ndarray,
     normal: np.ndarray,
-    space: SpaceMap | None,
+    space: SeenSpace | None,
     regions: tuple[PlaneRegion, ...],
     cap: float,
     step: float,
@@ -676,7 +676,7 @@ def _even_subsample(points: np.ndarray, count: int) -> np.ndarray:
 
 def _prepare(
     obj: PartialObject,
-    space: SpaceMap | None,
+    space: SeenSpace | None,
     planes: tuple[KnownPlane, ...],
     config: HypothesisConfig,
 ) -> _Context:
@@ -1022,7 +1022,7 @@ def _evaluate(
 
 def generate_hypotheses(
     obj: PartialObject,
-    space: SpaceMap | None,
+    space: SeenSpace | None,
     planes: tuple[KnownPlane, ...],
     config: HypothesisConfig | None = None,
     rng: np.random.Generator | None = None,

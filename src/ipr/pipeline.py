@@ -63,7 +63,7 @@ def run_pipeline(
     calling this must guard its entry point with ``if __name__ == "__main__":``.
     """
     from ipr.collision_checker import collision_checker, prepare_hypotheses
-    from ipr.fusion import fuse_views
+    from ipr.fusion import fuse_views, tracked_free_spaces
     from ipr.inference import VARIANTS, infer_shapes
     from ipr.likelihood import observed_frames
     from ipr.perception import perceive_scene
@@ -89,14 +89,18 @@ def run_pipeline(
     if not objects:
         log.warning("%s: no object found in frame 0; the result is empty", scene.path)
     summary: dict = {}
+    object_spaces: dict = {}
     if method in VARIANTS and VARIANTS[method].actions and config.fusion.enabled:
         support = next((p for p in perception.planes[0] if p.kind == "support"), None)
-        objects, fused = fuse_views(
-            perception.objects, perception.free_space, support, config.fusion
-        )
+        fused = fuse_views(perception.objects, perception.free_space, support, config.fusion)
+        objects = fused.objects
+        if config.fusion.later_free_space:
+            object_spaces = tracked_free_spaces(fused, perception.free_space)
         # Keyed like the result's objects (their position), listing the later frames fused.
         summary["fused_views"] = {
-            str(position): fused[obj.id] for position, obj in enumerate(objects) if obj.id in fused
+            str(position): fused.fused_frames[obj.id]
+            for position, obj in enumerate(objects)
+            if obj.id in fused.fused_frames
         }
     fused_at = time.perf_counter()
     if (
@@ -139,6 +143,7 @@ def run_pipeline(
             config.collision_checker,
             rng,
             remaining,
+            object_spaces,
         )
         generated = time.perf_counter()
         observed = observed_frames(

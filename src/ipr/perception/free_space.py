@@ -13,6 +13,7 @@ it; a footprint with no reading at all stays unknown.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 from scipy.ndimage import minimum_filter
@@ -90,6 +91,16 @@ class SpaceMap:
         states = np.full(len(points), UNKNOWN, dtype=np.uint8)
         states[inside] = self.state[tuple(indices[inside].T)]
         return states
+
+
+class SeenSpace(Protocol):
+    """What the hypotheses and constraints ask of a free-space map: a ``SpaceMap``, or a view
+    combining several frames' maps for one object (``ipr.fusion.TrackedFreeSpace``)."""
+
+    @property
+    def grid(self) -> VoxelGrid: ...
+
+    def state_at(self, points: np.ndarray) -> np.ndarray: ...
 
 
 def observe_space(
