@@ -1,0 +1,151 @@
+"""Development measurement of segmentation and tracking (docs/DESIGN_NOTES.md, "Perception").
+
+Usage: ``python -m benchmarks.dev_perception [--sets 8000:12 8100:24 ...] [--tracker-only]``.
+
+Generates (or reuses) the development dynamic scenes of the design notes with ``ipr synth``
+(base seeds 8000 (12 scenes), 8100 (24), 8012 (38), 8150 (50), and the held-out check 8050
+(24); never the benchmark suites' seeds) under ``--scenes``, runs the perception on every scene
+and scores it with the segmentation benchmark's own code (``benchmarks.segmentation``'s
+``evaluate_suite`` and ``suite_figures``). Prints, per set, over the development sets pooled
+and for the held-out check: ids kept ((object, later frame) pairs kept / pairs), the pooled
+share of (object, frame) rows with F >= 0.75, and the median perception ms per frame.
+
+``--tracker-only`` caches each scene's untracked segmentation labels (``--cache``) on first use
+and then reruns only the tracker on them (segmentation does not depend on the tracker: its
+temporal step compares with the previous frame's untracked segmentation), for quick decisions
+on tracker changes; its ms per frame is then the tracker's share alone. Decisions on anything
+else, and the timing, need the full run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+#: (base seed, scene count) of the development sets; the held-out check is scored apart.
+DEVELOPMENT_SETS = ((8000, 12), (8100, 24), (8012, 38), (8150, 50))
+HELD_OUT_SETS = ((8050, 24),)
+
+
+def scene_folder(root: Path, seed: int, count: int) -> Path:
+    """Generate (once) and return the folder of ``count`` dynamic scenes from ``seed``."""
+    from ipr.synth import generate_scenes
+
+    folder = root / f"dynamic-{seed}-{count}"
+    if not folder.exists():
+        generate_scenes(folder, kind="dynamic", seed=seed, count=count)
+    return folder
+
+
+def scene_paths(folder: Path) -> list[Path]:
+    """The scene directories of a generated folder, sorted."""
+    return sorted(p for p in folder.iterdir() if (p / "scene_camera.json").exists())
+
+
+def tracker_only_perceive(cache: Path, overrides: dict[str, float] | None = None):
+    """A ``benchmarks.segmentation.Perceive`` that segments each scene once (labels cached as
+    ``cache/<scene folder>-<scene>.npz``) and reruns only ``track_segments`` with the default
+    ``TrackingConfig`` changed by ``overrides``; its seconds per frame are the tracker's time
+    shared out over the frames."""
+    from dataclasses import replace
+
+    from ipr.perception import PerceptionConfig, perceive_scene
+    from ipr.perception.tracking import track_segments
+
+    cache.mkdir(parents=True, exist_ok=True)
+    config = replace(PerceptionConfig().tracking, **(overrides or {}))
+
+    def perceive(scene) -> tuple[list[np.ndarray], list[float]]:
+        path = cache / f"{Path(scene.path).parent.name}-{Path(scene.path).name}.npz"
+        if path.exists():
+            with np.load(path) as stored:
+                untracked = [stored[f"frame{i}"] for i in range(len(scene.frames))]
+        else:
+            perception = perceive_scene(scene, with_free_space=False)
+            untracked = [s.labels for s in perception.segmentations]
+            np.savez_compressed(path, **{f"frame{i}": u for i, u in enumerate(untracked)})
+        points = [frame.points_world() for frame in scene.frames]
+        started = time.perf_counter()
+        labels = track_segments(
+            untracked,
+            points,
+            [frame.rgb for frame in scene.frames],
+            config,
+            frames_depth=[frame.depth_m for frame in scene.frames],
+        )
+        share = (time.perf_counter() - started) / max(len(scene.frames), 1)
+        return labels, [share] * len(scene.frames)
+
+    return perceive
+
+
+def _line(name: str, figures: dict) -> str:
+    return (
+        f"{name:14s} ids kept {figures['ids_consistent']:4d} / {figures['ids_counted']:4d} "
+        f"({figures['ids_kept']:.3f})  F>=0.75 {figures['share_pooled']:.3f} "
+        f"({figures['visible_rows']} rows)  {figures['time_median_ms']:.0f} ms/frame"
+    )
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument(
+        "--sets",
+        nargs="*",
+        default=None,
+        help="seed:count development sets (default: the design notes' four and the check)",
+    )
+    parser.add_argument("--no-held-out", action="store_true", help="skip the held-out check")
+    parser.add_argument("--tracker-only", action="store_true")
+    parser.add_argument(
+        "--set",
+        nargs="*",
+        default=[],
+        metavar="NAME=VALUE",
+        help="with --tracker-only: TrackingConfig fields to change (Python literals)",
+    )
+    parser.add_argument("--scenes", type=Path, default=Path("/tmp/ipr-dev-perception"))
+    parser.add_argument("--cache", type=Path, default=Path("/tmp/ipr-dev-perception/untracked"))
+    args = parser.parse_args(argv)
+    for variable in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(variable, "1")
+    import ipr  # noqa: F401  (GL backend before MuJoCo loads)
+    from benchmarks.segmentation import default_perceive, evaluate_suite, suite_figures
+
+    if args.sets is None:
+        development = list(DEVELOPMENT_SETS)
+    else:
+        development = [tuple(int(v) for v in s.split(":")) for s in args.sets]
+    held_out = [] if args.no_held_out else list(HELD_OUT_SETS)
+    overrides = {k: ast.literal_eval(v) for k, v in (s.split("=", 1) for s in args.set)}
+    if overrides and not args.tracker_only:
+        parser.error("--set needs --tracker-only")
+    perceive = (
+        tracker_only_perceive(args.cache, overrides) if args.tracker_only else default_perceive()
+    )
+
+    pooled = []
+    for group, sets in (("development", development), ("held-out", held_out)):
+        results_group = []
+        for seed, count in sets:
+            results = evaluate_suite(scene_paths(scene_folder(args.scenes, seed, count)), perceive)
+            results_group.extend(results)
+            print(_line(f"{seed} ({count})", suite_figures(results)), flush=True)
+            for result in results:
+                if result.error is not None:
+                    print(f"  {result.scene}: {result.error}")
+        if results_group:
+            print(_line(group, suite_figures(results_group)), flush=True)
+        if group == "development":
+            pooled = results_group
+    return 0 if pooled or held_out else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
