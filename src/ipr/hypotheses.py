@@ -90,8 +90,9 @@ class UnaryTolerances:
     """Tolerances of the unary constraints, for sensor noise (one object at a time).
 
     Attributes:
-        free_space_tolerance: share of a shape's voxels allowed in frame-0 seen-free space or
-            inside walls, beyond those its observed points' own hull has.
+        free_space_tolerance: share of a shape's voxels allowed in seen-free space (frame 0's,
+            or with ``ipr.fusion.TrackedFreeSpace`` later frames' too) or inside walls, beyond
+            those its observed points' own hull has.
         free_space_tolerance_voxels: the same as a count; the larger of the two applies.
         support_tolerance_m: hypotheses are cut at the support plane, or at the lowest observed
             point when lower (every observed point stays inside); points more than this below
