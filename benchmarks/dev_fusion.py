@@ -4,10 +4,12 @@ Usage: ``python -m benchmarks.dev_fusion [--seed 9100] [--count 10]``.
 
 Generates (or reuses) development dynamic scenes with ``ipr synth`` seeds from ``--seed`` (never
 the benchmark suites), and scores the Collision Checker's answer on frame 0's partial objects
-with and without the later views fused into them (``ipr.fusion``), against the ground truth of
-the visible objects (benchmark code may read it; inference never does). Prints the mean object
-IoU per scene and over all visible objects (unmatched objects count 0, as in ``ipr eval``'s
-object space), how many objects a view was fused into, and the time fusion took.
+with and without the later views fused into them, each with frame 0's free space alone and with
+the later frames' free space through each object's registered motion (``ipr.fusion``), against
+the ground truth of the visible objects (benchmark code may read it; inference never does).
+Prints the mean object IoU per scene and over all visible objects (unmatched objects count 0,
+as in ``ipr eval``'s object space), how many objects a view was fused into or have a later free
+space, and the time fusion took.
 """
 
 from __future__ import annotations

@@ -122,8 +122,8 @@ def test_no_later_frame_or_no_object_leaves_frame_0_as_it_is(views):
     reference, space, *_ = views
     alone = fuse_views([(reference,)], [space], SUPPORT)
     assert alone.objects == (reference,) and alone.fused_frames == {} and alone.motions == {}
-    assert fuse_views([], [], None) == FusedViews((), {}, {})
-    assert fuse_views([(), ()], [None, None], SUPPORT) == FusedViews((), {}, {})
+    for nothing in (fuse_views([], [], None), fuse_views([(), ()], [None, None], SUPPORT)):
+        assert (nothing.objects, nothing.fused_frames, nothing.motions) == ((), {}, {})
 
 
 def test_fusion_settings_are_validated():
@@ -152,7 +152,8 @@ def test_later_free_space_reaches_frame_0_through_the_registered_motion(views):
     combined = seen.state_at(centres)
     # What frame 0 saw stands; only its hidden voxels can turn free.
     assert np.array_equal(combined[frame0 != UNKNOWN], frame0[frame0 != UNKNOWN])
-    # The box's own hidden inside is never free: the box was there in the later frame too.
+    # The box's own hidden inside is (all but 1 %) not free: the box was there in the later
+    # frame too.
     inside = _inside_box(centres, margin_m=0.006)
     assert inside.sum() > 200
     assert np.count_nonzero(combined[inside] == FREE) <= 0.01 * inside.sum()

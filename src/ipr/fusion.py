@@ -252,7 +252,7 @@ def _transformed(transform: np.ndarray, points: np.ndarray) -> np.ndarray:
     return np.asarray(points, float) @ transform[:3, :3].T + transform[:3, 3]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class FusedViews:
     """What the later frames add to frame 0's objects.
 
