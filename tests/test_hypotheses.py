@@ -141,6 +141,28 @@ def test_deterministic_per_seed(oblique):
     )
 
 
+def test_a_slow_machine_gets_the_same_hypotheses(oblique, monkeypatch):
+    """No wall-clock limit by default: a clock that runs 100 s per reading (a heavily loaded
+    machine) changes nothing; with ``timeout_s`` set the same clock simplifies the rest."""
+    import ipr.hypotheses as module
+
+    obj, space = oblique
+    config = dataclasses.replace(CONFIG, count=6)
+    reference = generate_hypotheses(obj, space, (SUPPORT,), config, np.random.default_rng(3))
+    ticks = iter(range(0, 10**9, 100))
+    monkeypatch.setattr(module.time, "perf_counter", lambda: float(next(ticks)))
+    slow = generate_hypotheses(obj, space, (SUPPORT,), config, np.random.default_rng(3))
+    for a, b in zip(reference, slow, strict=True):
+        assert np.array_equal(a.vertices, b.vertices)
+        assert a.rounds == b.rounds and a.attempts == b.attempts
+    limited = dataclasses.replace(config, timeout_s=1.0)
+    hurried = generate_hypotheses(obj, space, (SUPPORT,), limited, np.random.default_rng(3))
+    assert all(h.rounds == 1 and h.attempts == 1 for h in hurried[1:])
+    assert any(h.rounds > 1 for h in reference[1:])
+    with pytest.raises(ValueError, match="timeout_s"):
+        dataclasses.replace(config, timeout_s=0.0)
+
+
 def test_single_tiny_facet_and_flat_or_collinear_points_do_not_crash():
     rng = np.random.default_rng(0)
     patch = np.column_stack([rng.uniform(0, 0.01, 30), rng.uniform(0, 0.01, 30), np.full(30, 0.05)])

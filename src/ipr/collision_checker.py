@@ -391,7 +391,10 @@ def prepare_hypotheses(
     if time_budget_s is not None:
         per_object = config.generation_share * time_budget_s / max(len(objects), 1)
         hypothesis_config = dataclasses.replace(
-            hypothesis_config, timeout_s=min(hypothesis_config.timeout_s, per_object)
+            hypothesis_config,
+            timeout_s=per_object
+            if hypothesis_config.timeout_s is None
+            else min(hypothesis_config.timeout_s, per_object),
         )
     object_rngs = rng.spawn(len(objects))
 

@@ -9,9 +9,10 @@ the later frames saw of each object into frame 0 (``ipr.fusion``) before the hyp
 others see frame 0 only, as their likelihood does.
 
 Time budget: ``time_budget_s`` covers the whole run; hypotheses get their share of what is left
-after perception and fusion, and inference the rest. Without one, hypotheses run to their own
-timeouts and inference gets ``config.inference.budget_per_object_s`` per object, less what
-fusion took per object (at most half of it).
+after perception and fusion (a per-object timeout), and inference the rest. Without one,
+hypotheses have no wall-clock limit (so they do not depend on the machine's load) and inference
+gets ``config.inference.budget_per_object_s`` per object, less what fusion took per object (at
+most half of it).
 """
 
 from __future__ import annotations
