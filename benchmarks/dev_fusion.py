@@ -44,7 +44,7 @@ def measure_scene(path: Path) -> dict:
     """Summed matched IoU without and with fusion, visible truths, fused objects, seconds."""
     from ipr import voxels
     from ipr.collision_checker import collision_checker
-    from ipr.fusion import fuse_views, tracked_free_spaces
+    from ipr.fusion import FusionConfig, fuse_views, tracked_free_spaces
     from ipr.metrics import frame0_ground_truth, visible_pixel_counts
     from ipr.perception import perceive_scene
     from ipr.scene import load_scene
@@ -65,9 +65,15 @@ def measure_scene(path: Path) -> dict:
     started = time.perf_counter()
     fused = fuse_views(perception.objects, perception.free_space, support)
     seconds = time.perf_counter() - started
-    tracked = tracked_free_spaces(fused, perception.free_space)
+    later_only = FusionConfig(pusher_free_space=False)
+    tracked = tracked_free_spaces(fused, perception.free_space, config=later_only)
+    with_pushes = tracked_free_spaces(
+        fused, perception.free_space, scene.pushes, scene.pusher, FusionConfig()
+    )
     scores = {}
-    for name, objects, spaces in _variants(perception.objects[0], fused.objects, tracked):
+    for name, objects, spaces in _variants(
+        perception.objects[0], fused.objects, tracked, with_pushes
+    ):
         posteriors = collision_checker(
             objects,
             perception.free_space[0],
@@ -82,17 +88,21 @@ def measure_scene(path: Path) -> dict:
         "objects": len(fused.objects),
         "fused": len(fused.fused_frames),
         "tracked": len(tracked),
+        "pushed_past": sum(len(space.swept) for space in with_pushes.values()),
         "seconds": seconds,
     }
 
 
-def _variants(frame0: tuple, fused: tuple, tracked: dict) -> list[tuple[str, tuple, dict]]:
+def _variants(
+    frame0: tuple, fused: tuple, tracked: dict, with_pushes: dict
+) -> list[tuple[str, tuple, dict]]:
     """(name, objects, per-object spaces) of the compared inputs."""
     return [
         ("frame 0", frame0, {}),
         ("fused", fused, {}),
         ("tracked free", frame0, tracked),
         ("fused+tracked", fused, tracked),
+        ("+pushed past", fused, with_pushes),
     ]
 
 
@@ -122,6 +132,7 @@ def main(argv: list[str] | None = None) -> int:
     print(
         f"views fused into {sum(r['fused'] for r in rows)} of {objects} objects, "
         f"later free space for {sum(r['tracked'] for r in rows)}; "
+        f"{sum(r['pushed_past'] for r in rows)} (object, push) pairs pushed past; "
         f"fusion {sum(r['seconds'] for r in rows) / max(objects, 1):.2f} s per object"
     )
     return 0

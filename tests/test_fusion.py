@@ -4,10 +4,21 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 
 from ipr.camera import backproject
-from ipr.fusion import FusedViews, FusionConfig, fuse_views, register_view, tracked_free_spaces
+from ipr.fusion import (
+    FusedViews,
+    FusionConfig,
+    SweptCapsule,
+    TrackedFreeSpace,
+    fuse_views,
+    pushed_through,
+    register_view,
+    tracked_free_spaces,
+)
 from ipr.perception.free_space import FREE, UNKNOWN, SpaceMap
+from ipr.scene import Push, Pusher
 from tests.box_scene import BOX_HALF, SUPPORT, K, box_mesh, partial_box, render_view
 
 EYE = (0.2, -0.35, 0.3)
@@ -170,3 +181,80 @@ def test_an_object_without_a_registered_later_view_keeps_frame_0s_space(views):
     fused = fuse_views([(reference,), (later,)], [everything_free, later_space], SUPPORT)
     assert tracked_free_spaces(fused, [everything_free, later_space]) == {}
     assert tracked_free_spaces(FusedViews((), {}, {1: {1: np.eye(4)}}), [None, later_space]) == {}
+
+
+PUSHER = Pusher(radius_m=0.01, length_m=0.15)
+
+
+def _push(start, direction, distance_m: float, before: int = 0, after: int = 1) -> Push:
+    direction = np.asarray(direction, float)
+    return Push(
+        before, after, np.asarray(start, float), direction / np.linalg.norm(direction),
+        distance_m, 0.05,
+    )  # fmt: skip
+
+
+def test_swept_capsule_distance_agrees_with_a_dense_sampling():
+    # A tilted stick pushed obliquely: the swept parallelogram is not a rectangle.
+    pusher = Pusher(0.01, 0.15, np.array([0.3, 0.0, 1.0]))
+    capsule = SweptCapsule.of(_push([0.0, 0.0, 0.08], [1.0, 0.4, 0.3], 0.1), pusher)
+    s, t = np.meshgrid(np.linspace(-1, 1, 301) * capsule.half_length_m, np.linspace(0, 0.1, 301))
+    sheet = capsule.start + s[..., None] * capsule.axis + t[..., None] * capsule.direction
+    rng = np.random.default_rng(0)
+    points = sheet.reshape(-1, 3)[rng.integers(0, sheet.size // 3, 3000)]
+    points = points + rng.normal(scale=0.015, size=points.shape)
+    brute = cKDTree(sheet.reshape(-1, 3)).query(points)[0]
+    assert np.allclose(capsule.distance(points), brute, atol=6e-4)
+    clear = np.abs(brute - capsule.radius_m) > 1e-3
+    inside = capsule.contains(points)
+    assert np.array_equal(inside[clear], brute[clear] <= capsule.radius_m)
+    assert 100 < inside.sum() < len(points) - 100
+    # Moving the volume moves what it contains.
+    shift = np.eye(4)
+    shift[:3, 3] = [0.3, -0.2, 0.0]
+    assert np.array_equal(capsule.moved(shift).contains(points + shift[:3, 3]), inside)
+
+
+def test_a_push_that_did_not_move_an_object_frees_what_it_swept(views):
+    reference, space, *_ = views
+    behind = _push([-0.15, 0.065, 0.04], [1.0, 0.0, 0.0], 0.3)  # 2.5 cm behind the box
+    swept = pushed_through(reference.points, {1: np.eye(4)}, [behind], PUSHER)
+    assert len(swept) == 1
+    centres = space.grid.centres().reshape(-1, 3)
+    frame0 = space.state_at(centres)
+    combined = TrackedFreeSpace(space, (), swept).state_at(centres)
+    in_sweep = swept[0].contains(centres)
+    hidden_swept = in_sweep & (frame0 == UNKNOWN)
+    assert hidden_swept.sum() > 20
+    assert np.all(combined[hidden_swept] == FREE)
+    assert np.array_equal(combined[~hidden_swept], frame0[~hidden_swept])
+    # Through the entry point: only with a pusher and pushes.
+    fused = FusedViews((reference,), {}, {reference.id: {1: np.eye(4)}})
+    no_later = FusionConfig(later_free_space=False)
+    tracked = tracked_free_spaces(fused, [space, space], [behind], PUSHER, no_later)
+    assert set(tracked) == {reference.id} and len(tracked[reference.id].swept) == 1
+    assert tracked_free_spaces(fused, [space, space], [behind], None, no_later) == {}
+    assert tracked_free_spaces(fused, [space, space], [], PUSHER, no_later) == {}
+    # A push through the object's own observed points contradicts "did not move"; a push to a
+    # frame the object did not register in says nothing.
+    through = _push([-0.15, 0.0, 0.04], [1.0, 0.0, 0.0], 0.3)
+    assert pushed_through(reference.points, {1: np.eye(4)}, [through], PUSHER) == ()
+    assert pushed_through(reference.points, {}, [behind], PUSHER) == ()
+
+
+def test_a_push_that_moved_an_object_frees_only_where_the_pusher_stopped(views):
+    reference, *_ = views
+    # The box slid 5 cm along +x; the pusher stopped against its -x face (at x = 0 after).
+    moved = np.eye(4)
+    moved[:3, 3] = [0.05, 0.0, 0.0]
+    push = _push([-0.2, 0.0, 0.04], [1.0, 0.0, 0.0], 0.2 - 0.011)
+    config = FusionConfig(settle_margin_m=0.003)
+    (end,) = pushed_through(reference.points, {1: np.linalg.inv(moved)}, [push], PUSHER, config)
+    # In the box's frame-0 pose the pusher's end is 5 cm further back, 3 mm thinner.
+    assert end.distance_m == 0 and end.radius_m == pytest.approx(0.007)
+    assert np.allclose(end.start, [-0.061, 0.0, 0.04])
+    assert end.contains(np.array([[-0.061, 0.0, 0.04], [-0.055, 0.0, 0.04]])).tolist() == [
+        True,
+        True,
+    ]
+    assert not end.contains(np.array([[-0.15, 0.0, 0.04], [-0.05, 0.0, 0.02]])).any()

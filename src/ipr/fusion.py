@@ -41,6 +41,8 @@ have no pixel in frame 0). Deterministic: no random draws.
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import logging
 from dataclasses import dataclass
 
@@ -49,6 +51,7 @@ from scipy.spatial import cKDTree
 
 from ipr.perception.free_space import FREE, UNKNOWN, SpaceMap, VoxelGrid
 from ipr.perception.types import Facet, KnownPlane, PartialObject
+from ipr.scene import Push, Pusher
 
 logger = logging.getLogger(__name__)
 
@@ -74,6 +77,13 @@ class FusionConfig:
         later_free_space: hypotheses of an object whose later views register also stay out of
             the space those frames saw empty, through its registered motion
             (``TrackedFreeSpace``).
+        pusher_free_space: ... and out of the volume the pusher swept during a push that did
+            not move the object (``pushed_through``).
+        static_tolerance_m: an object whose observed points moved less than this (mean, m)
+            between the frames before and after a push, by their registered motions, stayed
+            put during that push.
+        settle_margin_m: a pushed object may settle back this far (m) into where the pusher
+            stopped once it is withdrawn.
     """
 
     enabled: bool = True
@@ -89,6 +99,9 @@ class FusionConfig:
     novel_distance_m: float = 0.006
     min_novel_points: int = 30
     later_free_space: bool = True
+    pusher_free_space: bool = True
+    static_tolerance_m: float = 0.005
+    settle_margin_m: float = 0.003
 
     def __post_init__(self) -> None:
         if self.max_points < 10 or self.yaw_starts < 1 or self.iterations < 1:
@@ -363,6 +376,162 @@ def fuse_views(
 
 
 @dataclass(frozen=True, eq=False)
+class SweptCapsule:
+    """The volume a capsule pusher swept during one straight push (world frame, metres): every
+    point within ``radius_m`` of the parallelogram {start + s axis + t direction : |s| <=
+    half_length_m, 0 <= t <= distance_m}.
+
+    Attributes:
+        start: (3,) the capsule centre where the push began.
+        axis: (3,) unit axis of the capsule.
+        half_length_m: half the distance between the centres of its two caps.
+        direction: (3,) unit direction of the push.
+        distance_m: how far the centre travelled.
+        radius_m: the capsule's radius.
+    """
+
+    start: np.ndarray
+    axis: np.ndarray
+    half_length_m: float
+    direction: np.ndarray
+    distance_m: float
+    radius_m: float
+
+    @staticmethod
+    def of(push: Push, pusher: Pusher) -> SweptCapsule:
+        """The volume ``pusher`` swept during ``push``."""
+        axis = np.asarray(pusher.axis, float)
+        return SweptCapsule(
+            np.asarray(push.start_m, float),
+            axis / np.linalg.norm(axis),
+            max(pusher.length_m / 2 - pusher.radius_m, 0.0),
+            np.asarray(push.direction, float),
+            float(push.distance_m),
+            float(pusher.radius_m),
+        )
+
+    def moved(self, transform: np.ndarray) -> SweptCapsule:
+        """This volume moved by the rigid (4, 4) ``transform``."""
+        rotation = transform[:3, :3]
+        return dataclasses.replace(
+            self,
+            start=rotation @ self.start + transform[:3, 3],
+            axis=rotation @ self.axis,
+            direction=rotation @ self.direction,
+        )
+
+    def distance(self, points: np.ndarray) -> np.ndarray:
+        """(N,) distance (m) from world points (N, 3) to the swept parallelogram (0 inside it:
+        the capsule's surface is at ``radius_m``)."""
+        q = np.asarray(points, float).reshape(-1, 3) - self.start
+        a, d = self.axis, self.direction
+        h, length = self.half_length_m, self.distance_m
+        corners = [(-h, 0.0), (h, 0.0), (h, length), (-h, length)]
+        best = np.full(len(q), np.inf)
+        for (s0, t0), (s1, t1) in zip(corners, corners[1:] + corners[:1], strict=True):
+            begin = s0 * a + t0 * d
+            edge = (s1 - s0) * a + (t1 - t0) * d
+            span = float(edge @ edge)
+            along = np.zeros(len(q)) if span == 0 else np.clip((q - begin) @ edge / span, 0, 1)
+            gap = np.linalg.norm(q - begin - along[:, None] * edge, axis=1)
+            best = np.minimum(best, gap)
+        gram = np.array([[a @ a, a @ d], [a @ d, d @ d]])
+        if abs(np.linalg.det(gram)) > 1e-9 and length > 0:
+            s, t = np.linalg.solve(gram, np.stack([q @ a, q @ d]))
+            inside = (np.abs(s) <= h) & (t >= 0) & (t <= length)
+            plane = np.linalg.norm(q - s[:, None] * a - t[:, None] * d, axis=1)
+            best = np.where(inside, np.minimum(best, plane), best)
+        return best
+
+    @functools.cached_property
+    def bounds(self) -> np.ndarray:
+        """(2, 3) lower and upper corners of the axis-aligned box around the volume (m)."""
+        ends = self.start + np.array([0.0, self.distance_m])[:, None] * self.direction
+        corners = np.concatenate(
+            [ends + self.half_length_m * self.axis, ends - self.half_length_m * self.axis]
+        )
+        return np.stack([corners.min(axis=0) - self.radius_m, corners.max(axis=0) + self.radius_m])
+
+    def contains(self, points: np.ndarray, margin_m: float = 0.0) -> np.ndarray:
+        """(N,) bool: world points (N, 3) inside the swept volume shrunk by ``margin_m``."""
+        points = np.asarray(points, float).reshape(-1, 3)
+        low, high = self.bounds
+        # Most points are nowhere near the pusher: test its bounding box first.
+        near = np.flatnonzero(np.all((points >= low) & (points <= high), axis=1))
+        inside = np.zeros(len(points), dtype=bool)
+        if near.size:
+            inside[near] = self.distance(points[near]) <= self.radius_m - margin_m
+        return inside
+
+
+def pushed_through(
+    points: np.ndarray,
+    motions: dict[int, np.ndarray],
+    pushes: tuple[Push, ...] | list[Push],
+    pusher: Pusher,
+    config: FusionConfig | None = None,
+) -> tuple[SweptCapsule, ...]:
+    """Volumes the pusher occupied where an object was not, in the object's frame-0 pose.
+
+    Beyond the paper, which uses the pushes only through the simulated motion: the pusher is a
+    solid, so wherever it was, the object was not (at that time):
+
+    - a push that did not move the object did not touch it: the whole volume the pusher swept
+      was empty of the object, wherever its hidden side is;
+    - a push that moved the object ended with the pusher beside it: the capsule at its end
+      position (less ``settle_margin_m``, as the object may settle back a little once the
+      pusher is withdrawn) was empty of the object at its pose after the push. A push from
+      behind thus bounds the hidden back of the object it pushed.
+
+    An object stayed put when its observed points (``points``, (N, 3) world, frame 0) moved less
+    than ``static_tolerance_m`` (mean) between its registered poses before and after the push
+    (``motions``: frame t -> ``frame0_from_frame`` of ``FusedViews.motions``; frame 0 is the
+    identity); a push from or to a frame the object did not register in is skipped. A volume
+    that holds the object's own observed points (2 mm inside its surface) contradicts the
+    registration (a wrong one, or a swapped id); it is skipped and logged. Each volume is
+    returned moved into the object's frame-0 pose by the inverse of its registered motion.
+    """
+    config = config or FusionConfig()
+    points = np.asarray(points, float)
+    if len(points) == 0:
+        return ()
+    poses = {0: np.eye(4), **{t: np.linalg.inv(m) for t, m in motions.items()}}
+    result = []
+    for push in pushes:
+        before, after = poses.get(push.before_frame), poses.get(push.after_frame)
+        if before is None or after is None:
+            continue
+        at_push = _transformed(before, points)
+        at_end = _transformed(after, points)
+        moved = np.linalg.norm(at_end - at_push, axis=1).mean()
+        if moved < config.static_tolerance_m:
+            capsule, pose, where = SweptCapsule.of(push, pusher), before, at_push
+        else:
+            # Moved: where the pusher stopped, the object was not (it settled a little after).
+            swept = SweptCapsule.of(push, pusher)
+            capsule = dataclasses.replace(
+                swept,
+                start=np.asarray(push.end_m, float),
+                distance_m=0.0,
+                radius_m=max(swept.radius_m - config.settle_margin_m, 0.0),
+            )
+            pose, where = after, at_end
+        if capsule.radius_m <= 0:
+            continue
+        if capsule.contains(where, margin_m=0.002).any():
+            logger.info(
+                "object's observed points inside the pusher's volume (push from frame %d to "
+                "%d); ignored",
+                push.before_frame,
+                push.after_frame,
+            )
+            continue
+        # In the object's frame-0 pose: where the pusher was, relative to the object.
+        result.append(capsule.moved(np.linalg.inv(pose)))
+    return tuple(result)
+
+
+@dataclass(frozen=True, eq=False)
 class TrackedFreeSpace:
     """Space seen empty around one object: in frame 0, and in later frames through the object's
     registered motion (beyond the paper, which checks frame 0's free space only).
@@ -371,12 +540,14 @@ class TrackedFreeSpace:
     what it held at p in frame 0. So a frame-0 point p whose image M_t p frame t saw to be empty
     is not part of the object, whatever else stood there in frame 0: a pushed neighbour that
     uncovers the space behind the object shows how far its hidden side can reach, and a pushed
-    object that turns shows it in its own later views. Frame 0's map decides where it saw
-    anything (a later frame only turns frame 0's *unknown* voxels free), so registration errors
-    cannot contradict what frame 0 saw; the maps' surface margin (1 cm) absorbs a few
-    millimetres of registration error. A wrong registration does not: a yaw that fits the seen
-    points but sends the hidden side elsewhere puts true hidden voxels in this space (on
-    development scenes 4 % of the true voxels, in 10 of 60 objects; docs/DESIGN_NOTES.md).
+    object that turns shows it in its own later views. Likewise a point p whose image the pusher
+    occupied, by the object's motion at the time (``pushed_through``). Frame
+    0's map decides where it saw anything (a later frame or a push only turns frame 0's
+    *unknown* voxels free), so registration errors cannot contradict what frame 0 saw; the
+    maps' surface margin (1 cm) absorbs a few millimetres of registration error. A wrong
+    registration does not: a yaw that fits the seen points but sends the hidden side elsewhere
+    puts true hidden voxels in this space (on development scenes 4 % of the true voxels, in 10
+    of 60 objects; docs/DESIGN_NOTES.md).
 
     It answers ``state_at`` and ``grid`` like a ``SpaceMap``, which is all the hypotheses and
     constraints ask of a space.
@@ -384,10 +555,13 @@ class TrackedFreeSpace:
     Attributes:
         reference: frame 0's map.
         later: per later frame, its map and the object's (4, 4) ``frame_from_frame0`` motion.
+        swept: volumes the pusher occupied where the object was not, moved into the object's
+            frame-0 pose (``pushed_through``).
     """
 
     reference: SpaceMap
     later: tuple[tuple[SpaceMap, np.ndarray], ...]
+    swept: tuple[SweptCapsule, ...] = ()
 
     @property
     def grid(self) -> VoxelGrid:
@@ -396,7 +570,8 @@ class TrackedFreeSpace:
 
     def state_at(self, points: np.ndarray) -> np.ndarray:
         """State (N,) of world points (N, 3) at the object's frame-0 pose: FREE where frame 0 or,
-        for frame 0's unknown voxels, any later frame saw the moved point's voxel empty."""
+        for frame 0's unknown voxels, any later frame saw the moved point's voxel empty or a
+        push that left the object in place swept through it."""
         points = np.asarray(points, float)
         states = self.reference.state_at(points)
         hidden = np.flatnonzero(states == UNKNOWN)
@@ -406,24 +581,44 @@ class TrackedFreeSpace:
             seen_free = space.state_at(_transformed(frame_from_frame0, points[hidden])) == FREE
             states[hidden[seen_free]] = FREE
             hidden = hidden[~seen_free]
+        for capsule in self.swept:
+            if hidden.size == 0:
+                break
+            swept = capsule.contains(points[hidden])
+            states[hidden[swept]] = FREE
+            hidden = hidden[~swept]
         return states
 
 
 def tracked_free_spaces(
-    fused: FusedViews, spaces: list[SpaceMap | None]
+    fused: FusedViews,
+    spaces: list[SpaceMap | None],
+    pushes: tuple[Push, ...] | list[Push] = (),
+    pusher: Pusher | None = None,
+    config: FusionConfig | None = None,
 ) -> dict[int, TrackedFreeSpace]:
-    """Per object id with at least one registered later view, its ``TrackedFreeSpace`` (frame
-    0's map ``spaces[0]`` and the later frames' maps through the registered motions); empty
-    without a frame-0 map. Objects without a registered later view keep frame 0's map."""
+    """Per object id with at least one registered later view (``later_free_space``) or one
+    push that swept past it without moving it (``pusher_free_space``, needs ``pushes`` and
+    ``pusher``), its ``TrackedFreeSpace``; empty without a frame-0 map. Objects without either
+    keep frame 0's map."""
+    config = config or FusionConfig()
     if not spaces or spaces[0] is None:
         return {}
+    observed = {
+        obj.id: np.asarray(obj.points)[np.asarray(obj.pixels) >= 0] for obj in fused.objects
+    }
     tracked = {}
     for object_id, motions in fused.motions.items():
-        later = tuple(
-            (spaces[t], np.linalg.inv(frame0_from_frame))
-            for t, frame0_from_frame in sorted(motions.items())
-            if spaces[t] is not None
-        )
-        if later:
-            tracked[object_id] = TrackedFreeSpace(spaces[0], later)
+        later: tuple = ()
+        if config.later_free_space:
+            later = tuple(
+                (spaces[t], np.linalg.inv(frame0_from_frame))
+                for t, frame0_from_frame in sorted(motions.items())
+                if spaces[t] is not None
+            )
+        swept: tuple = ()
+        if config.pusher_free_space and pusher is not None and pushes and object_id in observed:
+            swept = pushed_through(observed[object_id], motions, pushes, pusher, config)
+        if later or swept:
+            tracked[object_id] = TrackedFreeSpace(spaces[0], later, swept)
     return tracked

@@ -95,8 +95,10 @@ def run_pipeline(
         support = next((p for p in perception.planes[0] if p.kind == "support"), None)
         fused = fuse_views(perception.objects, perception.free_space, support, config.fusion)
         objects = fused.objects
-        if config.fusion.later_free_space:
-            object_spaces = tracked_free_spaces(fused, perception.free_space)
+        if config.fusion.later_free_space or config.fusion.pusher_free_space:
+            object_spaces = tracked_free_spaces(
+                fused, perception.free_space, scene.pushes, scene.pusher, config.fusion
+            )
         # Keyed like the result's objects (their position), listing the later frames fused.
         summary["fused_views"] = {
             str(position): fused.fused_frames[obj.id]
