@@ -5,7 +5,8 @@ Usage: ``python -m benchmarks.dev_fusion [--seed 9100] [--count 10]``.
 Generates (or reuses) development dynamic scenes with ``ipr synth`` seeds from ``--seed`` (never
 the benchmark suites), and scores the Collision Checker's answer on frame 0's partial objects
 with and without the later views fused into them, each with frame 0's free space alone and with
-the later frames' free space through each object's registered motion (``ipr.fusion``), against
+the later frames' free space through each object's registered motion (``ipr.fusion``), and
+with the pusher's volumes too (``FusionConfig.pusher_free_space``), against
 the ground truth of the visible objects (benchmark code may read it; inference never does).
 Prints the mean object IoU per scene and over all visible objects (unmatched objects count 0,
 as in ``ipr eval``'s object space), how many objects a view was fused into or have a later free
@@ -68,7 +69,11 @@ def measure_scene(path: Path) -> dict:
     later_only = FusionConfig(pusher_free_space=False)
     tracked = tracked_free_spaces(fused, perception.free_space, config=later_only)
     with_pushes = tracked_free_spaces(
-        fused, perception.free_space, scene.pushes, scene.pusher, FusionConfig()
+        fused,
+        perception.free_space,
+        scene.pushes,
+        scene.pusher,
+        FusionConfig(pusher_free_space=True),
     )
     scores = {}
     for name, objects, spaces in _variants(

@@ -230,7 +230,10 @@ def test_a_push_that_did_not_move_an_object_frees_what_it_swept(views):
     assert np.array_equal(combined[~hidden_swept], frame0[~hidden_swept])
     # Through the entry point: only with a pusher and pushes.
     fused = FusedViews((reference,), {}, {reference.id: {1: np.eye(4)}})
-    no_later = FusionConfig(later_free_space=False)
+    no_later = FusionConfig(later_free_space=False, pusher_free_space=True)
+    assert tracked_free_spaces(fused, [space, space], [behind], PUSHER) != {}  # later views
+    off = FusionConfig(later_free_space=False)  # the pusher's volume is off by default
+    assert tracked_free_spaces(fused, [space, space], [behind], PUSHER, off) == {}
     tracked = tracked_free_spaces(fused, [space, space], [behind], PUSHER, no_later)
     assert set(tracked) == {reference.id} and len(tracked[reference.id].swept) == 1
     assert tracked_free_spaces(fused, [space, space], [behind], None, no_later) == {}
