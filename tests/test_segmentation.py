@@ -380,34 +380,3 @@ def test_kmeans_labels_finds_separated_clusters_reproducibly():
     assert np.array_equal(labels, kmeans_labels(points, 3, restarts=4, seed=0))
     assert (kmeans_labels(points, 1, restarts=4, seed=0) == 0).all()
     assert sorted(kmeans_labels(points[:2], 3, restarts=1, seed=0).tolist()) == [0, 1]
-
-
-def test_supervoxels_do_not_depend_on_where_the_world_frame_is():
-    # Any z-up world frame is valid (SCENE_FORMAT.md): the same images under a world frame
-    # turned about z and shifted must give the same supervoxels, moved with the frame.
-    import dataclasses
-
-    frame = render(camera(), boxes=[box(0.0, 0.0, (0.10, 0.08, 0.10))], spheres=[
-        (np.array([0.1, -0.1, 0.03]), 0.03)
-    ])  # fmt: skip
-    turn = np.radians(37.0)
-    moved_from_world = np.eye(4)
-    moved_from_world[:3, :3] = [
-        [np.cos(turn), -np.sin(turn), 0.0], [np.sin(turn), np.cos(turn), 0.0], [0.0, 0.0, 1.0]
-    ]  # fmt: skip
-    moved_from_world[:3, 3] = [0.3137, -0.1711, 0.0]
-    moved = dataclasses.replace(frame, world_from_camera=moved_from_world @ frame.world_from_camera)
-    keep = (frame.points_world()[..., 2] > 0.01) & (frame.depth_m > 0)
-    first = compute_supervoxels(frame, keep, PerceptionConfig())
-    second = compute_supervoxels(moved, keep, PerceptionConfig())
-    assert first.count > 10 and second.count == first.count
-    labelled = first.labels >= 0
-    assert np.array_equal(labelled, second.labels >= 0)
-    # The same partition of the pixels (labels may be numbered differently).
-    pairs = np.unique(np.stack([first.labels[labelled], second.labels[labelled]]), axis=1)
-    assert pairs.shape[1] == first.count
-    order = np.argsort(pairs[0])
-    match = pairs[1][order]
-    expected = first.centres @ moved_from_world[:3, :3].T + moved_from_world[:3, 3]
-    assert np.allclose(second.centres[match], expected, atol=1e-9)
-    assert np.allclose(second.normals[match], first.normals @ moved_from_world[:3, :3].T)

@@ -128,7 +128,7 @@ def segment_frame(
     keep = np.zeros(height * width, dtype=bool)
     keep[above[~static_geometry_mask(above_points, planes, config)]] = True
     supervoxels = compute_supervoxels(
-        frame, keep.reshape(height, width), config, points_world=points, support=support
+        frame, keep.reshape(height, width), config, points_world=points
     )
     change = None
     if frame_change is not None and config.temporal_anchoring:

@@ -38,7 +38,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from ipr.perception.config import PerceptionConfig
-from ipr.perception.types import KnownPlane, Supervoxels
+from ipr.perception.types import Supervoxels
 from ipr.scene import Frame
 
 # The 13 "forward" offsets of the 26-neighbourhood (the other 13 are their negatives).
@@ -154,32 +154,6 @@ def organised_normals_at(
     return normal
 
 
-def grid_frame(world_from_camera: np.ndarray, support: KnownPlane | None = None) -> np.ndarray:
-    """(4, 4) grid_from_world: the frame in which supervoxel grids are laid.
-
-    Origin below (or above) the camera centre on the ``support`` plane (at the camera's height
-    without one), z along world z (up), x along the camera's viewing direction projected on the
-    horizontal (world x when the camera looks straight down). It depends only on the camera's
-    pose relative to gravity and the support, so a world frame turned about z or shifted gives
-    the same grid relative to the scene, and voxel layers start at the support (as with the
-    support at world z = 0: development ids kept 1105 of 1205 with layers from the camera's
-    height against 1127 of 1202 from the support).
-    """
-    world_from_camera = np.asarray(world_from_camera, dtype=np.float64)
-    origin = world_from_camera[:3, 3].copy()
-    if support is not None and abs(float(support.normal[2])) > 1e-6:
-        # The point of the support straight below the camera: normal . x + offset = 0.
-        origin[2] = -(support.offset + support.normal[:2] @ origin[:2]) / support.normal[2]
-    forward = world_from_camera[:3, 2]
-    angle = float(np.arctan2(forward[1], forward[0])) if np.hypot(*forward[:2]) > 1e-9 else 0.0
-    cos, sin = np.cos(angle), np.sin(angle)
-    rotation = np.array([[cos, sin, 0.0], [-sin, cos, 0.0], [0.0, 0.0, 1.0]])  # turn by -angle
-    grid_from_world = np.eye(4)
-    grid_from_world[:3, :3] = rotation
-    grid_from_world[:3, 3] = -rotation @ origin
-    return grid_from_world
-
-
 def compute_supervoxels(
     frame: Frame,
     keep: np.ndarray,
@@ -187,14 +161,12 @@ def compute_supervoxels(
     *,
     normals_camera: np.ndarray | None = None,
     points_world: np.ndarray | None = None,
-    support: KnownPlane | None = None,
 ) -> Supervoxels:
     """VCCS-like supervoxels of the pixels of ``frame`` where ``keep`` (H, W) bool is True.
 
     Pixels without depth are never used. ``normals_camera`` (H, W, 3) (``organised_normals``;
     only the kept pixels are read) and ``points_world`` (H, W, 3) (``frame.points_world()``)
-    may be passed to avoid recomputing them. The grids are laid in ``grid_frame`` (from the
-    ``support`` plane, when known).
+    may be passed to avoid recomputing them.
 
     Supervoxel normals are the smallest principal axis of the points of their dominant face
     (``_dominant_faces``: a least-squares plane, which noise barely tilts over a 2 cm patch),
@@ -210,15 +182,7 @@ def compute_supervoxels(
         return _empty(labels_image)
     if points_world is None:
         points_world = frame.points_world()
-    # The voxel and seed grids are laid in the camera's level frame (``grid_frame``), not the
-    # world's: any world frame with z up is valid, and supervoxels (so segments) must not depend
-    # on where its origin is or which way its x axis points.
-    grid_from_world = grid_frame(frame.world_from_camera, support)
-    grid_rotation = grid_from_world[:3, :3]
-    all_points = (
-        np.asarray(points_world.reshape(-1, 3)[pixels], dtype=np.float64) @ grid_rotation.T
-        + grid_from_world[:3, 3]
-    )
+    all_points = np.asarray(points_world.reshape(-1, 3)[pixels], dtype=np.float64)
     voxel = config.voxel_size_m
     scaled = all_points / voxel
     all_cells = np.floor(scaled, out=scaled).astype(np.int64)
@@ -237,7 +201,7 @@ def compute_supervoxels(
         camera_normals = organised_normals_at(frame.depth_m, frame.K, pixels[sample], config)
     else:
         camera_normals = normals_camera.reshape(-1, 3)[pixels[sample]]
-    pixel_normals = camera_normals.astype(np.float64) @ (grid_rotation @ rotation).T
+    pixel_normals = camera_normals.astype(np.float64) @ rotation.T
     colours = frame.rgb.reshape(-1, 3)[pixels[sample]].astype(np.float64)
     colours /= 255.0
 
@@ -370,9 +334,6 @@ def compute_supervoxels(
         )
     else:
         normals = _plane_normals(supervoxel_of_point, points, centres, counts, mean_normals)
-    # Back to the world frame.
-    centres = (centres - grid_from_world[:3, 3]) @ grid_rotation
-    normals = normals @ grid_rotation
     towards_camera = np.einsum("mc,mc->m", normals, camera_centre - centres) >= 0
     normals[~towards_camera] *= -1.0
     mean_colours = _group_mean(supervoxel_of_point, colours, n_supervoxels, counts)
