@@ -8,6 +8,7 @@ import platform
 import statistics
 import subprocess
 from collections.abc import Sequence
+from pathlib import Path
 
 
 def machine_description() -> str:
@@ -56,3 +57,22 @@ def markdown_table(header: Sequence[str], rows: Sequence[Sequence[object]]) -> s
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     lines += ["| " + " | ".join(cell(value) for value in row) + " |" for row in rows]
     return "\n".join(lines)
+
+
+def development_scenes(root: Path, seed: int, count: int) -> list[Path]:
+    """The scene directories (sorted) of ``count`` generated dynamic development scenes from
+    ``seed`` (never a benchmark suite's seeds), in ``root/dynamic-<seed>-<count>``: generated
+    on first use into a temporary folder renamed when complete, so an interrupted run leaves
+    no half-written set to be reused."""
+    from ipr.synth import generate_scenes
+
+    folder = Path(root) / f"dynamic-{seed}-{count}"
+    if not folder.exists():
+        partial = folder.with_name(folder.name + ".part")
+        if partial.exists():
+            import shutil
+
+            shutil.rmtree(partial)
+        generate_scenes(partial, kind="dynamic", seed=seed, count=count)
+        partial.rename(folder)
+    return sorted(p for p in folder.iterdir() if (p / "scene_camera.json").exists())

@@ -118,13 +118,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--scenes", type=Path, default=Path("/tmp/ipr-dev-inference"))
     args = parser.parse_args(argv)
     import ipr  # noqa: F401  (GL backend before MuJoCo loads)
-    from ipr.synth import generate_scenes
+    from benchmarks.common import development_scenes
 
-    folder = args.scenes / f"dynamic-{args.seed}-{args.count}"
-    if not folder.exists():
-        generate_scenes(folder, kind="dynamic", seed=args.seed, count=args.count)
     rows = []
-    for path in sorted(p for p in folder.iterdir() if (p / "scene_camera.json").exists()):
+    for path in development_scenes(args.scenes, args.seed, args.count):
         row = measure_scene(path)
         rows.append(row)
         per = {k: v / max(row["truths"], 1) for k, v in row["scores"].items()}

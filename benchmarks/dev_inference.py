@@ -143,13 +143,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--scenes", type=Path, default=Path("/tmp/ipr-dev-inference"))
     args = parser.parse_args(argv)
     import ipr  # noqa: F401  (GL backend before MuJoCo loads)
-    from ipr.synth import generate_scenes
+    from benchmarks.common import development_scenes
 
-    folder = args.scenes / f"dynamic-{args.seed}-{args.count}"
-    if not folder.exists():
-        generate_scenes(folder, kind="dynamic", seed=args.seed, count=args.count)
     scenes = []
-    for path in sorted(p for p in folder.iterdir() if (p / "scene_camera.json").exists()):
+    for path in development_scenes(args.scenes, args.seed, args.count):
         scenes.append(measure_scene(path, args.samples))
         print(f"{path.name}: {len(scenes[-1]['candidate_iou'])} matched objects", flush=True)
     rows = [

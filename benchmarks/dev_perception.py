@@ -33,21 +33,6 @@ DEVELOPMENT_SETS = ((8000, 12), (8100, 24), (8012, 38), (8150, 50))
 HELD_OUT_SETS = ((8050, 24),)
 
 
-def scene_folder(root: Path, seed: int, count: int) -> Path:
-    """Generate (once) and return the folder of ``count`` dynamic scenes from ``seed``."""
-    from ipr.synth import generate_scenes
-
-    folder = root / f"dynamic-{seed}-{count}"
-    if not folder.exists():
-        generate_scenes(folder, kind="dynamic", seed=seed, count=count)
-    return folder
-
-
-def scene_paths(folder: Path) -> list[Path]:
-    """The scene directories of a generated folder, sorted."""
-    return sorted(p for p in folder.iterdir() if (p / "scene_camera.json").exists())
-
-
 def tracker_only_perceive(cache: Path, overrides: dict[str, float] | None = None):
     """A ``benchmarks.segmentation.Perceive`` that segments each scene once (labels cached as
     ``cache/<scene folder>-<scene>.npz``) and reruns only ``track_segments`` with the default
@@ -116,6 +101,7 @@ def main(argv: list[str] | None = None) -> int:
     for variable in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ.setdefault(variable, "1")
     import ipr  # noqa: F401  (GL backend before MuJoCo loads)
+    from benchmarks.common import development_scenes
     from benchmarks.segmentation import default_perceive, evaluate_suite, suite_figures
 
     if args.sets is None:
@@ -134,7 +120,7 @@ def main(argv: list[str] | None = None) -> int:
     for group, sets in (("development", development), ("held-out", held_out)):
         results_group = []
         for seed, count in sets:
-            results = evaluate_suite(scene_paths(scene_folder(args.scenes, seed, count)), perceive)
+            results = evaluate_suite(development_scenes(args.scenes, seed, count), perceive)
             results_group.extend(results)
             print(_line(f"{seed} ({count})", suite_figures(results)), flush=True)
             for result in results:

@@ -81,14 +81,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--timestep", type=float, default=0.004)
     parser.add_argument("--scenes", type=Path, default=Path("/tmp/ipr-dev-inference"))
     args = parser.parse_args(argv)
+    if not (args.friction > 0 and args.timestep > 0 and args.count >= 1):
+        parser.error("--friction and --timestep must be positive and --count at least 1")
     import ipr  # noqa: F401  (GL backend before MuJoCo loads)
-    from ipr.synth import generate_scenes
+    from benchmarks.common import development_scenes
 
-    folder = args.scenes / f"dynamic-{args.seed}-{args.count}"
-    if not folder.exists():
-        generate_scenes(folder, kind="dynamic", seed=args.seed, count=args.count)
     rows = []
-    for path in sorted(p for p in folder.iterdir() if (p / "scene_camera.json").exists()):
+    for path in development_scenes(args.scenes, args.seed, args.count):
         rows += replay_errors(path, args.friction, args.timestep)
     errors, motions = np.array(rows).reshape(-1, 2).T
     moved = motions > 0.005
