@@ -302,3 +302,28 @@ def test_hypothesis_weighting_respects_the_pairwise_constraints():
     feasible = compatible[(0, 1)] * np.outer(u0, u1)
     assert estimate[0] == pytest.approx(feasible.sum(1) / feasible.sum())
     assert estimate[1] == pytest.approx(feasible.sum(0) / feasible.sum())
+
+
+def test_a_joint_model_drawn_again_is_not_simulated_again():
+    from ipr.collision_checker import uniform_posteriors
+    from ipr.inference import VARIANTS, Sampler, build_problem
+
+    prepared = _prepared(TRUE_BOX, DEEP_BOX)
+    problem, _ = build_problem(
+        prepared, uniform_posteriors(prepared), (SUPPORT,), _push_scene(),
+        variant=VARIANTS["ipr+action+uniform"], pusher=Pusher(), pushes=(BEHIND,),
+        config=InferenceConfig(), seed=0,
+    )  # fmt: skip
+    sampler = Sampler(problem)
+    try:
+        samples = [sampler.sample(index) for index in range(8)]
+        assert {s.choice for s in samples} == {(0,), (1,)}
+        # Two distinct models, two simulations; the repeats reuse them.
+        assert set(sampler.evaluated) == {(0,), (1,)}
+        # Reuse is exact because a simulation and its rendering are deterministic.
+        for choice in ((0,), (1,)):
+            fresh = sampler.depth_norms(choice)
+            assert np.array_equal(fresh, sampler.evaluated[choice])
+            assert all(np.array_equal(s.norms, fresh) for s in samples if s.choice == choice)
+    finally:
+        sampler.close()

@@ -267,6 +267,9 @@ class Sampler:
     def __init__(self, problem: InferenceProblem) -> None:
         self.problem = problem
         self.cache: dict[tuple, np.ndarray] = {}
+        # Depth error norms of the joint models already simulated: the simulation and
+        # rendering are deterministic, so a model drawn again costs only its tree sampling.
+        self.evaluated: dict[tuple[int, ...], np.ndarray | None] = {}
         self.stability_tests = 0
         self._renderer = None
 
@@ -419,6 +422,12 @@ class Sampler:
             )
         return np.array(norms)
 
+    def _norms_of(self, choice: tuple[int, ...], deadline: float) -> np.ndarray | None:
+        """``depth_norms`` of ``choice``, simulated once per sampler."""
+        if choice not in self.evaluated:
+            self.evaluated[choice] = self.depth_norms(choice, deadline)
+        return self.evaluated[choice]
+
     def log_likelihood_of(self, norms: np.ndarray | None) -> float:
         """log P(O | X, mu) from ``depth_norms`` (-inf for a failed simulation)."""
         if norms is None:
@@ -437,7 +446,7 @@ class Sampler:
         tests = self.stability_tests
         rng = np.random.default_rng([self.problem.seed, index])
         choice, object_log_proposal = self.tree_sample(rng, deadline)
-        norms = self.depth_norms(choice, deadline)
+        norms = self._norms_of(choice, deadline)
         return SampleResult(
             index,
             choice,
@@ -453,7 +462,7 @@ class Sampler:
     def score(self, index: int, choice: Sequence[int], deadline: float = math.inf):
         """Score a given joint model (exhaustive enumeration): proposal probability 1."""
         started = time.perf_counter()
-        norms = self.depth_norms(choice, deadline)
+        norms = self._norms_of(tuple(choice), deadline)
         return SampleResult(
             index, tuple(choice), 0.0, self.log_likelihood_of(norms), self.log_prior(choice),
             time.perf_counter() - started, 0, norms, (0.0,) * len(choice),

@@ -1,0 +1,52 @@
+"""The inference benchmark's own figures (``benchmarks.inference``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from benchmarks.inference import best_hypothesis_iou
+
+from ipr.metrics import evaluate
+from ipr.result import load_result, write_ground_truth_result, write_result
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory) -> Path:
+    from ipr.synth import SynthConfig, generate_scenes
+
+    folder = tmp_path_factory.mktemp("scenes")
+    config = SynthConfig(width=320, height=240, write_preview=False)
+    (path,) = generate_scenes(folder, kind="static", seed=5, count=1, config=config)
+    return Path(path)
+
+
+def test_the_best_hypothesis_ceiling_finds_the_true_shape_among_the_hypotheses(scene, tmp_path):
+    truth = load_result(write_ground_truth_result(scene, tmp_path / "truth"))
+    assert len(truth.objects) >= 2
+    shrunk, with_truth = [], []
+    for obj in truth.objects:
+        true_mesh = obj.load_mesh()
+        small = true_mesh.copy()
+        centre = small.centroid
+        small.apply_translation(-centre)
+        small.apply_scale(0.7)
+        small.apply_translation(centre)
+        shrunk.append((small, [(small, 1.0)], 1.0))
+        # The chosen shape is the shrunken one; the true shape is a less probable hypothesis.
+        with_truth.append((small, [(small, 0.6), (true_mesh, 0.4)], 0.6))
+    frames = {0: truth.world_from_camera[0]}
+    for name, objects in (("shrunk", shrunk), ("with-truth", with_truth)):
+        write_result(tmp_path / name, "test", frames, objects, {"total": 0.0})
+    only_shrunk = load_result(tmp_path / "shrunk")
+    evaluation = evaluate(scene, only_shrunk)
+    assert 0.2 < evaluation.object_space.iou < 0.5
+    # With only the shrunken hypotheses the ceiling is what was chosen.
+    assert best_hypothesis_iou(scene, only_shrunk, evaluation) == pytest.approx(
+        evaluation.object_space.iou
+    )
+    # The true shape among the hypotheses: choosing it would have scored 1.
+    mixed = load_result(tmp_path / "with-truth")
+    mixed_evaluation = evaluate(scene, mixed)
+    assert mixed_evaluation.object_space.iou == pytest.approx(evaluation.object_space.iou)
+    assert best_hypothesis_iou(scene, mixed, mixed_evaluation) > 0.99
