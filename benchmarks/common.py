@@ -49,7 +49,11 @@ def median(values: Sequence[float]) -> float:
 
 
 def markdown_table(header: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
-    """A GitHub markdown table; floats are printed with 3 decimals."""
+    """A GitHub markdown table; floats are printed with 3 decimals. ValueError when a row
+    has not as many cells as the header (a table a reader would misread)."""
+    for row in rows:
+        if len(row) != len(header):
+            raise ValueError(f"table row has {len(row)} cells for {len(header)} columns: {row}")
 
     def cell(value: object) -> str:
         return f"{value:.3f}" if isinstance(value, float) else str(value)

@@ -797,7 +797,6 @@ def budget_section(runs: Runs, suite: str = "ycb-dynamic", image: Path | None = 
                 f"{budget:g}",
                 _mean_median(rows, "object_iou"),
                 _mean_median(rows, "scene_iou"),
-                f"{_mean(rows, 'best_hypothesis_iou'):.3f}",
                 _seconds(_finite_median(r["total_s_per_object"] for r in ok)),
                 f"{median(samples):.0f}" if samples else "-",
                 len(rows) - len(ok),

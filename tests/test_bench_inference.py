@@ -50,3 +50,41 @@ def test_the_best_hypothesis_ceiling_finds_the_true_shape_among_the_hypotheses(s
     mixed_evaluation = evaluate(scene, mixed)
     assert mixed_evaluation.object_space.iou == pytest.approx(evaluation.object_space.iou)
     assert best_hypothesis_iou(scene, mixed, mixed_evaluation) > 0.99
+
+
+def _row(scene: str, method: str, iou: float, samples: int | None) -> dict:
+    from benchmarks.inference import SCORE_KEYS
+
+    return {
+        "scene": scene, "method": method, "error": None, **dict.fromkeys(SCORE_KEYS, iou),
+        "objects": 3, "hypotheses_s_per_object": 0.2, "method_s_per_object": 0.3,
+        "inference_s_per_object": 1.0, "total_s_per_object": 1.5, "samples": samples,
+        "fallback": None, "volume_spreads": [2.0], "best_hypothesis_iou": iou + 0.1,
+    }  # fmt: skip
+
+
+def test_every_inference_table_has_as_many_cells_per_row_as_columns(tmp_path):
+    from benchmarks.common import markdown_table
+    from benchmarks.inference import BUDGETS_S, budget_section, method_table
+
+    with pytest.raises(ValueError, match="cells"):
+        markdown_table(["a", "b"], [[1, 2, 3]])
+
+    class Rows:  # the budget section's view of the benchmark runs, with fixed rows
+        suites = {"ycb-dynamic": ["s0", "s1"]}
+
+        def rows(self, suite, method, budget=None, limit=None):
+            samples = None if method == "collision-checker" else int(10 * (budget or 1))
+            return [_row(f"s{i}", method, 0.5 + 0.01 * i, samples) for i in range(2)]
+
+    runs = Rows()
+    page = method_table(
+        {m: runs.rows("ycb-dynamic", m) for m in ("collision-checker", "ipr+uniform")},
+        "ycb-dynamic",
+    )
+    page += "\n" + budget_section(runs, image=tmp_path / "budget.png")
+    tables = [line for line in page.splitlines() if line.startswith("|")]
+    assert len(tables) == 2 + 2 + 2 + 1 + len(BUDGETS_S)
+    widths = {line.count("|") for line in tables}
+    assert len(widths) == 2  # the two tables, each with one width
+    assert (tmp_path / "budget.png").is_file()
