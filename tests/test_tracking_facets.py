@@ -209,6 +209,27 @@ def test_an_object_cut_in_three_is_joined_piece_by_piece():
     assert len({pair[1][75, 135], pair[1][85, 135], pair[1][95, 135]}) == 2
 
 
+def test_an_object_split_in_an_earlier_frame_and_seen_whole_joins_its_ids_in_every_frame():
+    # Frame 0 cut a yellow box into two touching halves, each with an id; frame 1 shows it
+    # whole, pushed 2 cm. The whole takes one half's id; the other half's id joins it, in frame
+    # 0 too, so the box has one id in every frame.
+    red = {1: (10, 10, 15, 15, RED)}
+    first = _boxes({**red, 2: (60, 100, 15, 30, YELLOW), 3: (75, 100, 15, 30, YELLOW)})
+    second = _boxes({**red, 2: (60, 120, 30, 30, YELLOW)})
+    tracked = _track([first, second])
+    box = tracked[1][75, 135]
+    assert tracked[0][65, 115] == tracked[0][85, 115] == box
+    assert tracked[1][12, 12] == tracked[0][12, 12] != box
+    # Without the join frame 0 keeps two ids, one of them lost in frame 1.
+    apart = _track([first, second], TrackingConfig(merge_split_objects=False))
+    assert apart[0][65, 115] != apart[0][85, 115]
+    # Two touching boxes that frame 1 still shows apart are two objects: no join.
+    both = _boxes({**red, 2: (60, 120, 15, 30, YELLOW), 3: (75, 120, 15, 30, YELLOW)})
+    kept = _track([first, both], TrackingConfig(merge_split_pieces=False))
+    assert kept[0][65, 115] != kept[0][85, 115]
+    assert {kept[1][65, 135], kept[1][85, 135]} == {kept[0][65, 115], kept[0][85, 115]}
+
+
 def test_touching_pieces_of_another_colour_or_depth_are_not_joined():
     red = {1: (10, 10, 15, 15, RED)}
     # Frame 0 took a yellow and a green object for one; frame 1 shows them apart. Their union
