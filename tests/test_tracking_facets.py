@@ -9,6 +9,7 @@ from ipr.perception.facets import mean_shift_directions, object_facets, pixel_ar
 from ipr.perception.tracking import (
     assign_segments,
     contact_pixels,
+    merge_split_pieces,
     merged_features,
     prefer_larger_objects,
     prefer_larger_pieces,
@@ -228,6 +229,28 @@ def test_an_object_split_in_an_earlier_frame_and_seen_whole_joins_its_ids_in_eve
     kept = _track([first, both], TrackingConfig(merge_split_pieces=False))
     assert kept[0][65, 115] != kept[0][85, 115]
     assert {kept[1][65, 135], kept[1][85, 135]} == {kept[0][65, 115], kept[0][85, 115]}
+
+
+def test_a_piece_left_to_another_object_joins_the_object_it_resembles_more():
+    # A yellow box (object 7) is pushed 2 cm and cut into halves; the assignment's second stage
+    # gave the lower half to object 8 (a yellow object now hidden) as a leftover pairing, though
+    # the half resembles the box more. The halves are joined into the box all the same.
+    labels, points, rgb = _boxes({2: (60, 120, 15, 30, YELLOW), 3: (75, 120, 15, 30, YELLOW)})
+    box = segment_features(*_boxes({7: (60, 100, 30, 30, YELLOW)}))[7]
+    hidden = segment_features(*_boxes({8: (10, 200, 12, 12, YELLOW)}))[8]
+    sightings = {7: [box], 8: [hidden]}
+    config = TrackingConfig()
+    cost = np.array([[1.0, 3.0], [1.2, 2.4]])  # rows: segments 2, 3; columns: objects 7, 8
+
+    def merge(cost):
+        segments = segment_features(labels, points, rgb)
+        return merge_split_pieces(
+            {2: 7, 3: 8}, cost, [2, 3], [7, 8], segments, sightings, points, config
+        )
+
+    assert merge(cost) == ({2: 7}, {3: 2})
+    # A half that resembles its own object more stays with it.
+    assert merge(np.array([[1.0, 3.0], [1.2, 1.1]])) == ({2: 7, 3: 8}, {})
 
 
 def test_touching_pieces_of_another_colour_or_depth_are_not_joined():

@@ -385,6 +385,17 @@ def prefer_larger_objects(
     return result
 
 
+def _free_for(
+    matched: int | None, object_id: int, row_cost: np.ndarray, column_of: dict[int, int]
+) -> bool:
+    """Whether a segment matched to ``matched`` (None: unmatched) may become a piece of
+    ``object_id``: it is unmatched, matched to that object, or matched to another object that
+    it resembles less (a leftover pairing of the assignment's second stage)."""
+    if matched is None or matched == object_id:
+        return True
+    return bool(row_cost[column_of[object_id]] < row_cost[column_of[matched]])
+
+
 def merge_split_pieces(
     assignment: dict[int, int],
     cost: np.ndarray,
@@ -403,7 +414,10 @@ def merge_split_pieces(
     view about as well, and the other piece starts a new object; the metric's best segment is
     then often the other piece, and neither piece may reach the F-measure the whole would.
     For each known object, among its ``merge_candidates`` cheapest segments that cost at most
-    ``piece_max_cost`` and are unmatched or matched to that object, two that touch
+    ``piece_max_cost`` and are unmatched, matched to that object or matched to another object
+    they resemble less (a leftover pairing of the assignment's second stage, which loses the
+    segment if it is joined: 1135 against 1132 of 1198 development pairs, F >= 0.75 0.925
+    against 0.922, held-out 227 of 232 and 0.949 against 0.946), two that touch
     (``merge_min_contact_px`` neighbouring pixel pairs whose points are within
     ``merge_contact_gap_m``: surfaces that meet, not one in front of the other) and whose
     colours are within ``merge_max_colour`` are joined when the union's cost (lowest over the
@@ -422,6 +436,7 @@ def merge_split_pieces(
     """
     result = dict(assignment)
     joins: dict[int, int] = {}
+    column_of = {o: c for c, o in enumerate(known_ids)}
     width = points.shape[1]
     flat_points = points.reshape(-1, 3)
     valid = None if depth_m is None else depth_m.reshape(-1) > 0
@@ -432,7 +447,7 @@ def merge_split_pieces(
             for row in np.argsort(cost[:, column])[: config.merge_candidates]
             if cost[row, column] <= config.piece_max_cost
             and segment_ids[row] in segments
-            and result.get(segment_ids[row], object_id) == object_id
+            and _free_for(result.get(segment_ids[row]), object_id, cost[row], column_of)
         }
         while len(row_cost) >= 2:
             best = None
