@@ -52,10 +52,11 @@ class TrackingConfig:
             (1.0 gave 1113 / 1202 development pairs, 2.0 1114, with margin 0.6).
         piece_cost_margin: see ``larger_object_takes_segment`` (0.3: 1112; 0.6: 1114).
         merge_split_pieces: two touching segments of similar colour, each unmatched, matched
-            to the same known object or to one it resembles less, whose union resembles that object better than either
-            alone become one segment with its id (an object split in this frame;
-            ``tracking.merge_split_pieces``). Development pairs kept (of 1202) and share of
-            objects with F >= 0.75, all defaults: 1127, 0.919; without joins: 1115, 0.909.
+            to the same known object or to one it resembles less, whose union resembles that
+            object better than either alone become one segment with its id (an object split in
+            this frame; ``tracking.merge_split_pieces``). Development pairs kept (of 1202) and
+            share of objects with F >= 0.75, all defaults: 1127, 0.919; without joins: 1115,
+            0.909 (before ``merge_split_objects``).
         merge_max_colour: the two pieces' colour histograms are at most this Bhattacharyya
             distance apart (in [0, 1]; 0.4: 1120, 0.916; 0.8: 1128, 0.918 with more joins of
             different objects).
