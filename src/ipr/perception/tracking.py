@@ -385,6 +385,26 @@ def prefer_larger_objects(
     return result
 
 
+def _touching_alike(
+    first: SegmentFeatures,
+    second: SegmentFeatures,
+    width: int,
+    flat_points: np.ndarray,
+    valid: np.ndarray | None,
+    config: TrackingConfig,
+) -> bool:
+    """Whether two segments of one frame may be pieces of one object: colours within
+    ``merge_max_colour`` and at least ``merge_min_contact_px`` touching pixel pairs
+    (``contact_pixels`` on the frame's (H*W, 3) world points, image ``width`` pixels wide, and
+    its (H*W,) depth validity or None)."""
+    if colour_distance(first, second) > config.merge_max_colour:
+        return False
+    contact = contact_pixels(
+        first.pixels, second.pixels, width, flat_points, config.merge_contact_gap_m, valid
+    )
+    return contact >= config.merge_min_contact_px
+
+
 def _free_for(
     matched: int | None, object_id: int, row_cost: np.ndarray, column_of: dict[int, int]
 ) -> bool:
@@ -453,12 +473,7 @@ def merge_split_pieces(
             best = None
             for first, second in combinations(sorted(row_cost, key=row_cost.get), 2):
                 a, b = segments[segment_ids[first]], segments[segment_ids[second]]
-                if colour_distance(a, b) > config.merge_max_colour:
-                    continue
-                contact = contact_pixels(
-                    a.pixels, b.pixels, width, flat_points, config.merge_contact_gap_m, valid
-                )
-                if contact < config.merge_min_contact_px:
+                if not _touching_alike(a, b, width, flat_points, valid, config):
                     continue
                 union = merged_features(a, b)
                 union_cost = min(pair_cost(union, seen, config) for seen in sightings[object_id])
@@ -522,19 +537,10 @@ def merge_split_objects(
             for frame in set(sighting_frames[kept]) & set(sighting_frames[other]):
                 a = sightings[kept][sighting_frames[kept].index(frame)]
                 b = sightings[other][sighting_frames[other].index(frame)]
-                if colour_distance(a, b) > config.merge_max_colour:
-                    continue
                 depth = frames_depth[frame]
+                valid = None if depth is None else depth.reshape(-1) > 0
                 points = frames_points[frame]
-                contact = contact_pixels(
-                    a.pixels,
-                    b.pixels,
-                    points.shape[1],
-                    points.reshape(-1, 3),
-                    config.merge_contact_gap_m,
-                    None if depth is None else depth.reshape(-1) > 0,
-                )
-                if contact < config.merge_min_contact_px:
+                if not _touching_alike(a, b, points.shape[1], points.reshape(-1, 3), valid, config):
                     continue
                 union = merged_features(a, b)
                 union_cost = pair_cost(segment, union, config)
