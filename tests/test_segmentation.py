@@ -324,26 +324,51 @@ def test_container_walls_are_found_and_not_objects(container_scene: Path):
     assert len(result.segment_ids) >= 2
 
 
-def test_boxes_on_a_table_are_not_walls():
-    # A cracker-box-sized box lying in front of others: long vertical face standing on the
-    # table, but capped by its own top and with objects on both sides.
-    frame = render(
-        camera(),
-        boxes=[
-            box(0.0, -0.05, (0.21, 0.16, 0.07)),
-            box(0.0, 0.12, (0.08, 0.08, 0.10)),
-            box(-0.2, -0.1, (0.06, 0.06, 0.06)),
-        ],
-    )
+def known_plane_kinds(boxes, config: PerceptionConfig | None = None) -> list[str]:
+    """Kinds of the known planes found in a frame rendered from ``boxes`` on the table."""
+    frame = render(camera(), boxes=boxes)
     valid = frame.depth_m > 0
     normals = organised_normals(frame.depth_m, K) @ frame.world_from_camera[:3, :3].T
     planes = find_known_planes(
         frame.points_world()[valid],
-        PerceptionConfig(),
+        config or PerceptionConfig(),
         normals=normals[valid],
         viewpoint=frame.world_from_camera[:3, 3],
     )
-    assert [p.kind for p in planes] == ["support"]
+    return [p.kind for p in planes]
+
+
+def test_boxes_on_a_table_are_not_walls():
+    # A cracker-box-sized box lying in front of others: long vertical face standing on the
+    # table, but capped by its own top and with objects on both sides.
+    boxes = [
+        box(0.0, -0.05, (0.21, 0.16, 0.07)),
+        box(0.0, 0.12, (0.08, 0.08, 0.10)),
+        box(-0.2, -0.1, (0.06, 0.06, 0.06)),
+    ]
+    assert known_plane_kinds(boxes) == ["support"]
+
+
+def test_faces_lined_up_in_a_plane_are_a_wall_only_when_solid_with_a_straight_top():
+    thin = 0.015
+    face_y = -0.05 + thin / 2
+    # A lone wall 27 x 10 cm standing on the table.
+    assert known_plane_kinds([box(0.0, face_y, (0.27, thin, 0.10))]) == ["support", "wall"]
+    # Three boxes side by side, fronts in one plane, of heights 6, 14 and 9 cm: as long as a
+    # wall, uncapped, but its top edge is not straight.
+    row = [
+        box(x, -0.05 + 0.03, (0.09, 0.06, h)) for x, h in ((-0.09, 0.06), (0.0, 0.14), (0.09, 0.09))
+    ]
+    # A plank resting on two posts: a straight top, but a face mostly empty below it.
+    bridge = [
+        (np.array([0.0, face_y, 0.13]), np.array([0.135, thin / 2, 0.01]), 0.0),
+        box(-0.125, face_y, (0.02, thin, 0.12)),
+        box(0.125, face_y, (0.02, thin, 0.12)),
+    ]
+    without_the_cues = PerceptionConfig(wall_min_top_agreement=0.0, wall_min_face_fill=0.0)
+    for boxes in (row, bridge):
+        assert known_plane_kinds(boxes, without_the_cues) == ["support", "wall"]
+        assert known_plane_kinds(boxes) == ["support"]
 
 
 def test_label_holes_take_the_label_of_the_nearest_valid_pixel_within_reach():

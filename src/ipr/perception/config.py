@@ -143,6 +143,11 @@ class PerceptionConfig:
         wall_cap_depth_m: how far behind a wall's face points "capping" it (a box's top) count.
         wall_max_capped_fraction: share of a wall's length allowed to have such points (objects
             standing behind a drawer front and rising above it).
+        wall_min_top_agreement: a wall accepted on its own (without a partner) has its top
+            edge within 2 cm of its top height over at least this share of its 2 cm columns
+            (a wall's rim is straight; the faces of a pile of objects are of many heights).
+        wall_min_face_fill: ... and inliers in at least this share of the 2 cm cells of its face
+            between its bottom and its top (a wall is a solid face).
         wall_side_range_m: distance from a wall within which the scene's other points are used
             for the one-sided test.
         wall_max_outside_fraction: share of those points allowed on the wall's minority side.
@@ -240,6 +245,8 @@ class PerceptionConfig:
     wall_max_thickness_m: float = 0.018
     wall_cap_depth_m: float = 0.10
     wall_max_capped_fraction: float = 0.5
+    wall_min_top_agreement: float = 0.6
+    wall_min_face_fill: float = 0.5
     wall_side_range_m: float = 0.5
     wall_max_outside_fraction: float = 0.03
     wall_partner_min_length_m: float = 0.1
