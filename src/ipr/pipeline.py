@@ -68,6 +68,7 @@ def run_pipeline(
     from ipr.inference import VARIANTS, infer_shapes
     from ipr.likelihood import observed_frames
     from ipr.perception import perceive_scene
+    from ipr.perception.occlusion import join_first_frame_pieces
 
     if method not in METHODS:
         raise IprError(f"unknown method {method!r}; available: {', '.join(METHODS)}")
@@ -85,6 +86,7 @@ def run_pipeline(
     started = time.perf_counter()
     deadline = None if time_budget_s is None else started + time_budget_s
     perception = perceive_scene(scene, config.perception)
+    perception, _ = join_first_frame_pieces(scene, perception, config.perception.occluded_pieces)
     perceived = time.perf_counter()
     objects = perception.objects[0]
     if not objects:

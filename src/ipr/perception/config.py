@@ -10,6 +10,34 @@ from dataclasses import dataclass, field
 
 
 @dataclass(frozen=True)
+class OccludedPiecesConfig:
+    """Settings of ``ipr.perception.occlusion.join_occluded_pieces`` (metres).
+
+    Attributes:
+        enabled: join pieces at all.
+        max_colour: largest Bhattacharyya distance between the pieces' colour histograms.
+        max_gap_m: largest distance between the pieces' nearest observed points.
+        max_inside_points: other objects' observed points allowed inside the joined hull.
+        inside_margin_m: points count as inside only this far within the hull's faces.
+        free_space_tolerance, free_space_tolerance_voxels: the joined hull may have this
+            share, or this count, whichever is larger, of extra voxels in seen-free space or
+            walls (the hypotheses' unary tolerances, ``ipr.hypotheses.UnaryTolerances``).
+        wall_min_thickness_m: walls without a measured thickness are slabs this thick.
+        point_stride: every this-many-th point is used for the gap between pieces.
+    """
+
+    enabled: bool = True
+    max_colour: float = 0.6
+    max_gap_m: float = 0.10
+    max_inside_points: int = 5
+    inside_margin_m: float = 0.005
+    free_space_tolerance: float = 0.02
+    free_space_tolerance_voxels: int = 20
+    wall_min_thickness_m: float = 0.005
+    point_stride: int = 20
+
+
+@dataclass(frozen=True)
 class TrackingConfig:
     """Weights and gates of the matching cost (dimensionless unless stated).
 
@@ -222,6 +250,8 @@ class PerceptionConfig:
         temporal_wall_max_arrived: largest share of arrived pixels a new wall may have.
         seed: seed of every random choice (RANSAC, k-means), for reproducible runs.
         tracking: matching of segments across frames.
+        occluded_pieces: joining frame 0's pieces of one object cut apart by an occluder
+            (``ipr.perception.occlusion``; used by ``ipr infer``, not by the label images).
     """
 
     plane_threshold_m: float = 0.01
@@ -296,3 +326,4 @@ class PerceptionConfig:
     temporal_wall_max_arrived: float = 0.1
     seed: int = 0
     tracking: TrackingConfig = field(default_factory=TrackingConfig)
+    occluded_pieces: OccludedPiecesConfig = field(default_factory=OccludedPiecesConfig)
