@@ -28,9 +28,15 @@ import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
 from ipr import voxels
-from ipr.hypotheses import PlaneRegion, allowed_voxels, convex_mesh, plane_regions
+from ipr.hypotheses import (
+    PlaneRegion,
+    allowed_voxels,
+    convex_mesh,
+    plane_regions,
+    unary_report,
+)
 from ipr.perception.config import OccludedPiecesConfig
-from ipr.perception.free_space import FREE, SeenSpace
+from ipr.perception.free_space import SeenSpace
 from ipr.perception.tracking import SegmentFeatures, colour_distance, merged_features
 from ipr.perception.types import KnownPlane, PartialObject
 
@@ -40,13 +46,11 @@ logger = logging.getLogger(__name__)
 def _offending_voxels(
     keys: np.ndarray, pitch_m: float, space: SeenSpace, regions: tuple[PlaneRegion, ...]
 ) -> int:
-    """Voxels (``ipr.voxels`` keys at ``pitch_m``) seen free or inside a known wall."""
-    centres = voxels.centres(keys, pitch_m)
-    offending = space.state_at(centres) == FREE
-    for region in regions:
-        if not region.is_support:
-            offending |= region.in_wall(centres)
-    return int(np.count_nonzero(offending))
+    """Voxels (``ipr.voxels`` keys at ``pitch_m``) seen free plus those inside a known wall
+    (``ipr.hypotheses.unary_report``, the hypotheses' own count)."""
+    # The vertices only feed the depth below the support, which is not used here.
+    report = unary_report(np.zeros((1, 3)), keys, pitch_m, space, regions)
+    return report.free_voxels + report.wall_voxels
 
 
 def _hull_keys(points: np.ndarray, pitch_m: float) -> np.ndarray | None:
