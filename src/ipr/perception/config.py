@@ -221,6 +221,23 @@ class PerceptionConfig:
         max_objects: upper bound on the number of objects per frame.
         min_object_pixels: segments with fewer pixels (with depth) are merged into a neighbour
             or dropped (an object peeking over a drawer front can show ~50).
+        join_container_insides: join the pieces of an open container's inside to the container
+            (``ipr.perception.containers``, where the rules below are explained).
+        inside_footprint_fraction, inside_margin_m: share of a piece's points within the
+            container's footprint on the support (its convex hull or fitted circle), grown by
+            this margin (m).
+        inside_circle_rms_m, inside_max_radius_m: the circle fitted to a container's
+            footprint counts when its RMS distance to the points is at most the first and its
+            radius at most the second (m).
+        inside_top_tolerance_m, inside_bottom_tolerance_m: how far (m) the piece's top may rise
+            above the container's and its bottom reach below the container's.
+        inside_rim_radius_m: the container's points this close to the piece's on the support
+            (m) are its rim around the piece.
+        inside_max_chroma: largest L1 distance between the two mean chromaticities.
+        inside_max_front_ratio: the piece stands in front of the container along at most this
+            share of the pixel pairs where they meet.
+        inside_min_contact_px: the two meet (touch, or the container hides the piece) along at
+            least this many 4-neighbour pixel pairs.
         label_fill_px: pixels without depth take the label of the nearest pixel with depth up
             to this distance in pixels (edge dropout, small holes); 0 = no filling.
         facet_bandwidth: mean-shift bandwidth on unit normals for facets (chord length).
@@ -309,6 +326,17 @@ class PerceptionConfig:
     max_objects: int = 20
     min_object_pixels: int = 40
     label_fill_px: float = 3.0
+    join_container_insides: bool = True
+    inside_footprint_fraction: float = 0.9
+    inside_margin_m: float = 0.01
+    inside_circle_rms_m: float = 0.004
+    inside_max_radius_m: float = 0.15
+    inside_top_tolerance_m: float = 0.005
+    inside_bottom_tolerance_m: float = 0.005
+    inside_max_chroma: float = 0.2
+    inside_rim_radius_m: float = 0.02
+    inside_max_front_ratio: float = 0.5
+    inside_min_contact_px: int = 3
     facet_bandwidth: float = 0.35
     min_facet_area_m2: float = 0.03**2
     free_space_voxel_m: float = 0.005

@@ -26,6 +26,7 @@ from scipy.sparse.linalg import eigsh
 
 from ipr.errors import IprError
 from ipr.perception.config import PerceptionConfig
+from ipr.perception.containers import join_container_insides
 from ipr.perception.planes import find_support_plane, find_walls, static_geometry_mask
 from ipr.perception.robot import robot_pixels
 from ipr.perception.supervoxels import compute_supervoxels, organised_normals_at
@@ -138,6 +139,16 @@ def segment_frame(
     labels = fill_label_holes(lookup[supervoxels.labels], valid | robot, config.label_fill_px)
     labels, segment_of_supervoxel = drop_support_residue(
         labels, segment_of_supervoxel, flat_points, valid.reshape(-1), support, config
+    )
+    labels, segment_of_supervoxel = join_container_insides(
+        labels,
+        segment_of_supervoxel,
+        flat_points,
+        valid.reshape(-1),
+        frame.depth_m,
+        frame.rgb,
+        support,
+        config,
     )
     return FrameSegmentation(frame.index, labels, supervoxels, segment_of_supervoxel, planes)
 

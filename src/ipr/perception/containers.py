@@ -1,0 +1,320 @@
+"""Open containers: join the pieces of a mug's, cup's or bowl's inside to the container.
+
+The convexity graph (``segmentation.edge_weights``) cuts at concave edges, and the inside of an
+open container is concave everywhere: a mug seen from above comes out as its outer wall plus
+the inside in several pieces, none of them reaching F >= 0.75 alone (``docs/DESIGN_NOTES.md``,
+"Open-container insides"). A piece P is the inside of a larger segment C when, measured on
+the support plane:
+
+- P meets C: their surfaces touch (4-neighbour pixels whose points are within 1 cm) or C's
+  near wall hides P's lower part (C 1-10 cm nearer), along at least ``inside_min_contact_px``
+  pixel pairs in all (a real sensor often loses the thin rim, so the inside only meets the
+  outer wall by occlusion);
+- P lies within C's footprint: at least ``inside_footprint_fraction`` of P's points project into
+  the convex hull of C's points projected on the support, or into the circle fitted to them,
+  grown by ``inside_margin_m``. The circle counts when it fits (RMS ``inside_circle_rms_m``) and
+  is at most ``inside_max_radius_m``: a camera sees only the front half of a mug's outer wall,
+  whose hull is a crescent that misses the far half of the inside;
+- P does not rise above C (its top at most ``inside_top_tolerance_m`` above C's): an inside is
+  below the rim;
+- P does not reach lower than C (its bottom at least ``inside_bottom_tolerance_m`` below C's
+  at most): an inside sits on the container's floor, whereas a piece of another object seen
+  under C's overhang stands on the support below C's lowest visible point;
+- P does not stand in front of C: where they meet, the pixel pairs at which P is 1-10 cm
+  nearer than C number at most ``inside_max_front_ratio`` times the pairs at which they meet
+  (an object resting on a box stands in front of it; an inside meets its container at the rim
+  or behind its wall);
+- C's surface around P (its points within ``inside_rim_radius_m`` of P's on the support)
+  reaches P's top (its 98th-percentile height at most ``inside_top_tolerance_m`` below it): a
+  rim surrounds an inside, whereas an object resting on a box rises above the box's face;
+- P has C's colour: mean chromaticities (r, g, b) / (r + g + b), which shading does not change
+  (an inside is darker than the outside), at most ``inside_max_chroma`` apart (L1).
+
+Pieces are joined one at a time, the pair that meets along the most pixels first, and the container's
+figures are recomputed after each join, so the inside's pieces that only touch each other join
+in turn. Measured on frame 0 of development scenes (``docs/DESIGN_NOTES.md``).
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import ConvexHull, QhullError, cKDTree
+
+from ipr.perception.config import PerceptionConfig
+from ipr.perception.types import KnownPlane
+
+#: Points of a segment used for its footprint figures (an even subset).
+_MAX_POINTS = 500
+
+
+@dataclass(frozen=True, eq=False)
+class _Segment:
+    """What the rules need of one segment (heights and footprint on the support, metres).
+
+    ``footprint`` (N, 2) and ``heights`` (N,) are an even subset of at most ``_MAX_POINTS`` of
+    its points with depth. ``circle_rms_m`` and ``max_radius_m`` are the config's bounds on
+    the fitted circle.
+    """
+
+    count: int
+    top: float
+    bottom: float
+    footprint: np.ndarray
+    heights: np.ndarray
+    chroma: np.ndarray
+    circle_rms_m: float
+    max_radius_m: float
+
+    @functools.cached_property
+    def hull(self) -> np.ndarray | None:
+        """(F, 3) edge equations (unit normals) of the footprint's convex hull; None when the
+        segment is seen as a line."""
+        try:
+            return ConvexHull(self.footprint).equations
+        except QhullError:
+            return None
+
+    @functools.cached_property
+    def circle(self) -> tuple[np.ndarray, float] | None:
+        """(centre (2,), radius) of the least-squares (Kasa) circle through the footprint, or
+        None when it does not fit (RMS distance above ``circle_rms_m``) or is larger than
+        ``max_radius_m``."""
+        if len(self.footprint) < 10:
+            return None
+        origin = self.footprint.mean(axis=0)
+        local = self.footprint - origin
+        design = np.column_stack([local, np.ones(len(local))])
+        solution, *_ = np.linalg.lstsq(design, (local**2).sum(axis=1), rcond=None)
+        centre = solution[:2] / 2.0
+        squared = solution[2] + centre @ centre
+        if squared <= 0:
+            return None
+        radius = float(np.sqrt(squared))
+        residual = np.linalg.norm(local - centre, axis=1) - radius
+        if radius > self.max_radius_m or np.sqrt(np.mean(residual**2)) > self.circle_rms_m:
+            return None
+        return centre + origin, radius
+
+
+def join_container_insides(
+    labels: np.ndarray,
+    segment_of_supervoxel: np.ndarray,
+    points: np.ndarray,
+    valid: np.ndarray,
+    depth_m: np.ndarray,
+    rgb: np.ndarray,
+    support: KnownPlane,
+    config: PerceptionConfig,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Relabel the pieces of open containers' insides with their container's label.
+
+    Args:
+        labels: (H, W) int segment labels, 0 = none.
+        segment_of_supervoxel: (M,) segment of each supervoxel (relabelled the same way).
+        points: (H*W, 3) world points, metres; valid: (H*W,) pixels with a depth reading.
+        depth_m: (H, W) depth, metres; rgb: (H, W, 3) uint8 colours.
+        support: the support plane (heights and footprints are measured on it).
+
+    Returns:
+        The relabelled (labels, segment_of_supervoxel); the inputs when nothing is joined.
+    """
+    if not config.join_container_insides or labels.max() < 2:
+        return labels, segment_of_supervoxel
+    height, width = labels.shape
+    contacts, fronts = _borders(
+        labels, points.reshape(height, width, 3), depth_m, valid.reshape(height, width)
+    )
+    meets = _meetings(contacts, fronts)
+    if not any(count >= config.inside_min_contact_px for count in meets.values()):
+        return labels, segment_of_supervoxel
+    normal = support.normal / np.linalg.norm(support.normal)
+    axis_u = np.cross(normal, [1.0, 0.0, 0.0])
+    if np.linalg.norm(axis_u) < 0.1:
+        axis_u = np.cross(normal, [0.0, 1.0, 0.0])
+    axis_u /= np.linalg.norm(axis_u)
+    axis_v = np.cross(normal, axis_u)
+    frame = (support, axis_u, axis_v)
+
+    # Pixels with depth of every segment, from one sort.
+    flat = labels.reshape(-1)
+    labelled = np.flatnonzero((flat > 0) & valid)
+    order = labelled[np.argsort(flat[labelled], kind="stable")]
+    ids, starts = np.unique(flat[order], return_index=True)
+    members = dict(zip(ids.tolist(), np.split(order, starts[1:]), strict=True))
+    summaries: dict[int, _Segment | None] = {}
+
+    def summary(segment: int) -> _Segment | None:
+        if segment not in summaries:
+            summaries[segment] = _summary(members.get(segment), points, rgb, frame, config)
+        return summaries[segment]
+
+    owner = {segment: segment for segment in members}
+    verdicts: dict[tuple[int, int], bool] = {}
+    joined = False
+    while True:
+        best = None
+        for (a, b), count in meets.items():
+            if count < config.inside_min_contact_px or (best is not None and count <= best[0]):
+                continue
+            first, second = summary(a), summary(b)
+            if first is None or second is None:
+                continue
+            piece, container = (a, b) if first.count < second.count else (b, a)
+            if fronts.get((piece, container), 0) > config.inside_max_front_ratio * count:
+                continue
+            if (piece, container) not in verdicts:
+                verdicts[piece, container] = _is_inside(summary(piece), summary(container), config)
+            if verdicts[piece, container]:
+                best = (count, piece, container)
+        if best is None:
+            break
+        _, piece, container = best
+        joined = True
+        for segment, target in owner.items():
+            if target == piece:
+                owner[segment] = container
+        members[container] = np.concatenate([members[container], members.pop(piece)])
+        summaries.pop(piece)
+        summaries.pop(container)
+        verdicts = {pair: v for pair, v in verdicts.items() if container not in pair}
+        contacts = _relabelled(contacts, piece, container, ordered=False)
+        fronts = _relabelled(fronts, piece, container, ordered=True)
+        meets = _meetings(contacts, fronts)
+    if not joined:
+        return labels, segment_of_supervoxel
+    largest = max(int(flat.max()), int(segment_of_supervoxel.max(initial=0)))
+    lookup = np.arange(largest + 1, dtype=labels.dtype)
+    for segment, target in owner.items():
+        lookup[segment] = target
+    return lookup[labels], lookup[segment_of_supervoxel].astype(segment_of_supervoxel.dtype)
+
+
+def _meetings(contacts: dict, fronts: dict) -> dict:
+    """{(a, b): pixel pairs, a < b} along which two segments' surfaces touch or one hides the
+    other."""
+    meets = dict(contacts)
+    for (a, b), count in fronts.items():
+        key = (min(a, b), max(a, b))
+        meets[key] = meets.get(key, 0) + count
+    return meets
+
+
+def _borders(
+    labels: np.ndarray, points: np.ndarray, depth_m: np.ndarray, valid: np.ndarray
+) -> tuple[dict, dict]:
+    """Where segments meet, from the 4-neighbour pixel pairs of two labels, both with depth.
+
+    Returns ``contacts`` {(a, b): count, a < b} of pairs whose world points are within 1 cm (the
+    two surfaces meet there) and ``fronts`` {(nearer, farther): count} of pairs whose depths
+    differ by 1-10 cm (one segment stands in front of the other there).
+    """
+    contacts: dict[tuple[int, int], int] = {}
+    fronts: dict[tuple[int, int], int] = {}
+    base = int(labels.max()) + 1
+    # Only the labelled pixels' bounding box can hold borders; labels without depth are 0.
+    rows, cols = np.nonzero(labels > 0)
+    box = (slice(rows.min(), rows.max() + 1), slice(cols.min(), cols.max() + 1))
+    labels = np.where(valid[box], labels[box], 0)
+    points, depth_m = points[box], depth_m[box]
+    for first, second in (
+        ((slice(None), slice(None, -1)), (slice(None), slice(1, None))),
+        ((slice(None, -1), slice(None)), (slice(1, None), slice(None))),
+    ):
+        a, b = labels[first], labels[second]
+        border = np.nonzero((a != b) & (a > 0) & (b > 0))
+        a, b = a[border].astype(np.int64), b[border].astype(np.int64)
+        gap = np.linalg.norm(points[first][border] - points[second][border], axis=1)
+        step = depth_m[second][border] - depth_m[first][border]  # > 0: a is nearer
+        near = gap < 0.01
+        _count(contacts, np.minimum(a[near], b[near]), np.maximum(a[near], b[near]), base)
+        ahead = (np.abs(step) > 0.01) & (np.abs(step) < 0.1)
+        _count(
+            fronts,
+            np.where(step > 0, a, b)[ahead],
+            np.where(step > 0, b, a)[ahead],
+            base,
+        )
+    return contacts, fronts
+
+
+def _count(counts: dict, first: np.ndarray, second: np.ndarray, base: int) -> None:
+    """Add the occurrences of each (first, second) pair to ``counts``."""
+    keys, count = np.unique(first * base + second, return_counts=True)
+    for key, n in zip(keys.tolist(), count.tolist(), strict=True):
+        pair = divmod(key, base)
+        counts[pair] = counts.get(pair, 0) + n
+
+
+def _relabelled(counts: dict, piece: int, container: int, ordered: bool) -> dict:
+    """``counts`` with ``piece`` renamed ``container`` (pairs within one segment dropped)."""
+    merged: dict[tuple[int, int], int] = {}
+    for (a, b), count in counts.items():
+        a, b = (container if a == piece else a), (container if b == piece else b)
+        if a != b:
+            key = (a, b) if ordered else (min(a, b), max(a, b))
+            merged[key] = merged.get(key, 0) + count
+    return merged
+
+
+def _summary(
+    pixels: np.ndarray | None,
+    points: np.ndarray,
+    rgb: np.ndarray,
+    frame: tuple[KnownPlane, np.ndarray, np.ndarray],
+    config: PerceptionConfig,
+) -> _Segment | None:
+    """The rules' figures of a segment from its (N,) flat pixel indices with depth."""
+    if pixels is None or pixels.size < 3:
+        return None
+    support, axis_u, axis_v = frame
+    count = int(pixels.size)
+    pixels = pixels[:: -(-count // _MAX_POINTS)]
+    world = points[pixels]
+    heights = support.signed_distance(world)
+    footprint = np.stack([world @ axis_u, world @ axis_v], axis=1)
+    colour = rgb.reshape(-1, 3)[pixels].astype(np.float64) + 1.0
+    return _Segment(
+        count=count,
+        top=float(np.percentile(heights, 98)),
+        bottom=float(np.percentile(heights, 2)),
+        footprint=footprint,
+        heights=heights,
+        chroma=(colour / colour.sum(axis=1, keepdims=True)).mean(axis=0),
+        circle_rms_m=config.inside_circle_rms_m,
+        max_radius_m=config.inside_max_radius_m,
+    )
+
+
+def _is_inside(piece: _Segment, container: _Segment, config: PerceptionConfig) -> bool:
+    """Whether ``piece`` is (part of) the inside of ``container`` (module doc)."""
+    if piece.top > container.top + config.inside_top_tolerance_m:
+        return False
+    if piece.bottom < container.bottom - config.inside_bottom_tolerance_m:
+        return False
+    if np.abs(piece.chroma - container.chroma).sum() > config.inside_max_chroma:
+        return False
+    fraction = config.inside_footprint_fraction
+    if container.circle is not None:
+        # A round wall (mug, cup, bowl) surrounds its inside at its full height, which the top
+        # rule has checked.
+        centre, radius = container.circle
+        distance = np.linalg.norm(piece.footprint - centre, axis=1)
+        if np.mean(distance <= radius + config.inside_margin_m) >= fraction:
+            return True
+    if container.hull is None:
+        return False
+    # Distance outside the hull: the largest signed distance to its edge lines.
+    outside = piece.footprint @ container.hull[:, :2].T + container.hull[:, 2]
+    if np.mean(outside.max(axis=1) <= config.inside_margin_m) < fraction:
+        return False
+    # Any other shape: its surface around the piece (a rim) must reach up to the piece's top.
+    distance, _ = cKDTree(piece.footprint).query(
+        container.footprint, distance_upper_bound=config.inside_rim_radius_m
+    )
+    around = container.heights[np.isfinite(distance)]
+    return bool(
+        around.size > 0 and np.percentile(around, 98) >= piece.top - config.inside_top_tolerance_m
+    )
