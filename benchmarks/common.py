@@ -63,20 +63,30 @@ def markdown_table(header: Sequence[str], rows: Sequence[Sequence[object]]) -> s
     return "\n".join(lines)
 
 
-def development_scenes(root: Path, seed: int, count: int) -> list[Path]:
-    """The scene directories (sorted) of ``count`` generated dynamic development scenes from
-    ``seed`` (never a benchmark suite's seeds), in ``root/dynamic-<seed>-<count>``: generated
-    on first use into a temporary folder renamed when complete, so an interrupted run leaves
-    no half-written set to be reused."""
-    from ipr.synth import generate_scenes
+#: Open containers the generator's pool rule drops (solidity), for segmentation development.
+CONTAINER_OBJECTS = ("024_bowl", "025_mug", "065-a_cups", "065-d_cups", "065-g_cups", "065-j_cups")
 
-    folder = Path(root) / f"dynamic-{seed}-{count}"
+
+def development_scenes(
+    root: Path, seed: int, count: int, *, kind: str = "dynamic", containers: bool = False
+) -> list[Path]:
+    """The scene directories (sorted) of ``count`` generated development scenes of ``kind``
+    from ``seed`` (never a benchmark suite's seeds), in ``root/<kind>-<seed>-<count>``
+    (``root/<kind>-containers-<seed>-<count>`` with ``containers``: the pool also holds the
+    bowl, the mug and four cups, each twice, ``CONTAINER_OBJECTS``): generated on first use into
+    a temporary folder renamed when complete, so an interrupted run leaves no half-written set
+    to be reused."""
+    from ipr.synth import SynthConfig, generate_scenes
+
+    name = f"{kind}-containers-{seed}-{count}" if containers else f"{kind}-{seed}-{count}"
+    folder = Path(root) / name
     if not folder.exists():
         partial = folder.with_name(folder.name + ".part")
         if partial.exists():
             import shutil
 
             shutil.rmtree(partial)
-        generate_scenes(partial, kind="dynamic", seed=seed, count=count)
+        config = SynthConfig(extra_objects=CONTAINER_OBJECTS * 2) if containers else SynthConfig()
+        generate_scenes(partial, kind=kind, seed=seed, count=count, config=config)
         partial.rename(folder)
     return sorted(p for p in folder.iterdir() if (p / "scene_camera.json").exists())

@@ -1,6 +1,7 @@
 """Development measurement of segmentation and tracking (docs/DESIGN_NOTES.md, "Perception").
 
-Usage: ``python -m benchmarks.dev_perception [--sets 8000:12 8100:24 ...] [--tracker-only]``.
+Usage: ``python -m benchmarks.dev_perception [--sets 8000:12 8100:24 ...] [--containers]
+[--tracker-only]``.
 
 Generates (or reuses) the development dynamic scenes of the design notes with ``ipr synth``
 (base seeds 8000 (12 scenes), 8100 (24), 8012 (38), 8150 (50), and the held-out check 8050
@@ -9,6 +10,11 @@ and scores it with the segmentation benchmark's own code (``benchmarks.segmentat
 ``evaluate_suite`` and ``suite_figures``). Prints, per set, over the development sets pooled
 and for the held-out check: ids kept ((object, later frame) pairs kept / pairs), the pooled
 share of (object, frame) rows with F >= 0.75, and the median perception ms per frame.
+
+``--containers`` scores the sets whose generator pool also holds open containers (bowl, mug,
+cups; ``benchmarks.common.CONTAINER_OBJECTS``): by default static seed 7100 (16 scenes) and
+dynamic seed 7200 (12), the sets of the design notes' "Open-container insides"; a set is then
+``seed:count[:kind]``.
 
 ``--tracker-only`` caches each scene's untracked segmentation labels (``--cache``) on first use
 and then reruns only the tracker on them (segmentation does not depend on the tracker: its
@@ -31,6 +37,8 @@ import numpy as np
 #: (base seed, scene count) of the development sets; the held-out check is scored apart.
 DEVELOPMENT_SETS = ((8000, 12), (8100, 24), (8012, 38), (8150, 50))
 HELD_OUT_SETS = ((8050, 24),)
+#: (base seed, scene count, kind) of the container development sets (``--containers``).
+CONTAINER_SETS = ((7100, 16, "static"), (7200, 12, "dynamic"))
 
 
 def tracker_only_perceive(cache: Path, overrides: dict[str, float] | None = None):
@@ -87,6 +95,9 @@ def main(argv: list[str] | None = None) -> int:
         help="seed:count development sets (default: the design notes' four and the check)",
     )
     parser.add_argument("--no-held-out", action="store_true", help="skip the held-out check")
+    parser.add_argument(
+        "--containers", action="store_true", help="the sets with open containers in the pool"
+    )
     parser.add_argument("--tracker-only", action="store_true")
     parser.add_argument(
         "--set",
@@ -105,10 +116,12 @@ def main(argv: list[str] | None = None) -> int:
     from benchmarks.segmentation import default_perceive, evaluate_suite, suite_figures
 
     if args.sets is None:
-        development = list(DEVELOPMENT_SETS)
+        development = list(CONTAINER_SETS if args.containers else DEVELOPMENT_SETS)
     else:
-        development = [tuple(int(v) for v in s.split(":")) for s in args.sets]
-    held_out = [] if args.no_held_out else list(HELD_OUT_SETS)
+        development = [_parse_set(s, parser) for s in args.sets]
+    development = [(*s, "dynamic") if len(s) == 2 else s for s in development]
+    held_out = [] if args.no_held_out or args.containers else list(HELD_OUT_SETS)
+    held_out = [(*s, "dynamic") for s in held_out]
     overrides = {k: ast.literal_eval(v) for k, v in (s.split("=", 1) for s in args.set)}
     if overrides and not args.tracker_only:
         parser.error("--set needs --tracker-only")
@@ -119,8 +132,11 @@ def main(argv: list[str] | None = None) -> int:
     pooled = []
     for group, sets in (("development", development), ("held-out", held_out)):
         results_group = []
-        for seed, count in sets:
-            results = evaluate_suite(development_scenes(args.scenes, seed, count), perceive)
+        for seed, count, kind in sets:
+            scenes = development_scenes(
+                args.scenes, seed, count, kind=kind, containers=args.containers
+            )
+            results = evaluate_suite(scenes, perceive)
             results_group.extend(results)
             print(_line(f"{seed} ({count})", suite_figures(results)), flush=True)
             for result in results:
@@ -131,6 +147,18 @@ def main(argv: list[str] | None = None) -> int:
         if group == "development":
             pooled = results_group
     return 0 if pooled or held_out else 1
+
+
+def _parse_set(text: str, parser: argparse.ArgumentParser) -> tuple:
+    """``seed:count[:kind]`` -> (seed, count[, kind])."""
+    parts = text.split(":")
+    try:
+        if len(parts) in (2, 3) and (len(parts) == 2 or parts[2] in ("static", "dynamic")):
+            return (int(parts[0]), int(parts[1]), *parts[2:])
+    except ValueError:
+        pass
+    parser.error(f"a set is seed:count[:static|dynamic], got {text!r}")
+    raise AssertionError  # parser.error exits
 
 
 if __name__ == "__main__":

@@ -386,6 +386,28 @@ def test_ycb_pool_rule_keeps_convex_objects_and_drops_thin_or_hollow_ones():
     assert [item.obj_id for item in catalogue] == list(range(1, len(files) + 1))
 
 
+@needs_ycb
+def test_extra_objects_join_the_pool_and_unknown_names_are_refused():
+    catalogue = load_ycb_catalogue(str(YCB))
+    plain = ycb_pool(catalogue, SynthConfig())
+    extra = ycb_pool(catalogue, SynthConfig(extra_objects=("025_mug", "024_bowl", "025_mug")))
+    assert [item.name for item in extra] == [
+        *(item.name for item in plain),
+        "025_mug",
+        "024_bowl",
+        "025_mug",
+    ]
+    with pytest.raises(ValueError, match="999_teapot"):
+        ycb_pool(catalogue, SynthConfig(extra_objects=("999_teapot",)))
+
+
+def test_extra_objects_must_be_a_tuple_of_names():
+    with pytest.raises(ValueError, match="extra_objects"):
+        SynthConfig(extra_objects="025_mug")
+    with pytest.raises(ValueError, match="extra_objects"):
+        SynthConfig(extra_objects=(25,))
+
+
 def test_models_folder_is_reused_and_conflicts_are_refused(tmp_path):
     shapes = list(procedural_catalogue(SynthConfig().procedural_density_kg_m3))[:3]
     write_bop_models(tmp_path, shapes)

@@ -10,29 +10,30 @@ the support plane:
   near wall hides P's lower part (C 1-10 cm nearer), along at least ``inside_min_contact_px``
   pixel pairs in all (a real sensor often loses the thin rim, so the inside only meets the
   outer wall by occlusion);
-- P lies within C's footprint: at least ``inside_footprint_fraction`` of P's points project into
-  the convex hull of C's points projected on the support, or into the circle fitted to them,
-  grown by ``inside_margin_m``. The circle counts when it fits (RMS ``inside_circle_rms_m``) and
-  is at most ``inside_max_radius_m``: a camera sees only the front half of a mug's outer wall,
-  whose hull is a crescent that misses the far half of the inside;
 - P does not rise above C (its top at most ``inside_top_tolerance_m`` above C's): an inside is
   below the rim;
-- P does not reach lower than C (its bottom at least ``inside_bottom_tolerance_m`` below C's
-  at most): an inside sits on the container's floor, whereas a piece of another object seen
-  under C's overhang stands on the support below C's lowest visible point;
-- P does not stand in front of C: where they meet, the pixel pairs at which P is 1-10 cm
-  nearer than C number at most ``inside_max_front_ratio`` times the pairs at which they meet
-  (an object resting on a box stands in front of it; an inside meets its container at the rim
-  or behind its wall);
-- C's surface around P (its points within ``inside_rim_radius_m`` of P's on the support)
-  reaches P's top (its 98th-percentile height at most ``inside_top_tolerance_m`` below it): a
-  rim surrounds an inside, whereas an object resting on a box rises above the box's face;
+- P does not reach lower than C (its bottom at most ``inside_bottom_tolerance_m`` below C's):
+  an inside sits on the container's floor, whereas a piece of another object seen under C's
+  overhang stands on the support below C's lowest visible point;
+- P does not stand in front of C: the pixel pairs at which P is 1-10 cm nearer than C are at
+  most ``inside_max_front_ratio`` of those along which they meet (an object resting on a box
+  stands in front of it; an inside meets its container at the rim or behind its wall);
 - P has C's colour: mean chromaticities (r, g, b) / (r + g + b), which shading does not change
-  (an inside is darker than the outside), at most ``inside_max_chroma`` apart (L1).
+  (an inside is darker than the outside), at most ``inside_max_chroma`` apart (L1);
+- P lies within C's footprint on the support: at least ``inside_footprint_fraction`` of P's
+  points project, with a margin of ``inside_margin_m``, either into the circle fitted to C's
+  footprint, when one fits (RMS at most ``inside_circle_rms_m``, radius at most
+  ``inside_max_radius_m``: a round wall, which surrounds its inside at its full height), or
+  into the convex hull of C's footprint. A camera sees only the front half of a mug's outer
+  wall, whose hull is a crescent that misses the inside; the circle does not. In the hull case
+  C's points within ``inside_rim_radius_m`` of P's on the support must also reach P's top (98th
+  percentile at most ``inside_top_tolerance_m`` below it): a rim surrounds an inside, whereas
+  an object resting on a box rises above the box's face.
 
-Pieces are joined one at a time, the pair that meets along the most pixels first, and the container's
-figures are recomputed after each join, so the inside's pieces that only touch each other join
-in turn. Measured on frame 0 of development scenes (``docs/DESIGN_NOTES.md``).
+Pieces are joined one at a time, the pair that meets along the most pixel pairs first, and the
+container's figures are recomputed after each join, so the inside's pieces that touch only
+each other join in turn. Measured on development scenes with containers
+(``benchmarks.dev_perception --containers``; ``docs/DESIGN_NOTES.md``).
 """
 
 from __future__ import annotations

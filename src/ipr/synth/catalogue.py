@@ -145,7 +145,14 @@ def _vertex_colors(mesh, count: int) -> np.ndarray:
 
 
 def ycb_pool(catalogue: tuple[ObjectModel, ...], config: SynthConfig) -> list[ObjectModel]:
-    """Objects of ``catalogue`` that pass the pool rule of this module's docstring."""
+    """Objects of ``catalogue`` that pass the pool rule of this module's docstring, then those
+    named in ``config.extra_objects`` (ValueError naming any that the catalogue lacks)."""
+    by_name = {item.name: item for item in catalogue}
+    unknown = [name for name in config.extra_objects if name not in by_name]
+    if unknown:
+        raise ValueError(
+            f"extra_objects {unknown} are not in the YCB catalogue (known: {sorted(by_name)})"
+        )
     pool = []
     low, high = config.density_range_kg_m3
     for item in catalogue:
@@ -158,7 +165,7 @@ def ycb_pool(catalogue: tuple[ObjectModel, ...], config: SynthConfig) -> list[Ob
             and low <= density <= high
         ):
             pool.append(item)
-    return pool
+    return pool + [by_name[name] for name in config.extra_objects]
 
 
 # --------------------------------------------------------------------------------------------

@@ -32,6 +32,10 @@ class SynthConfig:
         min_objects, max_objects: objects per scene (inclusive).
         object_source: "auto" (YCB when the folder exists, else procedural), "ycb", "procedural".
         min_solidity: YCB pool rule, volume / convex-hull volume (MuJoCo collides hulls).
+        extra_objects: YCB objects (file stems such as "025_mug") added to the pool although
+            the pool rule drops them, e.g. open containers for segmentation development; a name
+            given twice is drawn twice as often. MuJoCo still collides their convex hulls, so a
+            cup can hold nothing and objects rest on its rim. Default none.
         min_extent_m, max_extent_m: YCB pool rule on the smallest / largest bounding-box extent.
         boxed_max_extent_m: container and drawer scenes use only objects whose largest extent
             is at most this (tall boxes and bottles lean out over the rim or overflow).
@@ -101,6 +105,7 @@ class SynthConfig:
     max_objects: int = 8
     object_source: str = "auto"
     min_solidity: float = 0.75
+    extra_objects: tuple[str, ...] = ()
     min_extent_m: float = 0.015
     max_extent_m: float = 0.26
     boxed_max_extent_m: float = 0.2
@@ -159,9 +164,14 @@ class SynthConfig:
     def validate(self) -> None:
         """Raise ValueError naming the first bad field and the accepted values (called on
         construction, so a SynthConfig that exists is valid)."""
+        _require(
+            isinstance(self.extra_objects, tuple)
+            and all(isinstance(name, str) for name in self.extra_objects),
+            f"extra_objects must be a tuple of YCB object names, got {self.extra_objects!r}",
+        )
         for item in fields(self):
             value = getattr(self, item.name)
-            if isinstance(value, bool | str):
+            if isinstance(value, bool | str) or item.name == "extra_objects":
                 continue
             numbers = value if isinstance(value, tuple) else (value,)
             if not all(
