@@ -283,6 +283,12 @@ def test_pusher_pixels_are_removed():
 
 @pytest.fixture(scope="module")
 def container_scene(tmp_path_factory) -> Path:
+    """A generated container scene with YCB objects (its figures below are of that scene; the
+    procedural objects used without the shared data make another scene)."""
+    from ipr.data import shared_data_dir
+
+    if shared_data_dir() is None:
+        pytest.skip("shared data (../shared/data or $IPR_DATA) is absent")
     out = tmp_path_factory.mktemp("segmentation")
     return generate_scene(
         out,
