@@ -238,6 +238,10 @@ class PerceptionConfig:
             share of the pixel pairs where they meet.
         inside_min_contact_px: the two meet (touch, or the container hides the piece) along at
             least this many 4-neighbour pixel pairs.
+        inside_contact_gap_m: two neighbouring pixels whose points are closer than this (m)
+            belong to touching surfaces.
+        inside_front_step_m: (low, high) depth step (m) between neighbouring pixels at which
+            the nearer one stands in front of the other (above ``high``: unrelated surfaces).
         label_fill_px: pixels without depth take the label of the nearest pixel with depth up
             to this distance in pixels (edge dropout, small holes); 0 = no filling.
         facet_bandwidth: mean-shift bandwidth on unit normals for facets (chord length).
@@ -337,6 +341,8 @@ class PerceptionConfig:
     inside_rim_radius_m: float = 0.02
     inside_max_front_ratio: float = 0.5
     inside_min_contact_px: int = 3
+    inside_contact_gap_m: float = 0.01
+    inside_front_step_m: tuple[float, float] = (0.01, 0.1)
     facet_bandwidth: float = 0.35
     min_facet_area_m2: float = 0.03**2
     free_space_voxel_m: float = 0.005

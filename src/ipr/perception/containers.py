@@ -6,8 +6,9 @@ the inside in several pieces, none of them reaching F >= 0.75 alone (``docs/DESI
 "Open-container insides"). A piece P is the inside of a larger segment C when, measured on
 the support plane:
 
-- P meets C: their surfaces touch (4-neighbour pixels whose points are within 1 cm) or C's
-  near wall hides P's lower part (C 1-10 cm nearer), along at least ``inside_min_contact_px``
+- P meets C: their surfaces touch (4-neighbour pixels whose points are closer than
+  ``inside_contact_gap_m``) or C's near wall hides P's lower part (C nearer by a depth step
+  within ``inside_front_step_m``), along at least ``inside_min_contact_px``
   pixel pairs in all (a real sensor often loses the thin rim, so the inside only meets the
   outer wall by occlusion);
 - P does not rise above C (its top at most ``inside_top_tolerance_m`` above C's): an inside is
@@ -15,7 +16,7 @@ the support plane:
 - P does not reach lower than C (its bottom at most ``inside_bottom_tolerance_m`` below C's):
   an inside sits on the container's floor, whereas a piece of another object seen under C's
   overhang stands on the support below C's lowest visible point;
-- P does not stand in front of C: the pixel pairs at which P is 1-10 cm nearer than C are at
+- P does not stand in front of C: the pixel pairs at which P is nearer than C by such a step are at
   most ``inside_max_front_ratio`` of those along which they meet (an object resting on a box
   stands in front of it; an inside meets its container at the rim or behind its wall);
 - P has C's colour: mean chromaticities (r, g, b) / (r + g + b), which shading does not change
@@ -60,7 +61,6 @@ class _Segment:
     the fitted circle.
     """
 
-    count: int
     top: float
     bottom: float
     footprint: np.ndarray
@@ -126,7 +126,7 @@ def join_container_insides(
         return labels, segment_of_supervoxel
     height, width = labels.shape
     contacts, fronts = _borders(
-        labels, points.reshape(height, width, 3), depth_m, valid.reshape(height, width)
+        labels, points.reshape(height, width, 3), depth_m, valid.reshape(height, width), config
     )
     meets = _meetings(contacts, fronts)
     if not any(count >= config.inside_min_contact_px for count in meets.values()):
@@ -145,11 +145,11 @@ def join_container_insides(
     order = labelled[np.argsort(flat[labelled], kind="stable")]
     ids, starts = np.unique(flat[order], return_index=True)
     members = dict(zip(ids.tolist(), np.split(order, starts[1:]), strict=True))
-    summaries: dict[int, _Segment | None] = {}
+    summaries: dict[int, _Segment] = {}
 
-    def summary(segment: int) -> _Segment | None:
+    def summary(segment: int) -> _Segment:
         if segment not in summaries:
-            summaries[segment] = _summary(members.get(segment), points, rgb, frame, config)
+            summaries[segment] = _summary(members[segment], points, rgb, frame, config)
         return summaries[segment]
 
     owner = {segment: segment for segment in members}
@@ -160,10 +160,9 @@ def join_container_insides(
         for (a, b), count in meets.items():
             if count < config.inside_min_contact_px or (best is not None and count <= best[0]):
                 continue
-            first, second = summary(a), summary(b)
-            if first is None or second is None:
+            piece, container = (a, b) if len(members[a]) < len(members[b]) else (b, a)
+            if len(members[piece]) < 3:
                 continue
-            piece, container = (a, b) if first.count < second.count else (b, a)
             if fronts.get((piece, container), 0) > config.inside_max_front_ratio * count:
                 continue
             if (piece, container) not in verdicts:
@@ -178,8 +177,8 @@ def join_container_insides(
             if target == piece:
                 owner[segment] = container
         members[container] = np.concatenate([members[container], members.pop(piece)])
-        summaries.pop(piece)
-        summaries.pop(container)
+        summaries.pop(piece, None)
+        summaries.pop(container, None)
         verdicts = {pair: v for pair, v in verdicts.items() if container not in pair}
         contacts = _relabelled(contacts, piece, container, ordered=False)
         fronts = _relabelled(fronts, piece, container, ordered=True)
@@ -204,14 +203,21 @@ def _meetings(contacts: dict, fronts: dict) -> dict:
 
 
 def _borders(
-    labels: np.ndarray, points: np.ndarray, depth_m: np.ndarray, valid: np.ndarray
+    labels: np.ndarray,
+    points: np.ndarray,
+    depth_m: np.ndarray,
+    valid: np.ndarray,
+    config: PerceptionConfig,
 ) -> tuple[dict, dict]:
     """Where segments meet, from the 4-neighbour pixel pairs of two labels, both with depth.
 
-    Returns ``contacts`` {(a, b): count, a < b} of pairs whose world points are within 1 cm (the
-    two surfaces meet there) and ``fronts`` {(nearer, farther): count} of pairs whose depths
-    differ by 1-10 cm (one segment stands in front of the other there).
+    All pairs of segments at once (``tracking.contact_pixels`` counts one pair's contacts).
+    Returns ``contacts`` {(a, b): count, a < b} of pairs whose world points are less than
+    ``inside_contact_gap_m`` apart (the two surfaces meet there) and ``fronts`` {(nearer,
+    farther): count} of pairs whose depths differ within ``inside_front_step_m`` (one segment
+    stands in front of the other there).
     """
+    low, high = config.inside_front_step_m
     contacts: dict[tuple[int, int], int] = {}
     fronts: dict[tuple[int, int], int] = {}
     base = int(labels.max()) + 1
@@ -229,9 +235,9 @@ def _borders(
         a, b = a[border].astype(np.int64), b[border].astype(np.int64)
         gap = np.linalg.norm(points[first][border] - points[second][border], axis=1)
         step = depth_m[second][border] - depth_m[first][border]  # > 0: a is nearer
-        near = gap < 0.01
+        near = gap < config.inside_contact_gap_m
         _count(contacts, np.minimum(a[near], b[near]), np.maximum(a[near], b[near]), base)
-        ahead = (np.abs(step) > 0.01) & (np.abs(step) < 0.1)
+        ahead = (np.abs(step) > low) & (np.abs(step) < high)
         _count(
             fronts,
             np.where(step > 0, a, b)[ahead],
@@ -261,24 +267,20 @@ def _relabelled(counts: dict, piece: int, container: int, ordered: bool) -> dict
 
 
 def _summary(
-    pixels: np.ndarray | None,
+    pixels: np.ndarray,
     points: np.ndarray,
     rgb: np.ndarray,
     frame: tuple[KnownPlane, np.ndarray, np.ndarray],
     config: PerceptionConfig,
-) -> _Segment | None:
-    """The rules' figures of a segment from its (N,) flat pixel indices with depth."""
-    if pixels is None or pixels.size < 3:
-        return None
+) -> _Segment:
+    """The rules' figures of a segment from its (N,) flat pixel indices with depth (N >= 1)."""
     support, axis_u, axis_v = frame
-    count = int(pixels.size)
-    pixels = pixels[:: -(-count // _MAX_POINTS)]
+    pixels = pixels[:: -(-pixels.size // _MAX_POINTS)]
     world = points[pixels]
     heights = support.signed_distance(world)
     footprint = np.stack([world @ axis_u, world @ axis_v], axis=1)
     colour = rgb.reshape(-1, 3)[pixels].astype(np.float64) + 1.0
     return _Segment(
-        count=count,
         top=float(np.percentile(heights, 98)),
         bottom=float(np.percentile(heights, 2)),
         footprint=footprint,
