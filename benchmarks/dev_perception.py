@@ -49,7 +49,7 @@ def tracker_only_perceive(cache: Path, overrides: dict[str, float] | None = None
     from dataclasses import replace
 
     from ipr.perception import PerceptionConfig, perceive_scene
-    from ipr.perception.tracking import track_segments
+    from ipr.perception.tracking import split_merged_objects, track_segments
 
     cache.mkdir(parents=True, exist_ok=True)
     config = replace(PerceptionConfig().tracking, **(overrides or {}))
@@ -72,6 +72,16 @@ def tracker_only_perceive(cache: Path, overrides: dict[str, float] | None = None
             config,
             frames_depth=[frame.depth_m for frame in scene.frames],
         )
+        if config.split_merged_objects:
+            labels = split_merged_objects(
+                labels,
+                points,
+                [frame.rgb for frame in scene.frames],
+                [frame.depth_m for frame in scene.frames],
+                [frame.K for frame in scene.frames],
+                [frame.world_from_camera for frame in scene.frames],
+                replace(PerceptionConfig(), tracking=config),
+            )
         share = (time.perf_counter() - started) / max(len(scene.frames), 1)
         return labels, [share] * len(scene.frames)
 

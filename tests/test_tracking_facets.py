@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ipr.perception.config import TrackingConfig
+from ipr.camera import backproject
+from ipr.perception.config import PerceptionConfig, TrackingConfig
 from ipr.perception.facets import mean_shift_directions, object_facets, pixel_areas
 from ipr.perception.tracking import (
     assign_segments,
@@ -14,6 +15,7 @@ from ipr.perception.tracking import (
     prefer_larger_objects,
     prefer_larger_pieces,
     segment_features,
+    split_merged_objects,
     track_segments,
 )
 
@@ -351,3 +353,44 @@ def test_pixel_area_of_a_fronto_parallel_and_a_tilted_plane():
     assert np.isclose(flat, 1.0 / 500**2)
     tilted_normal = np.array([[0, np.sin(np.pi / 3), -np.cos(np.pi / 3)]])
     assert np.isclose(pixel_areas(point, tilted_normal, K)[0], flat / np.cos(np.pi / 3))
+
+
+def _depth_frame(boxes: dict[int, tuple[int, int, tuple[int, int, int]]], shape=(100, 200)):
+    """A camera 1 m above a grey table looking down (world = camera frame), with 30 x 30 px
+    boxes 5 cm tall {label: (row, col, colour)}: labels, depth, world points, colours, K, pose."""
+    labels = np.zeros(shape, np.int32)
+    depth = np.full(shape, 1.0, np.float32)
+    rgb = np.full((*shape, 3), 128, np.uint8)
+    for label, (row, col, colour) in boxes.items():
+        labels[row : row + 30, col : col + 30] = label
+        depth[row : row + 30, col : col + 30] = 0.95
+        rgb[row : row + 30, col : col + 30] = colour
+    K = np.array([[500.0, 0.0, shape[1] / 2], [0.0, 500.0, shape[0] / 2], [0.0, 0.0, 1.0]])
+    return labels, depth, backproject(depth, K), rgb, K, np.eye(4)
+
+
+def _split(frames):
+    labels, depth, points, rgb, K, pose = map(list, zip(*frames, strict=True))
+    return split_merged_objects(labels, points, rgb, depth, K, pose, PerceptionConfig())
+
+
+def test_an_object_merged_in_frame_0_is_split_once_a_push_separates_it():
+    # Frame 0 gives a red and a blue box side by side one segment; the push moves the blue box
+    # away and frame 1 sees two objects. Frame 0's blue pixels take the blue box's id.
+    first = _depth_frame({1: (35, 40, RED)})
+    first[0][35:65, 70:100] = 1
+    first[1][35:65, 70:100] = 0.95
+    first[3][35:65, 70:100] = BLUE
+    first = (first[0], first[1], backproject(first[1], first[4]), *first[3:])
+    second = _depth_frame({1: (35, 40, RED), 2: (35, 150, BLUE)})
+    split = _split([first, second])
+    assert (split[0][35:65, 40:70] == 1).all() and (split[0][35:65, 70:100] == 2).all()
+    assert np.array_equal(split[1], second[0])
+
+
+def test_a_pushed_object_is_not_split_by_an_unlike_object_appearing():
+    # A red box moves 20 px (a third of its old place is seen empty) and a blue object appears
+    # elsewhere: the blue one does not explain the red box's old pixels.
+    first = _depth_frame({1: (35, 40, RED)})
+    second = _depth_frame({1: (35, 50, RED), 2: (35, 150, BLUE)})
+    assert np.array_equal(_split([first, second])[0], first[0])

@@ -17,7 +17,7 @@ from ipr.camera import invert_transform
 from ipr.perception.config import PerceptionConfig
 from ipr.perception.facets import object_facets, pixel_areas
 from ipr.perception.free_space import SpaceMap, VoxelGrid, observe_space
-from ipr.perception.tracking import track_segments
+from ipr.perception.tracking import split_merged_objects, track_segments
 from ipr.perception.types import FrameSegmentation, KnownPlane, PartialObject
 from ipr.scene import Scene
 
@@ -86,6 +86,16 @@ def perceive_scene(
         config.tracking,
         frames_depth=[f.depth_m for f in scene.frames],
     )
+    if config.tracking.split_merged_objects:
+        labels = split_merged_objects(
+            labels,
+            points,
+            [f.rgb for f in scene.frames],
+            [f.depth_m for f in scene.frames],
+            [f.K for f in scene.frames],
+            [f.world_from_camera for f in scene.frames],
+            config,
+        )
     tracking_seconds = time.perf_counter() - started
 
     facet_seconds, objects, facet_labels = [], [], []

@@ -36,7 +36,10 @@ id (``merge_split_pieces``: an object split into comparable pieces in this frame
 would otherwise land on either piece almost at random). Last, backwards in time: two known
 objects that touched in an earlier frame, of which this frame matched one and not the other,
 and whose union then resembles the matched segment better, were one object split in that frame
-and become one id in every frame (``merge_split_objects``).
+and become one id in every frame (``merge_split_objects``). After tracking, the converse:
+an object first seen in a later frame that explains part of an earlier object's pixels in the
+frame before (two touching objects one segment until a push separated them) takes that part,
+back to frame 0 (``split_merged_objects``).
 
 Development scenes (dynamic, seeds 8000-8011 and 8100-8123, 343 (object, later frame) pairs;
 held-out check on seeds 8050-8073, 231 pairs), ids kept: overlap, colour, distance and height
@@ -62,7 +65,7 @@ from itertools import combinations
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from ipr.perception.config import TrackingConfig
+from ipr.perception.config import PerceptionConfig, TrackingConfig
 
 #: Histogram bins per RGB channel.
 COLOUR_BINS = 6
@@ -655,3 +658,143 @@ def track_segments(
             final[absorbed] = target
         tracked = [final[labels] for labels in tracked]
     return tracked
+
+
+def split_merged_objects(
+    tracked: list[np.ndarray],
+    frames_points: list[np.ndarray],
+    frames_rgb: list[np.ndarray],
+    frames_depth: list[np.ndarray],
+    frames_K: list[np.ndarray],
+    frames_world_from_camera: list[np.ndarray],
+    config: PerceptionConfig,
+) -> list[np.ndarray]:
+    """Split, in earlier frames, an object that a later frame shows to be two.
+
+    The converse of ``merge_split_objects``: frame 0 (before any push) often gives two
+    touching objects one segment, and when a push separates them the later frame's tracker
+    keeps the id for one and starts a new object for the other, whose frame-0 pixels then stay
+    under the wrong id for good. For an object ``z`` first seen in frame t and an object ``x``
+    seen in frames t-1 and t, the pixels of ``x`` in frame t-1 are followed into frame t
+    (``temporal.compare_frames`` with the frames swapped): those now seen as ``z`` in place,
+    or also those whose surface is gone (frame t sees through them), are the candidate part
+    ``g`` of ``z``. The split is made when both parts hold at least ``split_min_share`` of
+    ``x``'s pixels with depth (and ``split_min_px``), and it explains frame t better:
+    ``pair_cost(x_t, rest) + pair_cost(z_t, g)`` is below ``pair_cost(x_t, x_{t-1}) +
+    max_match_cost`` (``z`` as a new object) by more than ``split_margin``. Frames run from the
+    last back to the first, so a split carries back to frame 0 (``z`` is then first seen in
+    t-1). Pixels of ``x`` without depth go to the part of their nearest pixel with depth.
+
+    Args:
+        tracked: per frame, (H, W) int tracked labels (``track_segments``), not modified;
+            frames_points: (H, W, 3) world points (m); frames_rgb: (H, W, 3) uint8;
+            frames_depth: (H, W) depth (m, 0 = no reading); frames_K: (3, 3) intrinsics (px);
+            frames_world_from_camera: (4, 4) camera poses (world from OpenCV camera, m).
+
+    Returns:
+        (H, W) int32 label images (new arrays for the frames changed).
+    """
+    from ipr.perception.temporal import ARRIVED, UNCHANGED, compare_frames
+
+    tracking = config.tracking
+    result = [np.asarray(labels, dtype=np.int32) for labels in tracked]  # copied on change
+    # Ids present in each frame (np.unique over whole images would cost more than the rest).
+    sizes = [np.bincount(labels.reshape(-1)) for labels in result]
+    present = [{int(i) for i in np.flatnonzero(size)} - {0} for size in sizes]
+    for t in range(len(result) - 1, 0, -1):
+        new_ids = sorted(
+            i for i in present[t].difference(*present[:t]) if sizes[t][i] >= tracking.split_min_px
+        )
+        if not new_ids:
+            continue
+        previous_ids = sorted(present[t - 1] & present[t])
+        # Frame t-1 against frame t: ARRIVED here means frame t's surface lies behind (gone).
+        change = compare_frames(
+            frames_points[t - 1],
+            frames_depth[t - 1],
+            frames_depth[t],
+            result[t],
+            frames_K[t],
+            frames_world_from_camera[t],
+            config,
+            K=frames_K[t - 1],
+            world_from_camera=frames_world_from_camera[t - 1],
+        )
+        state, label_in_t = change.state.reshape(-1), change.previous_label.reshape(-1)
+        segments_t = segment_features(result[t], frames_points[t], frames_rgb[t], frames_depth[t])
+        previous_flat = result[t - 1].reshape(-1)
+        with_depth = frames_depth[t - 1].reshape(-1) > 0
+        best: tuple[float, int, int, np.ndarray] | None = None
+        previous_frame = (frames_points[t - 1], frames_rgb[t - 1], frames_depth[t - 1])
+        for new_id in new_ids:
+            z_t = segments_t[new_id]
+            for object_id in previous_ids:
+                pixels = np.flatnonzero((previous_flat == object_id) & with_depth)
+                least = max(tracking.split_min_share * pixels.size, tracking.split_min_px)
+                seen_as_new = (state[pixels] == UNCHANGED) & (label_in_t[pixels] == new_id)
+                gone = state[pixels] == ARRIVED
+                parts = [
+                    part
+                    for part in (seen_as_new | gone, seen_as_new)
+                    if least <= np.count_nonzero(part) <= pixels.size - least
+                ]
+                if not parts:
+                    continue
+                x_t = segments_t[object_id]
+                unsplit = (
+                    pair_cost(x_t, _pixel_features(pixels, *previous_frame), tracking)
+                    + tracking.max_match_cost
+                )
+                for part in parts:
+                    split = pair_cost(
+                        x_t, _pixel_features(pixels[~part], *previous_frame), tracking
+                    ) + pair_cost(z_t, _pixel_features(pixels[part], *previous_frame), tracking)
+                    gain = unsplit - split
+                    if gain > tracking.split_margin and (best is None or gain > best[0]):
+                        best = (gain, object_id, new_id, pixels[part])
+            if best is not None:
+                _, object_id, new_id, part = best
+                result[t - 1] = _relabel_part(result[t - 1], object_id, new_id, part, with_depth)
+                present[t - 1].add(new_id)
+                sizes[t - 1] = np.bincount(result[t - 1].reshape(-1))
+                previous_flat = result[t - 1].reshape(-1)
+                best = None
+    return result
+
+
+def _pixel_features(
+    pixels: np.ndarray, points: np.ndarray, rgb: np.ndarray, depth_m: np.ndarray
+) -> SegmentFeatures:
+    """``segment_features`` of one set of (N,) sorted flat pixel indices, all with depth, of a
+    frame with (H, W, 3) world points (m), (H, W, 3) uint8 colours and (H, W) depth (m)."""
+    bins = (rgb.reshape(-1, 3)[pixels].astype(np.int64) * COLOUR_BINS) // 256
+    codes = (bins[:, 0] * COLOUR_BINS + bins[:, 1]) * COLOUR_BINS + bins[:, 2]
+    histogram = np.bincount(codes, minlength=COLOUR_BINS**3).astype(np.float64)
+    points_k = points.reshape(-1, 3)[pixels]
+    return SegmentFeatures(
+        pixels,
+        points_k.mean(axis=0),
+        histogram / histogram.sum(),
+        float(np.percentile(points_k[:, 2], 98)),
+        float((depth_m.reshape(-1)[pixels].astype(np.float64) ** 2).sum()),
+    )
+
+
+def _relabel_part(
+    labels: np.ndarray, object_id: int, new_id: int, part: np.ndarray, with_depth: np.ndarray
+) -> np.ndarray:
+    """(H, W) labels with the (N,) flat pixels ``part`` of ``object_id`` given ``new_id``, and
+    its pixels without depth ((H*W,) ``with_depth`` False) given the id of the nearest of its
+    pixels with depth."""
+    from scipy.ndimage import distance_transform_edt
+
+    result = labels.copy()
+    flat = result.reshape(-1)
+    flat[part] = new_id
+    holes = (flat == object_id) & ~with_depth
+    if holes.any():
+        seeds = ((flat == object_id) | (flat == new_id)) & with_depth
+        _, (rows, cols) = distance_transform_edt(~seeds.reshape(labels.shape), return_indices=True)
+        nearest = flat[rows.reshape(-1) * labels.shape[1] + cols.reshape(-1)]
+        flat[holes] = nearest[holes]
+    return result
