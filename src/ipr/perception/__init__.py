@@ -15,6 +15,7 @@ import numpy as np
 
 from ipr.camera import invert_transform
 from ipr.perception.config import PerceptionConfig
+from ipr.perception.denoise import object_plane_depth
 from ipr.perception.facets import object_facets, pixel_areas
 from ipr.perception.free_space import SpaceMap, VoxelGrid, observe_space
 from ipr.perception.tracking import split_merged_objects, track_segments
@@ -181,6 +182,25 @@ def _partial_objects(
     # Per-pixel quantities of all objects in one pass each (objects are slices of ``order``):
     # real frames have a dozen small segments besides the objects, and per-object calls cost.
     world_all = flat_points[order]
+    if config.denoise_window_px >= 3:
+        # Hulls take extreme points: sensor noise would bulge every hull out (denoise.py).
+        depth = np.concatenate(
+            [
+                object_plane_depth(frame.depth_m, order[start:end], config.denoise_window_px)
+                for start, end in zip(starts, ends, strict=True)
+            ]
+            or [np.zeros(0)]
+        )
+        rows, cols = np.divmod(order, width)
+        camera = np.stack(
+            [
+                (cols - frame.K[0, 2]) / frame.K[0, 0] * depth,
+                (rows - frame.K[1, 2]) / frame.K[1, 1] * depth,
+                depth,
+            ],
+            axis=1,
+        )
+        world_all = camera @ frame.world_from_camera[:3, :3].T + frame.world_from_camera[:3, 3]
     camera_all = world_all @ camera_from_world[:3, :3].T + camera_from_world[:3, 3]
     supervoxel_all = flat_supervoxel[order]
     has_all = supervoxel_all >= 0

@@ -285,6 +285,15 @@ class PerceptionConfig:
             offset (m) are the same wall.
         temporal_wall_max_arrived: largest share of arrived pixels a new wall may have.
         seed: seed of every random choice (RANSAC, k-means), for reproducible runs.
+        denoise_window_px: partial objects' points come from depth replaced by a local plane
+            fit over this many pixels square of the same object (``ipr.perception.denoise``;
+            < 3: raw readings), so hulls of the points no longer bulge out by the noise.
+            Development scenes (``benchmarks.dev_inference``'s seeds 9100 / 9400, frame-0
+            hypotheses, 46 / 44 objects), Collision Checker object IoU and the best candidate's:
+            raw 0.641 / 0.720 and 0.589 / 0.726; window 5 0.660 / 0.752 and 0.601 / 0.740;
+            window 3 and 9 on 9100: 0.664 / 0.737 and 0.652 / 0.747. The minimum shapes'
+            precision rose 0.823 -> 0.888 on 9100 (fewer than 0.2 % of the raw points lie more
+            than 5 mm outside the true object). About 6 ms per real 640x480 frame.
         tracking: matching of segments across frames.
         occluded_pieces: joining frame 0's pieces of one object cut apart by an occluder
             (``ipr.perception.occlusion``; used by ``ipr infer``, not by the label images).
@@ -374,5 +383,6 @@ class PerceptionConfig:
     temporal_wall_offset_m: float = 0.02
     temporal_wall_max_arrived: float = 0.1
     seed: int = 0
+    denoise_window_px: int = 5
     tracking: TrackingConfig = field(default_factory=TrackingConfig)
     occluded_pieces: OccludedPiecesConfig = field(default_factory=OccludedPiecesConfig)
