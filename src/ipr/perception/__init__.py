@@ -2,8 +2,8 @@
 
 ``perceive_scene(scene)`` runs, per frame: known-plane and robot removal, supervoxels, the
 convexity-weighted graph and spectral clustering (``segmentation``); then tracking across frames
-(``tracking``), facets per object (``facets``) and the free/occupied/unknown voxel map of each
-frame (``free_space``).
+(``tracking``), each object's points from its plane-fitted depth (``denoise``) with facets
+(``facets``), and the free/occupied/unknown voxel map of each frame (``free_space``).
 """
 
 from __future__ import annotations
