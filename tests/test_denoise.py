@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from scipy.spatial import ConvexHull
 
+from ipr.perception.config import PerceptionConfig
 from ipr.perception.denoise import object_plane_depth
 
 
@@ -67,3 +69,11 @@ def test_small_or_line_shaped_objects_keep_their_readings():
     assert np.allclose(object_plane_depth(depth, line, 5), depth.reshape(-1)[line])
     assert np.allclose(object_plane_depth(depth, line[:4], 5), depth.reshape(-1)[line[:4]])
     assert np.allclose(object_plane_depth(depth, line, 1), depth.reshape(-1)[line])
+
+
+def test_an_even_window_is_refused_with_a_clear_message():
+    with pytest.raises(ValueError, match="denoise_window_px must be odd"):
+        PerceptionConfig(denoise_window_px=4)
+    with pytest.raises(ValueError, match="must be odd"):
+        object_plane_depth(np.ones((5, 5), np.float32), np.arange(25), 4)
+    assert PerceptionConfig(denoise_window_px=0).denoise_window_px == 0

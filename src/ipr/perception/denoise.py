@@ -30,6 +30,8 @@ def object_plane_depth(depth_m: np.ndarray, pixels: np.ndarray, window: int) -> 
     (H, W) depth image, each replaced by the object's local plane fit there (module doc); a
     pixel whose neighbourhood holds fewer than 6 of the object's pixels, or only a line of
     them, keeps its reading. ``window`` is the odd neighbourhood size (< 3: no change)."""
+    if window >= 3 and window % 2 == 0:
+        raise ValueError(f"the denoising window must be odd, got {window}")
     height, width = depth_m.shape
     readings = depth_m.reshape(-1)[pixels].astype(np.float64)
     if window < 3 or pixels.size < 6:
