@@ -385,6 +385,7 @@ class PerceptionConfig:
     seed: int = 0
     denoise_window_px: int = 5
     tracking: TrackingConfig = field(default_factory=TrackingConfig)
+    occluded_pieces: OccludedPiecesConfig = field(default_factory=OccludedPiecesConfig)
 
     def __post_init__(self) -> None:
         window = self.denoise_window_px
@@ -393,4 +394,3 @@ class PerceptionConfig:
                 f"perception.denoise_window_px must be odd (a window centred on its pixel) or "
                 f"below 3 to use raw depth, got {window}"
             )
-    occluded_pieces: OccludedPiecesConfig = field(default_factory=OccludedPiecesConfig)
