@@ -43,16 +43,16 @@ CONTAINER_SETS = ((7100, 16, "static"), (7200, 12, "dynamic"))
 
 def tracker_only_perceive(cache: Path, overrides: dict[str, float] | None = None):
     """A ``benchmarks.segmentation.Perceive`` that segments each scene once (labels cached as
-    ``cache/<scene folder>-<scene>.npz``) and reruns only ``track_segments`` with the default
+    ``cache/<scene folder>-<scene>.npz``) and reruns only the tracking (``track_scene``) with the default
     ``TrackingConfig`` changed by ``overrides``; its seconds per frame are the tracker's time
     shared out over the frames."""
     from dataclasses import replace
 
-    from ipr.perception import PerceptionConfig, perceive_scene
-    from ipr.perception.tracking import split_merged_objects, track_segments
+    from ipr.perception import PerceptionConfig, perceive_scene, track_scene
 
     cache.mkdir(parents=True, exist_ok=True)
-    config = replace(PerceptionConfig().tracking, **(overrides or {}))
+    defaults = PerceptionConfig()
+    config = replace(defaults, tracking=replace(defaults.tracking, **(overrides or {})))
 
     def perceive(scene) -> tuple[list[np.ndarray], list[float]]:
         path = cache / f"{Path(scene.path).parent.name}-{Path(scene.path).name}.npz"
@@ -65,23 +65,7 @@ def tracker_only_perceive(cache: Path, overrides: dict[str, float] | None = None
             np.savez_compressed(path, **{f"frame{i}": u for i, u in enumerate(untracked)})
         points = [frame.points_world() for frame in scene.frames]
         started = time.perf_counter()
-        labels = track_segments(
-            untracked,
-            points,
-            [frame.rgb for frame in scene.frames],
-            config,
-            frames_depth=[frame.depth_m for frame in scene.frames],
-        )
-        if config.split_merged_objects:
-            labels = split_merged_objects(
-                labels,
-                points,
-                [frame.rgb for frame in scene.frames],
-                [frame.depth_m for frame in scene.frames],
-                [frame.K for frame in scene.frames],
-                [frame.world_from_camera for frame in scene.frames],
-                replace(PerceptionConfig(), tracking=config),
-            )
+        labels = track_scene(untracked, scene, points, config)
         share = (time.perf_counter() - started) / max(len(scene.frames), 1)
         return labels, [share] * len(scene.frames)
 

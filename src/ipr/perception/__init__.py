@@ -22,7 +22,7 @@ from ipr.perception.tracking import split_merged_objects, track_segments
 from ipr.perception.types import FrameSegmentation, KnownPlane, PartialObject
 from ipr.scene import Scene
 
-__all__ = ["Perception", "PerceptionConfig", "perceive_scene"]
+__all__ = ["Perception", "PerceptionConfig", "perceive_scene", "track_scene"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -80,23 +80,7 @@ def perceive_scene(
         segment_seconds.append(time.perf_counter() - started)
 
     started = time.perf_counter()
-    labels = track_segments(
-        [s.labels for s in segmentations],
-        points,
-        [f.rgb for f in scene.frames],
-        config.tracking,
-        frames_depth=[f.depth_m for f in scene.frames],
-    )
-    if config.tracking.split_merged_objects:
-        labels = split_merged_objects(
-            labels,
-            points,
-            [f.rgb for f in scene.frames],
-            [f.depth_m for f in scene.frames],
-            [f.K for f in scene.frames],
-            [f.world_from_camera for f in scene.frames],
-            config,
-        )
+    labels = track_scene([s.labels for s in segmentations], scene, points, config)
     tracking_seconds = time.perf_counter() - started
 
     facet_seconds, objects, facet_labels = [], [], []
@@ -150,6 +134,36 @@ def perceive_scene(
         free_space,
         timing,
     )
+
+
+def track_scene(
+    untracked: list[np.ndarray],
+    scene: Scene,
+    points: list[np.ndarray],
+    config: PerceptionConfig,
+) -> list[np.ndarray]:
+    """Tracked (H, W) int32 labels of a scene's frames from their per-frame segment labels
+    (``track_segments``, then ``split_merged_objects`` when enabled); ``points`` are the
+    frames' (H, W, 3) world points (m)."""
+    frames = scene.frames
+    labels = track_segments(
+        untracked,
+        points,
+        [f.rgb for f in frames],
+        config.tracking,
+        frames_depth=[f.depth_m for f in frames],
+    )
+    if config.tracking.split_merged_objects:
+        labels = split_merged_objects(
+            labels,
+            points,
+            [f.rgb for f in frames],
+            [f.depth_m for f in frames],
+            [f.K for f in frames],
+            [f.world_from_camera for f in frames],
+            config,
+        )
+    return labels
 
 
 def _partial_objects(
