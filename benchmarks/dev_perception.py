@@ -43,9 +43,9 @@ CONTAINER_SETS = ((7100, 16, "static"), (7200, 12, "dynamic"))
 
 def tracker_only_perceive(cache: Path, overrides: dict[str, float] | None = None):
     """A ``benchmarks.segmentation.Perceive`` that segments each scene once (labels cached as
-    ``cache/<scene folder>-<scene>.npz``) and reruns only the tracking (``track_scene``) with the default
-    ``TrackingConfig`` changed by ``overrides``; its seconds per frame are the tracker's time
-    shared out over the frames."""
+    ``cache/<scene folder>-<scene>.npz``) and reruns only the tracking (``track_scene``) with
+    the default ``TrackingConfig`` changed by ``overrides``; its seconds per frame are the
+    tracker's time shared out over the frames."""
     from dataclasses import replace
 
     from ipr.perception import PerceptionConfig, perceive_scene, track_scene
