@@ -62,6 +62,16 @@ def backproject(depth_m: np.ndarray, K: np.ndarray) -> np.ndarray:
     return np.stack([x, y, z], axis=-1)
 
 
+def backproject_pixels(
+    pixels: np.ndarray, depth_m: np.ndarray, K: np.ndarray, width: int
+) -> np.ndarray:
+    """Camera-frame points (N, 3) in metres of (N,) flat pixel indices of an image ``width``
+    pixels wide, at their (N,) depths (m); ``backproject`` for chosen pixels only."""
+    rows, cols = np.divmod(np.asarray(pixels), width)
+    z = np.asarray(depth_m, dtype=np.float64)
+    return np.stack([(cols - K[0, 2]) / K[0, 0] * z, (rows - K[1, 2]) / K[1, 1] * z, z], axis=1)
+
+
 def project(points_camera: np.ndarray, K: np.ndarray) -> np.ndarray:
     """Pixel coordinates (N, 2) as (u, v) of (N, 3) camera-frame points with z > 0."""
     z = points_camera[:, 2]

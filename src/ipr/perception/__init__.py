@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ipr.camera import invert_transform
+from ipr.camera import backproject_pixels, invert_transform
 from ipr.perception.config import PerceptionConfig
 from ipr.perception.denoise import object_plane_depth
 from ipr.perception.facets import object_facets, pixel_areas
@@ -195,7 +195,6 @@ def _partial_objects(
     ends = np.append(starts[1:], len(order))[: len(starts)]  # no segments: no ends
     # Per-pixel quantities of all objects in one pass each (objects are slices of ``order``):
     # real frames have a dozen small segments besides the objects, and per-object calls cost.
-    world_all = flat_points[order]
     if config.denoise_window_px >= 3:
         # Hulls take extreme points: sensor noise would bulge every hull out (denoise.py).
         depth = np.concatenate(
@@ -205,17 +204,11 @@ def _partial_objects(
             ]
             or [np.zeros(0)]
         )
-        rows, cols = np.divmod(order, width)
-        camera = np.stack(
-            [
-                (cols - frame.K[0, 2]) / frame.K[0, 0] * depth,
-                (rows - frame.K[1, 2]) / frame.K[1, 1] * depth,
-                depth,
-            ],
-            axis=1,
-        )
-        world_all = camera @ frame.world_from_camera[:3, :3].T + frame.world_from_camera[:3, 3]
-    camera_all = world_all @ camera_from_world[:3, :3].T + camera_from_world[:3, 3]
+        camera_all = backproject_pixels(order, depth, frame.K, width)
+        world_all = camera_all @ frame.world_from_camera[:3, :3].T + frame.world_from_camera[:3, 3]
+    else:
+        world_all = flat_points[order]
+        camera_all = world_all @ camera_from_world[:3, :3].T + camera_from_world[:3, 3]
     supervoxel_all = flat_supervoxel[order]
     has_all = supervoxel_all >= 0
     normals_all = np.empty_like(world_all)

@@ -115,8 +115,7 @@ def segment_features(
         depth = depth_m.reshape(-1).astype(np.float64)
         valid = depth > 0
         footprint = depth**2
-    bins = (rgb.reshape(-1, 3)[order].astype(np.int64) * COLOUR_BINS) // 256
-    codes = (bins[:, 0] * COLOUR_BINS + bins[:, 1]) * COLOUR_BINS + bins[:, 2]
+    codes = _colour_codes(rgb.reshape(-1, 3)[order])
     features = {}
     for label, start, end in zip(ids, starts, ends, strict=True):
         pixels = order[start:end]
@@ -132,6 +131,12 @@ def segment_features(
             area if area > 0 else float(pixels.size),
         )
     return features
+
+
+def _colour_codes(colours: np.ndarray) -> np.ndarray:
+    """Histogram bin (N,) int64 of (N, 3) uint8 RGB colours, ``COLOUR_BINS`` per channel."""
+    bins = (colours.astype(np.int64) * COLOUR_BINS) // 256
+    return (bins[:, 0] * COLOUR_BINS + bins[:, 1]) * COLOUR_BINS + bins[:, 2]
 
 
 def match_costs(
@@ -767,9 +772,9 @@ def _pixel_features(
 ) -> SegmentFeatures:
     """``segment_features`` of one set of (N,) sorted flat pixel indices, all with depth, of a
     frame with (H, W, 3) world points (m), (H, W, 3) uint8 colours and (H, W) depth (m)."""
-    bins = (rgb.reshape(-1, 3)[pixels].astype(np.int64) * COLOUR_BINS) // 256
-    codes = (bins[:, 0] * COLOUR_BINS + bins[:, 1]) * COLOUR_BINS + bins[:, 2]
-    histogram = np.bincount(codes, minlength=COLOUR_BINS**3).astype(np.float64)
+    histogram = np.bincount(
+        _colour_codes(rgb.reshape(-1, 3)[pixels]), minlength=COLOUR_BINS**3
+    ).astype(np.float64)
     points_k = points.reshape(-1, 3)[pixels]
     return SegmentFeatures(
         pixels,
