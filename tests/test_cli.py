@@ -157,7 +157,14 @@ def test_infer_collision_checker_end_to_end(tmp_path: Path, capsys):
     for obj in result.objects:
         assert abs(sum(h.probability for h in obj.hypotheses) - 1.0) < 1e-6
         assert obj.load_mesh().is_watertight
-    assert set(result.timing_s) >= {"segmentation", "hypotheses", "inference", "total"}
+    assert set(result.timing_s) >= {"segmentation", "hypotheses", "inference", "carving", "total"}
+    # The written shapes are carved by the space frame 0 saw empty: no longer convex.
+    summary = result.extra["objects_summary"]
+    assert any(entry["carved"] for entry in summary)
+    for obj, entry in zip(result.objects, summary, strict=True):
+        mesh = obj.load_mesh()
+        if entry["carved"]:
+            assert mesh.volume < entry["best_volume_m3"]
     metrics_file = tmp_path / "metrics.json"
     assert main(["eval", str(scene), str(out), "--json", str(metrics_file)]) == 0
     metrics = json.loads(metrics_file.read_text())
@@ -266,7 +273,13 @@ def test_infer_default_method_writes_the_full_result_and_is_reproducible(tmp_pat
         details = result.extra["inference"]
         assert details["samples"] == 3 and details["fallback"] is None
         assert details["pushes_replayed"] >= 1 and details["frames_compared"] >= 2
-        assert set(result.timing_s) >= {"segmentation", "fusion", "hypotheses", "inference"}
+        assert set(result.timing_s) >= {
+            "segmentation",
+            "fusion",
+            "hypotheses",
+            "inference",
+            "carving",
+        }
         # Each object the pushes moved is fused with the later frames that saw it.
         assert set(details["fused_views"]) <= {str(obj.id) for obj in result.objects}
         assert all(set(frames) <= {1, 2, 3} for frames in details["fused_views"].values())

@@ -107,6 +107,9 @@ class ObjectPosterior:
             "relaxed-exact"/"relaxed-gibbs"/"dropped" when the constraints had to be relaxed,
             "minimum" when no hypothesis is feasible.
         generation_s: seconds spent generating its hypotheses (and minimum shape).
+        output_meshes: per hypothesis, the (vertices, faces) written in its place, or None to
+            write the hypothesis itself (``ipr.carving`` sets it); None: write every
+            hypothesis as it is.
     """
 
     object_id: int
@@ -116,11 +119,23 @@ class ObjectPosterior:
     minimum: ShapeHypothesis
     inference: str
     generation_s: float = 0.0
+    output_meshes: tuple[tuple[np.ndarray, np.ndarray] | None, ...] | None = None
 
     @property
     def best_hypothesis(self) -> ShapeHypothesis:
-        """The output shape."""
+        """The most probable hypothesis (convex, as inferred)."""
         return self.hypotheses[self.best]
+
+    def written_mesh(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """(vertices, faces) written for hypothesis k: its carved shape if any, else itself."""
+        if self.output_meshes is not None and self.output_meshes[k] is not None:
+            return self.output_meshes[k]
+        return self.hypotheses[k].mesh
+
+    @property
+    def output_mesh(self) -> tuple[np.ndarray, np.ndarray]:
+        """(vertices, faces) of the output shape (``best.ply``)."""
+        return self.written_mesh(self.best)
 
 
 # --------------------------------------------------------------------------------------------
@@ -569,10 +584,10 @@ def write_posterior_result(
         keep = np.flatnonzero(posterior.probabilities > 0)
         weights = posterior.probabilities[keep] / posterior.probabilities[keep].sum()
         hypotheses = [
-            (posterior.hypotheses[k].mesh, float(w)) for k, w in zip(keep, weights, strict=True)
+            (posterior.written_mesh(k), float(w)) for k, w in zip(keep, weights, strict=True)
         ]
         best_probability = float(posterior.probabilities[posterior.best])
-        objects.append((posterior.best_hypothesis.mesh, hypotheses, best_probability))
+        objects.append((posterior.output_mesh, hypotheses, best_probability))
         summary.append(
             {
                 "object_id": posterior.object_id,
@@ -580,6 +595,8 @@ def write_posterior_result(
                 "hypotheses": len(posterior.hypotheses),
                 "nonzero": int(keep.size),
                 "best_volume_m3": posterior.best_hypothesis.volume_m3,
+                "carved": posterior.output_meshes is not None
+                and posterior.output_meshes[posterior.best] is not None,
                 "volumes_m3": volume_spread(posterior.hypotheses),
                 "generation_s": posterior.generation_s,
             }

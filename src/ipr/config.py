@@ -4,13 +4,15 @@ Every field has a documented default in its stage's module; ``Config()`` is what
 uses. Sections: ``perception`` (``ipr.perception.config``), ``fusion`` (later views registered
 into frame 0 for the methods that use the pushes, ``ipr.fusion``), ``collision_checker`` (hypotheses,
 constraints and the Collision Checker, ``ipr.collision_checker``), ``inference`` (physics,
-likelihood and tree sampling, ``ipr.inference``).
+likelihood and tree sampling, ``ipr.inference``), ``carving`` (output shapes carved by the space the
+camera saw empty, ``ipr.carving``).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from ipr.carving import CarvingConfig
 from ipr.collision_checker import CollisionCheckerConfig
 from ipr.fusion import FusionConfig
 from ipr.inference import InferenceConfig
@@ -25,3 +27,4 @@ class Config:
     fusion: FusionConfig = field(default_factory=FusionConfig)
     collision_checker: CollisionCheckerConfig = field(default_factory=CollisionCheckerConfig)
     inference: InferenceConfig = field(default_factory=InferenceConfig)
+    carving: CarvingConfig = field(default_factory=CarvingConfig)

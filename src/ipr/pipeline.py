@@ -63,6 +63,7 @@ def run_pipeline(
     multi-core machine) starts a process pool: as with any Python multiprocessing, a script
     calling this must guard its entry point with ``if __name__ == "__main__":``.
     """
+    from ipr.carving import carve_posteriors, surface_views
     from ipr.collision_checker import collision_checker, prepare_hypotheses
     from ipr.fusion import fuse_views, tracked_free_spaces
     from ipr.inference import VARIANTS, infer_shapes
@@ -93,10 +94,12 @@ def run_pipeline(
         log.warning("%s: no object found in frame 0; the result is empty", scene.path)
     summary: dict = {}
     object_spaces: dict = {}
+    motions: dict = {}  # per object, its registered later-frame motions (methods with pushes)
     if method in VARIANTS and VARIANTS[method].actions and config.fusion.enabled:
         support = next((p for p in perception.planes[0] if p.kind == "support"), None)
         fused = fuse_views(perception.objects, perception.free_space, support, config.fusion)
         objects = fused.objects
+        motions = fused.motions
         if config.fusion.later_free_space or config.fusion.pusher_free_space:
             object_spaces = tracked_free_spaces(
                 fused, perception.free_space, scene.pushes, scene.pusher, config.fusion
@@ -180,6 +183,11 @@ def run_pipeline(
             "inference": finished - generated,
             **{f"inference_{name}": value for name, value in outcome.timing_s.items()},
         }
+    if config.carving.enabled and posteriors:
+        carving_started = time.perf_counter()
+        views = surface_views(scene.frames, perception.objects, motions, config.carving)
+        posteriors = carve_posteriors(posteriors, views)
+        timing["carving"] = time.perf_counter() - carving_started
     timing["total"] = time.perf_counter() - started
     return PipelineResult(method, posteriors, perception, timing, summary)
 

@@ -50,7 +50,7 @@ def completion_image(frame: object, posteriors: Sequence[object]) -> np.ndarray:
     grey = rgb.astype(np.float64).mean(axis=2, keepdims=True)
     right = np.repeat(0.35 * grey + 40.0, 3, axis=2)
     if posteriors:
-        meshes = [p.best_hypothesis.mesh for p in posteriors]
+        meshes = [p.output_mesh for p in posteriors]
         depth, index = render_depth_and_ids(
             meshes, [None] * len(meshes), frame.K, width, height, frame.world_from_camera
         )
