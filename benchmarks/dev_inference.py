@@ -14,7 +14,9 @@ inference never does):
 - the best of each object's candidates (oracle) and of the candidates the sampler visited.
 
 Figures are mean object IoU over the visible ground-truth objects (unmatched objects count 0),
-the convention of ``ipr eval``'s object space.
+the convention of ``ipr eval``'s object space, of the convex candidates as inferred: what the
+result writes is then carved by the space the camera saw empty (``ipr.carving``), which this
+script leaves out so that it measures the choice among candidates alone.
 """
 
 from __future__ import annotations
