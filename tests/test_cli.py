@@ -177,6 +177,16 @@ def test_infer_collision_checker_end_to_end(tmp_path: Path, capsys):
     first = [o.load_mesh().volume for o in result.objects]
     second = [o.load_mesh().volume for o in load_result(again).objects]
     assert np.allclose(first, second)
+    # Without carving the convex hypotheses are written as inferred.
+    convex = tmp_path / "convex"
+    assert main([*again_args[:3], str(convex), "--seed", "1", "--no-carving", "--method",
+                 "collision-checker"]) == 0  # fmt: skip
+    uncarved = load_result(convex)
+    assert not any(entry["carved"] for entry in uncarved.extra["objects_summary"])
+    volumes = [o.load_mesh().volume for o in uncarved.objects]
+    assert np.allclose(volumes, [e["best_volume_m3"] for e in summary], rtol=1e-4)
+    assert all(v >= c - 1e-12 for v, c in zip(volumes, first, strict=True))
+    assert sum(volumes) > sum(first)
 
 
 def test_infer_rejects_bad_budget_and_existing_output(scene_dir: Path, tmp_path: Path, capsys):

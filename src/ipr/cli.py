@@ -111,9 +111,12 @@ def _positive_int(text: str) -> int:
 
 
 def _cmd_infer(args: argparse.Namespace) -> int:
+    from ipr.carving import CarvingConfig
+    from ipr.config import Config
     from ipr.pipeline import infer
     from ipr.result import load_result
 
+    config = Config(carving=CarvingConfig(enabled=False)) if args.no_carving else None
     out = infer(
         Path(args.scene),
         Path(args.out),
@@ -122,6 +125,7 @@ def _cmd_infer(args: argparse.Namespace) -> int:
         time_budget_s=args.time_budget,
         workers=args.workers,
         samples=args.samples,
+        config=config,
         overwrite=args.overwrite,
     )
     result = load_result(out, load_meshes=False)
@@ -301,6 +305,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     infer.add_argument(
         "--seed", type=int, default=0, help="seed of every random choice (default 0)"
+    )
+    infer.add_argument(
+        "--no-carving",
+        action="store_true",
+        help="write the convex hypotheses as inferred, without removing the space the camera "
+        "saw empty (ipr.carving)",
     )
     infer.add_argument(
         "--time-budget",
