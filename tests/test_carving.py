@@ -137,18 +137,26 @@ def test_a_later_view_carves_through_the_objects_motion():
 
 def test_the_observed_surface_takes_the_objects_denoised_points_and_drops_the_robot():
     camera = np.eye(4)
-    depth = np.full((4, 5), 0.8, dtype=np.float32)
-    depth[0, 0] = 0.0
-    robot = np.zeros((4, 5), bool)
-    robot[3, 4] = True
+    depth = np.full((6, 6), 0.8, dtype=np.float32)
+    depth[:3, :3] = 0.0  # a hole, 3 x 3 pixels
+    depth[0, 3] = 0.7
+    robot = np.zeros((6, 6), bool)
+    robot[5, 5] = True
     frame = SimpleNamespace(depth_m=depth, world_from_camera=camera, robot_mask=robot)
     points = np.array([[0.0, 0.0, 0.75], [0.0, 0.0, 0.76], [1.0, 1.0, 1.0]])
-    obj = PartialObject(1, 0, np.array([7, 0, -1]), points, np.zeros((3, 3), np.uint8))
+    obj = PartialObject(1, 0, np.array([15, 1, -1]), points, np.zeros((3, 3), np.uint8))
     surface = observed_surface_depth(frame, [obj])
-    assert surface[1, 2] == pytest.approx(0.75)  # pixel 7 takes its denoised point
-    assert surface[0, 0] == 0.0  # no reading stays no reading
-    assert surface[3, 4] == 0.0  # the robot carves nothing
-    assert surface[2, 2] == pytest.approx(0.8)
+    assert surface[2, 3] == pytest.approx(0.75)  # pixel 15 takes its denoised point
+    assert surface[0, 1] == 0.0  # no reading stays no reading, even under an object's pixel
+    assert surface[5, 5] == 0.0  # the robot carves nothing
+    assert surface[4, 4] == pytest.approx(0.8)
+    filled = observed_surface_depth(frame, [obj], hole_fill_window_px=3)
+    assert filled[0, 2] == pytest.approx(0.7)  # a hole takes the nearest surface around it
+    assert filled[2, 2] == pytest.approx(0.75)
+    assert filled[1, 1] == 0.0  # nothing read around it
+    assert filled[5, 5] == 0.0
+    with pytest.raises(ValueError, match="odd"):
+        CarvingConfig(hole_fill_window_px=4)
 
 
 def test_surface_views_use_later_frames_only_with_motions():

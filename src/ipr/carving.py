@@ -13,7 +13,9 @@ removed: the hidden parts stay as inferred.
 
 The observed surface is the best estimate the perception has: each object pixel's denoised
 depth (``perception.denoise``, the points the hypotheses were built from), the raw reading
-elsewhere; pixels without a reading or on the robot carve nothing. In frame 0 a voxel is
+elsewhere. Sensors drop readings at depth discontinuities, so a pixel without a reading takes
+the nearest surface around it (the minimum over ``hole_fill_window_px``, as the free-space
+map assumes); pixels with no reading around them, or on the robot, carve nothing. In frame 0 a voxel is
 removed when its centre is in front of that surface at all (``first_frame_margin_m`` 0); in a
 later frame, where the object moved and its registration (``ipr.fusion``) is a few millimetres
 off, when it is more than ``later_frame_margin_m`` in front. Later frames are used by the
@@ -53,16 +55,23 @@ class CarvingConfig:
         later_frame_margin_m: the same for later frames, seen through the object's registered
             motion (m); it absorbs the registration error.
         later_frames: also carve with the later frames (methods that use the pushes only).
+        hole_fill_window_px: a pixel without a reading takes the minimum depth over this
+            window (odd; 1: holes carve nothing). Development (module doc): 3 against 1 and
+            7, object IoU 0.641 / 0.638 / 0.639 (Collision Checker, frame 0) and 0.667 /
+            0.664 / 0.665 (ipr+action+uniform, frame 0).
     """
 
     enabled: bool = True
     first_frame_margin_m: float = 0.0
     later_frame_margin_m: float = 0.005
     later_frames: bool = True
+    hole_fill_window_px: int = 3
 
     def __post_init__(self) -> None:
         if self.first_frame_margin_m < 0 or self.later_frame_margin_m < 0:
             raise ValueError("carving margins must be >= 0 metres")
+        if self.hole_fill_window_px < 1 or self.hole_fill_window_px % 2 == 0:
+            raise ValueError("hole_fill_window_px must be a positive odd number of pixels")
 
 
 @dataclass(frozen=True, eq=False)
@@ -86,10 +95,13 @@ class SurfaceView:
     frame_from_frame0: Mapping[int, np.ndarray] | None = None
 
 
-def observed_surface_depth(frame: object, objects: Sequence[object]) -> np.ndarray:
+def observed_surface_depth(
+    frame: object, objects: Sequence[object], hole_fill_window_px: int = 1
+) -> np.ndarray:
     """(H, W) float64 depth (m) of a frame's observed surface: its raw reading, with each
-    object pixel's denoised point (``PartialObject.points``, world) in its place; 0 where there
-    is no reading or the robot mask covers the pixel.
+    object pixel's denoised point (``PartialObject.points``, world) in its place; a pixel
+    without a reading takes the minimum over the ``hole_fill_window_px`` window around it (1:
+    none); 0 where nothing is known or the robot mask covers the pixel.
 
     Args:
         frame: an ``ipr.scene.Frame``; objects: that frame's ``PartialObject``s (points of pixel
@@ -106,6 +118,12 @@ def observed_surface_depth(frame: object, objects: Sequence[object]) -> np.ndarr
         points = np.asarray(obj.points, float)[own]
         z = points @ camera_from_world[2, :3] + camera_from_world[2, 3]
         flat[pixels[own]] = np.where(flat[pixels[own]] > 0, z, 0.0)
+    if hole_fill_window_px > 1:
+        from scipy.ndimage import minimum_filter
+
+        readings = np.where(depth > 0, depth, np.inf)
+        nearest = minimum_filter(readings, size=hole_fill_window_px, mode="nearest")
+        depth = np.where(depth > 0, depth, np.where(np.isfinite(nearest), nearest, 0.0))
     if getattr(frame, "robot_mask", None) is not None:
         depth[np.asarray(frame.robot_mask, bool)] = 0.0
     return depth
@@ -264,7 +282,7 @@ def surface_views(
     first = frames[0]
     views = [
         SurfaceView(
-            observed_surface_depth(first, objects_per_frame[0]),
+            observed_surface_depth(first, objects_per_frame[0], config.hole_fill_window_px),
             np.asarray(first.K, float),
             np.asarray(first.world_from_camera, float),
             config.first_frame_margin_m,
@@ -281,7 +299,9 @@ def surface_views(
         if moved:
             views.append(
                 SurfaceView(
-                    observed_surface_depth(frames[t], objects_per_frame[t]),
+                    observed_surface_depth(
+                        frames[t], objects_per_frame[t], config.hole_fill_window_px
+                    ),
                     np.asarray(frames[t].K, float),
                     np.asarray(frames[t].world_from_camera, float),
                     config.later_frame_margin_m,
