@@ -39,6 +39,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy.ndimage import minimum_filter
 
 from ipr import voxels
 from ipr.camera import invert_transform
@@ -119,8 +120,6 @@ def observed_surface_depth(
         z = points @ camera_from_world[2, :3] + camera_from_world[2, 3]
         flat[pixels[own]] = np.where(flat[pixels[own]] > 0, z, 0.0)
     if hole_fill_window_px > 1:
-        from scipy.ndimage import minimum_filter
-
         readings = np.where(depth > 0, depth, np.inf)
         nearest = minimum_filter(readings, size=hole_fill_window_px, mode="nearest")
         depth = np.where(depth > 0, depth, np.where(np.isfinite(nearest), nearest, 0.0))
