@@ -258,7 +258,18 @@ def carve_mesh(
     nothing was removed (write the shape itself) or everything was (the views contradict
     the shape; keep it rather than write nothing)."""
     vertices, faces, _ = voxels.closed_or_hull(mesh)
-    keys = voxels.scanline_voxels(vertices, faces, pitch_m)
+    return carve_shape_voxels(
+        voxels.scanline_voxels(vertices, faces, pitch_m), object_id, views, pitch_m
+    )
+
+
+def carve_shape_voxels(
+    keys: np.ndarray,
+    object_id: int,
+    views: Sequence[SurfaceView],
+    pitch_m: float = voxels.DEFAULT_PITCH_M,
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """``carve_mesh`` of a shape given by its voxel keys at ``pitch_m``."""
     kept = carve_voxels(keys, object_id, views, pitch_m)
     if kept.size in (0, keys.size):
         return None
@@ -318,8 +329,8 @@ def carve_posteriors(posteriors: Sequence[object], views: Sequence[SurfaceView])
         meshes = []
         for k, hypothesis in enumerate(posterior.hypotheses):
             written = posterior.probabilities[k] > 0 or k == posterior.best
-            meshes.append(
-                carve_mesh(hypothesis.mesh, posterior.object_id, views) if written else None
-            )
+            # The hypotheses' own voxels (cached at generation, the same voxelisation).
+            keys = hypothesis.keys(voxels.DEFAULT_PITCH_M) if written else None
+            meshes.append(carve_shape_voxels(keys, posterior.object_id, views) if written else None)
         carved.append(replace(posterior, output_meshes=tuple(meshes)))
     return carved
