@@ -377,6 +377,47 @@ def test_faces_lined_up_in_a_plane_are_a_wall_only_when_solid_with_a_straight_to
         assert known_plane_kinds(boxes) == ["support"]
 
 
+def test_a_side_wall_seen_edge_on_completes_the_container():
+    # A 26 x 20 cm container, 8 cm high, seen from a camera in the plane of its right wall: of
+    # that wall only the rim shows, too few points facing its way for the wall search, and
+    # without the completion the rim is left for the segmentation as thin objects.
+    thin = 0.015
+    walls = [
+        box(0.0, -0.1, (0.26, thin, 0.08)),
+        box(0.0, 0.1, (0.26, thin, 0.08)),
+        box(-0.12, 0.0, (thin, 0.2, 0.08)),
+        box(0.12, 0.0, (thin, 0.2, 0.08)),
+    ]
+    objects = [box(-0.04, 0.0, (0.06, 0.06, 0.06)), box(0.05, 0.03, (0.05, 0.08, 0.05))]
+    frame = render(
+        look_at(np.array([0.12, -0.5, 0.45]), np.array([0.12, 0.0, 0.0])), walls + objects
+    )
+    valid = frame.depth_m > 0
+    normals = organised_normals(frame.depth_m, K) @ frame.world_from_camera[:3, :3].T
+
+    def side_walls(config: PerceptionConfig) -> list[float]:
+        planes = find_known_planes(
+            frame.points_world()[valid],
+            config,
+            normals=normals[valid],
+            viewpoint=frame.world_from_camera[:3, 3],
+        )
+        return [
+            -p.offset * p.normal[0] for p in planes if p.kind == "wall" and abs(p.normal[0]) > 0.99
+        ]
+
+    assert len(side_walls(PerceptionConfig(wall_complete_corners=False))) == 1  # the left one
+    found = sorted(side_walls(PerceptionConfig()))
+    assert len(found) == 2 and abs(found[1] - 0.12) < 0.01
+    # The rim is static geometry, not an object.
+    points = frame.points_world()
+    rim = valid & (np.abs(points[..., 0] - 0.12) < 0.0075) & (points[..., 2] > 0.075)
+    assert rim.sum() > 30
+    assert np.mean(segment_frame(frame).labels[rim] > 0) < 0.1
+    without = segment_frame(frame, config=PerceptionConfig(wall_complete_corners=False))
+    assert np.mean(without.labels[rim] > 0) > 0.5
+
+
 def test_label_holes_take_the_label_of_the_nearest_valid_pixel_within_reach():
     rng = np.random.default_rng(5)
     labels = np.zeros((40, 50), np.int32)

@@ -201,6 +201,8 @@ class PerceptionConfig:
         wall_partner_top_match_m: tops of a wall whose bottom is hidden and of its partner
             differ by at most this.
         wall_corner_gap_m: two perpendicular walls meet within this of the ends of their runs.
+        wall_complete_corners: look for side walls seen edge-on at the ends of accepted walls
+            (``planes._edge_on_walls``).
         wall_top_margin_m: points up to this above a wall's top (its rim, with noise) are
             removed with it.
         pusher_margin_m: points within the pusher capsule's radius plus this are removed.
@@ -329,6 +331,7 @@ class PerceptionConfig:
     wall_partner_max_top_difference_m: float = 0.06
     wall_partner_top_match_m: float = 0.015
     wall_corner_gap_m: float = 0.04
+    wall_complete_corners: bool = True
     wall_top_margin_m: float = 0.005
     pusher_margin_m: float = 0.005
     voxel_size_m: float = 0.0075

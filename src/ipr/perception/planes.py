@@ -274,6 +274,7 @@ def find_walls(
     *,
     normals: np.ndarray | None,
     viewpoint: np.ndarray,
+    edge_on: bool = True,
 ) -> tuple[KnownPlane, ...]:
     """Walls of containers and drawer fronts among (N, 3) world points (m) above ``support``.
 
@@ -294,6 +295,12 @@ def find_walls(
     of 178 development scenes (62 on a table): 370 true walls accepted either way; 4 faces of
     objects lined up in a plane accepted as lone walls before the straight-top and solid-face
     cues, none after (docs/DESIGN_NOTES.md).
+
+    With ``edge_on`` (and ``wall_complete_corners``), side walls seen edge-on are then looked
+    for at the open ends of the accepted walls (``_edge_on_walls``). The segmentation asks for
+    them in a scene's first frame only: later frames keep the walls found before (walls do not
+    move, ``temporal.consistent_walls``), and a pushed object that stopped near a container's
+    side would offer its face as one.
     """
     points = np.asarray(points_world, dtype=np.float64)
     rng = np.random.default_rng(config.seed) if rng is None else rng
@@ -349,6 +356,9 @@ def find_walls(
         if normals is not None:  # surfaces crossing the slab stay in the pool
             done &= _facing(normals[pool], normal, unknown[pool])
         pool = pool[~done]
+    walls = _select_walls(candidates, config)
+    if edge_on and config.wall_complete_corners:
+        walls += _edge_on_walls(points, normals, height, walls, up, viewpoint, config)
     return tuple(
         KnownPlane(
             "wall",
@@ -357,8 +367,126 @@ def find_walls(
             _subsample(cues["run_points"], rng),
             cues["thickness"],
         )
-        for cues in _select_walls(candidates, config)
+        for cues in walls
     )
+
+
+def _edge_on_walls(
+    points: np.ndarray,
+    normals: np.ndarray | None,
+    height: np.ndarray,
+    walls: list[dict],
+    up: np.ndarray,
+    viewpoint: np.ndarray,
+    config: PerceptionConfig,
+) -> list[dict]:
+    """Side walls seen edge-on where an accepted wall's run ends without a corner partner.
+
+    A container's side wall seen along its length shows the camera its rim and a sliver of a
+    face at a grazing angle: too few points facing its way for the RANSAC search, so the rim
+    stayed as thin "objects" that the physics then completed into slabs (on the development
+    scenes these were most of the predicted volume lying outside every object). At each end of
+    an accepted wall's run with no perpendicular wall within ``wall_corner_gap_m``, vertical
+    planes perpendicular to it are tried every 5 mm within ``wall_corner_gap_m`` of the end,
+    with every point in their slab counted whatever its normal (the rim faces up). A plane is
+    accepted as a wall when its run (``_wall_cues``) reaches the accepted wall (within
+    ``wall_corner_gap_m``), its top matches an accepted wall's top within
+    ``wall_partner_top_match_m`` (a container's walls share their height), its top is straight
+    (``wall_min_top_agreement``) and the scene lies on one side of it
+    (``wall_max_outside_fraction``); of the planes accepted at one end, the one with the most
+    points in its run. Only walls square to another accepted wall (parallel or perpendicular:
+    part of a container's frame) are completed, and a plane within ``wall_corner_gap_m`` of a
+    parallel known wall is not tried (that wall's own rim). The capped rule does not apply: seen from outside, a side wall has the
+    container's contents behind it at the height of its rim.
+
+    ``points`` (N, 3) world (m), ``normals`` (N, 3) or None and ``height`` (N,) above the
+    support: the wall search's points; ``walls``: the accepted walls' cues. Returns the added walls' cues.
+    """
+    added: list[dict] = []
+    gap = config.wall_corner_gap_m
+    tops = [wall["top"] for wall in walls]
+    perpendicular = np.sin(np.radians(5.0))
+    for wall in walls:
+        if not any(_square(wall, other) for other in walls if other is not wall):
+            continue  # a lone wall is not known to be part of a container frame
+        along = wall["along"]
+        s_all = points @ along
+        depth_wall = points @ wall["normal"] + wall["offset"]
+        for end in wall["s_range"]:
+            present = walls + added
+            if any(
+                abs(float(other["normal"] @ wall["normal"])) < perpendicular
+                and abs(-other["offset"] / float(other["normal"] @ along) - end) <= gap
+                for other in present
+            ):
+                continue
+            # The points near this end, off the wall's own slab, within a container's width.
+            region = np.flatnonzero(
+                (np.abs(s_all - end) < gap + 0.08)
+                & (np.abs(depth_wall) < config.wall_partner_separation_m[1])
+                & ((depth_wall > config.plane_threshold_m) | (depth_wall < -wall["thickness"]))
+            )
+            if len(region) < config.wall_min_points:
+                continue
+            best = None
+            for position in end + np.arange(-gap, gap + 1e-9, 0.005):
+                if any(
+                    abs(float(other["normal"] @ along)) > np.cos(np.radians(5.0))
+                    and abs(-other["offset"] / float(other["normal"] @ along) - position) < gap
+                    for other in present
+                ):
+                    continue  # a known wall's own face or rim
+                normal, offset = along.copy(), -float(position)
+                if normal @ viewpoint + offset < 0:  # face the camera
+                    normal, offset = -normal, -offset
+                cues = _wall_cues(
+                    points[region],
+                    None if normals is None else normals[region],
+                    height[region],
+                    normal,
+                    offset,
+                    up,
+                    config,
+                    edge_on=True,
+                )
+                if cues is None or len(cues["run_points"]) < config.wall_min_points:
+                    continue
+                if (
+                    _meets_wall(cues, walls, gap)
+                    and min(abs(cues["top"] - top) for top in tops)
+                    <= config.wall_partner_top_match_m
+                    and cues["top_agreement"] >= config.wall_min_top_agreement
+                    and cues["outside"] <= config.wall_max_outside_fraction
+                    and (best is None or len(cues["run_points"]) > len(best["run_points"]))
+                ):
+                    best = cues
+            if best is not None:
+                # The plane is only placed to 5 mm and the rim's thickness is poorly seen
+                # edge-on: remove the thickest slab a wall may have.
+                best["thickness"] = config.wall_max_thickness_m
+                added.append(best)
+    return added
+
+
+def _square(first: dict, second: dict) -> bool:
+    """Whether two walls' normals are parallel or perpendicular within 5 degrees."""
+    cosine = abs(float(first["normal"] @ second["normal"]))
+    return cosine > np.cos(np.radians(5.0)) or cosine < np.sin(np.radians(5.0))
+
+
+def _meets_wall(cues: dict, walls: list[dict], gap: float) -> bool:
+    """Whether an end of the run of ``cues``' wall is within ``gap`` (m) of the plane of one of
+    ``walls`` perpendicular to it (a corner; the run may stop short of its other corner, hidden
+    behind the objects)."""
+    low, high = cues["s_range"]
+    for wall in walls:
+        cosine = float(wall["normal"] @ cues["along"])
+        if abs(cosine) < np.cos(np.radians(5.0)):
+            continue
+        crossing = -wall["offset"] / cosine  # where the wall's plane crosses the run's axis
+        if min(abs(low - crossing), abs(high - crossing)) <= gap:
+            return True
+    return False
 
 
 def _select_walls(candidates: list[dict], config: PerceptionConfig) -> list[dict]:
@@ -549,6 +677,7 @@ def _wall_cues(
     config: PerceptionConfig,
     unknown: np.ndarray | None = None,
     normals_up: np.ndarray | None = None,
+    edge_on: bool = False,
 ) -> dict | None:
     """Measurements of the vertical plane (normal, offset) used by ``_select_walls``.
 
@@ -559,15 +688,17 @@ def _wall_cues(
     points; None when the plane has too few inliers or cannot be a wall (a run shorter than
     ``wall_partner_min_length_m`` or a top outside the wall heights, which ``_select_walls``
     rejects anyway; most candidates are faces of objects, and this spares their costly cues).
+    ``edge_on``: every point in the plane's slab is an inlier whatever its normal (a wall seen
+    along its length shows its rim, which faces up; ``_edge_on_walls``).
     """
     threshold = config.plane_threshold_m
     along = np.cross(up, normal)
     depth = pts @ normal + offset
     s = pts @ along
     on_plane = (np.abs(depth) < threshold) & (h < config.wall_max_height_m + threshold)
-    if normals is not None:  # surfaces crossing the plane are not part of it
-        if normals_up is None:
-            normals_up = normals @ up
+    if normals is not None and normals_up is None:
+        normals_up = normals @ up
+    if normals is not None and not edge_on:  # surfaces crossing the plane are not part of it
         on_plane &= _facing(normals, normal, unknown)
     if on_plane.sum() < config.wall_min_points:
         return None

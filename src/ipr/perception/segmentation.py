@@ -114,6 +114,7 @@ def segment_frame(
         rng,
         normals=wall_normals @ frame.world_from_camera[:3, :3].T.astype(np.float32),
         viewpoint=frame.world_from_camera[:3, 3],
+        edge_on=previous is None,
     )
     if frame_change is not None and config.temporal_walls and previous[1].planes:
         walls = consistent_walls(
