@@ -203,6 +203,8 @@ class PerceptionConfig:
         wall_corner_gap_m: two perpendicular walls meet within this of the ends of their runs.
         wall_complete_corners: look for side walls seen edge-on at the ends of accepted walls
             (``planes._edge_on_walls``).
+        wall_max_span_m: a wall's face may extend past its run (an object in front of it cuts it
+            in two) to pieces of its plane whose top is the wall's, up to this overall length.
         wall_top_margin_m: points up to this above a wall's top (its rim, with noise) are
             removed with it.
         pusher_margin_m: points within the pusher capsule's radius plus this are removed.
@@ -332,6 +334,7 @@ class PerceptionConfig:
     wall_partner_top_match_m: float = 0.015
     wall_corner_gap_m: float = 0.04
     wall_complete_corners: bool = True
+    wall_max_span_m: float = 0.6
     wall_top_margin_m: float = 0.005
     pusher_margin_m: float = 0.005
     voxel_size_m: float = 0.0075

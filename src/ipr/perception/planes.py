@@ -364,7 +364,7 @@ def find_walls(
             "wall",
             cues["normal"],
             cues["offset"],
-            _subsample(cues["run_points"], rng),
+            _subsample(np.concatenate([cues["run_points"], cues["extra_points"]]), rng),
             cues["thickness"],
         )
         for cues in walls
@@ -386,7 +386,7 @@ def _edge_on_walls(
     face at a grazing angle: too few points facing its way for the RANSAC search, so the rim
     stayed as thin "objects" that the physics then completed into slabs (on the development
     scenes these were most of the predicted volume lying outside every object). At each end of
-    an accepted wall's run with no perpendicular wall within ``wall_corner_gap_m``, vertical
+    an accepted wall's face (its ``span``) with no perpendicular wall within ``wall_corner_gap_m``, vertical
     planes perpendicular to it are tried every 5 mm within ``wall_corner_gap_m`` of the end,
     with every point in their slab counted whatever its normal (the rim faces up). A plane is
     accepted as a wall when its run (``_wall_cues``) reaches the accepted wall (within
@@ -412,7 +412,7 @@ def _edge_on_walls(
         along = wall["along"]
         s_all = points @ along
         depth_wall = points @ wall["normal"] + wall["offset"]
-        for end in wall["s_range"]:
+        for end in wall["span"]:
             present = walls + added
             if any(
                 abs(float(other["normal"] @ wall["normal"])) < perpendicular
@@ -477,8 +477,8 @@ def _square(first: dict, second: dict) -> bool:
 def _meets_wall(cues: dict, walls: list[dict], gap: float) -> bool:
     """Whether an end of the run of ``cues``' wall is within ``gap`` (m) of the plane of one of
     ``walls`` perpendicular to it (a corner; the run may stop short of its other corner, hidden
-    behind the objects)."""
-    low, high = cues["s_range"]
+    behind the objects; ``span``: the run with the pieces of the wall beyond an occluder)."""
+    low, high = cues["span"]
     for wall in walls:
         cosine = float(wall["normal"] @ cues["along"])
         if abs(cosine) < np.cos(np.radians(5.0)):
@@ -685,7 +685,9 @@ def _wall_cues(
     their heights above it; ``unknown`` (N,) bool (``~normals.any(axis=1)``) and ``normals_up``
     (N,) (``normals @ up``) may be passed when already known. Returns the plane, its run (along-axis, range and length, m), top and
     bottom (m above the support), thickness (m), capped and outside fractions and the run's face
-    points; None when the plane has too few inliers or cannot be a wall (a run shorter than
+    points, the face points of the plane's other runs with the wall's top (``extra_points``, a
+    wall cut by an occluder; ``wall_max_span_m``) and the extent of both along the wall
+    (``span``); None when the plane has too few inliers or cannot be a wall (a run shorter than
     ``wall_partner_min_length_m`` or a top outside the wall heights, which ``_select_walls``
     rejects anyway; most candidates are faces of objects, and this spares their costly cues).
     ``edge_on``: every point in the plane's slab is an inlier whatever its normal (a wall seen
@@ -792,6 +794,23 @@ def _wall_cues(
     if near.any():
         in_front = float(np.mean(depth[near] > 0))
         outside = min(in_front, 1.0 - in_front)
+    # The plane's other runs whose top edge is the wall's top: the same wall, cut in two by an
+    # object standing in front of it. They join the wall's extent (the static slab and the
+    # physics), not the figures above, so they do not change which walls are accepted.
+    extra = np.zeros(len(s_in), dtype=bool)
+    for other in range(len(starts)):
+        low = first + occupied[starts[other]] * bin_m
+        high = first + (occupied[ends[other]] + 1) * bin_m
+        if other == best or max(high, s_hi) - min(low, s_lo) > config.wall_max_span_m:
+            continue
+        members = (s_in >= low) & (s_in <= high)
+        tops = np.full(int((high - low) / 0.02) + 1, -np.inf)
+        np.maximum.at(tops, ((s_in[members] - low) / 0.02).astype(np.int64), h_in[members])
+        tops = tops[np.isfinite(tops)]
+        if tops.size >= 2 and np.mean(np.abs(tops - top) < 0.02) >= config.wall_min_top_agreement:
+            extra |= members
+    extra &= h_in <= top + threshold
+    span = (float(s_in[in_run | extra].min()), float(s_in[in_run | extra].max()))
     return {
         "normal": normal,
         "offset": offset,
@@ -807,4 +826,7 @@ def _wall_cues(
         "face_fill": face_fill,
         # The face below its top (objects leaning on the wall and rising above it excluded).
         "run_points": pts[on_plane][in_run][heights <= top + threshold],
+        "extra_points": pts[on_plane][extra],
+        # The extent along the wall of the run and the extra runs (m).
+        "span": span,
     }
