@@ -418,6 +418,37 @@ def test_a_side_wall_seen_edge_on_completes_the_container():
     assert np.mean(without.labels[rim] > 0) > 0.5
 
 
+def test_a_wall_cut_in_two_by_an_object_in_front_of_it_is_static_on_both_sides():
+    # A tall box in front of the container's far wall splits its visible face into a long run
+    # (the wall's) and a short one; the short one has the wall's top and is the same wall.
+    thin = 0.015
+    walls = [
+        box(0.0, -0.1, (0.26, thin, 0.08)),
+        box(0.0, 0.1, (0.26, thin, 0.08)),
+        box(-0.12, 0.0, (thin, 0.2, 0.08)),
+        box(0.12, 0.0, (thin, 0.2, 0.08)),
+    ]
+    objects = [box(0.03, 0.06, (0.08, 0.05, 0.16)), box(-0.05, -0.03, (0.05, 0.05, 0.05))]
+    frame = render(
+        look_at(np.array([0.0, -0.55, 0.5]), np.array([0.0, 0.02, 0.0])), walls + objects
+    )
+    points = frame.points_world()
+    far_face = (
+        (frame.depth_m > 0)
+        & (points[..., 1] > 0.09)
+        & (points[..., 1] < 0.11)
+        & (points[..., 2] > 0.01)
+        & (points[..., 2] < 0.085)
+    )
+    short_run = far_face & (points[..., 0] > 0.07)
+    assert short_run.sum() > 200 and (far_face & (points[..., 0] < -0.01)).sum() > 500
+    result = segment_frame(frame)
+    assert np.mean(result.labels[far_face] > 0) < 0.02
+    assert len(result.segment_ids) == 2  # the two boxes
+    only_the_run = segment_frame(frame, config=PerceptionConfig(wall_max_span_m=0.0))
+    assert np.mean(only_the_run.labels[short_run] > 0) > 0.5
+
+
 def test_label_holes_take_the_label_of_the_nearest_valid_pixel_within_reach():
     rng = np.random.default_rng(5)
     labels = np.zeros((40, 50), np.int32)
