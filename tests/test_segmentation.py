@@ -377,17 +377,22 @@ def test_faces_lined_up_in_a_plane_are_a_wall_only_when_solid_with_a_straight_to
         assert known_plane_kinds(boxes) == ["support"]
 
 
-def test_a_side_wall_seen_edge_on_completes_the_container():
-    # A 26 x 20 cm container, 8 cm high, seen from a camera in the plane of its right wall: of
-    # that wall only the rim shows, too few points facing its way for the wall search, and
-    # without the completion the rim is left for the segmentation as thin objects.
+def container_walls():
+    """The four 1.5 cm walls of a 26 x 20 cm container, 8 cm high, centred on the origin."""
     thin = 0.015
-    walls = [
+    return [
         box(0.0, -0.1, (0.26, thin, 0.08)),
         box(0.0, 0.1, (0.26, thin, 0.08)),
         box(-0.12, 0.0, (thin, 0.2, 0.08)),
         box(0.12, 0.0, (thin, 0.2, 0.08)),
     ]
+
+
+def test_a_side_wall_seen_edge_on_completes_the_container():
+    # A 26 x 20 cm container, 8 cm high, seen from a camera in the plane of its right wall: of
+    # that wall only the rim shows, too few points facing its way for the wall search, and
+    # without the completion the rim is left for the segmentation as thin objects.
+    walls = container_walls()
     objects = [box(-0.04, 0.0, (0.06, 0.06, 0.06)), box(0.05, 0.03, (0.05, 0.08, 0.05))]
     frame = render(
         look_at(np.array([0.12, -0.5, 0.45]), np.array([0.12, 0.0, 0.0])), walls + objects
@@ -421,13 +426,7 @@ def test_a_side_wall_seen_edge_on_completes_the_container():
 def test_a_wall_cut_in_two_by_an_object_in_front_of_it_is_static_on_both_sides():
     # A tall box in front of the container's far wall splits its visible face into a long run
     # (the wall's) and a short one; the short one has the wall's top and is the same wall.
-    thin = 0.015
-    walls = [
-        box(0.0, -0.1, (0.26, thin, 0.08)),
-        box(0.0, 0.1, (0.26, thin, 0.08)),
-        box(-0.12, 0.0, (thin, 0.2, 0.08)),
-        box(0.12, 0.0, (thin, 0.2, 0.08)),
-    ]
+    walls = container_walls()
     objects = [box(0.03, 0.06, (0.08, 0.05, 0.16)), box(-0.05, -0.03, (0.05, 0.05, 0.05))]
     frame = render(
         look_at(np.array([0.0, -0.55, 0.5]), np.array([0.0, 0.02, 0.0])), walls + objects
