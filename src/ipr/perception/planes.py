@@ -230,6 +230,10 @@ def static_geometry_mask(
     return mask
 
 
+#: Two walls are square to each other (parallel or perpendicular) within 5 degrees.
+_SQUARE_COS = float(np.cos(np.radians(5.0)))
+_SQUARE_SIN = float(np.sin(np.radians(5.0)))
+
 #: A point belongs to a plane's face only if its normal is within 30 degrees of the plane's.
 _FACING_COS = float(np.cos(np.radians(30.0)))
 
@@ -380,32 +384,33 @@ def _edge_on_walls(
     viewpoint: np.ndarray,
     config: PerceptionConfig,
 ) -> list[dict]:
-    """Side walls seen edge-on where an accepted wall's run ends without a corner partner.
+    """Side walls seen edge-on where an accepted wall's face ends without a corner partner.
 
     A container's side wall seen along its length shows the camera its rim and a sliver of a
     face at a grazing angle: too few points facing its way for the RANSAC search, so the rim
     stayed as thin "objects" that the physics then completed into slabs (on the development
     scenes these were most of the predicted volume lying outside every object). At each end of
-    an accepted wall's face (its ``span``) with no perpendicular wall within ``wall_corner_gap_m``, vertical
-    planes perpendicular to it are tried every 5 mm within ``wall_corner_gap_m`` of the end,
-    with every point in their slab counted whatever its normal (the rim faces up). A plane is
-    accepted as a wall when its run (``_wall_cues``) reaches the accepted wall (within
-    ``wall_corner_gap_m``), its top matches an accepted wall's top within
-    ``wall_partner_top_match_m`` (a container's walls share their height), its top is straight
-    (``wall_min_top_agreement``) and the scene lies on one side of it
+    an accepted wall's face (its ``span``) with no perpendicular wall within
+    ``wall_corner_gap_m``, vertical planes perpendicular to it are tried every 5 mm within
+    ``wall_corner_gap_m`` of the end, with every point in their slab counted whatever its
+    normal (the rim faces up). A plane is accepted as a wall when its face reaches an accepted
+    wall perpendicular to it (within ``wall_corner_gap_m``: the wall it was looked for from or,
+    when objects hide that corner, the opposite one), its top matches an accepted wall's top
+    within ``wall_partner_top_match_m`` (a container's walls share their height), its top is
+    straight (``wall_min_top_agreement``) and the scene lies on one side of it
     (``wall_max_outside_fraction``); of the planes accepted at one end, the one with the most
     points in its run. Only walls square to another accepted wall (parallel or perpendicular:
     part of a container's frame) are completed, and a plane within ``wall_corner_gap_m`` of a
-    parallel known wall is not tried (that wall's own rim). The capped rule does not apply: seen from outside, a side wall has the
-    container's contents behind it at the height of its rim.
+    parallel known wall is not tried (that wall's own rim). The capped rule does not apply:
+    seen from outside, a side wall has the container's contents behind it at its rim's height.
 
     ``points`` (N, 3) world (m), ``normals`` (N, 3) or None and ``height`` (N,) above the
-    support: the wall search's points; ``walls``: the accepted walls' cues. Returns the added walls' cues.
+    support: the wall search's points; ``walls``: the accepted walls' cues. Returns the added
+    walls' cues.
     """
     added: list[dict] = []
     gap = config.wall_corner_gap_m
     tops = [wall["top"] for wall in walls]
-    perpendicular = np.sin(np.radians(5.0))
     for wall in walls:
         if not any(_square(wall, other) for other in walls if other is not wall):
             continue  # a lone wall is not known to be part of a container frame
@@ -414,12 +419,8 @@ def _edge_on_walls(
         depth_wall = points @ wall["normal"] + wall["offset"]
         for end in wall["span"]:
             present = walls + added
-            if any(
-                abs(float(other["normal"] @ wall["normal"])) < perpendicular
-                and abs(-other["offset"] / float(other["normal"] @ along) - end) <= gap
-                for other in present
-            ):
-                continue
+            if _crossed_within(present, along, end, gap):
+                continue  # a corner already
             # The points near this end, off the wall's own slab, within a container's width.
             region = np.flatnonzero(
                 (np.abs(s_all - end) < gap + 0.08)
@@ -430,11 +431,7 @@ def _edge_on_walls(
                 continue
             best = None
             for position in end + np.arange(-gap, gap + 1e-9, 0.005):
-                if any(
-                    abs(float(other["normal"] @ along)) > np.cos(np.radians(5.0))
-                    and abs(-other["offset"] / float(other["normal"] @ along) - position) < gap
-                    for other in present
-                ):
+                if _crossed_within(present, along, position, gap):
                     continue  # a known wall's own face or rim
                 normal, offset = along.copy(), -float(position)
                 if normal @ viewpoint + offset < 0:  # face the camera
@@ -471,22 +468,28 @@ def _edge_on_walls(
 def _square(first: dict, second: dict) -> bool:
     """Whether two walls' normals are parallel or perpendicular within 5 degrees."""
     cosine = abs(float(first["normal"] @ second["normal"]))
-    return cosine > np.cos(np.radians(5.0)) or cosine < np.sin(np.radians(5.0))
+    return cosine > _SQUARE_COS or cosine < _SQUARE_SIN
+
+
+def _crossing(wall: dict, axis: np.ndarray) -> float | None:
+    """Where ``wall``'s plane crosses the horizontal unit ``axis`` (m along it), when the wall is
+    perpendicular to the axis (its normal within 5 degrees of it); else None."""
+    cosine = float(wall["normal"] @ axis)
+    return -wall["offset"] / cosine if abs(cosine) > _SQUARE_COS else None
+
+
+def _crossed_within(walls: list[dict], axis: np.ndarray, position: float, gap: float) -> bool:
+    """Whether one of ``walls`` crosses ``axis`` within ``gap`` (m) of ``position`` (m)."""
+    crossings = (_crossing(wall, axis) for wall in walls)
+    return any(c is not None and abs(c - position) <= gap for c in crossings)
 
 
 def _meets_wall(cues: dict, walls: list[dict], gap: float) -> bool:
-    """Whether an end of the run of ``cues``' wall is within ``gap`` (m) of the plane of one of
-    ``walls`` perpendicular to it (a corner; the run may stop short of its other corner, hidden
-    behind the objects; ``span``: the run with the pieces of the wall beyond an occluder)."""
-    low, high = cues["span"]
-    for wall in walls:
-        cosine = float(wall["normal"] @ cues["along"])
-        if abs(cosine) < np.cos(np.radians(5.0)):
-            continue
-        crossing = -wall["offset"] / cosine  # where the wall's plane crosses the run's axis
-        if min(abs(low - crossing), abs(high - crossing)) <= gap:
-            return True
-    return False
+    """Whether an end of the face of ``cues``' wall (its ``span``: the run with the pieces of the
+    wall beyond an occluder) is within ``gap`` (m) of the plane of one of ``walls``
+    perpendicular to it (a corner; the face may stop short of its other corner, hidden behind
+    the objects)."""
+    return any(_crossed_within(walls, cues["along"], end, gap) for end in cues["span"])
 
 
 def _select_walls(candidates: list[dict], config: PerceptionConfig) -> list[dict]:
