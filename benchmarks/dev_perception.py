@@ -1,7 +1,7 @@
 """Development measurement of segmentation and tracking (docs/DESIGN_NOTES.md, "Perception").
 
 Usage: ``python -m benchmarks.dev_perception [--sets 8000:12 8100:24 ...] [--containers]
-[--tracker-only]``.
+[--tracker-only] [--lost]``.
 
 Generates (or reuses) the development dynamic scenes of the design notes with ``ipr synth``
 (base seeds 8000 (12 scenes), 8100 (24), 8012 (38), 8150 (50), and the held-out check 8050
@@ -21,6 +21,12 @@ and then reruns only the tracker on them (segmentation does not depend on the tr
 temporal step compares with the previous frame's untracked segmentation), for quick decisions
 on tracker changes; its ms per frame is then the tracker's share alone. Decisions on anything
 else, and the timing, need the full run.
+
+``--lost`` also lists every lost (object, later frame) pair (``LostId``) and counts them by
+kind: no segment with F >= 0.5 in the later frame (segmentation), a new id, or another frame-0
+object's id, each split by whether the frame-0 id went to another visible object, is shown but
+on no object's best segment, or is not shown at all; the diagnosis each session used to rebuild
+in a throwaway script.
 """
 
 from __future__ import annotations
@@ -93,6 +99,7 @@ def main(argv: list[str] | None = None) -> int:
         "--containers", action="store_true", help="the sets with open containers in the pool"
     )
     parser.add_argument("--tracker-only", action="store_true")
+    parser.add_argument("--lost", action="store_true", help="list and count the lost ids")
     parser.add_argument(
         "--set",
         nargs="*",
@@ -136,11 +143,43 @@ def main(argv: list[str] | None = None) -> int:
             for result in results:
                 if result.error is not None:
                     print(f"  {result.scene}: {result.error}")
+                if args.lost:
+                    for lost in result.lost_ids:
+                        print(f"  {seed}/{result.scene}: {_lost_line(lost)}")
         if results_group:
             print(_line(group, suite_figures(results_group)), flush=True)
+            if args.lost:
+                print(_lost_counts(results_group), flush=True)
         if group == "development":
             pooled = results_group
     return 0 if pooled or held_out else 1
+
+
+def _lost_where(lost) -> str:
+    """Where a lost pair's frame-0 id went in the later frame."""
+    if lost.frame0_label_holder is not None:
+        return "to another object"
+    return "shown, on no object" if lost.frame0_label_shown else "not shown"
+
+
+def _lost_line(lost) -> str:
+    """One ``LostId`` as a line."""
+    later = "-" if lost.label is None else str(lost.label)
+    holder = "" if lost.frame0_label_holder is None else f" {lost.frame0_label_holder}"
+    return (
+        f"frame {lost.frame} object {lost.obj_id}/{lost.occurrence}: id {lost.frame0_label} -> "
+        f"{later} ({lost.kind}; frame-0 id {_lost_where(lost)}{holder})"
+    )
+
+
+def _lost_counts(results) -> str:
+    """Lost pairs of ``results`` counted by kind and where the frame-0 id went."""
+    from collections import Counter
+
+    counts = Counter((lost.kind, _lost_where(lost)) for r in results for lost in r.lost_ids)
+    return "  lost: " + "; ".join(
+        f"{kind}, frame-0 id {where}: {n}" for (kind, where), n in sorted(counts.items())
+    )
 
 
 def _parse_set(text: str, parser: argparse.ArgumentParser) -> tuple:

@@ -49,7 +49,8 @@ class SceneSegmentation:
     ``ceiling_f`` (N,) F of the same rows for the ground truth restricted to pixels with a depth
     reading (what a perfect depth-based segmentation can reach);
     ``frame0_visible`` visible objects in frame 0; ``ids_consistent`` of ``ids_counted``
-    (object, later frame) pairs kept their id; ``per_frame_s`` perception seconds per frame;
+    (object, later frame) pairs kept their id, ``lost_ids`` the other counted pairs
+    (``ipr.segmentation_metrics.LostId``); ``per_frame_s`` perception seconds per frame;
     ``error`` the perception's exception (then scored as an empty prediction), else None.
     """
 
@@ -64,6 +65,7 @@ class SceneSegmentation:
     ids_counted: int
     per_frame_s: tuple[float, ...]
     error: str | None
+    lost_ids: tuple = ()
 
     @property
     def share_f75(self) -> float:
@@ -170,6 +172,7 @@ def evaluate_scene(
         ids_counted=ids.counted,
         per_frame_s=tuple(per_frame_s),
         error=error,
+        lost_ids=ids.lost,
     )
 
 

@@ -178,6 +178,35 @@ def test_id_consistency_lost_and_unfound_objects() -> None:
     assert id_consistency([merged, merged], [truth] * 2, [[5, 9]] * 2) == 1.0
 
 
+def test_lost_ids_say_what_happened_to_each_pair() -> None:
+    truth = _two_objects()
+    frame0 = np.where(truth > 0, truth + 10, 0)  # object 1 -> id 11, object 2 -> id 12
+    swapped = np.where(truth == 1, 12, np.where(truth == 2, 11, 0))
+    renamed = np.where(truth == 1, 30, frame0)  # object 1 under a new id, 11 nowhere
+    gone = np.where(truth == 1, 0, frame0)  # object 1 has no segment in this frame
+    sliver = renamed.copy()
+    sliver[0, 0] = 11  # id 11 shown, but on no object's best segment
+    counts = id_consistency_counts(
+        [frame0, swapped, renamed, gone, sliver], [truth] * 5, [[5, 9]] * 5
+    )
+    assert (counts.consistent, counts.counted) == (3, 8)
+    lost = {(x.frame, x.obj_id): x for x in counts.lost}
+    assert sorted(lost) == [(1, 5), (1, 9), (2, 5), (3, 5), (4, 5)]
+    assert (lost[1, 5].kind, lost[1, 5].label, lost[1, 5].frame0_label_holder) == (
+        "other id",
+        12,
+        (9, 0),
+    )
+    assert (lost[2, 5].kind, lost[2, 5].label, lost[2, 5].frame0_label_shown) == (
+        "new id",
+        30,
+        False,
+    )
+    assert (lost[3, 5].kind, lost[3, 5].label) == ("no segment", None)
+    assert lost[4, 5].frame0_label_shown and lost[4, 5].frame0_label_holder is None
+    assert all(x.frame0_label == {5: 11, 9: 12}[x.obj_id] for x in counts.lost)
+
+
 # --------------------------------------------------------------------------------------------
 # ground_truth_masks
 

@@ -504,14 +504,44 @@ def segmentation_scores(
 
 
 @dataclass(frozen=True)
+class LostId:
+    """A counted (object, later frame) pair that did not keep its frame-0 predicted id.
+
+    Attributes:
+        frame: index of the later frame.
+        obj_id, occurrence: the ground-truth object (its BOP ``obj_id`` and which occurrence of
+            that ``obj_id`` in the frame's list, from 0).
+        frame0_label: the predicted label of the object's best segment in frame 0.
+        label: the predicted label of its best segment in ``frame``, None when no segment
+            reaches ``ID_MATCH_MIN_F`` there.
+        kind: ``"no segment"`` (label None: a segmentation failure no tracker can mend),
+            ``"other id"`` (the label is another counted object's frame-0 label) or ``"new id"``.
+        frame0_label_shown: whether ``frame0_label`` is in ``frame``'s prediction at all.
+        frame0_label_holder: (obj_id, occurrence) of the visible object whose best segment in
+            ``frame`` carries ``frame0_label`` (another object took the id), else None.
+    """
+
+    frame: int
+    obj_id: int
+    occurrence: int
+    frame0_label: int
+    label: int | None
+    kind: str
+    frame0_label_shown: bool
+    frame0_label_holder: tuple[int, int] | None
+
+
+@dataclass(frozen=True)
 class IdConsistency:
     """Id consistency over a sequence (definition in the module doc): ``consistent`` of
     ``counted`` (object, later frame) pairs kept their predicted id; ``share`` =
-    consistent / counted (nan when nothing is counted)."""
+    consistent / counted (nan when nothing is counted); ``lost`` the other counted pairs, in
+    frame order, for the diagnosis of tracking failures."""
 
     consistent: int
     counted: int
     share: float
+    lost: tuple[LostId, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict; nan becomes None."""
@@ -588,13 +618,31 @@ def id_consistency_counts(
     if not ids:
         return IdConsistency(0, 0, math.nan)
     first = {key: label for key, label in ids[0].items() if label is not None}
+    frame0_labels = set(first.values())
     consistent = counted = 0
-    for later in ids[1:]:
+    lost = []
+    for frame, (later, predicted) in enumerate(
+        zip(ids[1:], predicted_labels_per_frame[1:], strict=True), start=1
+    ):
+        holders = {label: key for key, label in later.items() if label is not None}
         for key, label in first.items():
-            if key in later:
-                counted += 1
-                consistent += int(later[key] == label)
-    return IdConsistency(consistent, counted, consistent / counted if counted else math.nan)
+            if key not in later:
+                continue
+            counted += 1
+            if later[key] == label:
+                consistent += 1
+                continue
+            kind = (
+                "no segment"
+                if later[key] is None
+                else "other id"
+                if later[key] in frame0_labels
+                else "new id"
+            )
+            shown = bool(np.any(np.asarray(predicted) == label))
+            lost.append(LostId(frame, *key, label, later[key], kind, shown, holders.get(label)))
+    share = consistent / counted if counted else math.nan
+    return IdConsistency(consistent, counted, share, tuple(lost))
 
 
 def id_consistency(
