@@ -37,8 +37,13 @@ import os
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:  # imported lazily at run time (the GL backend is chosen first)
+    from benchmarks.segmentation import SceneSegmentation
+    from ipr.segmentation_metrics import LostId
 
 #: (base seed, scene count) of the development sets; the held-out check is scored apart.
 DEVELOPMENT_SETS = ((8000, 12), (8100, 24), (8012, 38), (8150, 50))
@@ -155,14 +160,14 @@ def main(argv: list[str] | None = None) -> int:
     return 0 if pooled or held_out else 1
 
 
-def _lost_where(lost) -> str:
+def _lost_where(lost: LostId) -> str:
     """Where a lost pair's frame-0 id went in the later frame."""
     if lost.frame0_label_holder is not None:
         return "to another object"
     return "shown, on no object" if lost.frame0_label_shown else "not shown"
 
 
-def _lost_line(lost) -> str:
+def _lost_line(lost: LostId) -> str:
     """One ``LostId`` as a line."""
     later = "-" if lost.label is None else str(lost.label)
     holder = "" if lost.frame0_label_holder is None else f" {lost.frame0_label_holder}"
@@ -172,7 +177,7 @@ def _lost_line(lost) -> str:
     )
 
 
-def _lost_counts(results) -> str:
+def _lost_counts(results: list[SceneSegmentation]) -> str:
     """Lost pairs of ``results`` counted by kind and where the frame-0 id went."""
     from collections import Counter
 

@@ -25,10 +25,14 @@ import traceback
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from benchmarks.common import markdown_table, median
+
+if TYPE_CHECKING:  # ipr is imported lazily (the GL backend is chosen first)
+    from ipr.segmentation_metrics import LostId
 
 #: Targets: share of visible objects with F >= 0.75 per suite, share of ids kept, time per frame.
 SHARE_TARGETS = {"ycb-static": 0.85, "ycb-dynamic": 0.85, "ycbv-real": 0.90}
@@ -65,7 +69,7 @@ class SceneSegmentation:
     ids_counted: int
     per_frame_s: tuple[float, ...]
     error: str | None
-    lost_ids: tuple = ()
+    lost_ids: tuple[LostId, ...] = ()
 
     @property
     def share_f75(self) -> float:

@@ -205,6 +205,8 @@ def test_lost_ids_say_what_happened_to_each_pair() -> None:
     assert (lost[3, 5].kind, lost[3, 5].label) == ("no segment", None)
     assert lost[4, 5].frame0_label_shown and lost[4, 5].frame0_label_holder is None
     assert all(x.frame0_label == {5: 11, 9: 12}[x.obj_id] for x in counts.lost)
+    written = json.loads(json.dumps(counts.to_dict()))
+    assert written["lost"][0]["frame0_label_holder"] == [9, 0]
 
 
 # --------------------------------------------------------------------------------------------

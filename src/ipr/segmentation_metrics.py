@@ -517,8 +517,9 @@ class LostId:
         kind: ``"no segment"`` (label None: a segmentation failure no tracker can mend),
             ``"other id"`` (the label is another counted object's frame-0 label) or ``"new id"``.
         frame0_label_shown: whether ``frame0_label`` is in ``frame``'s prediction at all.
-        frame0_label_holder: (obj_id, occurrence) of the visible object whose best segment in
-            ``frame`` carries ``frame0_label`` (another object took the id), else None.
+        frame0_label_holder: (obj_id, occurrence) of a visible object whose best segment in
+            ``frame`` (F >= ``ID_MATCH_MIN_F``) carries ``frame0_label`` (another object took
+            the id), else None.
     """
 
     frame: int
