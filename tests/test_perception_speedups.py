@@ -18,6 +18,7 @@ from ipr.perception.config import PerceptionConfig
 from ipr.perception.facets import _components, mean_shift_directions, pixel_areas
 from ipr.perception.robot import robot_pixels
 from ipr.perception.supervoxels import _VoxelIndex, compute_supervoxels, organised_normals_at
+from ipr.perception.tracking import _colour_codes, _grouped_percentile, _shared_count, segment_features
 from ipr.scene import Frame, Push, Pusher
 
 K = np.array([[300.0, 0.0, 79.5], [0.0, 300.0, 59.5], [0.0, 0.0, 1.0]])
@@ -209,3 +210,70 @@ def test_robot_pixels_are_the_points_inside_the_capsule():
     )
     assert expected.any()
     np.testing.assert_array_equal(mask.reshape(-1), expected)
+
+
+def _reference_segment_features(labels, points, rgb, depth_m):
+    """The per-segment ``segment_features`` (np.mean and np.percentile on each segment)."""
+    flat_labels, flat_points = labels.reshape(-1), points.reshape(-1, 3)
+    depth = depth_m.reshape(-1).astype(np.float64)
+    features = {}
+    for label in np.unique(flat_labels[flat_labels > 0]).tolist():
+        pixels = np.flatnonzero(flat_labels == label)
+        histogram = np.bincount(_colour_codes(rgb.reshape(-1, 3)[pixels]), minlength=216)
+        with_depth = depth[pixels] > 0
+        points_k = flat_points[pixels[with_depth]] if with_depth.any() else flat_points[pixels]
+        area = float((depth[pixels[with_depth]] ** 2).sum()) if with_depth.any() else 0.0
+        features[label] = (
+            pixels,
+            points_k.mean(axis=0),
+            histogram / histogram.sum(),
+            float(np.percentile(points_k[:, 2], 98)),
+            area if area > 0 else float(pixels.size),
+        )
+    return features
+
+
+def test_segment_features_are_bit_identical_to_the_per_segment_reference():
+    frame = _frame(6)
+    points = frame.points_world()
+    rng = np.random.default_rng(6)
+    labels = rng.integers(0, 6, frame.shape).astype(np.int32)
+    labels[:20] = 7  # a segment whose pixels all lack depth
+    depth = frame.depth_m.copy()
+    depth[:20] = 0.0
+    points[:20] = 0.0
+    expected = _reference_segment_features(labels, points, frame.rgb, depth)
+    found = segment_features(labels, points, frame.rgb, depth)
+    assert sorted(found) == sorted(expected) == [1, 2, 3, 4, 5, 7]
+    for label, (pixels, centroid, histogram, top, area) in expected.items():
+        np.testing.assert_array_equal(found[label].pixels, pixels)
+        np.testing.assert_array_equal(found[label].centroid, centroid)
+        np.testing.assert_array_equal(found[label].histogram, histogram)
+        assert found[label].top_m == top
+        assert found[label].area == area
+
+
+def test_grouped_percentile_is_numpys_percentile_of_each_run():
+    rng = np.random.default_rng(7)
+    for trial in range(100):
+        counts = rng.integers(0, 40, int(rng.integers(1, 8)))
+        counts[0] = rng.integers(1, 3000)
+        values = rng.normal(0.0, 0.3, int(counts.sum()))
+        if trial % 3 == 0:
+            values = np.round(values, 2)  # ties
+        found = _grouped_percentile(values, counts, 98.0)
+        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        for index, (start, count) in enumerate(zip(starts, counts, strict=True)):
+            if count == 0:
+                assert np.isnan(found[index])
+            else:
+                assert found[index] == np.percentile(values[start : start + count], 98.0)
+
+
+def test_shared_count_is_the_size_of_the_intersection():
+    rng = np.random.default_rng(8)
+    for _ in range(100):
+        first = np.unique(rng.integers(0, 500, int(rng.integers(0, 300))))
+        second = np.unique(rng.integers(0, 500, int(rng.integers(0, 300))))
+        expected = np.intersect1d(first, second, assume_unique=True).size
+        assert _shared_count(first, second) == _shared_count(second, first) == expected

@@ -79,7 +79,7 @@ class SegmentFeatures:
     """What tracking knows of a segment.
 
     Attributes:
-        pixels: (N,) flat pixel indices.
+        pixels: (N,) flat pixel indices, sorted and distinct.
         centroid: (3,) mean world point (m) of the pixels with depth.
         histogram: (COLOUR_BINS**3,) colour histogram summing to 1.
         top_m: top height (world z, m, 98th percentile).
@@ -116,21 +116,64 @@ def segment_features(
         valid = depth > 0
         footprint = depth**2
     codes = _colour_codes(rgb.reshape(-1, 3)[order])
+    # Centroids and top heights of all segments at once (a frame has a dozen segments of up to
+    # tens of thousands of pixels; per-segment reductions cost more than the arithmetic). The
+    # sums run over each segment's pixels in the same order as a per-segment mean, so the
+    # values are the same.
+    count = len(ids)
+    segment_of_sorted = np.repeat(np.arange(count), ends - starts)
+    valid_sorted = valid[order]
+    with_depth_count = np.bincount(segment_of_sorted[valid_sorted], minlength=count)
+    # Segments without any depth reading use all their pixels (whose points are all zero).
+    used = valid_sorted | (with_depth_count == 0)[segment_of_sorted]
+    used_segment = segment_of_sorted[used]
+    used_points = flat_points[order[used]]
+    used_count = np.bincount(used_segment, minlength=count)
+    centroids = np.stack(
+        [np.bincount(used_segment, weights=used_points[:, c], minlength=count) for c in range(3)],
+        axis=1,
+    ) / np.maximum(used_count, 1)[:, None]
+    tops = _grouped_percentile(used_points[:, 2], used_count, 98.0)
+    footprint_sorted = footprint[order]
     features = {}
-    for label, start, end in zip(ids, starts, ends, strict=True):
+    for index, (label, start, end) in enumerate(zip(ids, starts, ends, strict=True)):
         pixels = order[start:end]
         histogram = np.bincount(codes[start:end], minlength=COLOUR_BINS**3).astype(np.float64)
-        with_depth = valid[pixels]
-        points_k = flat_points[pixels[with_depth]] if with_depth.any() else flat_points[pixels]
-        area = float(footprint[pixels[with_depth]].sum()) if with_depth.any() else 0.0
+        area = (
+            float(footprint_sorted[start:end][valid_sorted[start:end]].sum())
+            if with_depth_count[index]
+            else 0.0
+        )
         features[int(label)] = SegmentFeatures(
             pixels,
-            points_k.mean(axis=0),
+            centroids[index],
             histogram / histogram.sum(),
-            float(np.percentile(points_k[:, 2], 98)),
+            float(tops[index]),
             area if area > 0 else float(pixels.size),
         )
     return features
+
+
+def _grouped_percentile(values: np.ndarray, counts: np.ndarray, percentile: float) -> np.ndarray:
+    """(G,) ``np.percentile`` (linear interpolation) of each of G consecutive runs of (N,)
+    ``values`` whose (G,) lengths are ``counts``; nan for empty runs. One partial sort per group and numpy's own
+    interpolation (``_lerp``), so the values are the same, without ``np.percentile``'s
+    per-call overhead."""
+    result = np.full(len(counts), np.nan)
+    first = 0
+    for group, count in enumerate(counts.tolist()):
+        if count == 0:
+            continue
+        virtual = (count - 1) * (percentile / 100.0)
+        lower = int(np.floor(virtual))
+        upper = min(lower + 1, count - 1)
+        gamma = virtual - lower
+        chosen = np.partition(values[first : first + count], (lower, upper))
+        a, b = chosen[lower], chosen[upper]
+        difference = b - a
+        result[group] = b - difference * (1 - gamma) if gamma >= 0.5 else a + difference * gamma
+        first += count
+    return result
 
 
 def _colour_codes(colours: np.ndarray) -> np.ndarray:
@@ -211,7 +254,7 @@ def pair_cost(segment: SegmentFeatures, known: SegmentFeatures, config: Tracking
     """``match_costs`` of one segment against one sighting, without the (H*W,) map of where
     known objects were seen (a segment's pixels are distinct, so its overlap is a set
     intersection)."""
-    shared = np.intersect1d(segment.pixels, known.pixels, assume_unique=True).size
+    shared = _shared_count(segment.pixels, known.pixels)
     overlap = shared / (segment.pixels.size + known.pixels.size - shared)
     cues = (
         overlap,
@@ -221,6 +264,18 @@ def pair_cost(segment: SegmentFeatures, known: SegmentFeatures, config: Tracking
         abs(segment.top_m - known.top_m),
     )
     return float(_combined_cost(*(np.float64(cue) for cue in cues), config))
+
+
+def _shared_count(first: np.ndarray, second: np.ndarray) -> int:
+    """Number of values common to two (N,) and (M,) sorted arrays of distinct flat pixel
+    indices: binary searches of the shorter in the longer, several times faster than
+    ``np.intersect1d`` (which sorts their concatenation) on segments of thousands of pixels."""
+    needles, haystack = (first, second) if first.size <= second.size else (second, first)
+    if needles.size == 0:
+        return 0
+    found = np.searchsorted(haystack, needles)
+    found[found == haystack.size] = 0  # past the end: compare with any value (not equal)
+    return int(np.count_nonzero(haystack[found] == needles))
 
 
 def merged_features(first: SegmentFeatures, second: SegmentFeatures) -> SegmentFeatures:
@@ -234,7 +289,7 @@ def merged_features(first: SegmentFeatures, second: SegmentFeatures) -> SegmentF
     n_first, n_second = first.pixels.size, second.pixels.size
     total = n_first + n_second
     return SegmentFeatures(
-        np.concatenate([first.pixels, second.pixels]),
+        np.sort(np.concatenate([first.pixels, second.pixels])),
         (n_first * first.centroid + n_second * second.centroid) / total,
         (n_first * first.histogram + n_second * second.histogram) / total,
         max(first.top_m, second.top_m),
@@ -533,11 +588,12 @@ def merge_split_objects(
     """
     joins: list[tuple[int, int]] = []
     matched = set(assignment.values())
+    valid_of_frame: dict[int, np.ndarray | None] = {}  # each frame's depth validity, once
     for segment_id, kept in sorted(assignment.items()):
         if kept not in sightings:
             continue
         segment = segments[segment_id]
-        own = min(pair_cost(segment, seen, config) for seen in sightings[kept])
+        own = None  # the segment's cost to its object, when a candidate needs it
         best = None
         for other in sorted(sightings):
             if other == kept or other in matched:
@@ -545,11 +601,18 @@ def merge_split_objects(
             for frame in set(sighting_frames[kept]) & set(sighting_frames[other]):
                 a = sightings[kept][sighting_frames[kept].index(frame)]
                 b = sightings[other][sighting_frames[other].index(frame)]
-                depth = frames_depth[frame]
-                valid = None if depth is None else depth.reshape(-1) > 0
+                if colour_distance(a, b) > config.merge_max_colour:
+                    continue  # _touching_alike's first test, before any per-pixel work
+                if frame not in valid_of_frame:
+                    depth = frames_depth[frame]
+                    valid_of_frame[frame] = None if depth is None else depth.reshape(-1) > 0
                 points = frames_points[frame]
-                if not _touching_alike(a, b, points.shape[1], points.reshape(-1, 3), valid, config):
+                if not _touching_alike(
+                    a, b, points.shape[1], points.reshape(-1, 3), valid_of_frame[frame], config
+                ):
                     continue
+                if own is None:
+                    own = min(pair_cost(segment, seen, config) for seen in sightings[kept])
                 union = merged_features(a, b)
                 union_cost = pair_cost(segment, union, config)
                 if union_cost >= own - config.object_merge_margin:
