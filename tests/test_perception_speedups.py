@@ -18,7 +18,12 @@ from ipr.perception.config import PerceptionConfig
 from ipr.perception.facets import _components, mean_shift_directions, pixel_areas
 from ipr.perception.robot import robot_pixels
 from ipr.perception.supervoxels import _VoxelIndex, compute_supervoxels, organised_normals_at
-from ipr.perception.tracking import _colour_codes, _grouped_percentile, _shared_count, segment_features
+from ipr.perception.tracking import (
+    _colour_codes,
+    _grouped_percentile,
+    _shared_count,
+    segment_features,
+)
 from ipr.scene import Frame, Push, Pusher
 
 K = np.array([[300.0, 0.0, 79.5], [0.0, 300.0, 59.5], [0.0, 0.0, 1.0]])

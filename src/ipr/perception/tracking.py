@@ -129,10 +129,16 @@ def segment_features(
     used_segment = segment_of_sorted[used]
     used_points = flat_points[order[used]]
     used_count = np.bincount(used_segment, minlength=count)
-    centroids = np.stack(
-        [np.bincount(used_segment, weights=used_points[:, c], minlength=count) for c in range(3)],
-        axis=1,
-    ) / np.maximum(used_count, 1)[:, None]
+    centroids = (
+        np.stack(
+            [
+                np.bincount(used_segment, weights=used_points[:, c], minlength=count)
+                for c in range(3)
+            ],
+            axis=1,
+        )
+        / np.maximum(used_count, 1)[:, None]
+    )
     tops = _grouped_percentile(used_points[:, 2], used_count, 98.0)
     footprint_sorted = footprint[order]
     features = {}
