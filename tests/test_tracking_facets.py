@@ -281,6 +281,29 @@ def test_touching_pieces_of_another_colour_or_depth_are_not_joined():
     assert glued[1][65, 135] == glued[1][85, 135]
 
 
+def test_two_objects_pushed_into_one_segment_are_split_between_their_ids():
+    # A blue box is pushed against a yellow one and the segmentation gives the two one segment
+    # for a frame: it takes the yellow box's id, and the blue box would find no segment. Its
+    # colour singles out its pixels in the segment, and each part resembles its object better
+    # than the union did: the blue pixels get the blue box's id back.
+    red = {1: (10, 10, 15, 15, RED)}
+    first = _boxes({**red, 2: (60, 100, 30, 30, YELLOW), 3: (60, 160, 20, 20, BLUE)})
+    labels, points, rgb = _boxes({**red, 2: (60, 110, 30, 30, YELLOW), 3: (60, 140, 20, 20, BLUE)})
+    merged = np.where(labels == 3, 2, labels)
+    tracked = _track([first, (merged, points, rgb)])
+    yellow, blue = tracked[0][75, 115], tracked[0][70, 170]
+    assert tracked[1][75, 125] == yellow and tracked[1][70, 150] == blue
+    assert tracked[1][12, 12] == tracked[0][12, 12]
+    # The switch is what splits them: without it the union keeps one id.
+    whole = _track([first, (merged, points, rgb)], TrackingConfig(split_merged_segments=False))
+    assert whole[1][75, 125] == whole[1][70, 150] == yellow
+    # A missing object whose colour the segment does not hold takes nothing from it.
+    green = _boxes({**red, 2: (60, 100, 30, 30, YELLOW), 3: (60, 160, 20, 20, GREEN)})
+    kept = _track([green, (merged, points, rgb)])
+    assert kept[1][75, 125] == kept[1][70, 150] == kept[0][75, 115]
+    assert kept[0][70, 170] not in np.unique(kept[1])
+
+
 def test_contact_counts_neighbouring_pixel_pairs_whose_surfaces_meet():
     labels, points, _ = _boxes(
         {1: (10, 10, 5, 4, RED), 2: (15, 10, 5, 4, RED), 3: (10, 14, 3, 3, RED)}
