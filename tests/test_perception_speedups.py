@@ -282,3 +282,43 @@ def test_shared_count_is_the_size_of_the_intersection():
         second = np.unique(rng.integers(0, 500, int(rng.integers(0, 300))))
         expected = np.intersect1d(first, second, assume_unique=True).size
         assert _shared_count(first, second) == _shared_count(second, first) == expected
+
+
+def _reference_fill(labels, valid, max_distance_px):
+    """Each pixel without depth takes the label of its nearest valid pixel within the distance
+    (ties: first offset in row-major order), pixel by pixel."""
+    from ipr.perception.segmentation import _offsets_by_distance
+
+    result = labels.copy()
+    height, width = labels.shape
+    offsets = _offsets_by_distance(max_distance_px)
+    for row, col in zip(*np.nonzero(~valid), strict=True):
+        for d_row, d_col in offsets:
+            r, c = row + d_row, col + d_col
+            if 0 <= r < height and 0 <= c < width and valid[r, c]:
+                result[row, col] = labels[r, c]
+                break
+    return result
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_fill_label_holes_matches_the_pixel_by_pixel_fill(seed):
+    """Large holes far from every segment (skipped by the fast path), thin dropout bands between
+    segments and the background, and a labelled pixel without depth."""
+    from ipr.perception.segmentation import fill_label_holes
+
+    rng = np.random.default_rng(seed)
+    labels = np.zeros((60, 80), dtype=np.int32)
+    labels[10:30, 10:35] = 1
+    labels[25:50, 40:70] = 2
+    valid = rng.random(labels.shape) > 0.3
+    valid[:, 72:] = False  # a wide hole beside segment 2
+    valid[:, 35:40] = False  # a dropout band along segment 1's edge, filled up to 3 px deep
+    valid[52:, :] = False
+    labels[~valid] = 0
+    labels[5, 5] = 3  # a label on a pixel without depth, far from the others
+    valid[5, 5] = False
+    for distance in (1.5, 3.0):
+        expected = _reference_fill(labels, valid, distance)
+        assert (fill_label_holes(labels, valid, distance) == expected).all()
+    assert (fill_label_holes(labels, valid, 3.0) > 0).sum() > (labels > 0).sum()

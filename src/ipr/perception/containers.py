@@ -280,9 +280,10 @@ def _summary(
     heights = support.signed_distance(world)
     footprint = np.stack([world @ axis_u, world @ axis_v], axis=1)
     colour = rgb.reshape(-1, 3)[pixels].astype(np.float64) + 1.0
+    bottom, top = np.percentile(heights, [2, 98])  # one sort for both
     return _Segment(
-        top=float(np.percentile(heights, 98)),
-        bottom=float(np.percentile(heights, 2)),
+        top=float(top),
+        bottom=float(bottom),
         footprint=footprint,
         heights=heights,
         chroma=(colour / colour.sum(axis=1, keepdims=True)).mean(axis=0),

@@ -21,6 +21,8 @@ fitted one by one.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from scipy.ndimage import uniform_filter
 
@@ -69,8 +71,7 @@ def _rim_plane_fit(
     centred depth and 0/1 mask, ``width`` wide) whose windows are partly outside the object,
     and whether it is defined ((N,) float64 and bool): least squares on the window's pixels
     of the object, in coordinates about each pixel."""
-    dv, du = np.mgrid[-margin : margin + 1, -margin : margin + 1]
-    du, dv = du.reshape(-1).astype(np.float64), dv.reshape(-1).astype(np.float64)
+    du, dv = _window_offsets(margin)
     neighbours = at[:, None] + (dv * width + du).astype(np.int64)[None, :]
     weights = mask[neighbours].astype(np.float64)
     values = depth[neighbours].astype(np.float64)
@@ -83,3 +84,13 @@ def _rim_plane_fit(
     numerator = sd * minor - cu * (cdu * cvv - cuv * cdv) + cv * (cdu * cuv - cuu * cdv)
     ok = np.abs(det) > 1e-6 * np.maximum(s, 1.0) ** 3  # not all on one line
     return numerator / np.where(ok, det, 1.0), ok
+
+
+@functools.lru_cache(maxsize=8)
+def _window_offsets(margin: int) -> tuple[np.ndarray, np.ndarray]:
+    """Column and row offsets (w*w,) float64 (read-only) of a window of half-size ``margin``,
+    row-major (built once: ``np.mgrid`` costs more than the fits of a small object)."""
+    dv, du = np.mgrid[-margin : margin + 1, -margin : margin + 1]
+    du, dv = du.reshape(-1).astype(np.float64), dv.reshape(-1).astype(np.float64)
+    du.flags.writeable = dv.flags.writeable = False
+    return du, dv
