@@ -132,7 +132,9 @@ def main(argv: list[str] | None = None) -> int:
     if overrides and not args.tracker_only:
         parser.error("--set needs --tracker-only")
     perceive = (
-        tracker_only_perceive(args.cache, overrides) if args.tracker_only else default_perceive()
+        tracker_only_perceive(args.cache, overrides)
+        if args.tracker_only
+        else default_perceive(timing_runs=1)
     )
 
     pooled = []

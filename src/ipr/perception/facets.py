@@ -133,8 +133,12 @@ def object_facets(
     facets, facet_of_point = [], np.full(len(points_world), -1, dtype=np.int64)
     region_normals = supervoxel_normals[supervoxel_ids]
     region_weights = supervoxel_sizes[supervoxel_ids].astype(float)
+    # The points of every region from one sort (regions are numbered from 0; points of no
+    # supervoxel of the object, region -1, come first and are skipped).
+    by_region = np.argsort(point_region, kind="stable")
+    bounds = np.searchsorted(point_region[by_region], np.arange(region.max() + 2))
     for number in range(region.max() + 1):
-        members = np.flatnonzero(point_region == number)
+        members = by_region[bounds[number] : bounds[number + 1]]
         if members.size == 0:
             continue
         in_region = region == number
