@@ -164,9 +164,9 @@ def segment_features(
 
 def _grouped_percentile(values: np.ndarray, counts: np.ndarray, percentile: float) -> np.ndarray:
     """(G,) ``np.percentile`` (linear interpolation) of each of G consecutive runs of (N,)
-    ``values`` whose (G,) lengths are ``counts``; nan for empty runs. One partial sort per group and numpy's own
-    interpolation (``_lerp``), so the values are the same, without ``np.percentile``'s
-    per-call overhead."""
+    ``values`` whose (G,) lengths are ``counts``; nan for empty runs. One partial sort per
+    group and numpy's own interpolation (``_lerp``), so the values are the same, without
+    ``np.percentile``'s per-call overhead."""
     result = np.full(len(counts), np.nan)
     first = 0
     for group, count in enumerate(counts.tolist()):
@@ -654,8 +654,9 @@ def split_merged_segments(
     segment for a frame: the segment takes one object's id and the other object finds no
     segment (on the development and held-out scenes, 18 of the 21 (object, later frame) pairs
     lost for lack of a segment with F >= 0.5 were such unions). For a known object ``b`` left
-    unmatched and a segment matched to object ``a``, each pixel of the segment whose colour is ``segment_split_ratio`` times likelier
-    under ``b``'s colour histogram than under ``a``'s (their latest sightings) votes for ``b``;
+    unmatched and a segment matched to object ``a``, each pixel of the segment whose colour is
+    ``segment_split_ratio`` times likelier under ``b``'s colour histogram than under ``a``'s
+    (their latest sightings) votes for ``b``;
     the largest 8-connected region of such pixels (at least ``segment_split_min_px``) is the
     candidate part of ``b``. The split is made when that part costs at most ``max_match_cost``
     as ``b`` and the rest costs less as ``a`` than the whole segment did, by more than
@@ -705,12 +706,12 @@ def split_merged_segments(
             part = segment.pixels[votes][region_of_vote == largest]
             if part.size < config.segment_split_min_px or part.size >= segment.pixels.size:
                 continue
-            part_features = _mixed_pixel_features(part, points, rgb, depth_m)
+            part_features = _pixel_features(part, points, rgb, depth_m)
             part_cost = min(pair_cost(part_features, seen, config) for seen in known)
             if part_cost > config.max_match_cost or (best is not None and part_cost >= best[0]):
                 continue
             rest = np.setdiff1d(segment.pixels, part, assume_unique=True)
-            rest_features = _mixed_pixel_features(rest, points, rgb, depth_m)
+            rest_features = _pixel_features(rest, points, rgb, depth_m)
             whole_cost = min(pair_cost(segment, seen, config) for seen in sightings[kept])
             rest_cost = min(pair_cost(rest_features, seen, config) for seen in sightings[kept])
             if rest_cost >= whole_cost - config.segment_split_margin:
@@ -727,32 +728,6 @@ def split_merged_segments(
         result[new_segment] = object_id
         matched.add(object_id)
     return result
-
-
-def _mixed_pixel_features(
-    pixels: np.ndarray, points: np.ndarray, rgb: np.ndarray, depth_m: np.ndarray | None
-) -> SegmentFeatures:
-    """``segment_features`` of one set of (N,) sorted flat pixel indices, which may include
-    pixels without depth (labels cover depth holes): colour from all of them, geometry from
-    those with a reading (all when none has one)."""
-    histogram = np.bincount(
-        _colour_codes(rgb.reshape(-1, 3)[pixels]), minlength=COLOUR_BINS**3
-    ).astype(np.float64)
-    if depth_m is None:
-        readings = np.ones(pixels.size)
-    else:
-        readings = depth_m.reshape(-1)[pixels].astype(np.float64)
-    with_depth = readings > 0
-    geometry = pixels[with_depth] if with_depth.any() else pixels
-    points_k = points.reshape(-1, 3)[geometry]
-    area = float((readings[with_depth] ** 2).sum())
-    return SegmentFeatures(
-        pixels,
-        points_k.mean(axis=0),
-        histogram / histogram.sum(),
-        float(np.percentile(points_k[:, 2], 98)),
-        area if area > 0 else float(pixels.size),
-    )
 
 
 def track_segments(
@@ -961,20 +936,29 @@ def split_merged_objects(
 
 
 def _pixel_features(
-    pixels: np.ndarray, points: np.ndarray, rgb: np.ndarray, depth_m: np.ndarray
+    pixels: np.ndarray, points: np.ndarray, rgb: np.ndarray, depth_m: np.ndarray | None
 ) -> SegmentFeatures:
-    """``segment_features`` of one set of (N,) sorted flat pixel indices, all with depth, of a
-    frame with (H, W, 3) world points (m), (H, W, 3) uint8 colours and (H, W) depth (m)."""
+    """``segment_features`` of one set of (N,) sorted flat pixel indices of a frame with
+    (H, W, 3) world points (m), (H, W, 3) uint8 colours and (H, W) depth (m, 0 = no reading;
+    None = all valid). The pixels may include some without depth (labels cover depth holes):
+    colour from all of them, geometry from those with a reading (all when none has one)."""
     histogram = np.bincount(
         _colour_codes(rgb.reshape(-1, 3)[pixels]), minlength=COLOUR_BINS**3
     ).astype(np.float64)
-    points_k = points.reshape(-1, 3)[pixels]
+    if depth_m is None:
+        readings = np.ones(pixels.size)
+    else:
+        readings = depth_m.reshape(-1)[pixels].astype(np.float64)
+    with_depth = readings > 0
+    geometry = pixels[with_depth] if with_depth.any() else pixels
+    points_k = points.reshape(-1, 3)[geometry]
+    area = float((readings[with_depth] ** 2).sum())
     return SegmentFeatures(
         pixels,
         points_k.mean(axis=0),
         histogram / histogram.sum(),
         float(np.percentile(points_k[:, 2], 98)),
-        float((depth_m.reshape(-1)[pixels].astype(np.float64) ** 2).sum()),
+        area if area > 0 else float(pixels.size),
     )
 
 
