@@ -23,6 +23,7 @@ from PIL import Image
 from ipr.atomic import staged_directory
 from ipr.camera import backproject, invert_transform, make_transform
 from ipr.errors import SceneError
+from ipr.kernels import world_points
 
 ACTIONS_FORMAT = "ipr-actions/1"
 FRAME_NAME = re.compile(r"^(\d{6})\.(png|jpg|jpeg)$")
@@ -60,8 +61,7 @@ class Frame:
 
     def points_world(self) -> np.ndarray:
         """(H, W, 3) world-frame points of every pixel (meaningless where depth is 0)."""
-        camera = backproject(self.depth_m, self.K)
-        return camera @ self.world_from_camera[:3, :3].T + self.world_from_camera[:3, 3]
+        return world_points(self.depth_m, self.K, self.world_from_camera)
 
 
 @dataclass(frozen=True, eq=False)

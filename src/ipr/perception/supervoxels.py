@@ -37,6 +37,7 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from ipr import kernels
 from ipr.perception.config import PerceptionConfig
 from ipr.perception.types import Supervoxels
 from ipr.scene import Frame
@@ -98,60 +99,18 @@ def organised_normals_at(
     flat = padded.reshape(-1)
     rows, cols = np.divmod(pixels, width)
     at = (rows + r) * padded_width + (cols + r)  # the pixels' flat indices in ``padded``
-    z = flat[at]
-    fx, fy, cx, cy = (
-        np.float32(K[0, 0]),
-        np.float32(K[1, 1]),
-        np.float32(K[0, 2]),
-        np.float32(K[1, 2]),
+    # The per-pixel arithmetic runs compiled, in float32 as before (``ipr.kernels``).
+    return kernels.organised_normals(
+        flat,
+        padded_width,
+        at,
+        rows,
+        cols,
+        np.asarray(K, dtype=np.float64),
+        r,
+        float(config.normal_max_jump_m),
+        float(config.normal_max_jump_ratio),
     )
-    # Back-projection x = (c - cx) / fx * z, y = (r - cy) / fy * z, in float32 as before; the
-    # per-pixel factors are shared by the pixel and its neighbours in the same row or column.
-    rows_f, cols_f = rows.astype(np.float32), cols.astype(np.float32)
-    x_factor = (cols_f - cx) / fx
-    y_factor = (rows_f - cy) / fy
-    centre_x, centre_y = x_factor * z, y_factor * z
-    limit = np.float32(config.normal_max_jump_m) + np.float32(config.normal_max_jump_ratio * r) * z
-
-    def neighbour_depth(shift: int) -> tuple[np.ndarray, np.ndarray]:
-        """Depth (P,) float32 of the neighbour ``shift`` flat padded pixels away (the pixel's
-        own where unusable) and its usability (P,) bool."""
-        nz = flat[at + shift]
-        ok = (nz > 0) & (np.abs(nz - z) <= limit)
-        return np.where(ok, nz, z), ok
-
-    # Horizontal neighbours share the pixel's row (its y factor), vertical ones its column.
-    z_right, ok_right = neighbour_depth(r)
-    z_left, ok_left = neighbour_depth(-r)
-    z_down, ok_down = neighbour_depth(r * padded_width)
-    z_up, ok_up = neighbour_depth(-r * padded_width)
-    x_right = np.where(ok_right, (cols_f + np.float32(r) - cx) / fx * z_right, centre_x)
-    x_left = np.where(ok_left, (cols_f - np.float32(r) - cx) / fx * z_left, centre_x)
-    y_down = np.where(ok_down, (rows_f + np.float32(r) - cy) / fy * z_down, centre_y)
-    y_up = np.where(ok_up, (rows_f - np.float32(r) - cy) / fy * z_up, centre_y)
-    # a = down - up, b = right - left; normal = a x b (the component formulas of np.cross).
-    a0 = x_factor * z_down - x_factor * z_up
-    a1 = y_down - y_up
-    a2 = z_down - z_up
-    b0 = x_right - x_left
-    b1 = y_factor * z_right - y_factor * z_left
-    b2 = z_right - z_left
-    n0, n1, n2 = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
-    # |n| as np.linalg.norm(axis=1) computes it in float32 (squares summed in axis order, same
-    # roundings), without its slow strided reduction over (P, 3).
-    squared = n0 * n0
-    squared += n1 * n1
-    squared += n2 * n2
-    norm = np.sqrt(squared)
-    normal = np.stack([n0, n1, n2], axis=1)
-    good = (z > 0) & (ok_right | ok_left) & (ok_down | ok_up) & (norm > 1e-12)
-    normal /= np.maximum(norm, 1e-12)[:, None]
-    normal[~good] = 0.0
-    # Towards the camera (the camera centre is the origin of the camera frame).
-    centre = np.stack([centre_x, centre_y, z], axis=1)
-    flip = np.einsum("pc,pc->p", normal, centre) > 0
-    normal[flip] *= -1.0
-    return normal
 
 
 def compute_supervoxels(
@@ -260,57 +219,22 @@ def compute_supervoxels(
     has = candidates >= 0
     safe = np.where(has, candidates, 0)
 
-    # 4. k-means rounds in VCCS's distance.
-    seed_centre = voxel_centre[seed_voxels].copy()
-    seed_normal = voxel_normal[seed_voxels].copy()
-    seed_colour = voxel_colour[seed_voxels].copy()
-    assignment = np.zeros(n_voxels, dtype=np.int64)
-    spatial = 1.0 / seed_size**2
-    missing = ~has
-    # (V, 27) work arrays reused by every round: each is megabytes, and fresh temporaries of
-    # that size cost page faults on every allocation (about half of this loop's time).
-    distance = np.empty(safe.shape)
-    gathered = np.empty(safe.shape)
-    term = np.empty(safe.shape)
-    for _ in range(config.supervoxel_iterations):
-        # Summed one coordinate at a time from (V, 27) gathers of seed columns: 3.5 times
-        # faster than einsum over (V, 27, 3) gathers (small inner dimensions). In place, with
-        # the arithmetic (and so the roundings) of
-        # w_n + sum over axes of (spatial * offset * offset - (w_n * n_voxel) * n_seed).
-        distance.fill(config.supervoxel_normal_weight)
-        for axis in range(3):
-            np.take(seed_centre[:, axis], safe, out=gathered)
-            offset = np.subtract(voxel_centre[:, axis, None], gathered, out=gathered)
-            np.multiply(offset, spatial, out=term)
-            term *= offset
-            distance += term
-            np.take(seed_normal[:, axis], safe, out=gathered)
-            np.multiply(
-                config.supervoxel_normal_weight * voxel_normal[:, axis, None], gathered, out=term
-            )
-            distance -= term
-            if config.supervoxel_colour_weight > 0:
-                np.take(seed_colour[:, axis], safe, out=gathered)
-                offset = np.subtract(voxel_colour[:, axis, None], gathered, out=gathered)
-                np.multiply(offset, config.supervoxel_colour_weight, out=term)
-                term *= offset
-                distance += term
-        distance[missing] = np.inf
-        assignment = safe[np.arange(n_voxels), np.argmin(distance, axis=1)]
-        weight = voxel_count
-        totals = np.bincount(assignment, weights=weight, minlength=n_seeds)
-        alive = totals > 0
-        seed_centre[alive] = (
-            _group_sum(assignment, voxel_centre * weight[:, None], n_seeds)[alive]
-            / totals[alive, None]
-        )
-        seed_normal[alive] = _normalise(
-            _group_sum(assignment, voxel_normal * weight[:, None], n_seeds)
-        )[alive]
-        seed_colour[alive] = (
-            _group_sum(assignment, voxel_colour * weight[:, None], n_seeds)[alive]
-            / totals[alive, None]
-        )
+    # 4. k-means rounds in VCCS's distance (compiled: the (V, 27) distances in one pass).
+    assignment = kernels.supervoxel_rounds(
+        voxel_centre,
+        voxel_normal,
+        voxel_colour,
+        voxel_count,
+        safe,
+        has,
+        voxel_centre[seed_voxels],
+        voxel_normal[seed_voxels],
+        voxel_colour[seed_voxels],
+        config.supervoxel_iterations,
+        seed_size,
+        config.supervoxel_normal_weight,
+        config.supervoxel_colour_weight,
+    )
 
     # 5. Connected parts of each supervoxel (26-connectivity), then crumbs merged.
     same = assignment[voxel_edges[:, 0]] == assignment[voxel_edges[:, 1]]

@@ -1,0 +1,190 @@
+"""Compiled inner loops (numba) for the per-pixel passes of perception.
+
+On the 2-core cloud machines ipr is measured on, numpy's per-pixel arithmetic is bound by memory
+traffic: each operator of an expression makes a full-size temporary, and a 640x480 frame's
+(H, W, 3) float64 points are 7 MB. A loop compiled by numba does the same arithmetic in one pass
+with no temporaries: the world points of a real frame take 1 ms instead of 10-12 ms
+(docs/DESIGN_NOTES.md, "Compiled kernels"). Each kernel here states the numpy expression it
+replaces; ``tests/test_kernels.py`` pins every one against that expression.
+
+Kernels are compiled on first use and cached on disk (``cache=True``: about 0.3 s to load in a
+new process instead of about 1 s to compile). ``NUMBA_DISABLE_JIT=1`` runs them as plain
+Python, for debugging.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+# nogil: callers may run perception in threads; no fastmath: the same IEEE arithmetic as numpy.
+_jit = numba.njit(cache=True, nogil=True)
+
+
+@_jit
+def world_points(depth_m: np.ndarray, K: np.ndarray, world_from_camera: np.ndarray) -> np.ndarray:
+    """(H, W, 3) float64 world points (m) of every pixel of a (H, W) depth image (m) with
+    intrinsics K (3, 3) and a 4x4 world-from-camera transform; meaningless where depth is 0.
+
+    ``backproject(depth_m, K) @ R.T + t`` in one pass (equal to rounding: the sum of the three
+    products is taken in the order x, y, z)."""
+    height, width = depth_m.shape
+    out = np.empty((height, width, 3))
+    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+    for row in range(height):
+        y_per_z = (row - cy) / fy
+        for col in range(width):
+            z = np.float64(depth_m[row, col])
+            x = (col - cx) / fx * z
+            y = y_per_z * z
+            for axis in range(3):
+                out[row, col, axis] = (
+                    x * world_from_camera[axis, 0]
+                    + y * world_from_camera[axis, 1]
+                    + z * world_from_camera[axis, 2]
+                    + world_from_camera[axis, 3]
+                )
+    return out
+
+
+@_jit
+def organised_normals(
+    padded_depth: np.ndarray,
+    padded_width: int,
+    at: np.ndarray,
+    rows: np.ndarray,
+    cols: np.ndarray,
+    K: np.ndarray,
+    radius_px: int,
+    max_jump_m: float,
+    max_jump_per_px: float,
+) -> np.ndarray:
+    """Unit normals (P, 3) float32, camera frame, towards the camera, of P pixels of an
+    organised depth image; rows of 0 where unknown. The loop of
+    ``supervoxels.organised_normals_at``, which documents the method: ``padded_depth`` is the
+    flat float32 depth image (m) with a border of ``radius_px`` zeros, ``padded_width`` its
+    width, ``at`` (P,) the pixels' flat indices in it and ``rows``, ``cols`` (P,) their image
+    coordinates. All arithmetic in float32, operation by operation as the numpy version."""
+    count = at.shape[0]
+    normals = np.zeros((count, 3), dtype=np.float32)
+    fx, fy = np.float32(K[0, 0]), np.float32(K[1, 1])
+    cx, cy = np.float32(K[0, 2]), np.float32(K[1, 2])
+    r = np.float32(radius_px)
+    jump = np.float32(max_jump_m)
+    jump_per_depth = np.float32(max_jump_per_px * radius_px)
+    tiny = np.float32(1e-12)
+    zero = np.float32(0.0)
+    shifts = (radius_px, -radius_px, radius_px * padded_width, -radius_px * padded_width)
+    neighbour = np.empty(4, dtype=np.float32)
+    usable = np.empty(4, dtype=np.bool_)
+    for p in range(count):
+        z = padded_depth[at[p]]
+        row_f, col_f = np.float32(rows[p]), np.float32(cols[p])
+        x_factor = (col_f - cx) / fx
+        y_factor = (row_f - cy) / fy
+        centre_x, centre_y = x_factor * z, y_factor * z
+        limit = jump + jump_per_depth * z
+        for k in range(4):
+            nz = padded_depth[at[p] + shifts[k]]
+            ok = (nz > zero) and (abs(nz - z) <= limit)
+            usable[k] = ok
+            neighbour[k] = nz if ok else z
+        z_right, z_left, z_down, z_up = neighbour[0], neighbour[1], neighbour[2], neighbour[3]
+        x_right = (col_f + r - cx) / fx * z_right if usable[0] else centre_x
+        x_left = (col_f - r - cx) / fx * z_left if usable[1] else centre_x
+        y_down = (row_f + r - cy) / fy * z_down if usable[2] else centre_y
+        y_up = (row_f - r - cy) / fy * z_up if usable[3] else centre_y
+        a0 = x_factor * z_down - x_factor * z_up
+        a1 = y_down - y_up
+        a2 = z_down - z_up
+        b0 = x_right - x_left
+        b1 = y_factor * z_right - y_factor * z_left
+        b2 = z_right - z_left
+        n0, n1, n2 = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+        squared = n0 * n0
+        squared += n1 * n1
+        squared += n2 * n2
+        norm = np.sqrt(squared)
+        good = (z > zero) and (usable[0] or usable[1]) and (usable[2] or usable[3])
+        if not good or not norm > tiny:
+            continue
+        n0, n1, n2 = n0 / norm, n1 / norm, n2 / norm
+        if n0 * centre_x + n1 * centre_y + n2 * z > zero:
+            n0, n1, n2 = -n0, -n1, -n2
+        normals[p, 0], normals[p, 1], normals[p, 2] = n0, n1, n2
+    return normals
+
+
+@_jit
+def supervoxel_rounds(
+    voxel_centre: np.ndarray,
+    voxel_normal: np.ndarray,
+    voxel_colour: np.ndarray,
+    voxel_count: np.ndarray,
+    candidates: np.ndarray,
+    has_candidate: np.ndarray,
+    seed_centre: np.ndarray,
+    seed_normal: np.ndarray,
+    seed_colour: np.ndarray,
+    iterations: int,
+    seed_size_m: float,
+    normal_weight: float,
+    colour_weight: float,
+) -> np.ndarray:
+    """The k-means rounds of ``supervoxels.compute_supervoxels``: (V,) int64 seed of each of V
+    voxels after ``iterations`` rounds (0 rounds: all 0).
+
+    Each round assigns every voxel to the nearest of its (V, 27) ``candidates`` seeds (where
+    ``has_candidate``; the first of equal distances) in VCCS's distance
+    ``normal_weight * (1 - n_voxel . n_seed) + |c_voxel - c_seed|^2 / seed_size_m^2
+    + colour_weight * |rgb_voxel - rgb_seed|^2``, then moves each seed that kept voxels to the
+    mean of their (V, 3) centres, normals (renormalised) and colours weighted by ``voxel_count``
+    (V,). ``seed_centre``, ``seed_normal`` and ``seed_colour`` (S, 3) are updated in place.
+    The arithmetic and summation order are those of the numpy version (same bits).
+    """
+    n_voxels, n_candidates = candidates.shape
+    n_seeds = seed_centre.shape[0]
+    assignment = np.zeros(n_voxels, dtype=np.int64)
+    spatial = 1.0 / seed_size_m**2
+    totals = np.empty(n_seeds)
+    sums = np.empty((3, n_seeds, 3))
+    for _ in range(iterations):
+        for v in range(n_voxels):
+            best, best_distance = 0, np.inf
+            for k in range(n_candidates):
+                if not has_candidate[v, k]:
+                    continue
+                s = candidates[v, k]
+                distance = normal_weight
+                for axis in range(3):
+                    offset = voxel_centre[v, axis] - seed_centre[s, axis]
+                    distance += offset * spatial * offset
+                    distance -= normal_weight * voxel_normal[v, axis] * seed_normal[s, axis]
+                    if colour_weight > 0:
+                        offset = voxel_colour[v, axis] - seed_colour[s, axis]
+                        distance += offset * colour_weight * offset
+                if distance < best_distance:
+                    best, best_distance = k, distance
+            assignment[v] = candidates[v, best] if has_candidate[v, best] else candidates[v, 0]
+        totals[:] = 0.0
+        sums[:] = 0.0
+        for v in range(n_voxels):
+            s = assignment[v]
+            weight = voxel_count[v]
+            totals[s] += weight
+            for axis in range(3):
+                sums[0, s, axis] += voxel_centre[v, axis] * weight
+                sums[1, s, axis] += voxel_normal[v, axis] * weight
+                sums[2, s, axis] += voxel_colour[v, axis] * weight
+        for s in range(n_seeds):
+            if not totals[s] > 0:
+                continue
+            squared = sums[1, s, 0] * sums[1, s, 0]
+            squared += sums[1, s, 1] * sums[1, s, 1]
+            squared += sums[1, s, 2] * sums[1, s, 2]
+            norm = np.sqrt(squared)
+            for axis in range(3):
+                seed_centre[s, axis] = sums[0, s, axis] / totals[s]
+                seed_normal[s, axis] = sums[1, s, axis] / norm if norm > 1e-12 else 0.0
+                seed_colour[s, axis] = sums[2, s, axis] / totals[s]
+    return assignment
