@@ -188,3 +188,147 @@ def supervoxel_rounds(
                 seed_normal[s, axis] = sums[1, s, axis] / norm if norm > 1e-12 else 0.0
                 seed_colour[s, axis] = sums[2, s, axis] / totals[s]
     return assignment
+
+
+@_jit
+def mean_shift_directions(
+    normals: np.ndarray, weights: np.ndarray, bandwidth: float, iterations: int
+) -> np.ndarray:
+    """Mode index (N,) int64 of each unit normal (N, 3) under weighted Gaussian mean shift on
+    the sphere, modes merged heaviest first; ``facets.mean_shift_directions`` documents the
+    method. Equal to numpy's version up to rounding (its matrix products run in BLAS)."""
+    count = normals.shape[0]
+    modes = normals.copy()
+    shifted = np.empty_like(modes)
+    scale = 2 * bandwidth**2
+    for _ in range(iterations):
+        change = 0.0
+        for i in range(count):
+            s0 = s1 = s2 = 0.0
+            for j in range(count):
+                dot = modes[i, 0] * normals[j, 0] + modes[i, 1] * normals[j, 1]
+                dot += modes[i, 2] * normals[j, 2]
+                kernel = np.exp(-max(2.0 - 2.0 * dot, 0.0) / scale) * weights[j]
+                s0 += kernel * normals[j, 0]
+                s1 += kernel * normals[j, 1]
+                s2 += kernel * normals[j, 2]
+            norm = np.sqrt(s0 * s0 + s1 * s1 + s2 * s2) + 1e-12
+            shifted[i, 0], shifted[i, 1], shifted[i, 2] = s0 / norm, s1 / norm, s2 / norm
+            for axis in range(3):
+                change = max(change, abs(shifted[i, axis] - modes[i, axis]))
+        modes[:] = shifted
+        if change < 1e-5:
+            break
+    # Merge modes closer than half a bandwidth, heaviest first (a stable order): each normal
+    # joins the first centre (in creation order) near its mode; a normal near none is a centre.
+    order = np.argsort(-weights, kind="mergesort")
+    label = np.full(count, -1, dtype=np.int64)
+    centres = 0
+    for index in order:
+        if label[index] >= 0:
+            continue
+        for j in range(count):
+            if label[j] >= 0:
+                continue
+            d0 = modes[j, 0] - modes[index, 0]
+            d1 = modes[j, 1] - modes[index, 1]
+            d2 = modes[j, 2] - modes[index, 2]
+            if np.sqrt(d0 * d0 + d1 * d1 + d2 * d2) < bandwidth / 2:
+                label[j] = centres
+        label[index] = centres
+        centres += 1
+    return label
+
+
+@_jit
+def segment_sums(
+    flat_labels: np.ndarray,
+    flat_points: np.ndarray,
+    flat_rgb: np.ndarray,
+    flat_depth: np.ndarray,
+    colour_bins: int,
+):
+    """Per-segment sums of a label image in one pass, for ``tracking.segment_features``.
+
+    ``flat_labels`` (P,) ints (segments k >= 1, 0 = none), ``flat_points`` (P, 3) world points
+    (m), ``flat_rgb`` (P, 3) uint8 and ``flat_depth`` (P,) depth (m, 0 = no reading). Segments
+    are numbered 0..G-1 in increasing label. Returns:
+    ``ids`` (G,) labels; ``order`` (N,) the labelled pixels grouped by segment, in raster order
+    within each (numpy's stable argsort of the labels); ``starts`` (G + 1,) each segment's
+    slice of ``order``; ``with_depth`` (G,) pixels with a reading; ``used`` (G,) pixels whose
+    points are used (those with a reading, or all where none has one); ``point_sums`` (G, 3)
+    sums of the used points in raster order (the order of ``np.bincount`` over ``order``);
+    ``used_z`` (sum of used,) the used points' z grouped by segment; ``histograms`` (G, B^3)
+    int64 counts of colour bins (``B = colour_bins`` per channel, ``(c * B) // 256``);
+    ``footprints`` (G,) sums of depth^2 over the pixels with a reading.
+    """
+    count = flat_labels.shape[0]
+    largest = 0
+    labelled = 0
+    for p in range(count):
+        if flat_labels[p] > 0:
+            labelled += 1
+            if flat_labels[p] > largest:
+                largest = flat_labels[p]
+    size_of_label = np.zeros(largest + 1, dtype=np.int64)
+    for p in range(count):
+        if flat_labels[p] > 0:
+            size_of_label[flat_labels[p]] += 1
+    segment_of_label = np.full(largest + 1, -1, dtype=np.int64)
+    n_segments = 0
+    for label in range(1, largest + 1):
+        if size_of_label[label] > 0:
+            segment_of_label[label] = n_segments
+            n_segments += 1
+    ids = np.empty(n_segments, dtype=np.int64)
+    starts = np.zeros(n_segments + 1, dtype=np.int64)
+    for label in range(1, largest + 1):
+        segment = segment_of_label[label]
+        if segment >= 0:
+            ids[segment] = label
+            starts[segment + 1] = starts[segment] + size_of_label[label]
+    order = np.empty(labelled, dtype=np.int64)
+    fill = starts[:-1].copy()
+    with_depth = np.zeros(n_segments, dtype=np.int64)
+    footprints = np.zeros(n_segments)
+    histograms = np.zeros((n_segments, colour_bins**3), dtype=np.int64)
+    for p in range(count):
+        label = flat_labels[p]
+        if label <= 0:
+            continue
+        segment = segment_of_label[label]
+        order[fill[segment]] = p
+        fill[segment] += 1
+        depth = np.float64(flat_depth[p])
+        if depth > 0:
+            with_depth[segment] += 1
+            footprints[segment] += depth * depth
+        code = 0
+        for channel in range(3):
+            code = code * colour_bins + (np.int64(flat_rgb[p, channel]) * colour_bins) // 256
+        histograms[segment, code] += 1
+    used = np.zeros(n_segments, dtype=np.int64)
+    point_sums = np.zeros((n_segments, 3))
+    used_z = np.empty(labelled)
+    used_at = 0
+    for segment in range(n_segments):
+        everything = with_depth[segment] == 0
+        for k in range(starts[segment], starts[segment + 1]):
+            p = order[k]
+            if everything or flat_depth[p] > 0:
+                used[segment] += 1
+                for axis in range(3):
+                    point_sums[segment, axis] += flat_points[p, axis]
+                used_z[used_at] = flat_points[p, 2]
+                used_at += 1
+    return (
+        ids,
+        order,
+        starts,
+        with_depth,
+        used,
+        point_sums,
+        used_z[:used_at],
+        histograms,
+        footprints,
+    )

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ipr import kernels
 from ipr.perception.types import Facet
 
 
@@ -23,41 +24,14 @@ def mean_shift_directions(
     tens of supervoxels, so the dense N x N kernel is cheaper than a general-purpose estimator's
     set-up (scikit-learn's MeanShift costs about 20 ms per call even on 30 points).
     """
-    modes = normals.copy()
-    scale = 2 * bandwidth**2
-    for _ in range(iterations):
-        # |m - n|^2 = 2 - 2 m.n for unit vectors: one matrix product instead of an (N, N, 3)
-        # difference array. In place, with the same roundings as
-        # exp(-max(2 - 2 m.n, 0) / (2 bandwidth^2)): objects have a few to a few hundred
-        # supervoxels, so the temporaries' allocations cost as much as the arithmetic.
-        kernel = modes @ normals.T
-        kernel *= -2.0
-        kernel += 2.0
-        np.maximum(kernel, 0.0, out=kernel)
-        np.negative(kernel, out=kernel)
-        kernel /= scale
-        np.exp(kernel, out=kernel)
-        kernel *= weights[None, :]
-        shifted = kernel @ normals
-        shifted /= _row_norms(shifted) + 1e-12
-        converged = np.abs(shifted - modes).max() < 1e-5
-        modes = shifted
-        if converged:
-            break
-    # Merge modes closer than half a bandwidth, heaviest first, so labels are deterministic: each
-    # normal joins the first centre (in creation order) near its mode, and a normal near none
-    # becomes a centre.
-    order = np.argsort(-weights, kind="stable")
-    label = np.full(len(normals), -1, dtype=np.int64)
-    count = 0
-    for index in order:
-        if label[index] >= 0:
-            continue
-        near = (_row_norms(modes - modes[index])[:, 0] < bandwidth / 2) & (label < 0)
-        label[near] = count
-        label[index] = count
-        count += 1
-    return label
+    # Compiled (``ipr.kernels``): objects have a few to a few hundred supervoxels, where
+    # numpy's per-call costs exceed the arithmetic.
+    return kernels.mean_shift_directions(
+        np.ascontiguousarray(normals, dtype=np.float64),
+        np.ascontiguousarray(weights, dtype=np.float64),
+        float(bandwidth),
+        int(iterations),
+    )
 
 
 def _row_norms(vectors: np.ndarray) -> np.ndarray:

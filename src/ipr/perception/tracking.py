@@ -67,6 +67,7 @@ from itertools import combinations
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from ipr import kernels
 from ipr.perception.config import PerceptionConfig, TrackingConfig
 
 #: Histogram bins per RGB channel.
@@ -102,62 +103,29 @@ def segment_features(
 ) -> dict[int, SegmentFeatures]:
     """Features of every segment k >= 1 in a (H, W) label image with (H, W, 3) world points,
     (H, W, 3) uint8 colours and the (H, W) depth (m, 0 = no reading; None = all valid)."""
-    flat_labels = labels.reshape(-1)
-    labelled = np.flatnonzero(flat_labels > 0)
-    order = labelled[np.argsort(flat_labels[labelled], kind="stable")]
-    ids, starts = np.unique(flat_labels[order], return_index=True)
-    ends = np.append(starts[1:], len(order))[: len(starts)]  # no segments: no ends
     flat_points = points.reshape(-1, 3)
     # A pixel without depth back-projects to the camera centre: labels may cover depth holes, so
-    # geometry comes from pixels with a reading.
-    if depth_m is None:
-        valid = np.ones(len(flat_points), dtype=bool)
-        footprint = np.ones(len(flat_points))
-    else:
-        depth = depth_m.reshape(-1).astype(np.float64)
-        valid = depth > 0
-        footprint = depth**2
-    codes = _colour_codes(rgb.reshape(-1, 3)[order])
-    # Centroids and top heights of all segments at once (a frame has a dozen segments of up to
-    # tens of thousands of pixels; per-segment reductions cost more than the arithmetic). The
-    # sums run over each segment's pixels in the same order as a per-segment mean, so the
-    # values are the same.
-    count = len(ids)
-    segment_of_sorted = np.repeat(np.arange(count), ends - starts)
-    valid_sorted = valid[order]
-    with_depth_count = np.bincount(segment_of_sorted[valid_sorted], minlength=count)
-    # Segments without any depth reading use all their pixels (whose points are all zero).
-    used = valid_sorted | (with_depth_count == 0)[segment_of_sorted]
-    used_segment = segment_of_sorted[used]
-    used_points = flat_points[order[used]]
-    used_count = np.bincount(used_segment, minlength=count)
-    centroids = (
-        np.stack(
-            [
-                np.bincount(used_segment, weights=used_points[:, c], minlength=count)
-                for c in range(3)
-            ],
-            axis=1,
+    # geometry comes from pixels with a reading (segments without any use all their pixels,
+    # whose points are all zero). One compiled pass gives every segment's sums (``ipr.kernels``;
+    # a frame has a dozen segments of up to tens of thousands of pixels).
+    depth = np.ones(len(flat_points)) if depth_m is None else depth_m.reshape(-1)
+    ids, order, starts, with_depth, used, point_sums, used_z, histograms, footprints = (
+        kernels.segment_sums(
+            labels.reshape(-1), flat_points, rgb.reshape(-1, 3), depth, COLOUR_BINS
         )
-        / np.maximum(used_count, 1)[:, None]
     )
-    tops = _grouped_percentile(used_points[:, 2], used_count, 98.0)
-    footprint_sorted = footprint[order]
+    centroids = point_sums / np.maximum(used, 1)[:, None]
+    tops = _grouped_percentile(used_z, used, 98.0)
     features = {}
-    for index, (label, start, end) in enumerate(zip(ids, starts, ends, strict=True)):
-        pixels = order[start:end]
-        histogram = np.bincount(codes[start:end], minlength=COLOUR_BINS**3).astype(np.float64)
-        area = (
-            float(footprint_sorted[start:end][valid_sorted[start:end]].sum())
-            if with_depth_count[index]
-            else 0.0
-        )
-        features[int(label)] = SegmentFeatures(
-            pixels,
+    for index, label in enumerate(ids.tolist()):
+        histogram = histograms[index].astype(np.float64)
+        area = float(footprints[index])
+        features[label] = SegmentFeatures(
+            order[starts[index] : starts[index + 1]],
             centroids[index],
             histogram / histogram.sum(),
             float(tops[index]),
-            area if area > 0 else float(pixels.size),
+            area if area > 0 else float(starts[index + 1] - starts[index]),
         )
     return features
 
