@@ -332,3 +332,127 @@ def segment_sums(
         histograms,
         footprints,
     )
+
+
+@_jit
+def plane_inlier_counts(
+    points: np.ndarray, normals: np.ndarray, offsets: np.ndarray, threshold_m: float
+) -> np.ndarray:
+    """(H,) int64 count of the (N, 3) points within ``threshold_m`` of each of H planes
+    {x : normals[h] . x + offsets[h] = 0} (unit (H, 3) normals): RANSAC's scores,
+    ``(np.abs(points @ normals.T + offsets) < threshold_m).sum(axis=0)`` without the (N, H)
+    arrays."""
+    xs, ys, zs = _columns(points)
+    counts = np.zeros(normals.shape[0], dtype=np.int64)
+    for h in range(normals.shape[0]):
+        n0, n1, n2, offset = normals[h, 0], normals[h, 1], normals[h, 2], offsets[h]
+        count = 0
+        for p in range(xs.shape[0]):  # branch-free: the compiler vectorises it
+            count += abs(xs[p] * n0 + ys[p] * n1 + zs[p] * n2 + offset) < threshold_m
+        counts[h] = count
+    return counts
+
+
+@_jit
+def facing_plane_inlier_counts(
+    points: np.ndarray,
+    point_normals: np.ndarray,
+    unknown: np.ndarray,
+    normals: np.ndarray,
+    offsets: np.ndarray,
+    threshold_m: float,
+    min_cos: float,
+) -> np.ndarray:
+    """``plane_inlier_counts`` counting only points whose (N, 3) unit normal is within
+    acos(``min_cos``) of +-the plane's, or ``unknown`` (N,) bool (no normal)."""
+    xs, ys, zs = _columns(points)
+    us, vs, ws = _columns(point_normals)
+    counts = np.zeros(normals.shape[0], dtype=np.int64)
+    for h in range(normals.shape[0]):
+        n0, n1, n2, offset = normals[h, 0], normals[h, 1], normals[h, 2], offsets[h]
+        count = 0
+        for p in range(xs.shape[0]):  # branch-free (& and |): the compiler vectorises it
+            near = abs(xs[p] * n0 + ys[p] * n1 + zs[p] * n2 + offset) < threshold_m
+            facing = abs(us[p] * n0 + vs[p] * n1 + ws[p] * n2) > min_cos
+            count += near & (facing | unknown[p])
+        counts[h] = count
+    return counts
+
+
+@_jit
+def _columns(points: np.ndarray):
+    """The three columns of (N, 3) ``points`` as contiguous (N,) float64 arrays."""
+    count = points.shape[0]
+    xs, ys, zs = np.empty(count), np.empty(count), np.empty(count)
+    for p in range(count):
+        xs[p], ys[p], zs[p] = points[p, 0], points[p, 1], points[p, 2]
+    return xs, ys, zs
+
+
+@_jit
+def plane_inliers(
+    points: np.ndarray, normal: np.ndarray, offset: float, threshold_m: float
+) -> np.ndarray:
+    """(K,) int64 indices of the (N, 3) points within ``threshold_m`` of the plane
+    {x : normal . x + offset = 0}, ascending: ``np.flatnonzero(np.abs(points @ normal +
+    offset) < threshold_m)`` in one pass."""
+    found = np.empty(points.shape[0], dtype=np.int64)
+    count = 0
+    n0, n1, n2 = normal[0], normal[1], normal[2]
+    for p in range(points.shape[0]):
+        distance = points[p, 0] * n0 + points[p, 1] * n1 + points[p, 2] * n2 + offset
+        if abs(distance) < threshold_m:
+            found[count] = p
+            count += 1
+    return found[:count].copy()
+
+
+@_jit
+def centred_scatter(points: np.ndarray, indices: np.ndarray):
+    """Centroid (3,) and scatter matrix (3, 3) (sum of outer products of the centred points)
+    of the (N, 3) points at ``indices`` (K,): a plane fit's moments, without gathering them."""
+    centroid = np.zeros(3)
+    for k in range(indices.shape[0]):
+        for axis in range(3):
+            centroid[axis] += points[indices[k], axis]
+    centroid /= max(indices.shape[0], 1)
+    scatter = np.zeros((3, 3))
+    for k in range(indices.shape[0]):
+        d0 = points[indices[k], 0] - centroid[0]
+        d1 = points[indices[k], 1] - centroid[1]
+        d2 = points[indices[k], 2] - centroid[2]
+        scatter[0, 0] += d0 * d0
+        scatter[0, 1] += d0 * d1
+        scatter[0, 2] += d0 * d2
+        scatter[1, 1] += d1 * d1
+        scatter[1, 2] += d1 * d2
+        scatter[2, 2] += d2 * d2
+    scatter[1, 0], scatter[2, 0], scatter[2, 1] = scatter[0, 1], scatter[0, 2], scatter[1, 2]
+    return centroid, scatter
+
+
+@_jit
+def facing_plane_inliers(
+    points: np.ndarray,
+    point_normals: np.ndarray,
+    unknown: np.ndarray,
+    normal: np.ndarray,
+    offset: float,
+    threshold_m: float,
+    min_cos: float,
+) -> np.ndarray:
+    """(K,) int64 ascending indices of the (N, 3) points within ``threshold_m`` of the plane
+    {x : normal . x + offset = 0} whose (N, 3) normal is within acos(``min_cos``) of +-the
+    plane's or ``unknown`` (N,) bool: ``plane_inliers`` with the facing test of
+    ``facing_plane_inlier_counts``."""
+    found = np.empty(points.shape[0], dtype=np.int64)
+    count = 0
+    n0, n1, n2 = normal[0], normal[1], normal[2]
+    for p in range(points.shape[0]):
+        distance = points[p, 0] * n0 + points[p, 1] * n1 + points[p, 2] * n2 + offset
+        if abs(distance) < threshold_m:
+            cosine = point_normals[p, 0] * n0 + point_normals[p, 1] * n1 + point_normals[p, 2] * n2
+            if unknown[p] or abs(cosine) > min_cos:
+                found[count] = p
+                count += 1
+    return found[:count].copy()

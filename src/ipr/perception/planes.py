@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ipr import kernels
 from ipr.perception.config import PerceptionConfig
 from ipr.perception.types import KnownPlane
 
@@ -73,14 +74,8 @@ def fit_plane_ransac(
         return None
     normals = normals[valid] / norms[valid, None]
     offsets = -np.einsum("ij,ij->i", normals, triples[valid, 0])
-    best, best_count = None, -1
-    for start in range(0, len(normals), 250):
-        distances = sample @ normals[start : start + 250].T
-        distances += offsets[start : start + 250]
-        counts = (np.abs(distances, out=distances) < threshold_m).sum(axis=0)
-        index = int(np.argmax(counts))
-        if counts[index] > best_count:
-            best, best_count = start + index, int(counts[index])
+    # Compiled scoring (``ipr.kernels``): no (sample, hypotheses) distance arrays.
+    best = int(np.argmax(kernels.plane_inlier_counts(sample, normals, offsets, threshold_m)))
     normal, offset = normals[best], offsets[best]
     # The refits use at most 20000 inliers (evenly spread: they fix the plane as well as all of
     # them, at a fraction of the cost of a decomposition of a large matrix), so their inliers
@@ -88,31 +83,22 @@ def fit_plane_ransac(
     # spares two of the three passes over all ~300000 points (3.5 ms).
     refit_points = points[:: max(1, len(points) // 50000)]
     for _ in range(2):  # least-squares refits on the inliers
-        inliers = np.flatnonzero(_plane_distances(refit_points, normal, offset) < threshold_m)
+        inliers = kernels.plane_inliers(refit_points, normal, float(offset), threshold_m)
         if len(inliers) < 3:
             return None
-        used = refit_points[inliers[:: max(1, len(inliers) // 20000)]]
-        centroid = used.mean(axis=0)
-        centred = used - centroid
-        _, vectors = np.linalg.eigh(centred.T @ centred)
+        centroid, scatter = kernels.centred_scatter(
+            refit_points, inliers[:: max(1, len(inliers) // 20000)]
+        )
+        _, vectors = np.linalg.eigh(scatter)
         refit = vectors[:, 0] * (1.0 if vectors[:, 0] @ normal >= 0 else -1.0)
         if axis is not None and abs(float(refit @ axis)) < np.cos(np.radians(max_tilt_deg)):
             break  # the refit would leave the allowed orientations: keep the hypothesis
         normal = refit
         offset = -float(normal @ centroid)
-    inliers = np.flatnonzero(_plane_distances(points, normal, offset) < threshold_m)
+    inliers = kernels.plane_inliers(points, normal, float(offset), threshold_m)
     if len(inliers) < min_inliers:
         return None
     return Plane(normal, offset, inliers)
-
-
-def _plane_distances(points: np.ndarray, normal: np.ndarray, offset: float) -> np.ndarray:
-    """Unsigned distances (N,) in metres of (N, 3) points to the plane (unit normal, offset):
-    ``np.abs(points @ normal + offset)``, computed in place (one (N,) array instead of three:
-    this runs over the ~300000 points of a 640x480 frame)."""
-    distances = points @ normal
-    distances += offset
-    return np.abs(distances, out=distances)
 
 
 # --------------------------------------------------------------------------------------------
@@ -629,45 +615,57 @@ def _fit_vertical_plane(
     pairs = rng.integers(0, count, size=(config.wall_iterations, 2))
     along = points[pairs[:, 1]] - points[pairs[:, 0]]
     along -= np.outer(along @ up, up)
-    normal = np.cross(up, along)
+    normal = _cross_rows(up, along)
     norms = np.linalg.norm(normal, axis=1)
     valid = norms > 0.02  # pairs closer than 2 cm give unstable orientations
     if not valid.any():
         return None
     normal = normal[valid] / norms[valid, None]
     offset = -np.einsum("ij,ij->i", normal, points[pairs[valid, 0]])
-    # (sample, hypotheses) arrays in place: np.abs(sample @ normal.T + offset) < threshold.
-    distances = sample @ normal.T
-    distances += offset
-    votes = np.abs(distances, out=distances) < threshold
-    if normals is not None:
-        sample_normals = normals[sample_index]
+    # Compiled scoring (``ipr.kernels``): no (sample, hypotheses) arrays.
+    if normals is None:
+        votes = kernels.plane_inlier_counts(sample, normal, offset, threshold)
+    else:
+        sample_normals = np.ascontiguousarray(normals[sample_index], dtype=np.float64)
         sample_unknown = ~sample_normals.any(axis=1) if unknown is None else unknown[sample_index]
-        facing = sample_normals @ normal.T
-        facing = np.abs(facing, out=facing) > _FACING_COS
-        facing |= sample_unknown[:, None]
-        votes &= facing
-    best = int(np.argmax(votes.sum(axis=0)))
+        votes = kernels.facing_plane_inlier_counts(
+            sample, sample_normals, sample_unknown, normal, offset, threshold, _FACING_COS
+        )
+    best = int(np.argmax(votes))
     best_normal, best_offset = normal[best], float(offset[best])
     if basis is None:
         basis = np.linalg.svd(np.eye(3) - np.outer(up, up))[0][:, :2]  # horizontal directions
     if normals is not None and unknown is None:
         unknown = ~normals.any(axis=1)
     for _ in range(2):
-        inliers = np.abs(points @ best_normal + best_offset) < threshold
-        if normals is not None:
-            inliers &= _facing(normals, best_normal, unknown)
-        if inliers.sum() < config.wall_min_points:
+        if normals is None:
+            inliers = kernels.plane_inliers(points, best_normal, best_offset, threshold)
+        else:
+            inliers = kernels.facing_plane_inliers(
+                points, normals, unknown, best_normal, best_offset, threshold, _FACING_COS
+            )
+        if len(inliers) < config.wall_min_points:
             return None
-        flat = points[np.flatnonzero(inliers)[:: max(1, int(inliers.sum()) // 5000)]] @ basis
-        centroid = flat.mean(axis=0)
-        centred = flat - centroid
-        _, vectors = np.linalg.eigh(centred.T @ centred)
+        # The least-squares line of the inliers seen from above: the 3D moments projected on
+        # the horizontal basis (the moments of the projected points).
+        centroid_3d, scatter_3d = kernels.centred_scatter(
+            points, inliers[:: max(1, len(inliers) // 5000)]
+        )
+        centroid = basis.T @ centroid_3d
+        _, vectors = np.linalg.eigh(basis.T @ scatter_3d @ basis)
         refit = basis @ vectors[:, 0]
         refit *= 1.0 if refit @ best_normal >= 0 else -1.0
         best_normal = refit / np.linalg.norm(refit)
         best_offset = -float(best_normal @ (basis @ centroid))
     return best_normal, best_offset
+
+
+def _cross_rows(vector: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """(N, 3) cross products of a (3,) vector with each row of (N, 3): ``np.cross(vector,
+    rows)``'s formulas by columns (np.cross's set-up costs more than a few hundred rows)."""
+    a0, a1, a2 = (float(c) for c in vector)
+    b0, b1, b2 = rows[:, 0], rows[:, 1], rows[:, 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=1)
 
 
 def _wall_cues(
@@ -697,7 +695,7 @@ def _wall_cues(
     along its length shows its rim, which faces up; ``_edge_on_walls``).
     """
     threshold = config.plane_threshold_m
-    along = np.cross(up, normal)
+    along = _cross_rows(up, normal[None])[0]
     depth = pts @ normal + offset
     s = pts @ along
     on_plane = (np.abs(depth) < threshold) & (h < config.wall_max_height_m + threshold)
