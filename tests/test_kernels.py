@@ -9,9 +9,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.ndimage import uniform_filter
 
 from ipr import kernels
-from ipr.camera import backproject, look_at
+from ipr.camera import backproject, backproject_pixels, look_at
+from ipr.perception.denoise import objects_plane_depth
+from ipr.perception.facets import pixel_areas
 
 
 def _normalise(vectors: np.ndarray) -> np.ndarray:
@@ -95,3 +98,115 @@ def test_supervoxel_rounds_are_bit_identical_to_the_numpy_rounds(colour_weight):
     )
     np.testing.assert_array_equal(got, expected)
     assert len(np.unique(got)) > n_seeds // 2  # the rounds did not collapse the seeds
+
+
+# The numpy plane-fit depth before the kernel: float32 box filters, Cramer's rule at the rim.
+def _reference_plane_depth(depth_m: np.ndarray, pixels: np.ndarray, window: int) -> np.ndarray:
+    """(N,) float64 depth (m) at one object's (N,) flat pixel indices (all with a reading) of a
+    (H, W) depth image, each replaced by the object's local plane fit there (module doc); a
+    pixel whose neighbourhood holds fewer than 6 of the object's pixels, or only a line of
+    them, keeps its reading. ``window`` is the odd neighbourhood size (< 3: no change)."""
+    if window >= 3 and window % 2 == 0:
+        raise ValueError(f"the denoising window must be odd, got {window}")
+    height, width = depth_m.shape
+    readings = depth_m.reshape(-1)[pixels].astype(np.float64)
+    if window < 3 or pixels.size < 6:
+        return readings
+    margin = window // 2
+    rows, cols = np.divmod(pixels, width)
+    top, left = int(rows.min()), int(cols.min())
+    # The object's bounding box padded by the margin on every side (so windows stay inside).
+    shape = (int(rows.max()) - top + 1 + 2 * margin, int(cols.max()) - left + 1 + 2 * margin)
+    at = (rows - top + margin) * shape[1] + (cols - left + margin)
+    mask = np.zeros(shape[0] * shape[1], dtype=np.float32)
+    mask[at] = 1.0
+    reference = float(readings.mean())  # centred depth keeps float32 sums exact enough
+    depth = np.zeros_like(mask)
+    depth[at] = readings - reference
+    area = window * window
+    count = uniform_filter(mask.reshape(shape), window, mode="constant").reshape(-1)[at] * area
+    result = readings.copy()
+    # A full window is symmetric about its pixel, so the plane's value there is the mean.
+    full = count > area - 0.5
+    if full.any():
+        mean = uniform_filter(depth.reshape(shape), window, mode="constant").reshape(-1)
+        result[full] = mean[at[full]] + reference
+    rim = np.flatnonzero(~full & (count > 5.5))
+    if rim.size:
+        fitted, ok = _rim_plane_fit(depth, mask, at[rim], shape[1], margin)
+        result[rim[ok]] = fitted[ok] + reference
+    return result
+
+
+def _rim_plane_fit(
+    depth: np.ndarray, mask: np.ndarray, at: np.ndarray, width: int, margin: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """The local plane's depth at (N,) flat pixels ``at`` of a padded crop ((h*w,) float32
+    centred depth and 0/1 mask, ``width`` wide) whose windows are partly outside the object,
+    and whether it is defined ((N,) float64 and bool): least squares on the window's pixels
+    of the object, in coordinates about each pixel."""
+    du, dv = _window_offsets(margin)
+    neighbours = at[:, None] + (dv * width + du).astype(np.int64)[None, :]
+    weights = mask[neighbours].astype(np.float64)
+    values = depth[neighbours].astype(np.float64)
+    s, cu, cv = weights.sum(axis=1), weights @ du, weights @ dv
+    cuu, cvv, cuv = weights @ (du * du), weights @ (dv * dv), weights @ (du * dv)
+    sd, cdu, cdv = values.sum(axis=1), values @ du, values @ dv
+    # Cramer's rule for [[s, cu, cv], [cu, cuu, cuv], [cv, cuv, cvv]] x = [sd, cdu, cdv].
+    minor = cuu * cvv - cuv * cuv
+    det = s * minor - cu * (cu * cvv - cuv * cv) + cv * (cu * cuv - cuu * cv)
+    numerator = sd * minor - cu * (cdu * cvv - cuv * cdv) + cv * (cdu * cuv - cuu * cdv)
+    ok = np.abs(det) > 1e-6 * np.maximum(s, 1.0) ** 3  # not all on one line
+    return numerator / np.where(ok, det, 1.0), ok
+
+
+def _window_offsets(margin: int) -> tuple[np.ndarray, np.ndarray]:
+    """Column and row offsets (w*w,) float64 (read-only) of a window of half-size ``margin``,
+    row-major (built once: ``np.mgrid`` costs more than the fits of a small object)."""
+    dv, du = np.mgrid[-margin : margin + 1, -margin : margin + 1]
+    du, dv = du.reshape(-1).astype(np.float64), dv.reshape(-1).astype(np.float64)
+    du.flags.writeable = dv.flags.writeable = False
+    return du, dv
+
+
+@pytest.mark.parametrize("window", [3, 5, 7])
+def test_objects_plane_depth_matches_the_box_filter_version(window):
+    rng = np.random.default_rng(window)
+    v, u = np.mgrid[:70, :90].astype(float)
+    labels = np.zeros((70, 90), int)
+    labels[5:40, 3:50] = 1
+    labels[30:66, 45:85] = 2
+    labels[50:52, 5:40] = 3  # a two-pixel-high strip: rim fits on nearly a line
+    labels[60, 10:14] = 4  # fewer than 6 pixels: unchanged
+    labels[rng.random(labels.shape) < 0.05] = 0
+    depth = (0.8 + 0.002 * u - 0.001 * v + rng.normal(0, 0.002, u.shape)).astype(np.float32)
+    depth[labels == 0] = 0.0
+    flat = labels.reshape(-1)
+    objects = [np.flatnonzero(flat == k) for k in (1, 2, 3, 4)]
+    starts = np.cumsum([0] + [len(o) for o in objects])
+    got = objects_plane_depth(depth, np.concatenate(objects), starts, window)
+    expected = np.concatenate([_reference_plane_depth(depth, o, window) for o in objects])
+    # float64 window sums against float32 box filters of centred depth: sub-micrometre.
+    np.testing.assert_allclose(got, expected, rtol=0, atol=2e-7)
+    changed = got != depth.reshape(-1)[np.concatenate(objects)]
+    assert changed[: starts[1]].mean() > 0.9 and not changed[starts[3] :].any()
+
+
+def test_object_pixel_geometry_matches_backprojection_and_pixel_areas():
+    rng = np.random.default_rng(5)
+    K = np.array([[520.0, 0.0, 40.3], [0.0, 525.0, 29.7], [0.0, 0.0, 1.0]])
+    world_from_camera = look_at(np.array([0.5, -0.6, 0.8]), np.zeros(3))
+    width = 80
+    pixels = rng.choice(60 * width, 900, replace=False)
+    depth = rng.uniform(0.4, 1.5, 900).astype(np.float32)
+    normals = rng.normal(size=(900, 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    world, areas = kernels.object_pixel_geometry(
+        pixels, depth, width, K, world_from_camera, normals
+    )
+    camera = backproject_pixels(pixels, depth, K, width)
+    expected_world = camera @ world_from_camera[:3, :3].T + world_from_camera[:3, 3]
+    expected_areas = pixel_areas(camera, normals @ world_from_camera[:3, :3], K)
+    np.testing.assert_allclose(world, expected_world, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(areas, expected_areas, rtol=1e-12)
+    assert areas.min() > 0 and (areas > expected_areas.min() * 1.5).any()  # tilt matters

@@ -13,10 +13,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ipr.camera import backproject_pixels, invert_transform
+from ipr.kernels import object_pixel_geometry
 from ipr.perception.config import PerceptionConfig
-from ipr.perception.denoise import object_plane_depth
-from ipr.perception.facets import object_facets, pixel_areas
+from ipr.perception.denoise import objects_plane_depth
+from ipr.perception.facets import object_facets
 from ipr.perception.free_space import SpaceMap, VoxelGrid, observe_space
 from ipr.perception.tracking import split_merged_objects, track_segments
 from ipr.perception.types import FrameSegmentation, KnownPlane, PartialObject
@@ -84,13 +84,9 @@ def perceive_scene(
     tracking_seconds = time.perf_counter() - started
 
     facet_seconds, objects, facet_labels = [], [], []
-    for frame, segmentation, frame_labels, frame_points in zip(
-        scene.frames, segmentations, labels, points, strict=True
-    ):
+    for frame, segmentation, frame_labels in zip(scene.frames, segmentations, labels, strict=True):
         started = time.perf_counter()
-        frame_objects, frame_facets = _partial_objects(
-            frame, segmentation, frame_labels, frame_points, config
-        )
+        frame_objects, frame_facets = _partial_objects(frame, segmentation, frame_labels, config)
         objects.append(frame_objects)
         facet_labels.append(frame_facets)
         facet_seconds.append(time.perf_counter() - started)
@@ -170,18 +166,15 @@ def _partial_objects(
     frame,
     segmentation: FrameSegmentation,
     labels: np.ndarray,
-    points: np.ndarray,
     config: PerceptionConfig,
 ) -> tuple[tuple[PartialObject, ...], np.ndarray]:
     """Partial objects with facets for one frame's tracked labels; also the facet label image."""
     height, width = labels.shape
     flat_labels = labels.reshape(-1)
-    flat_points = points.reshape(-1, 3)
     flat_rgb = frame.rgb.reshape(-1, 3)
     valid = frame.depth_m.reshape(-1) > 0
     supervoxels = segmentation.supervoxels
     flat_supervoxel = supervoxels.labels.reshape(-1)
-    camera_from_world = invert_transform(frame.world_from_camera)
     facet_image = np.zeros(height * width, dtype=np.int32)
     border = np.zeros((height, width), dtype=bool)
     border[:2, :] = border[-2:, :] = border[:, :2] = border[:, -2:] = True
@@ -195,26 +188,21 @@ def _partial_objects(
     ends = np.append(starts[1:], len(order))[: len(starts)]  # no segments: no ends
     # Per-pixel quantities of all objects in one pass each (objects are slices of ``order``):
     # real frames have a dozen small segments besides the objects, and per-object calls cost.
-    if config.denoise_window_px >= 3:
-        # Hulls take extreme points: sensor noise would bulge every hull out (denoise.py).
-        depth = np.concatenate(
-            [
-                object_plane_depth(frame.depth_m, order[start:end], config.denoise_window_px)
-                for start, end in zip(starts, ends, strict=True)
-            ]
-            or [np.zeros(0)]
-        )
-        camera_all = backproject_pixels(order, depth, frame.K, width)
-        world_all = camera_all @ frame.world_from_camera[:3, :3].T + frame.world_from_camera[:3, 3]
-    else:
-        world_all = flat_points[order]
-        camera_all = world_all @ camera_from_world[:3, :3].T + camera_from_world[:3, 3]
+    # Hulls take extreme points: sensor noise would bulge every hull out (denoise.py).
+    depth = objects_plane_depth(
+        frame.depth_m,
+        order,
+        np.append(starts, len(order)),
+        config.denoise_window_px if config.denoise_window_px >= 3 else 1,
+    )
     supervoxel_all = flat_supervoxel[order]
     has_all = supervoxel_all >= 0
-    normals_all = np.empty_like(world_all)
+    normals_all = np.empty((len(order), 3))
     normals_all[:] = -frame.world_from_camera[:3, 2]  # no supervoxel: facing the camera
     normals_all[has_all] = supervoxels.normals[supervoxel_all[has_all]]
-    areas_all = pixel_areas(camera_all, normals_all @ camera_from_world[:3, :3].T, frame.K)
+    world_all, areas_all = object_pixel_geometry(
+        order, depth, width, frame.K, frame.world_from_camera, normals_all
+    )
     rgb_all = flat_rgb[order]
     border_all = border[order]
     for object_id, start, end in zip(object_ids.tolist(), starts, ends, strict=True):
