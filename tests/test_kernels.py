@@ -210,3 +210,52 @@ def test_object_pixel_geometry_matches_backprojection_and_pixel_areas():
     np.testing.assert_allclose(world, expected_world, rtol=0, atol=1e-14)
     np.testing.assert_allclose(areas, expected_areas, rtol=1e-12)
     assert areas.min() > 0 and (areas > expected_areas.min() * 1.5).any()  # tilt matters
+
+
+def _reference_dominant_faces(groups, points, pixel_normals, mean_normals, gate):
+    """The numpy ``_dominant_faces`` before the kernel: centres and covariances."""
+    count = len(mean_normals)
+    normal = mean_normals
+    inlier_groups = groups
+    for _ in range(2):
+        inlier = np.einsum("pc,pc->p", pixel_normals, normal[groups]) > gate
+        inlier_groups = groups[inlier]
+        summed = _group_sum(inlier_groups, pixel_normals[inlier], count)
+        normal = np.where(
+            (np.linalg.norm(summed, axis=1) > 1e-12)[:, None], _normalise(summed), normal
+        )
+    clear = np.bincount(inlier_groups, minlength=count) >= 6
+    inlier = np.where(clear[groups], inlier, True)
+    used_groups, used_points = groups[inlier], points[inlier]
+    sizes = np.bincount(used_groups, minlength=count)
+    centres = _group_sum(used_groups, used_points, count) / np.maximum(sizes, 1)[:, None]
+    local = [used_points[:, axis] - centres[used_groups, axis] for axis in range(3)]
+    covariance = np.empty((count, 3, 3))
+    for i in range(3):
+        for j in range(i, 3):
+            value = np.bincount(used_groups, weights=local[i] * local[j], minlength=count)
+            covariance[:, i, j] = covariance[:, j, i] = value
+    covariance /= np.maximum(sizes, 1)[:, None, None]
+    return centres, covariance, sizes, normal
+
+
+def test_dominant_face_moments_are_bit_identical_to_the_numpy_version():
+    rng = np.random.default_rng(8)
+    n_groups, n_points = 60, 6000
+    groups = rng.integers(0, n_groups, n_points)
+    groups[groups == 7] = 8  # an empty group
+    groups[:4] = 9  # a tiny one (fewer than 6 kept pixels: all are used)
+    groups[groups == 9] = 10
+    groups[:4] = 9
+    points = rng.normal(size=(n_points, 3)) * 0.02
+    # Two faces per group: most normals near +z, a third near +x (the crease's other side).
+    pixel_normals = np.where(rng.random((n_points, 1)) < 0.66, [0.0, 0.0, 1.0], [1.0, 0.0, 0.0])
+    pixel_normals = _normalise(pixel_normals + rng.normal(0, 0.15, (n_points, 3)))
+    mean_normals = _normalise(_group_sum(groups, pixel_normals, n_groups))
+    gate = float(np.cos(np.radians(30.0)))
+    got = kernels.dominant_face_moments(groups, points, pixel_normals, mean_normals, gate)
+    expected = _reference_dominant_faces(groups, points, pixel_normals, mean_normals, gate)
+    for found, wanted in zip(got, expected, strict=True):
+        np.testing.assert_array_equal(found, wanted)
+    assert got[2][7] == 0 and got[2][9] == 4  # the empty and the tiny group
+    assert 0.5 < got[2][20] / (groups == 20).sum() < 0.8  # the dominant face only

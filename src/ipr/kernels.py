@@ -566,3 +566,73 @@ def object_pixel_geometry(
         facing = max(abs(facing / length), 0.25)
         areas[p] = z * z / (fx * fy) * (abs(z / length) / facing)
     return world, areas
+
+
+@_jit
+def dominant_face_moments(
+    groups: np.ndarray,
+    points: np.ndarray,
+    pixel_normals: np.ndarray,
+    mean_normals: np.ndarray,
+    min_cos: float,
+):
+    """The dominant face of each of M groups of pixels (``supervoxels._dominant_faces``
+    documents the method): twice, keep each group's pixels whose normal is within
+    acos(``min_cos``) of the group's normal and re-average it; then take the moments of the
+    kept pixels (of all the group's pixels when fewer than 6 were kept).
+
+    ``groups`` (N,) group of each pixel, ``points`` (N, 3) (m), ``pixel_normals`` (N, 3) unit,
+    ``mean_normals`` (M, 3) each group's starting normal. Returns the faces' centres (M, 3),
+    covariances (M, 3, 3) (sums of centred outer products over the pixel count), pixel counts
+    (M,) int64 and re-averaged normals (M, 3). Sums run in pixel order, as numpy's bincounts.
+    """
+    count, n_points = mean_normals.shape[0], groups.shape[0]
+    normal = mean_normals.copy()
+    inlier = np.ones(n_points, dtype=np.bool_)
+    inlier_count = np.zeros(count, dtype=np.int64)
+    summed = np.empty((count, 3))
+    for _ in range(2):
+        summed[:] = 0.0
+        inlier_count[:] = 0
+        for p in range(n_points):
+            g = groups[p]
+            dot = pixel_normals[p, 0] * normal[g, 0] + pixel_normals[p, 1] * normal[g, 1]
+            dot += pixel_normals[p, 2] * normal[g, 2]
+            inlier[p] = dot > min_cos
+            if inlier[p]:
+                inlier_count[g] += 1
+                for axis in range(3):
+                    summed[g, axis] += pixel_normals[p, axis]
+        for g in range(count):
+            squared = summed[g, 0] * summed[g, 0]
+            squared += summed[g, 1] * summed[g, 1]
+            squared += summed[g, 2] * summed[g, 2]
+            norm = np.sqrt(squared)
+            if norm > 1e-12:
+                for axis in range(3):
+                    normal[g, axis] = summed[g, axis] / norm
+    sizes = np.zeros(count, dtype=np.int64)
+    centres = np.zeros((count, 3))
+    for p in range(n_points):
+        g = groups[p]
+        if inlier[p] or inlier_count[g] < 6:  # groups without a clear face use every pixel
+            sizes[g] += 1
+            for axis in range(3):
+                centres[g, axis] += points[p, axis]
+    for g in range(count):
+        for axis in range(3):
+            centres[g, axis] /= max(sizes[g], 1)
+    covariance = np.zeros((count, 3, 3))
+    for p in range(n_points):
+        g = groups[p]
+        if inlier[p] or inlier_count[g] < 6:
+            for i in range(3):
+                local_i = points[p, i] - centres[g, i]
+                for j in range(i, 3):
+                    covariance[g, i, j] += local_i * (points[p, j] - centres[g, j])
+    for g in range(count):
+        for i in range(3):
+            for j in range(i, 3):
+                covariance[g, i, j] /= max(sizes[g], 1)
+                covariance[g, j, i] = covariance[g, i, j]
+    return centres, covariance, sizes, normal

@@ -415,6 +415,14 @@ def _plane_normals(
             covariance[:, i, j] = value
             covariance[:, j, i] = value
     covariance /= np.maximum(sizes, 1)[:, None, None]
+    return _normals_of_covariances(covariance, sizes, fallback)
+
+
+def _normals_of_covariances(
+    covariance: np.ndarray, sizes: np.ndarray, fallback: np.ndarray
+) -> np.ndarray:
+    """(M, 3) plane normals from (M, 3, 3) point covariances of groups of (M,) sizes: the
+    smallest principal axis; ``fallback`` (M, 3) where it is known and the plane is not."""
     eigenvalues, eigenvectors = np.linalg.eigh(covariance)
     normals = eigenvectors[:, :, 0]
     # The plane is defined only when the second spread clearly exceeds the thickness.
@@ -440,25 +448,12 @@ def _dominant_faces(
     ``dominant_face_deg`` of the group's mean normal and re-average; the centre and the plane
     fit then use those pixels only (all pixels when fewer than 6 remain).
     """
-    count = len(mean_normals)
-    gate = np.cos(np.radians(config.dominant_face_deg))
-    normal = mean_normals
-    inlier = np.ones(len(groups), dtype=bool)
-    inlier_groups = groups
-    for _ in range(2):
-        inlier = np.einsum("pc,pc->p", pixel_normals, normal[groups]) > gate
-        inlier_groups = groups[inlier]
-        summed = _group_sum(inlier_groups, pixel_normals[inlier], count)
-        normal = np.where(
-            (np.linalg.norm(summed, axis=1) > 1e-12)[:, None], _normalise(summed), normal
-        )
-    inlier_count = np.bincount(inlier_groups, minlength=count)
-    clear = inlier_count >= 6
-    # Groups without a clear face use all their pixels.
-    inlier = np.where(clear[groups], inlier, True)
-    # Each selection gathered once (tens of thousands of pixels), shared by the fits below.
-    used_groups, used_points = groups[inlier], points[inlier]
-    used_sizes = np.bincount(used_groups, minlength=count)
-    centres = _group_mean(used_groups, used_points, count, used_sizes)
-    normals = _plane_normals(used_groups, used_points, centres, used_sizes, normal)
-    return centres, normals
+    # Compiled (``ipr.kernels``): the selections and moments in a few passes over the pixels.
+    centres, covariance, sizes, normal = kernels.dominant_face_moments(
+        groups,
+        np.ascontiguousarray(points, dtype=np.float64),
+        np.ascontiguousarray(pixel_normals, dtype=np.float64),
+        np.ascontiguousarray(mean_normals, dtype=np.float64),
+        float(np.cos(np.radians(config.dominant_face_deg))),
+    )
+    return centres, _normals_of_covariances(covariance, sizes, normal)
