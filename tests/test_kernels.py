@@ -259,3 +259,58 @@ def test_dominant_face_moments_are_bit_identical_to_the_numpy_version():
         np.testing.assert_array_equal(found, wanted)
     assert got[2][7] == 0 and got[2][9] == 4  # the empty and the tiny group
     assert 0.5 < got[2][20] / (groups == 20).sum() < 0.8  # the dominant face only
+
+
+def _reference_borders(labels, points, depth_m, valid, gap_m, low, high):
+    """The numpy ``containers._borders`` before the kernel (dictionaries in insertion order)."""
+    contacts, fronts = {}, {}
+    base = int(labels.max()) + 1
+
+    def count(counts, first, second):
+        keys, numbers = np.unique(first * base + second, return_counts=True)
+        for key, n in zip(keys.tolist(), numbers.tolist(), strict=True):
+            pair = divmod(key, base)
+            counts[pair] = counts.get(pair, 0) + n
+
+    labels = np.where(valid, labels, 0)
+    for first, second in (
+        ((slice(None), slice(None, -1)), (slice(None), slice(1, None))),
+        ((slice(None, -1), slice(None)), (slice(1, None), slice(None))),
+    ):
+        a, b = labels[first], labels[second]
+        border = np.nonzero((a != b) & (a > 0) & (b > 0))
+        a, b = a[border].astype(np.int64), b[border].astype(np.int64)
+        gap = np.linalg.norm(points[first][border] - points[second][border], axis=1)
+        step = depth_m[second][border] - depth_m[first][border]
+        near = gap < gap_m
+        count(contacts, np.minimum(a[near], b[near]), np.maximum(a[near], b[near]))
+        ahead = (np.abs(step) > low) & (np.abs(step) < high)
+        count(fronts, np.where(step > 0, a, b)[ahead], np.where(step > 0, b, a)[ahead])
+    return contacts, fronts
+
+
+def test_container_borders_match_the_numpy_version_in_order():
+    from ipr.perception.config import PerceptionConfig
+    from ipr.perception.containers import _borders
+
+    rng = np.random.default_rng(12)
+    labels = np.zeros((60, 80), dtype=np.int32)
+    labels[5:50, 5:40] = 3
+    labels[20:35, 15:30] = 1  # inside 3
+    labels[10:55, 40:75] = 2  # beside 3
+    labels[rng.random(labels.shape) < 0.02] = 0
+    depth = rng.uniform(0.7, 0.75, labels.shape).astype(np.float32)
+    depth[labels == 1] += 0.03  # behind its surround: a front step
+    valid = rng.random(labels.shape) > 0.03
+    world_from_camera = look_at(np.array([0.2, -0.5, 0.6]), np.zeros(3))
+    K = np.array([[300.0, 0.0, 40.0], [0.0, 300.0, 30.0], [0.0, 0.0, 1.0]])
+    points = kernels.world_points(depth, K, world_from_camera)
+    config = PerceptionConfig()
+    low, high = config.inside_front_step_m
+    contacts, fronts = _borders(labels, points, depth, valid, config)
+    expected = _reference_borders(
+        labels, points, depth, valid, config.inside_contact_gap_m, low, high
+    )
+    assert list(contacts.items()) == list(expected[0].items())
+    assert list(fronts.items()) == list(expected[1].items())
+    assert contacts and fronts  # both kinds occur

@@ -636,3 +636,68 @@ def dominant_face_moments(
                 covariance[g, i, j] /= max(sizes[g], 1)
                 covariance[g, j, i] = covariance[g, i, j]
     return centres, covariance, sizes, normal
+
+
+@_jit
+def fill_from_nearest(
+    labels: np.ndarray, valid: np.ndarray, offsets: np.ndarray, result: np.ndarray
+) -> None:
+    """Give each pixel of (H, W) ``labels`` that is not ``valid`` the label of the first valid
+    pixel among (P, 2) (row, column) ``offsets`` from it (sorted by length: the nearest), or
+    leave it when none is valid; written into ``result`` (H, W), which starts as a copy of
+    ``labels``. The loop of ``segmentation.fill_label_holes``."""
+    height, width = labels.shape
+    for row in range(height):
+        for col in range(width):
+            if valid[row, col]:
+                continue
+            for k in range(offsets.shape[0]):
+                r, c = row + offsets[k, 0], col + offsets[k, 1]
+                if 0 <= r < height and 0 <= c < width and valid[r, c]:
+                    result[row, col] = labels[r, c]
+                    break
+
+
+@_jit
+def border_pair_counts(
+    labels: np.ndarray,
+    points: np.ndarray,
+    depth_m: np.ndarray,
+    valid: np.ndarray,
+    contact_gap_m: float,
+    front_low_m: float,
+    front_high_m: float,
+    n_labels: int,
+):
+    """Where segments meet, counted over the 4-neighbour pixel pairs of a (H, W) label image
+    (``containers._borders`` documents the rules): a pair counts when both pixels are
+    ``valid`` with labels a != b, both > 0. ``points`` (H, W, 3) world (m), ``depth_m`` (H, W).
+
+    Returns (2, L, L) int64 ``contacts`` [pass, min(a, b), max(a, b)] (world points closer than
+    ``contact_gap_m``) and (2, L, L) ``fronts`` [pass, nearer, farther] (depth step strictly
+    between ``front_low_m`` and ``front_high_m``); pass 0 counts horizontal pairs, pass 1
+    vertical ones, and L = ``n_labels`` exceeds every label."""
+    height, width = labels.shape
+    contacts = np.zeros((2, n_labels, n_labels), dtype=np.int64)
+    fronts = np.zeros((2, n_labels, n_labels), dtype=np.int64)
+    for direction in range(2):
+        d_row, d_col = (0, 1) if direction == 0 else (1, 0)
+        for row in range(height - d_row):
+            for col in range(width - d_col):
+                a = labels[row, col] if valid[row, col] else 0
+                r, c = row + d_row, col + d_col
+                b = labels[r, c] if valid[r, c] else 0
+                if a == b or a <= 0 or b <= 0:
+                    continue
+                dx = points[row, col, 0] - points[r, c, 0]
+                dy = points[row, col, 1] - points[r, c, 1]
+                dz = points[row, col, 2] - points[r, c, 2]
+                if np.sqrt(dx * dx + dy * dy + dz * dz) < contact_gap_m:
+                    contacts[direction, min(a, b), max(a, b)] += 1
+                step = depth_m[r, c] - depth_m[row, col]  # > 0: a is nearer; depth's dtype
+                if front_low_m < abs(step) < front_high_m:
+                    if step > 0:
+                        fronts[direction, a, b] += 1
+                    else:
+                        fronts[direction, b, a] += 1
+    return contacts, fronts

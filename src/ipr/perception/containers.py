@@ -45,6 +45,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
+from ipr import kernels
 from ipr.perception.config import PerceptionConfig
 from ipr.perception.types import KnownPlane
 
@@ -218,41 +219,31 @@ def _borders(
     stands in front of the other there).
     """
     low, high = config.inside_front_step_m
-    contacts: dict[tuple[int, int], int] = {}
-    fronts: dict[tuple[int, int], int] = {}
-    base = int(labels.max()) + 1
-    # Only the labelled pixels' bounding box can hold borders; labels without depth are 0.
+    # Only the labelled pixels' bounding box can hold borders.
     rows, cols = np.nonzero(labels > 0)
     box = (slice(rows.min(), rows.max() + 1), slice(cols.min(), cols.max() + 1))
-    labels = np.where(valid[box], labels[box], 0)
-    points, depth_m = points[box], depth_m[box]
-    for first, second in (
-        ((slice(None), slice(None, -1)), (slice(None), slice(1, None))),
-        ((slice(None, -1), slice(None)), (slice(1, None), slice(None))),
-    ):
-        a, b = labels[first], labels[second]
-        border = np.nonzero((a != b) & (a > 0) & (b > 0))
-        a, b = a[border].astype(np.int64), b[border].astype(np.int64)
-        gap = np.linalg.norm(points[first][border] - points[second][border], axis=1)
-        step = depth_m[second][border] - depth_m[first][border]  # > 0: a is nearer
-        near = gap < config.inside_contact_gap_m
-        _count(contacts, np.minimum(a[near], b[near]), np.maximum(a[near], b[near]), base)
-        ahead = (np.abs(step) > low) & (np.abs(step) < high)
-        _count(
-            fronts,
-            np.where(step > 0, a, b)[ahead],
-            np.where(step > 0, b, a)[ahead],
-            base,
-        )
+    # Compiled (``ipr.kernels``): both passes over the pixel pairs without temporaries.
+    contact_counts, front_counts = kernels.border_pair_counts(
+        np.ascontiguousarray(labels[box]),
+        points[box],
+        depth_m[box],
+        valid[box],
+        float(config.inside_contact_gap_m),
+        # The depth step is compared in the depth's own precision, as numpy compared it.
+        depth_m.dtype.type(low),
+        depth_m.dtype.type(high),
+        int(labels.max()) + 1,
+    )
+    # The pairs in the order the dictionaries were built before (each pass's pairs sorted,
+    # horizontal pass first): the joins take the first of equally strong pairs.
+    contacts: dict[tuple[int, int], int] = {}
+    fronts: dict[tuple[int, int], int] = {}
+    for counts, found in ((contact_counts, contacts), (front_counts, fronts)):
+        for direction in range(2):
+            for a, b in zip(*np.nonzero(counts[direction]), strict=True):
+                pair = (int(a), int(b))
+                found[pair] = found.get(pair, 0) + int(counts[direction, a, b])
     return contacts, fronts
-
-
-def _count(counts: dict, first: np.ndarray, second: np.ndarray, base: int) -> None:
-    """Add the occurrences of each (first, second) pair to ``counts``."""
-    keys, count = np.unique(first * base + second, return_counts=True)
-    for key, n in zip(keys.tolist(), count.tolist(), strict=True):
-        pair = divmod(key, base)
-        counts[pair] = counts.get(pair, 0) + n
 
 
 def _relabelled(counts: dict, piece: int, container: int, ordered: bool) -> dict:

@@ -20,11 +20,11 @@ from collections.abc import Sequence
 
 import numpy as np
 from scipy.linalg import eigh
-from scipy.ndimage import maximum_filter
 from scipy.sparse import coo_matrix, csr_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import eigsh
 
+from ipr import kernels
 from ipr.errors import IprError
 from ipr.perception.config import PerceptionConfig
 from ipr.perception.containers import join_container_insides
@@ -224,24 +224,14 @@ def fill_label_holes(labels: np.ndarray, valid: np.ndarray, max_distance_px: flo
     box_valid = valid[top:bottom, left:right]
     if box_valid.all() or not box_valid.any():
         return labels
-    box_height, box_width = box.shape
-    # Pixels still looking for a valid neighbour; only those with a labelled pixel within reach
-    # can take a label (the others' nearest valid pixel, if any, is unlabelled: they stay 0),
-    # and on real frames most pixels without depth are far from every segment.
-    span = 2 * int(np.ceil(max_distance_px)) + 1
-    near_label = maximum_filter(box > 0, size=span, mode="constant")
-    rows, cols = np.nonzero(~box_valid & near_label)
     result = labels.copy()
-    filled = result[top:bottom, left:right]  # a view: writes go to result
-    for d_row, d_col in _offsets_by_distance(max_distance_px):
-        r, c = rows + d_row, cols + d_col
-        inside = (r >= 0) & (r < box_height) & (c >= 0) & (c < box_width)
-        r, c = np.where(inside, r, 0), np.where(inside, c, 0)
-        found = inside & box_valid[r, c]
-        filled[rows[found], cols[found]] = box[r[found], c[found]]
-        rows, cols = rows[~found], cols[~found]
-        if rows.size == 0:
-            break
+    # Compiled (``ipr.kernels``): each pixel without depth tries the offsets until one is valid.
+    kernels.fill_from_nearest(
+        np.ascontiguousarray(box),
+        np.ascontiguousarray(box_valid),
+        _offsets_by_distance(max_distance_px),
+        result[top:bottom, left:right],  # a view: writes go to result
+    )
     return result
 
 
