@@ -497,9 +497,48 @@ def objects_plane_depth(
             col = pixels[p] % width - left + margin
             inside[row, col] = True
             centred[row, col] = result[p] - reference
+        # Summed-area tables of the mask and of the centred depth (row 0 and column 0 zero):
+        # a window's count and depth sum in four reads; only windows the object does not fill
+        # need the moments of the full fit.
+        filled = np.zeros((crop_height + 1, crop_width + 1))
+        depth_sum = np.zeros((crop_height + 1, crop_width + 1))
+        for row in range(crop_height):
+            for col in range(crop_width):
+                filled[row + 1, col + 1] = (
+                    filled[row, col + 1]
+                    + filled[row + 1, col]
+                    - filled[row, col]
+                    + inside[row, col]
+                )
+                depth_sum[row + 1, col + 1] = (
+                    depth_sum[row, col + 1]
+                    + depth_sum[row + 1, col]
+                    - depth_sum[row, col]
+                    + centred[row, col]
+                )
         for p in range(first, last):
             row = pixels[p] // width - top + margin
             col = pixels[p] % width - left + margin
+            low_row, high_row = row - margin, row + margin + 1
+            low_col, high_col = col - margin, col + margin + 1
+            count = (
+                filled[high_row, high_col]
+                - filled[low_row, high_col]
+                - filled[high_row, low_col]
+                + filled[low_row, low_col]
+            )
+            if count > area - 0.5:
+                # A full window is symmetric about its pixel: the plane's value is the mean.
+                window_sum = (
+                    depth_sum[high_row, high_col]
+                    - depth_sum[low_row, high_col]
+                    - depth_sum[high_row, low_col]
+                    + depth_sum[low_row, low_col]
+                )
+                result[p] = window_sum / area + reference
+                continue
+            if count < 5.5:
+                continue
             s = cu = cv = cuu = cvv = cuv = sd = cdu = cdv = 0.0
             for dv in range(-margin, margin + 1):
                 for du in range(-margin, margin + 1):
@@ -514,18 +553,12 @@ def objects_plane_depth(
                         sd += value
                         cdu += value * du
                         cdv += value * dv
-            if s > area - 0.5:
-                # A full window is symmetric about its pixel: the plane's value is the mean.
-                result[p] = sd / area + reference
-            elif s > 5.5:
-                # Cramer's rule for [[s, cu, cv], [cu, cuu, cuv], [cv, cuv, cvv]] x = [sd, cdu, cdv].
-                minor = cuu * cvv - cuv * cuv
-                det = s * minor - cu * (cu * cvv - cuv * cv) + cv * (cu * cuv - cuu * cv)
-                if abs(det) > 1e-6 * max(s, 1.0) ** 3:  # not all on one line
-                    numerator = (
-                        sd * minor - cu * (cdu * cvv - cuv * cdv) + cv * (cdu * cuv - cuu * cdv)
-                    )
-                    result[p] = numerator / det + reference
+            # Cramer's rule for [[s, cu, cv], [cu, cuu, cuv], [cv, cuv, cvv]] x = [sd, cdu, cdv].
+            minor = cuu * cvv - cuv * cuv
+            det = s * minor - cu * (cu * cvv - cuv * cv) + cv * (cu * cuv - cuu * cv)
+            if abs(det) > 1e-6 * max(s, 1.0) ** 3:  # not all on one line
+                numerator = sd * minor - cu * (cdu * cvv - cuv * cdv) + cv * (cdu * cuv - cuu * cdv)
+                result[p] = numerator / det + reference
     return result
 
 
@@ -701,3 +734,41 @@ def border_pair_counts(
                     else:
                         fronts[direction, b, a] += 1
     return contacts, fronts
+
+
+@_jit
+def group_sums(groups: np.ndarray, values: np.ndarray, count: int) -> np.ndarray:
+    """(count, C) sums of the rows of (N, C) ``values`` per group id (N,) in [0, count), in row
+    order: ``np.bincount(groups, weights=values[:, c], minlength=count)`` for every column c
+    in one pass (same bits)."""
+    sums = np.zeros((count, values.shape[1]))
+    for p in range(groups.shape[0]):
+        for c in range(values.shape[1]):
+            sums[groups[p], c] += values[p, c]
+    return sums
+
+
+@_jit
+def voxel_keys(points: np.ndarray, pixels: np.ndarray, voxel_m: float):
+    """Voxel keys (N,) int64 of the (P, 3) world points (m) at flat ``pixels`` (N,), and the
+    grid's dims (3,): each point's cell floor(x / ``voxel_m``) shifted so that the smallest is
+    1 on every axis (neighbour offsets never wrap), key (x * dims[1] + y) * dims[2] + z, with
+    dims one more than the largest shifted cell on every axis."""
+    count = pixels.shape[0]
+    cells = np.empty((count, 3), dtype=np.int64)
+    low = np.full(3, np.iinfo(np.int64).max, dtype=np.int64)
+    high = np.full(3, np.iinfo(np.int64).min, dtype=np.int64)
+    for p in range(count):
+        for axis in range(3):
+            cell = np.int64(np.floor(points[pixels[p], axis] / voxel_m))
+            cells[p, axis] = cell
+            low[axis] = min(low[axis], cell)
+            high[axis] = max(high[axis], cell)
+    dims = high - low + 3  # shifted cells run from 1 to high - low + 1
+    keys = np.empty(count, dtype=np.int64)
+    for p in range(count):
+        x = cells[p, 0] - low[0] + 1
+        y = cells[p, 1] - low[1] + 1
+        z = cells[p, 2] - low[2] + 1
+        keys[p] = (x * dims[1] + y) * dims[2] + z
+    return keys, dims

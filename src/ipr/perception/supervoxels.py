@@ -141,20 +141,15 @@ def compute_supervoxels(
         return _empty(labels_image)
     if points_world is None:
         points_world = frame.points_world()
-    all_points = np.asarray(points_world.reshape(-1, 3)[pixels], dtype=np.float64)
+    flat_points = np.asarray(points_world.reshape(-1, 3), dtype=np.float64)
     voxel = config.voxel_size_m
-    scaled = all_points / voxel
-    all_cells = np.floor(scaled, out=scaled).astype(np.int64)
-    # Column by column: numpy's axis-0 reductions of an (N, 3) array are ten times slower.
-    low = np.array([all_cells[:, axis].min() for axis in range(3)])
-    all_cells -= low - 1  # >= 1 so that neighbour offsets never wrap
-    dims = np.array([all_cells[:, axis].max() for axis in range(3)]) + 2
-    all_keys = (all_cells[:, 0] * dims[1] + all_cells[:, 1]) * dims[2] + all_cells[:, 2]
+    # Compiled (``ipr.kernels``): every kept pixel's voxel key without gathering its point.
+    all_keys, dims = kernels.voxel_keys(flat_points, pixels, voxel)
     # Close-up frames have tens of pixels per voxel: the statistics come from an even subset
     # of at most supervoxel_max_points pixels, and every pixel then joins its voxel's label.
     step = -(-len(pixels) // config.supervoxel_max_points)
     sample = np.arange(0, len(pixels), step)
-    points = all_points[sample]
+    points = flat_points[pixels[sample]]
     keys = all_keys[sample]
     if normals_camera is None:
         camera_normals = organised_normals_at(frame.depth_m, frame.K, pixels[sample], config)
@@ -340,14 +335,9 @@ def _empty(labels: np.ndarray) -> Supervoxels:
 
 
 def _group_sum(groups: np.ndarray, values: np.ndarray, count: int) -> np.ndarray:
-    """(count, C) sums of (N, C) ``values`` per group id (N,)."""
-    return np.stack(
-        [
-            np.bincount(groups, weights=values[:, c], minlength=count)
-            for c in range(values.shape[1])
-        ],
-        axis=1,
-    )
+    """(count, C) sums of (N, C) ``values`` per group id (N,) (compiled: one pass, the same
+    sums as a bincount per column)."""
+    return kernels.group_sums(groups, np.asarray(values, dtype=np.float64), int(count))
 
 
 def _group_mean(
