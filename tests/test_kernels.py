@@ -314,3 +314,59 @@ def test_container_borders_match_the_numpy_version_in_order():
     assert list(contacts.items()) == list(expected[0].items())
     assert list(fronts.items()) == list(expected[1].items())
     assert contacts and fronts  # both kinds occur
+
+
+@pytest.mark.parametrize("previous_dtype", [np.float32, np.float64])
+def test_pixel_changes_match_the_numpy_comparison(previous_dtype):
+    rng = np.random.default_rng(21)
+    size = 5000
+    valid = np.sort(rng.choice(size, 3000, replace=False))
+    z = rng.uniform(0.5, 1.5, valid.size).astype(np.float32)
+    previous_depth = (rng.uniform(0.5, 1.5, size) * (rng.random(size) > 0.1)).astype(
+        previous_dtype
+    )
+    pixel = rng.integers(0, size, valid.size)
+    pixel[:1000] = valid[:1000]  # many land on their own spot: small differences
+    previous_depth[pixel[:1000]] = z[:1000] + rng.normal(0, 0.004, 1000)
+    inside = rng.random(valid.size) > 0.05
+    previous_labels = rng.integers(0, 6, size).astype(np.int32)
+    tolerance, quadratic, near_m = 0.005, 0.003, 0.01
+    # The numpy expressions of compare_frames before the kernel.
+    before = previous_depth[pixel]
+    compared = inside & (before > 0)
+    limit = tolerance + quadratic * z**2
+    difference = z - before
+    expected_state = np.full(valid.size, 1, dtype=np.int8)
+    expected_state[difference > limit] = 2
+    expected_state[difference < -limit] = 3
+    expected_state[~compared] = 0
+    state, label, near = kernels.pixel_changes(
+        size,
+        valid,
+        pixel,
+        z,
+        inside,
+        previous_depth,
+        previous_labels,
+        np.float32(tolerance),
+        np.float32(quadratic),
+        difference.dtype.type(near_m),
+        (1, 2, 3, 0),
+    )
+    np.testing.assert_array_equal(state[valid], expected_state)
+    np.testing.assert_array_equal(label[valid], np.where(compared, previous_labels[pixel], 0))
+    np.testing.assert_array_equal(near[valid], compared & (np.abs(difference) <= near_m))
+    assert len(np.unique(expected_state)) == 4  # every state occurs
+
+
+def test_grouped_order_statistic_is_the_lexsort_pick():
+    rng = np.random.default_rng(4)
+    groups = rng.integers(3, 40, 4000).astype(np.int32)
+    groups[groups == 11] = 12  # a missing id
+    values = rng.normal(size=4000).round(2)  # ties
+    order = np.lexsort((values, groups))
+    ids, starts, counts = np.unique(groups[order], return_index=True, return_counts=True)
+    expected = values[order][starts + np.floor(0.9 * (counts - 1)).astype(np.int64)]
+    found_ids, found = kernels.grouped_order_statistic(groups, values, 0.9)
+    np.testing.assert_array_equal(found_ids, ids)
+    np.testing.assert_array_equal(found, expected)

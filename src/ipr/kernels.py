@@ -772,3 +772,81 @@ def voxel_keys(points: np.ndarray, pixels: np.ndarray, voxel_m: float):
         z = cells[p, 2] - low[2] + 1
         keys[p] = (x * dims[1] + y) * dims[2] + z
     return keys, dims
+
+
+@_jit
+def pixel_changes(
+    size: int,
+    valid: np.ndarray,
+    pixel: np.ndarray,
+    z: np.ndarray,
+    inside: np.ndarray,
+    previous_depth: np.ndarray,
+    previous_labels: np.ndarray,
+    tolerance_m,
+    tolerance_quadratic,
+    near_m,
+    states: tuple,
+):
+    """Per-pixel comparison of frame t with frame t-1 (``temporal.compare_frames`` documents
+    it): pixel ``valid[k]`` (flat, of ``size`` pixels) with depth ``z[k]`` lands on flat pixel
+    ``pixel[k]`` of frame t-1 where ``inside[k]``. Returns (size,) int8 states (``states`` =
+    (unchanged, revealed, arrived, not compared); pixels without depth 0), (size,) int32 labels
+    of frame t-1 there (0 where not compared) and (size,) bool "within ``near_m``". The
+    tolerances are scalars of z's dtype, so the arithmetic is numpy's (same bits)."""
+    unchanged, revealed, arrived, not_compared = states
+    state = np.zeros(size, dtype=np.int8)
+    previous_label = np.zeros(size, dtype=np.int32)
+    near = np.zeros(size, dtype=np.bool_)
+    for k in range(valid.shape[0]):
+        before = previous_depth[pixel[k]]
+        depth = z[k]
+        if not (inside[k] and before > 0):
+            state[valid[k]] = not_compared
+            continue
+        tolerance = tolerance_m + tolerance_quadratic * depth**2
+        difference = depth - before
+        if difference < -tolerance:
+            state[valid[k]] = arrived
+        elif difference > tolerance:
+            state[valid[k]] = revealed
+        else:
+            state[valid[k]] = unchanged
+        previous_label[valid[k]] = previous_labels[pixel[k]]
+        near[valid[k]] = abs(difference) <= near_m
+    return state, previous_label, near
+
+
+@_jit
+def grouped_order_statistic(groups: np.ndarray, values: np.ndarray, fraction: float):
+    """The distinct ids (G,) of (N,) ``groups`` (ascending) and, for each, the value at
+    position floor(``fraction`` * (n - 1)) of its n (N,) ``values`` sorted ascending (the
+    lower of numpy's percentile neighbours)."""
+    if groups.shape[0] == 0:
+        return np.zeros(0, dtype=groups.dtype), np.zeros(0)
+    lowest, highest = groups.min(), groups.max()
+    sizes = np.zeros(highest - lowest + 2, dtype=np.int64)
+    for group in groups:
+        sizes[group - lowest + 1] += 1
+    starts = np.cumsum(sizes)
+    fill = starts[:-1].copy()
+    grouped = np.empty(values.shape[0])
+    for p in range(groups.shape[0]):
+        slot = groups[p] - lowest
+        grouped[fill[slot]] = values[p]
+        fill[slot] += 1
+    n_groups = 0
+    for slot in range(highest - lowest + 1):
+        n_groups += starts[slot + 1] > starts[slot]
+    ids = np.empty(n_groups, dtype=groups.dtype)
+    statistic = np.empty(n_groups)
+    found = 0
+    for slot in range(highest - lowest + 1):
+        first, last = starts[slot], starts[slot + 1]
+        if last == first:
+            continue
+        ordered = np.sort(grouped[first:last])
+        ids[found] = slot + lowest
+        statistic[found] = ordered[int(np.floor(fraction * (last - first - 1)))]
+        found += 1
+    return ids, statistic

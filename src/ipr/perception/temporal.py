@@ -41,6 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ipr import kernels
 from ipr.camera import invert_transform
 from ipr.perception.config import PerceptionConfig
 from ipr.perception.planes import static_geometry_mask
@@ -118,20 +119,22 @@ def compare_frames(
         previous_height, previous_width = previous_depth_m.shape
         inside = in_front & (u >= 0) & (u < previous_width) & (v >= 0) & (v < previous_height)
         pixel = np.where(inside, v.astype(np.int64) * previous_width + u.astype(np.int64), 0)
-    before = previous_depth_m.reshape(-1)[pixel]
-    compared = inside & (before > 0)
-    tolerance = config.temporal_depth_tolerance_m + config.temporal_depth_tolerance_quadratic * z**2
-    difference = z - before
-    pixel_state = np.full(valid.size, UNCHANGED, dtype=np.int8)
-    pixel_state[difference > tolerance] = REVEALED
-    pixel_state[difference < -tolerance] = ARRIVED
-    pixel_state[~compared] = NOT_COMPARED
-    state = np.zeros(height * width, dtype=np.int8)
-    state[valid] = pixel_state
-    previous_label = np.zeros(height * width, dtype=np.int32)
-    previous_label[valid] = np.where(compared, previous_labels.reshape(-1)[pixel], 0)
-    near = np.zeros(height * width, dtype=bool)
-    near[valid] = compared & (np.abs(difference) <= config.temporal_near_m)
+    # Compiled (``ipr.kernels``): the states in one pass. Each quantity keeps the precision
+    # numpy gave it: tolerances in z's, the depth difference in the wider of the two depths'.
+    dtype = np.result_type(z.dtype, previous_depth_m.dtype)
+    state, previous_label, near = kernels.pixel_changes(
+        height * width,
+        valid,
+        pixel,
+        z,
+        inside,
+        previous_depth_m.reshape(-1),
+        previous_labels.reshape(-1),
+        z.dtype.type(config.temporal_depth_tolerance_m),
+        z.dtype.type(config.temporal_depth_tolerance_quadratic),
+        dtype.type(config.temporal_near_m),
+        (UNCHANGED, REVEALED, ARRIVED, NOT_COMPARED),
+    )
     return FrameChange(
         state.reshape(height, width),
         previous_label.reshape(height, width),
