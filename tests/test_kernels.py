@@ -199,10 +199,16 @@ def test_object_pixel_geometry_matches_backprojection_and_pixel_areas():
     width = 80
     pixels = rng.choice(60 * width, 900, replace=False)
     depth = rng.uniform(0.4, 1.5, 900).astype(np.float32)
-    normals = rng.normal(size=(900, 3))
-    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    supervoxel_normals = rng.normal(size=(40, 3))
+    supervoxel_normals /= np.linalg.norm(supervoxel_normals, axis=1, keepdims=True)
+    point_supervoxel = rng.integers(-1, 40, 900)  # -1: no supervoxel, facing the camera
+    normals = np.where(
+        (point_supervoxel >= 0)[:, None],
+        supervoxel_normals[point_supervoxel],
+        -world_from_camera[:3, 2],
+    )
     world, areas = kernels.object_pixel_geometry(
-        pixels, depth, width, K, world_from_camera, normals
+        pixels, depth, width, K, world_from_camera, point_supervoxel, supervoxel_normals
     )
     camera = backproject_pixels(pixels, depth, K, width)
     expected_world = camera @ world_from_camera[:3, :3].T + world_from_camera[:3, 3]
@@ -322,9 +328,7 @@ def test_pixel_changes_match_the_numpy_comparison(previous_dtype):
     size = 5000
     valid = np.sort(rng.choice(size, 3000, replace=False))
     z = rng.uniform(0.5, 1.5, valid.size).astype(np.float32)
-    previous_depth = (rng.uniform(0.5, 1.5, size) * (rng.random(size) > 0.1)).astype(
-        previous_dtype
-    )
+    previous_depth = (rng.uniform(0.5, 1.5, size) * (rng.random(size) > 0.1)).astype(previous_dtype)
     pixel = rng.integers(0, size, valid.size)
     pixel[:1000] = valid[:1000]  # many land on their own spot: small differences
     previous_depth[pixel[:1000]] = z[:1000] + rng.normal(0, 0.004, 1000)

@@ -569,12 +569,14 @@ def object_pixel_geometry(
     width: int,
     K: np.ndarray,
     world_from_camera: np.ndarray,
-    normals_world: np.ndarray,
+    point_supervoxel: np.ndarray,
+    supervoxel_normals: np.ndarray,
 ):
     """World points (N, 3) (m) and surface areas (N,) (m^2) of N pixels, in one pass.
 
     ``pixels`` (N,) flat indices in an image ``width`` wide, ``depth_m`` (N,) their depths
-    (m, > 0), ``normals_world`` (N, 3) their unit surface normals (world). A pixel at depth z
+    (m, > 0), ``point_supervoxel`` (N,) their supervoxels (-1 = none: the surface faces the
+    camera) and ``supervoxel_normals`` (M, 3) those's unit normals (world). A pixel at depth z
     covers z^2 / (fx fy) of the fronto-parallel plane, more by |r_z| / max(|r . n|, 0.25) on a
     surface tilted away (r the unit ray; ``facets.pixel_areas``); the points are
     ``backproject_pixels`` moved to the world."""
@@ -588,6 +590,7 @@ def object_pixel_geometry(
         x, y = (col - cx) / fx * z, (row - cy) / fy * z
         facing = 0.0  # r . n in the camera frame = (R r_camera) . n_world
         length = np.sqrt(x * x + y * y + z * z)
+        supervoxel = point_supervoxel[p]
         for axis in range(3):
             world[p, axis] = (
                 x * world_from_camera[axis, 0]
@@ -595,7 +598,11 @@ def object_pixel_geometry(
                 + z * world_from_camera[axis, 2]
                 + world_from_camera[axis, 3]
             )
-            facing += (world[p, axis] - world_from_camera[axis, 3]) * normals_world[p, axis]
+            if supervoxel >= 0:
+                normal = supervoxel_normals[supervoxel, axis]
+            else:
+                normal = -world_from_camera[axis, 2]
+            facing += (world[p, axis] - world_from_camera[axis, 3]) * normal
         facing = max(abs(facing / length), 0.25)
         areas[p] = z * z / (fx * fy) * (abs(z / length) / facing)
     return world, areas
@@ -850,3 +857,53 @@ def grouped_order_statistic(groups: np.ndarray, values: np.ndarray, fraction: fl
         statistic[found] = ordered[int(np.floor(fraction * (last - first - 1)))]
         found += 1
     return ids, statistic
+
+
+@_jit
+def connected_components(pairs: np.ndarray, count: int) -> np.ndarray:
+    """(count,) int64 connected component of each node of the undirected graph with (E, 2)
+    edges ``pairs``, numbered in the order of each component's smallest node (as scipy's
+    ``connected_components`` numbers them): union-find whose roots are the smallest nodes."""
+    parent = np.arange(count)
+    for e in range(pairs.shape[0]):
+        a, b = pairs[e, 0], pairs[e, 1]
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        while parent[b] != b:
+            parent[b] = parent[parent[b]]
+            b = parent[b]
+        if a < b:
+            parent[b] = a
+        elif b < a:
+            parent[a] = b
+    component = np.empty(count, dtype=np.int64)
+    n_components = 0
+    for node in range(count):  # a root precedes its component's other nodes
+        root = node
+        while parent[root] != root:
+            root = parent[root]
+        if root == node:
+            component[node] = n_components
+            n_components += 1
+        else:
+            component[node] = component[root]
+    return component
+
+
+@_jit
+def region_sums(point_region: np.ndarray, points: np.ndarray, areas: np.ndarray, count: int):
+    """Pixel counts (count,) int64, point sums (count, 3) and area sums (count,) of the (N,)
+    points of each region id in [0, count) (points of region -1 are skipped), in point order."""
+    sizes = np.zeros(count, dtype=np.int64)
+    sums = np.zeros((count, 3))
+    area_sums = np.zeros(count)
+    for p in range(point_region.shape[0]):
+        region = point_region[p]
+        if region < 0:
+            continue
+        sizes[region] += 1
+        area_sums[region] += areas[p]
+        for axis in range(3):
+            sums[region, axis] += points[p, axis]
+    return sizes, sums, area_sums

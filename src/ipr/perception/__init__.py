@@ -197,11 +197,14 @@ def _partial_objects(
     )
     supervoxel_all = flat_supervoxel[order]
     has_all = supervoxel_all >= 0
-    normals_all = np.empty((len(order), 3))
-    normals_all[:] = -frame.world_from_camera[:3, 2]  # no supervoxel: facing the camera
-    normals_all[has_all] = supervoxels.normals[supervoxel_all[has_all]]
     world_all, areas_all = object_pixel_geometry(
-        order, depth, width, frame.K, frame.world_from_camera, normals_all
+        order,
+        depth,
+        width,
+        frame.K,
+        frame.world_from_camera,
+        supervoxel_all,
+        np.ascontiguousarray(supervoxels.normals, dtype=np.float64),
     )
     rgb_all = flat_rgb[order]
     border_all = border[order]

@@ -107,50 +107,32 @@ def object_facets(
     facets, facet_of_point = [], np.full(len(points_world), -1, dtype=np.int64)
     region_normals = supervoxel_normals[supervoxel_ids]
     region_weights = supervoxel_sizes[supervoxel_ids].astype(float)
-    # The points of every region from one sort (regions are numbered from 0; points of no
-    # supervoxel of the object, region -1, come first and are skipped).
+    n_regions = int(region.max()) + 1
+    # The points of every region from one sort and one gather (regions are numbered from 0;
+    # points of no supervoxel of the object, region -1, come first and are skipped); their
+    # counts, centres and areas from one compiled pass.
     by_region = np.argsort(point_region, kind="stable")
-    bounds = np.searchsorted(point_region[by_region], np.arange(region.max() + 2))
-    for number in range(region.max() + 1):
-        members = by_region[bounds[number] : bounds[number + 1]]
-        if members.size == 0:
+    bounds = np.searchsorted(point_region[by_region], np.arange(n_regions + 1))
+    grouped = points_world[by_region]
+    sizes, sums, area_sums = kernels.region_sums(
+        point_region, np.ascontiguousarray(points_world, dtype=np.float64), point_areas, n_regions
+    )
+    summed_normals = kernels.group_sums(region, region_normals * region_weights[:, None], n_regions)
+    for number in range(n_regions):
+        if sizes[number] == 0:
             continue
-        in_region = region == number
-        weights = region_weights[in_region]
-        normal = (region_normals[in_region] * weights[:, None]).sum(axis=0)
-        normal /= np.linalg.norm(normal) + 1e-12
-        facet_of_point[members] = len(facets)
-        points = points_world[members]
-        facets.append(Facet(points.mean(axis=0), normal, points, float(point_areas[members].sum())))
+        normal = summed_normals[number]
+        normal /= np.sqrt(normal @ normal) + 1e-12
+        facet_of_point[by_region[bounds[number] : bounds[number + 1]]] = len(facets)
+        points = grouped[bounds[number] : bounds[number + 1]]
+        facets.append(Facet(sums[number] / sizes[number], normal, points, float(area_sums[number])))
     return tuple(facets), facet_of_point
 
 
 def _components(pairs: np.ndarray, count: int) -> np.ndarray:
     """(count,) int64 connected component of each node of the undirected graph with edges
     (E, 2) ``pairs``, numbered as scipy's ``connected_components`` numbers them: in the order
-    of each component's smallest node.
-
-    Min-label hooking with pointer jumping: every node ends up pointing at the smallest node
-    of its component. The graphs here (one object's supervoxels) have a few to a few hundred
-    nodes, where scipy's sparse-matrix set-up costs several times the work itself.
-    """
-    parent = np.arange(count)
-    if len(pairs) == 0:
-        return parent
-    a, b = pairs[:, 0], pairs[:, 1]
-    while True:
-        root_a, root_b = parent[a], parent[b]
-        differ = root_a != root_b
-        if not differ.any():
-            break
-        root_a, root_b = root_a[differ], root_b[differ]
-        low = np.minimum(root_a, root_b)
-        # Each root hooks under the smallest root it is linked to (roots only decrease).
-        np.minimum.at(parent, root_a, low)
-        np.minimum.at(parent, root_b, low)
-        while True:  # point every node at its root
-            grand = parent[parent]
-            if np.array_equal(grand, parent):
-                break
-            parent = grand
-    return np.unique(parent, return_inverse=True)[1]
+    of each component's smallest node. Compiled union-find (``ipr.kernels``): the graphs here
+    (one object's supervoxels) have a few to a few hundred nodes, where scipy's sparse-matrix
+    set-up costs several times the work itself."""
+    return kernels.connected_components(np.asarray(pairs, dtype=np.int64).reshape(-1, 2), count)
