@@ -374,3 +374,30 @@ def test_grouped_order_statistic_is_the_lexsort_pick():
     found_ids, found = kernels.grouped_order_statistic(groups, values, 0.9)
     np.testing.assert_array_equal(found_ids, ids)
     np.testing.assert_array_equal(found, expected)
+
+
+def test_lloyd_iterations_match_the_numpy_iterations():
+    rng = np.random.default_rng(9)
+    blobs = rng.normal(size=(5, 4)) * 3
+    points = np.concatenate([blob + rng.normal(0, 0.6, (80, 4)) for blob in blobs])
+    start = points[rng.choice(len(points), 5, replace=False)].copy()
+    # The numpy iterations of kmeans_labels before the kernel.
+    centres = start.copy()
+    squared = np.einsum("ij,ij->i", points, points)
+    labels = np.full(len(points), -1)
+    for _ in range(100):
+        distances = squared[:, None] - 2.0 * points @ centres.T + np.sum(centres**2, axis=1)
+        new_labels = np.argmin(distances, axis=1)
+        if np.array_equal(new_labels, labels):
+            break
+        labels = new_labels
+        for c in range(5):
+            if (labels == c).any():
+                centres[c] = points[labels == c].mean(axis=0)
+    inertia = float(np.maximum(distances[np.arange(len(points)), labels], 0.0).sum())
+    found_centres = start.copy()
+    found, found_inertia = kernels.lloyd_iterations(points, found_centres, 100)
+    np.testing.assert_array_equal(found, labels)
+    assert found_inertia == pytest.approx(inertia, rel=1e-9)
+    np.testing.assert_allclose(found_centres, centres, rtol=1e-12)
+    assert len(np.unique(found)) == 5

@@ -907,3 +907,58 @@ def region_sums(point_region: np.ndarray, points: np.ndarray, areas: np.ndarray,
         for axis in range(3):
             sums[region, axis] += points[p, axis]
     return sizes, sums, area_sums
+
+
+@_jit
+def lloyd_iterations(points: np.ndarray, centres: np.ndarray, max_iterations: int):
+    """Lloyd's k-means from the (k, d) ``centres`` (updated in place) on (m, d) ``points``:
+    assign each point to its nearest centre (the first of equals), move each centre that kept
+    points to their mean, until the assignment stops changing or ``max_iterations``. Returns
+    the (m,) int64 labels and the inertia (sum of squared distances to the assigned centres,
+    as |x|^2 - 2 x.c + |c|^2 clipped at 0, from the last assignment)."""
+    m, d = points.shape
+    k = centres.shape[0]
+    labels = np.full(m, -1, dtype=np.int64)
+    nearest = np.zeros(m)
+    squared = np.zeros(m)
+    for i in range(m):
+        for j in range(d):
+            squared[i] += points[i, j] * points[i, j]
+    centre_squared = np.zeros(k)
+    sums = np.zeros((k, d))
+    counts = np.zeros(k)
+    for _ in range(max_iterations):
+        for c in range(k):
+            centre_squared[c] = 0.0
+            for j in range(d):
+                centre_squared[c] += centres[c, j] * centres[c, j]
+        changed = False
+        for i in range(m):
+            best, best_distance = 0, np.inf
+            for c in range(k):
+                dot = 0.0
+                for j in range(d):
+                    dot += points[i, j] * centres[c, j]
+                distance = squared[i] - 2.0 * dot + centre_squared[c]
+                if distance < best_distance:
+                    best, best_distance = c, distance
+            nearest[i] = best_distance
+            if labels[i] != best:
+                labels[i] = best
+                changed = True
+        if not changed:
+            break
+        sums[:] = 0.0
+        counts[:] = 0.0
+        for i in range(m):
+            counts[labels[i]] += 1.0
+            for j in range(d):
+                sums[labels[i], j] += points[i, j]
+        for c in range(k):
+            if counts[c] > 0:  # an emptied cluster keeps its centre
+                for j in range(d):
+                    centres[c, j] = sums[c, j] / counts[c]
+    inertia = 0.0
+    for i in range(m):
+        inertia += max(nearest[i], 0.0)
+    return labels, inertia

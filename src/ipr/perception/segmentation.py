@@ -486,7 +486,6 @@ def kmeans_labels(
     if m <= k:
         return np.arange(m, dtype=np.int64)
     rng = np.random.default_rng(seed)
-    squared = np.einsum("ij,ij->i", points, points)
     best_labels, best_inertia = np.zeros(m, dtype=np.int64), np.inf
     for _ in range(max(restarts, 1)):
         # k-means++: each next centre drawn with probability proportional to the squared
@@ -505,20 +504,8 @@ def kmeans_labels(
                 index = rng.integers(m)
             centres[c] = points[index]
             closest = np.minimum(closest, np.sum((points - centres[c]) ** 2, axis=1))
-        labels = np.full(m, -1, dtype=np.int64)
-        for _ in range(max_iterations):
-            distances = squared[:, None] - 2.0 * points @ centres.T + np.sum(centres**2, axis=1)
-            new_labels = np.argmin(distances, axis=1)
-            if np.array_equal(new_labels, labels):
-                break
-            labels = new_labels
-            members = np.zeros((m, k))
-            members[np.arange(m), labels] = 1.0
-            counts = members.sum(axis=0)
-            sums = members.T @ points
-            filled = counts > 0  # an emptied cluster keeps its centre
-            centres[filled] = sums[filled] / counts[filled, None]
-        inertia = float(np.maximum(distances[np.arange(m), labels], 0.0).sum())
+        # Lloyd iterations compiled (``ipr.kernels``): tens of small numpy calls per iteration.
+        labels, inertia = kernels.lloyd_iterations(points, centres, max_iterations)
         if inertia < best_inertia:
             best_labels, best_inertia = labels, inertia
     return best_labels
