@@ -962,3 +962,32 @@ def lloyd_iterations(points: np.ndarray, centres: np.ndarray, max_iterations: in
     for i in range(m):
         inertia += max(nearest[i], 0.0)
     return labels, inertia
+
+
+@_jit
+def rows_at(values: np.ndarray, indices: np.ndarray) -> np.ndarray:
+    """``values[indices]`` for (N, 3) float64 ``values`` and (K,) indices: numpy's fancy
+    indexing of rows costs several times this loop on hundreds of thousands of rows."""
+    out = np.empty((indices.shape[0], 3))
+    for k in range(indices.shape[0]):
+        for axis in range(3):
+            out[k, axis] = values[indices[k], axis]
+    return out
+
+
+@_jit
+def indices_above(
+    points: np.ndarray, indices: np.ndarray, normal: np.ndarray, offset: float, clearance: float
+) -> np.ndarray:
+    """The (K,) ``indices`` whose (N, 3) points lie at least ``clearance`` (m) above the plane
+    {x : normal . x + offset = 0} (positive side), in order: ``indices[points[indices] @ normal
+    + offset >= clearance]`` in one pass."""
+    found = np.empty(indices.shape[0], dtype=indices.dtype)
+    count = 0
+    n0, n1, n2 = normal[0], normal[1], normal[2]
+    for k in range(indices.shape[0]):
+        i = indices[k]
+        if points[i, 0] * n0 + points[i, 1] * n1 + points[i, 2] * n2 + offset >= clearance:
+            found[count] = i
+            count += 1
+    return found[:count].copy()

@@ -79,7 +79,7 @@ def segment_frame(
     flat_points = points.reshape(-1, 3)
     robot = robot_pixels(frame, pushes, pusher, config, points_world=points)
     usable = np.flatnonzero((valid & ~robot).reshape(-1))
-    usable_points = flat_points[usable]
+    usable_points = kernels.rows_at(flat_points, usable)
     support = find_support_plane(usable_points, config, rng)
     if support is None:
         raise SegmentationError(
@@ -90,8 +90,10 @@ def segment_frame(
         )
     # Everything at or below the support is static. The wall search looks at an even subset
     # of the points above it (``wall_max_points``), so only those need normals here.
-    above = usable[support.signed_distance(usable_points) >= config.support_clearance_m]
-    above_points = flat_points[above]
+    above = kernels.indices_above(
+        flat_points, usable, support.normal, float(support.offset), config.support_clearance_m
+    )
+    above_points = kernels.rows_at(flat_points, above)
     frame_change = None
     if previous is not None and (config.temporal_anchoring or config.temporal_walls):
         previous_frame, previous_segmentation = previous
