@@ -401,3 +401,44 @@ def test_lloyd_iterations_match_the_numpy_iterations():
     assert found_inertia == pytest.approx(inertia, rel=1e-9)
     np.testing.assert_allclose(found_centres, centres, rtol=1e-12)
     assert len(np.unique(found)) == 5
+
+
+def test_supervoxel_anchor_counts_match_the_numpy_counts():
+    rng = np.random.default_rng(17)
+    size, count, n_labels = 6000, 50, 7
+    flat_supervoxel = rng.integers(-1, count, size)
+    state = rng.integers(0, 4, size).astype(np.int8)  # 0 not compared, 1 unchanged, 2, 3
+    label = rng.integers(0, n_labels, size)
+    label[(label == 5) & (state == 1)] = 6  # segment 5 keeps few unchanged pixels: it moved
+    near = rng.random(size) < 0.5
+    min_pixels, fraction = 40, 0.3
+    got = kernels.supervoxel_anchor_counts(
+        flat_supervoxel, state, label, near, count, n_labels, (0, 1, 2, 3), min_pixels, fraction
+    )
+    # The numpy expressions of supervoxel_anchors before the kernel.
+    unchanged_per_label = np.bincount(label[state == 1], minlength=n_labels)
+    compared_per_label = np.bincount(label[state != 0], minlength=n_labels)
+    stayed = (unchanged_per_label >= min_pixels) & (
+        unchanged_per_label >= fraction * compared_per_label
+    )
+    stayed[0] = False
+    member = flat_supervoxel >= 0
+    sv, pixel_state, pixel_label = flat_supervoxel[member], state[member], label[member]
+    is_unchanged = pixel_state == 1
+    label_stayed = stayed[pixel_label] | (pixel_label == 0)
+    shifted = (pixel_state == 3) & near[member] & stayed[pixel_label]
+    compatible = np.bincount(
+        sv[(pixel_state == 2) | (is_unchanged & label_stayed) | shifted], minlength=count
+    )
+    incompatible = np.bincount(
+        sv[((pixel_state == 3) & ~shifted) | (is_unchanged & ~label_stayed)], minlength=count
+    )
+    kept = is_unchanged & stayed[pixel_label]
+    table = np.bincount(
+        sv[kept] * n_labels + pixel_label[kept], minlength=count * n_labels
+    ).reshape(count, n_labels)
+    for found, wanted in zip(
+        got, (compatible, incompatible, table, np.bincount(sv, minlength=count)), strict=True
+    ):
+        np.testing.assert_array_equal(found, wanted)
+    assert stayed[1:5].all() and not stayed[5]

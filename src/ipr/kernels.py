@@ -991,3 +991,60 @@ def indices_above(
             found[count] = i
             count += 1
     return found[:count].copy()
+
+
+@_jit
+def supervoxel_anchor_counts(
+    flat_supervoxel: np.ndarray,
+    state: np.ndarray,
+    label: np.ndarray,
+    near: np.ndarray,
+    count: int,
+    n_labels: int,
+    states: tuple,
+    min_pixels: int,
+    static_fraction: float,
+):
+    """The pixel counts of ``temporal.supervoxel_anchors`` (which documents the rules) in two
+    passes over the (P,) pixels: ``flat_supervoxel`` (-1 = none), ``state`` (int8 states,
+    ``states`` = (not compared, unchanged, revealed, arrived)), ``label`` (previous segment,
+    0 = none, < ``n_labels``) and ``near`` (bool). Returns, per supervoxel (``count``): the
+    compatible and incompatible pixel counts (int64), the (count, n_labels) table of unchanged
+    pixels of segments that stayed, and the pixel count."""
+    not_compared, unchanged, revealed, arrived = states
+    unchanged_per_label = np.zeros(n_labels, dtype=np.int64)
+    compared_per_label = np.zeros(n_labels, dtype=np.int64)
+    for p in range(state.shape[0]):
+        if state[p] == unchanged:
+            unchanged_per_label[label[p]] += 1
+        if state[p] != not_compared:
+            compared_per_label[label[p]] += 1
+    stayed = np.zeros(n_labels, dtype=np.bool_)
+    for segment in range(1, n_labels):
+        stayed[segment] = (unchanged_per_label[segment] >= min_pixels) and (
+            unchanged_per_label[segment] >= static_fraction * compared_per_label[segment]
+        )
+    compatible = np.zeros(count, dtype=np.int64)
+    incompatible = np.zeros(count, dtype=np.int64)
+    table = np.zeros((count, n_labels), dtype=np.int64)
+    pixels = np.zeros(count, dtype=np.int64)
+    for p in range(state.shape[0]):
+        supervoxel = flat_supervoxel[p]
+        if supervoxel < 0:
+            continue
+        pixels[supervoxel] += 1
+        segment = label[p]
+        segment_stayed = stayed[segment]
+        shifted = state[p] == arrived and near[p] and segment_stayed
+        if state[p] == unchanged:
+            if segment_stayed or segment == 0:
+                compatible[supervoxel] += 1
+            else:
+                incompatible[supervoxel] += 1
+            if segment_stayed:
+                table[supervoxel, segment] += 1
+        elif state[p] == revealed or shifted:
+            compatible[supervoxel] += 1
+        elif state[p] == arrived:
+            incompatible[supervoxel] += 1
+    return compatible, incompatible, table, pixels

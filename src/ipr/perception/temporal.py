@@ -211,42 +211,28 @@ def supervoxel_anchors(
     state = change.state.reshape(-1)
     label = change.previous_label.reshape(-1).astype(np.int64)
     n_labels = int(label.max()) + 1 if label.size else 1
-    unchanged = state == UNCHANGED
-    unchanged_per_label = np.bincount(label[unchanged], minlength=n_labels)
-    compared_per_label = np.bincount(label[state != NOT_COMPARED], minlength=n_labels)
-    stayed = (unchanged_per_label >= config.min_object_pixels) & (
-        unchanged_per_label >= config.temporal_static_fraction * compared_per_label
-    )
-    stayed[0] = False
     anchor = np.zeros(count, dtype=np.int32)
-    compatible = np.zeros(count, dtype=np.int64)
-    incompatible = np.zeros(count, dtype=np.int64)
     if count == 0:
-        return SupervoxelChange(anchor, compatible, incompatible)
-    member = flat_supervoxel >= 0
-    sv = flat_supervoxel[member].astype(np.int64)
-    pixel_state, pixel_label = state[member], label[member]
-    is_unchanged = pixel_state == UNCHANGED
-    label_stayed = stayed[pixel_label] | (pixel_label == 0)
-    near = change.near.reshape(-1)[member] if change.near is not None else np.zeros(sv.size, bool)
-    shifted = (pixel_state == ARRIVED) & near & stayed[pixel_label]
-    compatible = np.bincount(
-        sv[(pixel_state == REVEALED) | (is_unchanged & label_stayed) | shifted], minlength=count
-    ).astype(np.int64)
-    incompatible = np.bincount(
-        sv[((pixel_state == ARRIVED) & ~shifted) | (is_unchanged & ~label_stayed)],
-        minlength=count,
-    ).astype(np.int64)
-    # Unchanged pixels of segments that stayed, per (supervoxel, segment): a dense count table
-    # (supervoxels x previous labels, small) instead of sorting the pixels' keys.
-    kept = is_unchanged & stayed[pixel_label]
-    if kept.any():
-        table = np.bincount(
-            sv[kept] * n_labels + pixel_label[kept], minlength=count * n_labels
-        ).reshape(count, n_labels)
+        zero = np.zeros(0, dtype=np.int64)
+        return SupervoxelChange(anchor, zero, zero.copy())
+    near = change.near.reshape(-1) if change.near is not None else np.zeros(state.size, bool)
+    # Compiled (``ipr.kernels``): every count in two passes over the pixels.
+    compatible, incompatible, table, pixels = kernels.supervoxel_anchor_counts(
+        flat_supervoxel,
+        state,
+        label,
+        near,
+        count,
+        n_labels,
+        (NOT_COMPARED, UNCHANGED, REVEALED, ARRIVED),
+        config.min_object_pixels,
+        float(config.temporal_static_fraction),
+    )
+    # Unchanged pixels of segments that stayed, per (supervoxel, segment): the most voted
+    # segment anchors the supervoxel when it holds enough of its pixels.
+    if table.any():
         best_label = np.argmax(table, axis=1)  # ties: the lowest label
         votes = table[np.arange(count), best_label]
-        pixels = np.bincount(sv, minlength=count)
         enough = (votes > 0) & (votes >= config.temporal_anchor_fraction * pixels)
         anchor[enough] = best_label[enough]
     return SupervoxelChange(anchor, compatible, incompatible)
