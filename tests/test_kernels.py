@@ -442,3 +442,38 @@ def test_supervoxel_anchor_counts_match_the_numpy_counts():
     ):
         np.testing.assert_array_equal(found, wanted)
     assert stayed[1:5].all() and not stayed[5]
+
+
+@pytest.mark.parametrize("use_normals", [True, False])
+def test_wall_slab_kernels_match_the_numpy_masks(use_normals):
+    rng = np.random.default_rng(13)
+    points = rng.uniform(-0.3, 0.3, (3000, 3))
+    points[:800, 0] = rng.normal(0.1, 0.004, 800)  # a wall's face at x = 0.1
+    normals = rng.normal(size=(3000, 3))
+    normals[:600] = [1.0, 0.0, 0.0]
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    unknown = rng.random(3000) < 0.1
+    normals[unknown] = 0.0
+    heights = points[:, 2] + 0.3
+    normal, offset, along = np.array([1.0, 0.0, 0.0]), -0.1, np.array([0.0, 1.0, 0.0])
+    min_cos = float(np.cos(np.radians(30.0)))
+    facing = (np.abs(normals @ normal) > min_cos) | unknown
+    depth, position, on_plane = kernels.vertical_plane_coordinates(
+        points, normals, unknown, heights, normal, offset, along, 0.01, 0.5, min_cos, use_normals
+    )
+    expected = (np.abs(points @ normal + offset) < 0.01) & (heights < 0.5)
+    if use_normals:
+        expected &= facing
+    np.testing.assert_allclose(depth, points @ normal + offset, atol=1e-15)
+    np.testing.assert_allclose(position, points @ along, atol=1e-15)
+    np.testing.assert_array_equal(on_plane, expected)
+    pool = np.flatnonzero(rng.random(3000) < 0.7)
+    kept = kernels.outside_slab(
+        points, normals, unknown, pool, normal, offset, 0.02, 0.05, min_cos, use_normals
+    )
+    slab_depth = points[pool] @ normal + offset
+    done = (slab_depth < 0.02) & (slab_depth > -0.05)
+    if use_normals:
+        done &= facing[pool]
+    np.testing.assert_array_equal(kept, pool[~done])
+    assert 0 < on_plane.sum() < 800 and len(kept) < len(pool)

@@ -1048,3 +1048,81 @@ def supervoxel_anchor_counts(
         elif state[p] == arrived:
             incompatible[supervoxel] += 1
     return compatible, incompatible, table, pixels
+
+
+@_jit
+def vertical_plane_coordinates(
+    points: np.ndarray,
+    point_normals: np.ndarray,
+    unknown: np.ndarray,
+    heights: np.ndarray,
+    normal: np.ndarray,
+    offset: float,
+    along: np.ndarray,
+    threshold_m: float,
+    max_height_m: float,
+    min_cos: float,
+    use_normals: bool,
+):
+    """For (N, 3) points (m) and a vertical plane (unit ``normal``, ``offset``) with the
+    horizontal direction ``along`` it: each point's signed depth (N,) in front of the plane,
+    its position (N,) along it, and whether it lies on the plane's face (N,) bool: within
+    ``threshold_m`` of it, below ``max_height_m`` (``heights`` (N,) above the support) and,
+    with ``use_normals``, facing the plane's way (within acos(``min_cos``) of +-normal) or
+    of ``unknown`` normal (``planes._wall_cues``)."""
+    count = points.shape[0]
+    depth = np.empty(count)
+    position = np.empty(count)
+    on_plane = np.empty(count, dtype=np.bool_)
+    for p in range(count):
+        x, y, z = points[p, 0], points[p, 1], points[p, 2]
+        depth[p] = x * normal[0] + y * normal[1] + z * normal[2] + offset
+        position[p] = x * along[0] + y * along[1] + z * along[2]
+        inside = abs(depth[p]) < threshold_m and heights[p] < max_height_m
+        if inside and use_normals and not unknown[p]:
+            cosine = (
+                point_normals[p, 0] * normal[0]
+                + point_normals[p, 1] * normal[1]
+                + point_normals[p, 2] * normal[2]
+            )
+            inside = abs(cosine) > min_cos
+        on_plane[p] = inside
+    return depth, position, on_plane
+
+
+@_jit
+def outside_slab(
+    points: np.ndarray,
+    point_normals: np.ndarray,
+    unknown: np.ndarray,
+    pool: np.ndarray,
+    normal: np.ndarray,
+    offset: float,
+    front_m: float,
+    back_m: float,
+    min_cos: float,
+    use_normals: bool,
+) -> np.ndarray:
+    """The (K,) ``pool`` indices of (N, 3) points that stay in the wall search after a wall
+    (unit ``normal``, ``offset``) was found: those not in its slab (depth in
+    (-``back_m``, ``front_m``)) or, with ``use_normals``, in it but not facing its way
+    (``_facing``: within acos(``min_cos``) of +-normal, or ``unknown``)."""
+    kept = np.empty(pool.shape[0], dtype=pool.dtype)
+    count = 0
+    for k in range(pool.shape[0]):
+        p = pool[k]
+        depth = (
+            points[p, 0] * normal[0] + points[p, 1] * normal[1] + points[p, 2] * normal[2] + offset
+        )
+        done = depth < front_m and depth > -back_m
+        if done and use_normals and not unknown[p]:
+            cosine = (
+                point_normals[p, 0] * normal[0]
+                + point_normals[p, 1] * normal[1]
+                + point_normals[p, 2] * normal[2]
+            )
+            done = abs(cosine) > min_cos
+        if not done:
+            kept[count] = p
+            count += 1
+    return kept[:count].copy()

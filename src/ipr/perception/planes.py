@@ -341,11 +341,19 @@ def find_walls(
         cues = _wall_cues(points, normals, height, normal, offset, up, config, unknown, normals_up)
         if cues is not None:
             candidates.append(cues)
-        depth = points[pool] @ normal + offset
-        done = (depth < 2 * margin) & (depth > -(config.wall_max_thickness_m + 2 * margin))
-        if normals is not None:  # surfaces crossing the slab stay in the pool
-            done &= _facing(normals[pool], normal, unknown[pool])
-        pool = pool[~done]
+        # Surfaces crossing the slab stay in the pool (compiled: ``ipr.kernels``).
+        pool = kernels.outside_slab(
+            points,
+            points if normals is None else normals,
+            np.zeros(len(points), dtype=bool) if unknown is None else unknown,
+            pool,
+            normal,
+            float(offset),
+            2 * margin,
+            config.wall_max_thickness_m + 2 * margin,
+            _FACING_COS,
+            normals is not None,
+        )
     walls = _select_walls(candidates, config)
     if edge_on and config.wall_complete_corners:
         walls += _edge_on_walls(points, normals, height, walls, up, viewpoint, config)
@@ -696,13 +704,25 @@ def _wall_cues(
     """
     threshold = config.plane_threshold_m
     along = _cross_rows(up, normal[None])[0]
-    depth = pts @ normal + offset
-    s = pts @ along
-    on_plane = (np.abs(depth) < threshold) & (h < config.wall_max_height_m + threshold)
     if normals is not None and normals_up is None:
         normals_up = normals @ up
-    if normals is not None and not edge_on:  # surfaces crossing the plane are not part of it
-        on_plane &= _facing(normals, normal, unknown)
+    if normals is not None and unknown is None:
+        unknown = ~normals.any(axis=1)
+    # Compiled (``ipr.kernels``): depth, position along the plane and face membership in one
+    # pass; surfaces crossing the plane are not part of it (unless seen edge-on).
+    depth, s, on_plane = kernels.vertical_plane_coordinates(
+        pts,
+        pts if normals is None else normals,
+        np.zeros(len(pts), dtype=bool) if unknown is None else unknown,
+        h,
+        normal,
+        float(offset),
+        along,
+        threshold,
+        config.wall_max_height_m + threshold,
+        _FACING_COS,
+        normals is not None and not edge_on,
+    )
     if on_plane.sum() < config.wall_min_points:
         return None
     s_in, h_in = s[on_plane], h[on_plane]
