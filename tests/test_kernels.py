@@ -477,3 +477,37 @@ def test_wall_slab_kernels_match_the_numpy_masks(use_normals):
         done &= facing[pool]
     np.testing.assert_array_equal(kept, pool[~done])
     assert 0 < on_plane.sum() < 800 and len(kept) < len(pool)
+
+
+def test_projection_to_the_previous_camera_is_bit_identical_to_numpy():
+    rng = np.random.default_rng(23)
+    height, width = 48, 64
+    depth = rng.uniform(0.4, 1.6, (height, width)).astype(np.float32)
+    depth[rng.random(depth.shape) < 0.1] = 0.0
+    valid = np.flatnonzero(depth.reshape(-1) > 0)
+    K = np.array([[60.0, 0.0, 31.5], [0.0, 62.0, 23.5], [0.0, 0.0, 1.0]])
+    now = look_at(np.array([0.5, -0.5, 0.7]), np.zeros(3))
+    before = look_at(np.array([0.56, -0.45, 0.72]), np.array([0.02, 0.0, 0.0]))
+    relative = (np.linalg.inv(before) @ now).astype(np.float32)
+    f32 = np.float32
+    ray_x = (np.arange(width, dtype=f32) - f32(K[0, 2])) * f32(1.0 / K[0, 0])
+    ray_y = (np.arange(height, dtype=f32) - f32(K[1, 2])) * f32(1.0 / K[1, 1])
+    # The numpy expressions of compare_frames before the kernel.
+    x_now, y_now = ray_x[None, :] * depth, ray_y[:, None] * depth
+    x, y, z = (
+        (relative[i, 0] * x_now + relative[i, 1] * y_now + relative[i, 2] * depth
+         + relative[i, 3]).reshape(-1)[valid]
+        for i in range(3)
+    )  # fmt: skip
+    in_front = z > 1e-6
+    inverse_z = f32(1.0) / np.where(in_front, z, f32(1.0))
+    u = np.rint(x * inverse_z * f32(K[0, 0]) + f32(K[0, 2]))
+    v = np.rint(y * inverse_z * f32(K[1, 1]) + f32(K[1, 2]))
+    inside = in_front & (u >= 0) & (u < width) & (v >= 0) & (v < height)
+    pixel = np.where(inside, v.astype(np.int64) * width + u.astype(np.int64), 0)
+    got = kernels.project_to_previous(
+        depth, valid, ray_x, ray_y, relative, K.astype(f32), height, width
+    )
+    for found, wanted in zip(got, (pixel, z, inside), strict=True):
+        np.testing.assert_array_equal(found, wanted)
+    assert 0 < inside.mean() < 1  # some land outside the previous image

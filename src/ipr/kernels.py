@@ -1126,3 +1126,61 @@ def outside_slab(
             kept[count] = p
             count += 1
     return kept[:count].copy()
+
+
+@_jit
+def project_to_previous(
+    depth_m: np.ndarray,
+    valid: np.ndarray,
+    ray_x: np.ndarray,
+    ray_y: np.ndarray,
+    relative: np.ndarray,
+    previous_K: np.ndarray,
+    previous_height: int,
+    previous_width: int,
+):
+    """Where each ``valid`` pixel (K,) (flat) of a (H, W) float32 depth image lands in the
+    previous camera: its flat pixel there (K,) int64 (0 where not ``inside``), its depth there
+    z (K,) float32 and whether it is inside that image and in front of the camera (K,) bool.
+    ``ray_x`` (W,) and ``ray_y`` (H,) float32 are the pixel grid's (c - cx) / fx, ``relative``
+    (4, 4) float32 the previous camera from this one and ``previous_K`` (3, 3) float32. All in
+    float32, operation by operation as ``temporal.compare_frames``'s numpy version."""
+    height, width = depth_m.shape
+    count = valid.shape[0]
+    pixel = np.zeros(count, dtype=np.int64)
+    z_out = np.empty(count, dtype=np.float32)
+    inside = np.zeros(count, dtype=np.bool_)
+    one = np.float32(1.0)
+    for k in range(count):
+        row, col = valid[k] // width, valid[k] % width
+        z_now = depth_m[row, col]
+        x_now = ray_x[col] * z_now
+        y_now = ray_y[row] * z_now
+        x = (
+            relative[0, 0] * x_now
+            + relative[0, 1] * y_now
+            + relative[0, 2] * z_now
+            + relative[0, 3]
+        )
+        y = (
+            relative[1, 0] * x_now
+            + relative[1, 1] * y_now
+            + relative[1, 2] * z_now
+            + relative[1, 3]
+        )
+        z = (
+            relative[2, 0] * x_now
+            + relative[2, 1] * y_now
+            + relative[2, 2] * z_now
+            + relative[2, 3]
+        )
+        z_out[k] = z
+        if not z > np.float32(1e-6):
+            continue
+        inverse_z = one / z
+        u = np.rint(x * inverse_z * previous_K[0, 0] + previous_K[0, 2])
+        v = np.rint(y * inverse_z * previous_K[1, 1] + previous_K[1, 2])
+        if u >= 0 and u < previous_width and v >= 0 and v < previous_height:
+            inside[k] = True
+            pixel[k] = np.int64(v) * previous_width + np.int64(u)
+    return pixel, z_out, inside

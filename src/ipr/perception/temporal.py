@@ -107,7 +107,7 @@ def compare_frames(
         pixel = valid
         z = flat_depth[valid].astype(np.float32)
         inside = np.ones(valid.size, dtype=bool)
-    else:
+    elif K is None or world_from_camera is None:
         x, y, z = _in_previous_camera(
             points_world, depth_m, valid, previous_world_from_camera, K, world_from_camera
         )
@@ -119,6 +119,20 @@ def compare_frames(
         previous_height, previous_width = previous_depth_m.shape
         inside = in_front & (u >= 0) & (u < previous_width) & (v >= 0) & (v < previous_height)
         pixel = np.where(inside, v.astype(np.int64) * previous_width + u.astype(np.int64), 0)
+    else:
+        # From frame t's depth and pixel grid in float32, compiled (``ipr.kernels``): the same
+        # operations as ``_in_previous_camera`` and the projection above, in one pass.
+        f32 = np.float32
+        relative = (invert_transform(previous_world_from_camera) @ world_from_camera).astype(f32)
+        pixel, z, inside = kernels.project_to_previous(
+            depth_m.astype(f32, copy=False),
+            valid,
+            (np.arange(width, dtype=f32) - f32(K[0, 2])) * f32(1.0 / K[0, 0]),
+            (np.arange(height, dtype=f32) - f32(K[1, 2])) * f32(1.0 / K[1, 1]),
+            relative,
+            np.asarray(previous_K, dtype=f32),
+            *previous_depth_m.shape,
+        )
     # Compiled (``ipr.kernels``): the states in one pass. Each quantity keeps the precision
     # numpy gave it: tolerances in z's, the depth difference in the wider of the two depths'.
     dtype = np.result_type(z.dtype, previous_depth_m.dtype)
