@@ -511,3 +511,57 @@ def test_projection_to_the_previous_camera_is_bit_identical_to_numpy():
     for found, wanted in zip(got, (pixel, z, inside), strict=True):
         np.testing.assert_array_equal(found, wanted)
     assert 0 < inside.mean() < 1  # some land outside the previous image
+
+
+def test_plane_kernels_match_the_numpy_expressions():
+    rng = np.random.default_rng(31)
+    points = rng.uniform(-0.5, 0.5, (4000, 3))
+    points[:1500, 2] = rng.normal(0.0, 0.003, 1500)  # a table at z = 0
+    normals = rng.normal(size=(300, 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    normals[0] = [0.0, 0.0, 1.0]
+    offsets = rng.uniform(-0.1, 0.1, 300)
+    offsets[0] = 0.0
+    distances = np.abs(points @ normals.T + offsets)
+    counts = kernels.plane_inlier_counts(points, normals, offsets, 0.01)
+    np.testing.assert_array_equal(counts, (distances < 0.01).sum(axis=0))
+    assert int(np.argmax(counts)) == 0
+    point_normals = rng.normal(size=(4000, 3))
+    point_normals /= np.linalg.norm(point_normals, axis=1, keepdims=True)
+    unknown = rng.random(4000) < 0.1
+    facing = (np.abs(point_normals @ normals.T) > 0.8) | unknown[:, None]
+    np.testing.assert_array_equal(
+        kernels.facing_plane_inlier_counts(
+            points, point_normals, unknown, normals, offsets, 0.01, 0.8
+        ),
+        ((distances < 0.01) & facing).sum(axis=0),
+    )
+    inliers = kernels.plane_inliers(points, normals[0], 0.0, 0.01)
+    np.testing.assert_array_equal(inliers, np.flatnonzero(distances[:, 0] < 0.01))
+    np.testing.assert_array_equal(
+        kernels.facing_plane_inliers(points, point_normals, unknown, normals[0], 0.0, 0.01, 0.8),
+        np.flatnonzero((distances[:, 0] < 0.01) & facing[:, 0]),
+    )
+    centroid, scatter = kernels.centred_scatter(points, inliers)
+    centred = points[inliers] - points[inliers].mean(axis=0)
+    np.testing.assert_allclose(centroid, points[inliers].mean(axis=0), atol=1e-15)
+    np.testing.assert_allclose(scatter, centred.T @ centred, rtol=1e-10, atol=1e-15)
+    subset = np.flatnonzero(rng.random(4000) < 0.5)
+    np.testing.assert_array_equal(kernels.rows_at(points, subset), points[subset])
+    np.testing.assert_array_equal(
+        kernels.indices_above(points, subset, normals[0], 0.0, 0.005),
+        subset[points[subset] @ normals[0] >= 0.005],
+    )
+
+
+def test_region_sums_skip_points_of_no_region():
+    rng = np.random.default_rng(2)
+    region = rng.integers(-1, 5, 500)
+    points = rng.normal(size=(500, 3))
+    areas = rng.random(500)
+    sizes, sums, area_sums = kernels.region_sums(region, points, areas, 5)
+    for number in range(5):
+        members = region == number
+        assert sizes[number] == members.sum()
+        np.testing.assert_allclose(sums[number], points[members].sum(axis=0), atol=1e-12)
+        assert area_sums[number] == pytest.approx(areas[members].sum(), rel=1e-12)
