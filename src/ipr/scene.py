@@ -23,7 +23,6 @@ from PIL import Image
 from ipr.atomic import staged_directory
 from ipr.camera import backproject, invert_transform, make_transform
 from ipr.errors import SceneError
-from ipr.kernels import world_points
 
 ACTIONS_FORMAT = "ipr-actions/1"
 FRAME_NAME = re.compile(r"^(\d{6})\.(png|jpg|jpeg)$")
@@ -61,6 +60,9 @@ class Frame:
 
     def points_world(self) -> np.ndarray:
         """(H, W, 3) world-frame points of every pixel (meaningless where depth is 0)."""
+        # Imported here: numba's import (0.4 s) is only worth paying where points are needed.
+        from ipr.kernels import world_points
+
         return world_points(self.depth_m, self.K, self.world_from_camera)
 
 
