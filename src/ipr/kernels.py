@@ -53,6 +53,13 @@ def _rotated(x: float, y: float, z: float, transform: np.ndarray, axis: int) -> 
 
 
 @_jit
+def _dot(rows: np.ndarray, index: int, vector: np.ndarray) -> float:
+    """rows[index] . vector for (N, 3) rows and a (3,) vector, summed in x, y, z order (the
+    plane distances and facing tests of the kernels below all take this one product)."""
+    return rows[index, 0] * vector[0] + rows[index, 1] * vector[1] + rows[index, 2] * vector[2]
+
+
+@_jit
 def world_points(depth_m: np.ndarray, K: np.ndarray, world_from_camera: np.ndarray) -> np.ndarray:
     """(H, W, 3) float64 world points (m) of every pixel of a (H, W) depth image (m) with
     intrinsics K (3, 3) and a 4x4 world-from-camera transform; meaningless where depth is 0.
@@ -422,10 +429,8 @@ def plane_inliers(
     offset) < threshold_m)`` in one pass."""
     found = np.empty(points.shape[0], dtype=np.int64)
     count = 0
-    n0, n1, n2 = normal[0], normal[1], normal[2]
     for p in range(points.shape[0]):
-        distance = points[p, 0] * n0 + points[p, 1] * n1 + points[p, 2] * n2 + offset
-        if abs(distance) < threshold_m:
+        if abs(_dot(points, p, normal) + offset) < threshold_m:
             found[count] = p
             count += 1
     return found[:count].copy()
@@ -471,14 +476,11 @@ def facing_plane_inliers(
     ``facing_plane_inlier_counts``."""
     found = np.empty(points.shape[0], dtype=np.int64)
     count = 0
-    n0, n1, n2 = normal[0], normal[1], normal[2]
     for p in range(points.shape[0]):
-        distance = points[p, 0] * n0 + points[p, 1] * n1 + points[p, 2] * n2 + offset
-        if abs(distance) < threshold_m:
-            cosine = point_normals[p, 0] * n0 + point_normals[p, 1] * n1 + point_normals[p, 2] * n2
-            if unknown[p] or abs(cosine) > min_cos:
-                found[count] = p
-                count += 1
+        near = abs(_dot(points, p, normal) + offset) < threshold_m
+        if near and (unknown[p] or abs(_dot(point_normals, p, normal)) > min_cos):
+            found[count] = p
+            count += 1
     return found[:count].copy()
 
 
@@ -1003,10 +1005,9 @@ def indices_above(
     + offset >= clearance]`` in one pass."""
     found = np.empty(indices.shape[0], dtype=indices.dtype)
     count = 0
-    n0, n1, n2 = normal[0], normal[1], normal[2]
     for k in range(indices.shape[0]):
         i = indices[k]
-        if points[i, 0] * n0 + points[i, 1] * n1 + points[i, 2] * n2 + offset >= clearance:
+        if _dot(points, i, normal) + offset >= clearance:
             found[count] = i
             count += 1
     return found[:count].copy()
@@ -1094,17 +1095,11 @@ def vertical_plane_coordinates(
     position = np.empty(count)
     on_plane = np.empty(count, dtype=np.bool_)
     for p in range(count):
-        x, y, z = points[p, 0], points[p, 1], points[p, 2]
-        depth[p] = x * normal[0] + y * normal[1] + z * normal[2] + offset
-        position[p] = x * along[0] + y * along[1] + z * along[2]
+        depth[p] = _dot(points, p, normal) + offset
+        position[p] = _dot(points, p, along)
         inside = abs(depth[p]) < threshold_m and heights[p] < max_height_m
         if inside and use_normals and not unknown[p]:
-            cosine = (
-                point_normals[p, 0] * normal[0]
-                + point_normals[p, 1] * normal[1]
-                + point_normals[p, 2] * normal[2]
-            )
-            inside = abs(cosine) > min_cos
+            inside = abs(_dot(point_normals, p, normal)) > min_cos
         on_plane[p] = inside
     return depth, position, on_plane
 
@@ -1130,17 +1125,10 @@ def outside_slab(
     count = 0
     for k in range(pool.shape[0]):
         p = pool[k]
-        depth = (
-            points[p, 0] * normal[0] + points[p, 1] * normal[1] + points[p, 2] * normal[2] + offset
-        )
+        depth = _dot(points, p, normal) + offset
         done = depth < front_m and depth > -back_m
         if done and use_normals and not unknown[p]:
-            cosine = (
-                point_normals[p, 0] * normal[0]
-                + point_normals[p, 1] * normal[1]
-                + point_normals[p, 2] * normal[2]
-            )
-            done = abs(cosine) > min_cos
+            done = abs(_dot(point_normals, p, normal)) > min_cos
         if not done:
             kept[count] = p
             count += 1

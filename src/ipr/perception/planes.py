@@ -51,8 +51,8 @@ def fit_plane_ransac(
 ) -> Plane | None:
     """Dominant plane of (N, 3) points by RANSAC, refined by least squares on its inliers.
 
-    Hypotheses are scored in batches (vectorised over iterations on a subsample of
-    ``sample_size`` points) and the best is re-scored on all points. With ``axis`` (unit (3,)),
+    Hypotheses are scored on a subsample of ``sample_size`` points (one compiled pass per
+    hypothesis, ``kernels.plane_inlier_counts``) and the best is re-scored on all points. With ``axis`` (unit (3,)),
     only planes whose normal is within ``max_tilt_deg`` of +-axis are considered (hypotheses and
     refits alike). Returns None when fewer than ``min_inliers`` points support any plane.
     Deterministic for a given ``rng`` (seed 0 when None).
