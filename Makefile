@@ -7,7 +7,7 @@ IPR    := $(VENV)/bin/ipr
 STAMP  := $(VENV)/.installed
 DEMO_OUT ?= out/demo
 
-.PHONY: setup demo test bench lint format clean
+.PHONY: setup demo test test-slow bench lint format clean
 
 setup: $(STAMP)
 
@@ -24,8 +24,12 @@ $(STAMP): requirements.lock pyproject.toml scripts/setup_system.sh
 demo: $(STAMP)
 	$(PY) -m ipr.demo $(DEMO_OUT)
 
+# The default tests (under 3 minutes on 2 cores); .ci/run also runs the slow ones (test-slow).
 test: $(STAMP)
-	$(PY) -m pytest -q tests
+	$(PY) -m pytest -q -m "not slow" tests
+
+test-slow: $(STAMP)
+	$(PY) -m pytest -q -m slow tests
 
 bench: $(STAMP)
 	$(PY) -m benchmarks.run

@@ -46,7 +46,7 @@ def measure_scene(path: Path) -> dict:
     from ipr import voxels
     from ipr.collision_checker import collision_checker
     from ipr.fusion import FusionConfig, fuse_views, tracked_free_spaces
-    from ipr.metrics import frame0_ground_truth, visible_pixel_counts
+    from ipr.ground_truth import frame0_ground_truth, visible_pixel_counts
     from ipr.perception import perceive_scene
     from ipr.scene import load_scene
 

@@ -43,10 +43,12 @@ def measure_scene(path: Path, samples: int) -> dict:
     from scipy.optimize import linear_sum_assignment
 
     from ipr import voxels
-    from ipr.collision_checker import prepare_hypotheses, uniform_posteriors
-    from ipr.inference import VARIANTS, InferenceConfig, build_problem, run_samples
+    from ipr.collision_checker import uniform_posteriors
+    from ipr.ground_truth import frame0_ground_truth, visible_pixel_counts
+    from ipr.hypotheses import prepare_hypotheses
+    from ipr.inference import InferenceConfig, build_problem, run_samples
     from ipr.likelihood import observed_frames
-    from ipr.metrics import frame0_ground_truth, visible_pixel_counts
+    from ipr.methods import METHODS
     from ipr.perception import perceive_scene
     from ipr.scene import load_scene
 
@@ -61,7 +63,7 @@ def measure_scene(path: Path, samples: int) -> dict:
     observed = observed_frames(scene.frames, perception.labels, config.likelihood.decimation)
     problem, _ = build_problem(
         prepared, uniform, perception.planes[0], observed,
-        variant=VARIANTS["ipr+action+uniform"], pusher=scene.pusher, pushes=scene.pushes,
+        variant=METHODS["ipr+action+uniform"], pusher=scene.pusher, pushes=scene.pushes,
         config=config, seed=0,
     )  # fmt: skip
     results = run_samples(problem, ((i, None) for i in range(samples)), workers=1, deadline=np.inf)
@@ -105,7 +107,7 @@ def estimate_iou(
     ``weighting`` (``InferenceConfig.weighting``) and ``prior`` ("uniform" or "size")."""
     import dataclasses
 
-    from ipr.collision_checker import posterior_medoid
+    from ipr.factor_graph import posterior_medoid
     from ipr.inference import marginals, size_log_prior
 
     problem = scene["problem"]

@@ -27,10 +27,9 @@ def replay_errors(path: Path, friction: float, timestep_s: float) -> list[tuple[
     """(simulated-motion error, true motion) in metres per (object, later frame) of one scene."""
     import trimesh
 
-    from ipr.metrics import default_models_dir, load_ground_truth, load_model
     from ipr.perception import perceive_scene
     from ipr.physics import Body, PhysicsConfig, build_world
-    from ipr.scene import load_scene
+    from ipr.scene import default_models_dir, load_ground_truth, load_model, load_scene
 
     scene = load_scene(path)
     truth = load_ground_truth(path)

@@ -65,8 +65,8 @@ def suite_statistics(scenes: list[Path]) -> dict[str, float]:
 
 def oracle_scores(scenes: list[Path]) -> dict[str, float]:
     """Minimum and median IoU of the ground truth scored as a result, both spaces."""
+    from ipr.ground_truth import write_ground_truth_result
     from ipr.metrics import evaluate
-    from ipr.result import write_ground_truth_result
 
     scene_iou, object_iou, seconds = [], [], []
     with tempfile.TemporaryDirectory() as folder:

@@ -7,8 +7,9 @@ from pathlib import Path
 import pytest
 from benchmarks.inference import best_hypothesis_iou
 
+from ipr.ground_truth import write_ground_truth_result
 from ipr.metrics import evaluate
-from ipr.result import load_result, write_ground_truth_result, write_result
+from ipr.result import load_result, write_result
 
 
 @pytest.fixture(scope="module")

@@ -98,6 +98,7 @@ def test_eval_json_is_not_half_written_on_error(scene_dir: Path, tmp_path: Path)
     assert not target.exists()
 
 
+@pytest.mark.slow
 def test_segment_writes_labels_facets_and_overlays(tmp_path: Path, capsys):
     from PIL import Image
 
@@ -136,6 +137,7 @@ def test_segment_writes_labels_facets_and_overlays(tmp_path: Path, capsys):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["scenes", "seg"]
 
 
+@pytest.mark.slow
 def test_infer_collision_checker_end_to_end(tmp_path: Path, capsys):
     from ipr.result import load_result
     from ipr.synth import SynthConfig, generate_scene
@@ -259,6 +261,7 @@ def test_ground_truth_of_a_scene_without_ground_truth_fails_clearly(
     assert not (tmp_path / "gt").exists()
 
 
+@pytest.mark.slow
 def test_infer_default_method_writes_the_full_result_and_is_reproducible(tmp_path: Path, capsys):
     from PIL import Image
 

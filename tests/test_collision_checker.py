@@ -7,21 +7,18 @@ import itertools
 import numpy as np
 import pytest
 
-from ipr.collision_checker import (
-    CollisionCheckerConfig,
-    _gibbs_marginals,
-    collision_checker,
-    exact_marginals,
-    write_collision_checker_result,
-)
-from ipr.hypotheses import HypothesisConfig
+from ipr.collision_checker import CollisionCheckerConfig, collision_checker
+from ipr.factor_graph import exact_marginals, gibbs_marginals
+from ipr.hypotheses import ConstraintConfig, HypothesisConfig
 from ipr.perception.free_space import FREE, SpaceMap
 from ipr.perception.types import Facet, PartialObject
-from ipr.result import load_result
+from ipr.result import load_result, write_posterior_result
 
 from .box_scene import GRID, SUPPORT, partial_box, render_view
 
-CONFIG = CollisionCheckerConfig(hypotheses=HypothesisConfig(count=16))
+CONFIG = CollisionCheckerConfig()
+HYPOTHESES = HypothesisConfig(count=16)
+CONSTRAINTS = ConstraintConfig()
 WALL_Y = 0.10  # the second object's seen front face (m)
 
 
@@ -44,14 +41,14 @@ def scene():
 def test_hypotheses_that_must_hit_a_neighbour_get_zero_probability(scene):
     view, objects = scene
     posteriors = collision_checker(
-        objects, view.space(), (SUPPORT,), CONFIG, np.random.default_rng(0)
+        objects, view.space(), (SUPPORT,), CONFIG, np.random.default_rng(0), hypotheses=HYPOTHESES
     )
     assert [p.object_id for p in posteriors] == [1, 2]
     box = posteriors[0]
     assert box.probabilities.sum() == pytest.approx(1.0)
     assert len(box.hypotheses) == 16
     reach = np.array([h.vertices[:, 1].max() for h in box.hypotheses])
-    through = reach > WALL_Y + CONFIG.constraints.overlap_tolerance_m + 1e-3
+    through = reach > WALL_Y + CONSTRAINTS.overlap_tolerance_m + 1e-3
     assert through.any() and (~through).any()  # the test means something
     assert np.all(box.probabilities[through] == 0)
     assert np.all(box.probabilities[~through] > 0)
@@ -64,9 +61,15 @@ def test_hypotheses_that_must_hit_a_neighbour_get_zero_probability(scene):
 
 def test_result_directory(scene, tmp_path):
     view, objects = scene
-    posteriors = collision_checker(objects, None, (SUPPORT,), CONFIG, np.random.default_rng(1))
-    path = write_collision_checker_result(
-        tmp_path / "result", posteriors, {0: view.world_from_camera}, {"total": 1.0}
+    posteriors = collision_checker(
+        objects, None, (SUPPORT,), CONFIG, np.random.default_rng(1), hypotheses=HYPOTHESES
+    )
+    path = write_posterior_result(
+        tmp_path / "result",
+        posteriors,
+        {0: view.world_from_camera},
+        {"total": 1.0},
+        method="collision-checker",
     )
     result = load_result(path)
     assert result.method == "collision-checker"
@@ -80,7 +83,9 @@ def test_result_directory(scene, tmp_path):
 def test_minimum_shape_when_no_hypothesis_is_feasible(scene):
     _, objects = scene
     everything_free = SpaceMap(GRID, np.full(GRID.shape, FREE, dtype=np.uint8))
-    (posterior,) = collision_checker(objects[:1], everything_free, (SUPPORT,), CONFIG)
+    (posterior,) = collision_checker(
+        objects[:1], everything_free, (SUPPORT,), CONFIG, hypotheses=HYPOTHESES
+    )
     assert posterior.inference == "minimum"
     assert posterior.hypotheses == (posterior.minimum,)
     assert posterior.probabilities.tolist() == [1.0]
@@ -104,8 +109,9 @@ def test_exact_and_sampled_marginals_match_enumeration():
              [(1, 2), (2, 3), (3, 4), (1, 3)]}  # fmt: skip
     truth = brute_force(sizes, edges)
     exact = exact_marginals(sorted(sizes), edges, sizes)
-    config = CollisionCheckerConfig(gibbs_chains=4, gibbs_sweeps=1500, gibbs_burn_in=20)
-    sampled = _gibbs_marginals(sorted(sizes), edges, sizes, config, rng, np.inf)
+    sampled = gibbs_marginals(
+        sorted(sizes), edges, sizes, rng, np.inf, chains=4, sweeps=1500, burn_in=20
+    )
     for i in sizes:
         assert np.allclose(exact[i], truth[i], atol=1e-12)
         assert np.abs(sampled[i] - truth[i]).max() < 0.06
@@ -116,8 +122,9 @@ def test_exact_and_sampled_marginals_match_enumeration():
 def test_tiny_time_budget_still_gives_valid_posteriors(scene):
     _, objects = scene
     posteriors = collision_checker(
-        objects, None, (SUPPORT,), CONFIG, np.random.default_rng(2), time_budget_s=0.01
-    )
+        objects, None, (SUPPORT,), CONFIG, np.random.default_rng(2), time_budget_s=0.01,
+        hypotheses=HYPOTHESES,
+    )  # fmt: skip
     for posterior in posteriors:
         assert posterior.probabilities.sum() == pytest.approx(1.0)
         assert posterior.probabilities[posterior.best] > 0

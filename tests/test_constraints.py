@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ipr.constraints import (
+from ipr.hypotheses import UnaryTolerances
+from ipr.hypotheses.constraints import (
     ConstraintConfig,
     OverlapCache,
     compatibility_matrix,
@@ -15,9 +16,9 @@ from ipr.constraints import (
     penetration_depth,
     unary_feasible,
 )
-from ipr.hypotheses import ShapeHypothesis, UnaryTolerances
 from ipr.perception.free_space import FREE, SpaceMap, VoxelGrid
 from ipr.perception.types import KnownPlane
+from ipr.products import ShapeHypothesis
 
 from .box_scene import SUPPORT, box_mesh
 

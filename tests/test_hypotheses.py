@@ -144,7 +144,7 @@ def test_deterministic_per_seed(oblique):
 def test_a_slow_machine_gets_the_same_hypotheses(oblique, monkeypatch):
     """No wall-clock limit by default: a clock that runs 100 s per reading (a heavily loaded
     machine) changes nothing; with ``timeout_s`` set the same clock simplifies the rest."""
-    import ipr.hypotheses as module
+    import ipr.hypotheses.generate as module
 
     obj, space = oblique
     config = dataclasses.replace(CONFIG, count=6)

@@ -11,11 +11,10 @@ import pytest
 
 import ipr  # noqa: F401  (GL backend before MuJoCo loads)
 from ipr.camera import look_at
-from ipr.collision_checker import PreparedHypotheses
-from ipr.hypotheses import ShapeHypothesis
 from ipr.inference import InferenceConfig, infer_shapes
 from ipr.likelihood import LikelihoodConfig, observed_frames
 from ipr.physics import Body, PhysicsConfig, build_world
+from ipr.products import PreparedHypotheses, ShapeHypothesis
 from ipr.rendering import render_depth_and_ids
 from ipr.scene import Frame, Push, Pusher
 from tests.box_scene import BACKDROP, HEIGHT, SUPPORT, TABLE, WIDTH, K, box_mesh
@@ -106,9 +105,9 @@ def test_replaying_the_push_rules_out_a_shape_it_would_have_moved():
         method="ipr+uniform", config=strict, **common,
     )  # fmt: skip
     assert with_action.posteriors[0].probabilities[0] > 0.95
-    assert with_action.summary["pushes_replayed"] == 1
+    assert with_action.summary.pushes_replayed == 1
     # Without the push the two shapes look alike from the low camera.
-    assert gravity_only.summary["pushes_replayed"] == 0
+    assert gravity_only.summary.pushes_replayed == 0
     assert 0.2 < gravity_only.posteriors[0].probabilities[0] < 0.8
     # The default alpha weighs the same evidence more cautiously, in the same direction.
     default = infer_shapes(
@@ -306,12 +305,13 @@ def test_hypothesis_weighting_respects_the_pairwise_constraints():
 
 def test_a_joint_model_drawn_again_is_not_simulated_again():
     from ipr.collision_checker import uniform_posteriors
-    from ipr.inference import VARIANTS, Sampler, build_problem
+    from ipr.inference import Sampler, build_problem
+    from ipr.methods import METHODS
 
     prepared = _prepared(TRUE_BOX, DEEP_BOX)
     problem, _ = build_problem(
         prepared, uniform_posteriors(prepared), (SUPPORT,), _push_scene(),
-        variant=VARIANTS["ipr+action+uniform"], pusher=Pusher(), pushes=(BEHIND,),
+        variant=METHODS["ipr+action+uniform"], pusher=Pusher(), pushes=(BEHIND,),
         config=InferenceConfig(), seed=0,
     )  # fmt: skip
     sampler = Sampler(problem)

@@ -12,9 +12,10 @@ import trimesh
 from ipr import voxels
 from ipr.camera import invert_transform, look_at
 from ipr.data import ycbv_real_dir
+from ipr.ground_truth import write_ground_truth_result
 from ipr.metrics import evaluate, format_table, scores
 from ipr.rendering import render_depth_and_ids
-from ipr.result import load_result, write_ground_truth_result, write_result
+from ipr.result import load_result, write_result
 from ipr.scene import Frame, ObjectPose, load_ground_truth, load_model, write_scene
 
 K = np.array([[300.0, 0.0, 159.5], [0.0, 300.0, 119.5], [0.0, 0.0, 1.0]])

@@ -11,11 +11,11 @@ import trimesh
 from ipr.camera import look_at
 from ipr.data import ycbv_real_dir
 from ipr.errors import ResultError
+from ipr.ground_truth import write_ground_truth_result
 from ipr.result import (
     RESULT_FORMAT,
     load_result,
     read_mesh,
-    write_ground_truth_result,
     write_result,
 )
 

@@ -43,6 +43,9 @@ from scipy.ndimage import minimum_filter
 
 from ipr import voxels
 from ipr.camera import invert_transform
+from ipr.perception.types import PartialObject
+from ipr.products import ObjectPosterior
+from ipr.scene import Frame
 
 
 @dataclass(frozen=True)
@@ -97,7 +100,7 @@ class SurfaceView:
 
 
 def observed_surface_depth(
-    frame: object, objects: Sequence[object], hole_fill_window_px: int = 1
+    frame: Frame, objects: Sequence[PartialObject], hole_fill_window_px: int = 1
 ) -> np.ndarray:
     """(H, W) float64 depth (m) of a frame's observed surface: its raw reading, with each
     object pixel's denoised point (``PartialObject.points``, world) in its place; a pixel
@@ -277,8 +280,8 @@ def carve_shape_voxels(
 
 
 def surface_views(
-    frames: Sequence[object],
-    objects_per_frame: Sequence[Sequence[object]],
+    frames: Sequence[Frame],
+    objects_per_frame: Sequence[Sequence[PartialObject]],
     motions: Mapping[int, Mapping[int, np.ndarray]] | None,
     config: CarvingConfig,
 ) -> list[SurfaceView]:
@@ -321,7 +324,9 @@ def surface_views(
     return views
 
 
-def carve_posteriors(posteriors: Sequence[object], views: Sequence[SurfaceView]) -> list:
+def carve_posteriors(
+    posteriors: Sequence[ObjectPosterior], views: Sequence[SurfaceView]
+) -> list[ObjectPosterior]:
     """``ObjectPosterior``s whose written shapes (``output_meshes``: the hypotheses with
     non-zero probability, and the best) are carved by ``views``."""
     carved = []

@@ -88,7 +88,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
 
 
 def _cmd_ground_truth(args: argparse.Namespace) -> int:
-    from ipr.result import write_ground_truth_result
+    from ipr.ground_truth import write_ground_truth_result
 
     path = write_ground_truth_result(
         Path(args.scene),
@@ -110,13 +110,28 @@ def _positive_int(text: str) -> int:
     return value
 
 
+def _config(args: argparse.Namespace):
+    """The run's Config: ``--config FILE`` over the defaults (None: the defaults)."""
+    if not getattr(args, "config", None):
+        return None
+    from ipr.config import read_config
+
+    return read_config(Path(args.config))
+
+
 def _cmd_infer(args: argparse.Namespace) -> int:
-    from ipr.carving import CarvingConfig
+    import dataclasses
+
     from ipr.config import Config
     from ipr.pipeline import infer
     from ipr.result import load_result
 
-    config = Config(carving=CarvingConfig(enabled=False)) if args.no_carving else None
+    config = _config(args)
+    if args.no_carving:
+        config = config or Config()
+        config = dataclasses.replace(
+            config, carving=dataclasses.replace(config.carving, enabled=False)
+        )
     out = infer(
         Path(args.scene),
         Path(args.out),
@@ -147,8 +162,9 @@ def _cmd_segment(args: argparse.Namespace) -> int:
     from ipr.perception.output import write_segmentation
     from ipr.scene import load_scene
 
+    config = _config(args)
     scene = load_scene(Path(args.scene))
-    perception = perceive_scene(scene)
+    perception = perceive_scene(scene, config.perception if config else None)
     out = write_segmentation(scene, perception, Path(args.out), overwrite=args.overwrite)
     per_frame = perception.timing_s["per_frame"]
     print(
@@ -278,14 +294,11 @@ def build_parser() -> argparse.ArgumentParser:
         description="Perceive the scene, hypothesise hidden parts (Algorithm 1), apply the "
         "geometric constraints and infer shape posteriors; writes a result directory "
         "per SCENE_FORMAT.md (result.json, objects/<k>/best.ply and hypotheses). "
-        "The default method, ipr+action+uniform, replays gravity and the recorded pushes in "
+        f"The default method, {DEFAULT_METHOD}, replays gravity and the recorded pushes in "
         "MuJoCo for sampled joint shapes and weighs them by how well the simulated depth "
-        "images match the observed ones (the paper's full IPR). ipr+uniform and ipr+size "
-        "simulate gravity only (size: smaller shapes a priori more probable); "
-        "ipr+action+size adds the pushes; collision-checker uses no physics (uniform prior "
-        "over jointly feasible shapes); exhaustive scores every joint model (scenes of at "
-        "most 4 objects; to validate the sampler). Also writes completion.png: the input "
-        "beside the completed objects.",
+        "images match the observed ones (the paper's full IPR). Methods: "
+        + "; ".join(f"{m.name}: {m.description}" for m in METHODS.values())
+        + ". Also writes completion.png: the input beside the completed objects.",
     )
     infer.add_argument("scene", metavar="SCENE")
     infer.add_argument("-o", "--out", required=True, metavar="OUT")
@@ -320,6 +333,7 @@ def build_parser() -> argparse.ArgumentParser:
         "runs out (default: 1.75 s of inference per object after the hypotheses)",
     )
     infer.add_argument("--overwrite", action="store_true", help="replace OUT if it exists")
+    _add_config_option(infer)
     infer.set_defaults(handler=_cmd_infer)
 
     segment = commands.add_parser(
@@ -334,7 +348,20 @@ def build_parser() -> argparse.ArgumentParser:
     segment.add_argument("scene", metavar="SCENE")
     segment.add_argument("-o", "--out", required=True, metavar="OUT")
     segment.add_argument("--overwrite", action="store_true", help="replace OUT if it exists")
+    _add_config_option(segment)
     segment.set_defaults(handler=_cmd_segment)
+
+    config = commands.add_parser(
+        "config",
+        help="show the configuration (defaults, or a file over them) as TOML",
+        description="'ipr config show' prints every setting with its default as TOML; "
+        "'ipr config show --config FILE' prints the settings FILE gives over the defaults "
+        "(and checks them). Save the output, edit what you need (or keep only those lines) "
+        "and pass it to 'ipr infer --config FILE'.",
+    )
+    config.add_argument("action", choices=["show"])
+    _add_config_option(config)
+    config.set_defaults(handler=_cmd_config)
 
     check = commands.add_parser("check", help="validate a scene directory and summarise it")
     check.add_argument("scene", metavar="SCENE")
@@ -349,6 +376,21 @@ def build_parser() -> argparse.ArgumentParser:
     suite.add_argument("name", choices=["ycb-static", "ycb-dynamic", "ycbv-real", "all"])
     suite.set_defaults(handler=_cmd_suite)
     return parser
+
+
+def _add_config_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--config",
+        metavar="FILE",
+        help="TOML file of settings over the defaults ('ipr config show' lists them all)",
+    )
+
+
+def _cmd_config(args: argparse.Namespace) -> int:
+    from ipr.config import Config, config_to_toml
+
+    print(config_to_toml(_config(args) or Config()), end="")
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:

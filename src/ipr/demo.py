@@ -19,12 +19,12 @@ def run_demo(out_dir: Path) -> int:
     """Generate a dynamic scene, segment it, infer shapes, score them; print where things are."""
     import ipr  # noqa: F401  (GL backend)
     from ipr.data import ycb_models_dir
+    from ipr.ground_truth import write_ground_truth_result
     from ipr.methods import DEFAULT_METHOD
     from ipr.metrics import evaluate, format_table
     from ipr.perception import perceive_scene
     from ipr.perception.output import write_segmentation
     from ipr.pipeline import infer
-    from ipr.result import write_ground_truth_result
     from ipr.scene import load_scene
     from ipr.synth import generate_scene
 

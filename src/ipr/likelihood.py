@@ -31,6 +31,7 @@ import numpy as np
 
 from ipr.physics import decimated_camera, decimated_pixels
 from ipr.rendering import PinholeCamera
+from ipr.scene import Frame
 
 
 @dataclass(frozen=True)
@@ -94,7 +95,7 @@ class ObservedFrames:
 
 
 def observed_frames(
-    frames: Sequence[object], labels: Sequence[np.ndarray], decimation: int
+    frames: Sequence[Frame], labels: Sequence[np.ndarray], decimation: int
 ) -> ObservedFrames:
     """Decimate ``ipr.scene.Frame``s and their (H, W) tracked label images."""
     cameras, depths, ids, ignores = [], [], [], []

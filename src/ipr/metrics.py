@@ -37,22 +37,9 @@ from typing import Any
 import numpy as np
 
 from ipr import voxels
-from ipr.errors import SceneError
+from ipr.ground_truth import frame0_ground_truth, visible_pixel_counts
 from ipr.result import Result, load_result
-from ipr.scene import (
-    Frame,
-    ObjectPose,
-    Scene,
-    default_models_dir,
-    load_ground_truth,
-    load_model,
-    load_scene,
-    load_visible_pixel_counts,
-)
 
-#: BOP visibility tolerance: a rendered surface up to this far (m) behind the observed depth is
-#: still seen.
-VISIBILITY_TOLERANCE_M = 0.015
 DEFAULT_MIN_VISIBLE_PX = 100
 
 
@@ -145,82 +132,6 @@ class Evaluation:
 
 # --------------------------------------------------------------------------------------------
 # Ground truth and visibility
-
-
-def frame0_ground_truth(
-    scene_path: Path | str, models_dir: Path | str | None = None
-) -> tuple[list[ObjectPose], list[Any], Path]:
-    """Frame-0 ground-truth poses (camera from model, m), the model mesh of each (trimesh,
-    metres, model frame; one shared object per obj_id) and the models folder used.
-
-    ``models_dir`` defaults to the contract's ``<scene>/../models``.
-    """
-    scene_path = Path(scene_path)
-    ground_truth = load_ground_truth(scene_path)
-    if 0 not in ground_truth:
-        raise SceneError(
-            scene_path / "scene_gt.json",
-            "has no frame 0",
-            'give the frame-0 object poses under key "0"',
-        )
-    poses = ground_truth[0]
-    folder = Path(models_dir) if models_dir is not None else default_models_dir(scene_path)
-    cache: dict[int, Any] = {}
-    for pose in poses:
-        if pose.obj_id not in cache:
-            cache[pose.obj_id] = load_model(folder, pose.obj_id)
-    return poses, [cache[pose.obj_id] for pose in poses], folder
-
-
-def rendered_visible_pixel_counts(
-    frame: Frame,
-    camera_from_model: list[np.ndarray],
-    models: list[Any],
-    *,
-    tolerance_m: float = VISIBILITY_TOLERANCE_M,
-) -> np.ndarray:
-    """Pixels (N,) int64 of ``frame`` that show each model (BOP rule, module doc).
-
-    Models (metres, model frame) are rendered together from the frame's camera with poses
-    ``camera_from_model`` (4x4, metres); a pixel counts for the front-most model when its
-    rendered depth is at most the observed depth + ``tolerance_m`` or there is no reading.
-    """
-    from ipr.rendering import render_depth_and_ids
-
-    height, width = frame.shape
-    depth, index = render_depth_and_ids(
-        models, camera_from_model, frame.K, width, height, np.eye(4)
-    )
-    observed = frame.depth_m
-    consistent = (observed <= 0) | (depth <= observed + tolerance_m)
-    shown = index[(index >= 0) & consistent]
-    return np.bincount(shown, minlength=len(models)).astype(np.int64)
-
-
-def visible_pixel_counts(
-    scene: Scene | Path | str, poses: list[ObjectPose], models: list[Any]
-) -> tuple[np.ndarray, str]:
-    """Frame-0 visible pixels of each ground-truth object and where they come from.
-
-    Uses ``px_count_visib`` of ``scene_gt_info.json`` when the scene has it (source
-    ``"scene_gt_info"``), else renders the models (``"rendered"``; needs the scene's frame 0,
-    loaded when a path is given).
-    """
-    path = scene.path if isinstance(scene, Scene) else Path(scene)
-    counts = load_visible_pixel_counts(path)
-    if counts is not None:
-        if 0 not in counts or len(counts[0]) != len(poses):
-            raise SceneError(
-                path / "scene_gt_info.json",
-                "frame 0 must list one entry per object of scene_gt.json",
-                "regenerate scene_gt_info.json from scene_gt.json",
-            )
-        return np.asarray(counts[0], dtype=np.int64), "scene_gt_info"
-    loaded = scene if isinstance(scene, Scene) else load_scene(path)
-    counts_rendered = rendered_visible_pixel_counts(
-        loaded.frames[0], [pose.camera_from_model for pose in poses], models
-    )
-    return counts_rendered, "rendered"
 
 
 # --------------------------------------------------------------------------------------------

@@ -19,15 +19,29 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from ipr.carving import carve_posteriors, surface_views
+from ipr.collision_checker import collision_checker
 from ipr.config import Config
 from ipr.errors import IprError
-from ipr.methods import DEFAULT_METHOD, METHODS
+from ipr.fusion import fuse_views, tracked_free_spaces
+from ipr.hypotheses import prepare_hypotheses
+from ipr.inference import infer_shapes
+from ipr.likelihood import observed_frames
+from ipr.methods import DEFAULT_METHOD, Method, get_method
+from ipr.perception import Perception, perceive_scene
+from ipr.perception.occlusion import join_first_frame_pieces
+from ipr.perception.types import PartialObject
+from ipr.products import ObjectPosterior, RunSummary, StageTimings
+from ipr.report import completion_png
+from ipr.result import write_posterior_result
 from ipr.scene import Scene, load_scene
 
 log = logging.getLogger(__name__)
@@ -35,14 +49,123 @@ log = logging.getLogger(__name__)
 
 @dataclass(frozen=True, eq=False)
 class PipelineResult:
-    """What a run produced: per-object posteriors, the perception, seconds per stage, and
-    method-specific details (``summary``: samples, fallback, ...)."""
+    """What a run produced.
+
+    Attributes:
+        method: the method's name.
+        posteriors: per frame-0 object, its shape posterior (in the perception's object order).
+        perception: every frame's perception.
+        timing: seconds per stage.
+        summary: method-specific details (fused views, the sampling summary).
+    """
 
     method: str
-    posteriors: list
-    perception: object
-    timing_s: dict[str, float]
-    summary: dict = field(default_factory=dict)
+    posteriors: list[ObjectPosterior]
+    perception: Perception
+    timing: StageTimings
+    summary: RunSummary = field(default_factory=RunSummary)
+
+    @property
+    def timing_s(self) -> dict[str, float]:
+        """Stage name -> seconds, as ``result.json`` records them."""
+        return self.timing.to_dict()
+
+
+@dataclass(frozen=True)
+class RunBudget:
+    """The run's time arithmetic (module doc).
+
+    Attributes:
+        started: ``time.perf_counter()`` at the start of the run (s).
+        deadline: ``time.perf_counter()`` time the whole run must end by (None: no wall-clock
+            limit; hypotheses then have no timeout and inference its per-object default).
+    """
+
+    started: float
+    deadline: float | None
+
+    @classmethod
+    def start(cls, time_budget_s: float | None) -> RunBudget:
+        """A budget starting now, of ``time_budget_s`` seconds (None: unlimited)."""
+        now = time.perf_counter()
+        return cls(now, None if time_budget_s is None else now + time_budget_s)
+
+    def remaining_s(self, now: float) -> float | None:
+        """Seconds left at ``now`` (at least 1 ms; None without a deadline)."""
+        return None if self.deadline is None else max(self.deadline - now, 1e-3)
+
+    def inference_per_object_s(
+        self, default_s: float, fusion_s: float, objects: int, fixed_samples: bool
+    ) -> float:
+        """Default inference seconds per object: ``default_s`` less fusion's time per object
+        (at most half of it), so that a default run costs what it did without fusion. Only
+        without a deadline or a fixed sample count, and only when fusion took any time."""
+        if not objects or fusion_s <= 0 or self.deadline is not None or fixed_samples:
+            return default_s
+        return default_s - min(fusion_s / objects, default_s / 2)
+
+
+def _checked_arguments(
+    method: str,
+    time_budget_s: float | None,
+    workers: int | None,
+    samples: int | None,
+) -> Method:
+    """The method; IprError for an unknown method or an out-of-range option."""
+    chosen = get_method(method)
+    if time_budget_s is not None and not (time_budget_s > 0 and math.isfinite(time_budget_s)):
+        raise IprError(f"--time-budget must be positive, got {time_budget_s}")
+    if workers is not None and workers < 1:
+        raise IprError(f"--workers must be at least 1, got {workers}")
+    if samples is not None and samples < 1:
+        raise IprError(f"--samples must be at least 1, got {samples}")
+    return chosen
+
+
+def perceive(scene: Scene, config: Config) -> Perception:
+    """Every frame's perception, with frame 0's occluded pieces joined."""
+    perception = perceive_scene(scene, config.perception)
+    perception, _ = join_first_frame_pieces(scene, perception, config.perception.occluded_pieces)
+    return perception
+
+
+@dataclass(frozen=True, eq=False)
+class FusedObjects:
+    """Frame 0's objects after view fusion (or as perceived, for methods that do not fuse).
+
+    Attributes:
+        objects: the partial objects hypotheses are made for.
+        object_spaces: per object id, the seen-free space through its registered motion.
+        motions: per object id, its registered later-frame motions (for carving).
+        fused_views: per result object (its position), the later frames fused into it; None
+            when the method does not fuse.
+    """
+
+    objects: tuple[PartialObject, ...]
+    object_spaces: Mapping = field(default_factory=dict)
+    motions: Mapping = field(default_factory=dict)
+    fused_views: Mapping[str, list[int]] | None = None
+
+
+def fuse(scene: Scene, perception: Perception, method: Method, config: Config) -> FusedObjects:
+    """Register the later frames' views into frame 0 for the methods that use the pushes."""
+    objects = perception.objects[0]
+    if not (method.actions and config.fusion.enabled):
+        return FusedObjects(objects)
+    support = next((p for p in perception.planes[0] if p.kind == "support"), None)
+    fused = fuse_views(perception.objects, perception.free_space, support, config.fusion)
+    object_spaces: dict = {}
+    if config.fusion.later_free_space or config.fusion.pusher_free_space:
+        object_spaces = tracked_free_spaces(
+            fused, perception.free_space, scene.pushes, scene.pusher, config.fusion
+        )
+    # Keyed like the result's objects (their position), listing the later frames fused.
+    fused_views = {
+        str(position): fused.fused_frames[obj.id]
+        for position, obj in enumerate(fused.objects)
+        if obj.id in fused.fused_frames
+    }
+    return FusedObjects(fused.objects, object_spaces, fused.motions, fused_views)
 
 
 def run_pipeline(
@@ -63,95 +186,61 @@ def run_pipeline(
     multi-core machine) starts a process pool: as with any Python multiprocessing, a script
     calling this must guard its entry point with ``if __name__ == "__main__":``.
     """
-    from ipr.carving import carve_posteriors, surface_views
-    from ipr.collision_checker import collision_checker, prepare_hypotheses
-    from ipr.fusion import fuse_views, tracked_free_spaces
-    from ipr.inference import VARIANTS, infer_shapes
-    from ipr.likelihood import observed_frames
-    from ipr.perception import perceive_scene
-    from ipr.perception.occlusion import join_first_frame_pieces
-
-    if method not in METHODS:
-        raise IprError(f"unknown method {method!r}; available: {', '.join(METHODS)}")
-    if time_budget_s is not None and not time_budget_s > 0:
-        raise IprError(f"--time-budget must be positive, got {time_budget_s}")
-    if workers is not None and workers < 1:
-        raise IprError(f"--workers must be at least 1, got {workers}")
-    if samples is not None and samples < 1:
-        raise IprError(f"--samples must be at least 1, got {samples}")
+    chosen = _checked_arguments(method, time_budget_s, workers, samples)
     config = config or Config()
     if samples is not None:
         config = dataclasses.replace(
             config, inference=dataclasses.replace(config.inference, max_samples=samples)
         )
-    started = time.perf_counter()
-    deadline = None if time_budget_s is None else started + time_budget_s
-    perception = perceive_scene(scene, config.perception)
-    perception, _ = join_first_frame_pieces(scene, perception, config.perception.occluded_pieces)
+    budget = RunBudget.start(time_budget_s)
+    perception = perceive(scene, config)
     perceived = time.perf_counter()
-    objects = perception.objects[0]
-    if not objects:
+    if not perception.objects[0]:
         log.warning("%s: no object found in frame 0; the result is empty", scene.path)
-    summary: dict = {}
-    object_spaces: dict = {}
-    motions: dict = {}  # per object, its registered later-frame motions (methods with pushes)
-    if method in VARIANTS and VARIANTS[method].actions and config.fusion.enabled:
-        support = next((p for p in perception.planes[0] if p.kind == "support"), None)
-        fused = fuse_views(perception.objects, perception.free_space, support, config.fusion)
-        objects = fused.objects
-        motions = fused.motions
-        if config.fusion.later_free_space or config.fusion.pusher_free_space:
-            object_spaces = tracked_free_spaces(
-                fused, perception.free_space, scene.pushes, scene.pusher, config.fusion
-            )
-        # Keyed like the result's objects (their position), listing the later frames fused.
-        summary["fused_views"] = {
-            str(position): fused.fused_frames[obj.id]
-            for position, obj in enumerate(objects)
-            if obj.id in fused.fused_frames
-        }
+    fused = fuse(scene, perception, chosen, config)
     fused_at = time.perf_counter()
-    if (
-        objects
-        and fused_at - perceived > 0
-        and deadline is None
-        and not config.inference.max_samples
-    ):
-        # Fusion's time comes out of the default inference budget (at most half of it), so
-        # that a default run costs what it did without fusion (about 3 s per object).
-        per_object = config.inference.budget_per_object_s
-        spent = min((fused_at - perceived) / len(objects), per_object / 2)
+    per_object = budget.inference_per_object_s(
+        config.inference.budget_per_object_s,
+        fused_at - perceived,
+        len(fused.objects),
+        bool(config.inference.max_samples),
+    )
+    if per_object != config.inference.budget_per_object_s:
         config = dataclasses.replace(
             config,
-            inference=dataclasses.replace(config.inference, budget_per_object_s=per_object - spent),
+            inference=dataclasses.replace(config.inference, budget_per_object_s=per_object),
         )
-    remaining = None if deadline is None else max(deadline - fused_at, 1e-3)
+    remaining = budget.remaining_s(fused_at)
     rng = np.random.default_rng(seed)
-    if method == "collision-checker":
+    summary = RunSummary(fused_views=fused.fused_views)
+    if not chosen.physics:
         posteriors = collision_checker(
-            objects,
+            fused.objects,
             perception.free_space[0],
             perception.planes[0],
             config.collision_checker,
             rng=rng,
             time_budget_s=remaining,
+            hypotheses=config.hypotheses,
+            constraints=config.constraints,
         )
         finished = time.perf_counter()
         generation = float(sum(p.generation_s for p in posteriors))
-        timing = {
-            "segmentation": perceived - started,
-            "hypotheses": generation,
-            "inference": max(finished - perceived - generation, 0.0),
-        }
+        timing = StageTimings(
+            segmentation=perceived - budget.started,
+            hypotheses=generation,
+            inference=max(finished - perceived - generation, 0.0),
+        )
     else:
         prepared = prepare_hypotheses(
-            objects,
+            fused.objects,
             perception.free_space[0],
             perception.planes[0],
-            config.collision_checker,
+            config.hypotheses,
+            config.constraints,
             rng,
             remaining,
-            object_spaces,
+            fused.object_spaces,
         )
         generated = time.perf_counter()
         observed = observed_frames(
@@ -168,28 +257,29 @@ def run_pipeline(
                 config=config.inference,
                 collision_checker_config=config.collision_checker,
                 seed=seed,
-                deadline=deadline,
+                deadline=budget.deadline,
                 workers=workers,
             )
         except IprError as error:  # say which scene the method refused
             raise IprError(f"{scene.path}: {error}") from None
         finished = time.perf_counter()
         posteriors = outcome.posteriors
-        summary = {**summary, **outcome.summary}
-        timing = {
-            "segmentation": perceived - started,
-            "fusion": fused_at - perceived,
-            "hypotheses": generated - fused_at,
-            "inference": finished - generated,
-            **{f"inference_{name}": value for name, value in outcome.timing_s.items()},
-        }
+        summary = dataclasses.replace(summary, sampling=outcome.summary)
+        timing = StageTimings(
+            segmentation=perceived - budget.started,
+            fusion=fused_at - perceived,
+            hypotheses=generated - fused_at,
+            inference=finished - generated,
+            inference_collision_checker=outcome.timing_s["collision_checker"],
+            inference_sampling=outcome.timing_s["sampling"],
+        )
     if config.carving.enabled and posteriors:
         carving_started = time.perf_counter()
-        views = surface_views(scene.frames, perception.objects, motions, config.carving)
+        views = surface_views(scene.frames, perception.objects, fused.motions, config.carving)
         posteriors = carve_posteriors(posteriors, views)
-        timing["carving"] = time.perf_counter() - carving_started
-    timing["total"] = time.perf_counter() - started
-    return PipelineResult(method, posteriors, perception, timing, summary)
+        timing = dataclasses.replace(timing, carving=time.perf_counter() - carving_started)
+    timing = dataclasses.replace(timing, total=time.perf_counter() - budget.started)
+    return PipelineResult(chosen.name, posteriors, perception, timing, summary)
 
 
 def infer(
@@ -206,9 +296,6 @@ def infer(
 ) -> Path:
     """Load a scene, run the pipeline and write the result directory (atomically), with
     ``completion.png``: frame 0's RGB beside the completed objects seen from its camera."""
-    from ipr.collision_checker import write_posterior_result
-    from ipr.report import completion_png
-
     out_dir = Path(out_dir)
     if out_dir.exists() and not overwrite:
         raise IprError(
@@ -225,7 +312,8 @@ def infer(
         samples=samples,
     )
     world_from_camera = {frame.index: frame.world_from_camera for frame in scene.frames}
-    extra = {"inference": result.summary} if result.summary else {}
+    details = result.summary.to_dict()
+    extra = {"inference": details} if details else {}
     return write_posterior_result(
         out_dir,
         result.posteriors,

@@ -12,6 +12,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from ipr.products import ObjectPosterior
+from ipr.scene import Frame
+
 #: Distinct colours (RGB, 0-255) for objects, cycled.
 PALETTE = np.array(
     [
@@ -40,7 +43,7 @@ def _shading(depth_m: np.ndarray, K: np.ndarray) -> np.ndarray:
     return 0.35 + 0.65 * np.clip(np.nan_to_num(facing), 0.0, 1.0)
 
 
-def completion_image(frame: object, posteriors: Sequence[object]) -> np.ndarray:
+def completion_image(frame: Frame, posteriors: Sequence[ObjectPosterior]) -> np.ndarray:
     """(H, 2W, 3) uint8: ``frame``'s RGB, and the output shapes of ``posteriors``
     (``ObjectPosterior``; world frame) rendered from its camera over the dimmed input."""
     from ipr.rendering import render_depth_and_ids
@@ -61,7 +64,7 @@ def completion_image(frame: object, posteriors: Sequence[object]) -> np.ndarray:
     return np.concatenate([rgb, np.clip(right, 0, 255).astype(np.uint8)], axis=1)
 
 
-def completion_png(frame: object, posteriors: Sequence[object]) -> bytes:
+def completion_png(frame: Frame, posteriors: Sequence[ObjectPosterior]) -> bytes:
     """``completion_image`` encoded as PNG."""
     from PIL import Image
 

@@ -4,8 +4,8 @@ A result holds, per reconstructed object, its most probable complete shape (``be
 optionally its weighted shape hypotheses (``hyp_NNN.ply``), all in metres in the world frame at
 the object's frame-0 pose, plus the world-from-camera transforms the method used (so that ground
 truth given in camera frames can be placed in the result's world frame), the method name and
-timings. ``write_ground_truth_result`` builds the oracle result from a scene's ground truth (an
-evaluation-only function: inference never reads ground truth).
+timings. ``write_posterior_result`` writes a method's per-object posteriors; the oracle result
+built from ground truth is ``ipr.ground_truth``'s (evaluation only).
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ import numpy as np
 
 from ipr.atomic import staged_directory
 from ipr.errors import ResultError
+from ipr.products import ObjectPosterior, volume_spread
 
 RESULT_FORMAT = "ipr-result/1"
 RESULT_FILE = "result.json"
@@ -518,61 +519,54 @@ def _check_mesh_for_writing(mesh: Any, what: str) -> None:
         raise ValueError(f"{what} has NaN or inf vertices")
 
 
-# --------------------------------------------------------------------------------------------
-# Ground truth (evaluation only)
-
-
-def write_ground_truth_result(
-    scene_path: Path | str,
+def write_posterior_result(
     out_dir: Path | str,
-    models_dir: Path | str | None = None,
-    overwrite: bool = False,
+    posteriors: Sequence[ObjectPosterior],
+    world_from_camera: Mapping[int, np.ndarray],
+    timing_s: Mapping[str, float] | None = None,
     *,
-    visible_only: bool = True,
-    min_visible_px: int = 100,
+    method: str,
+    extra: Mapping | None = None,
+    extra_files: Mapping[str, bytes] | None = None,
+    overwrite: bool = False,
 ) -> Path:
-    """Write the oracle result of a scene: its ground-truth models at their frame-0 poses.
+    """Write a result directory (``ipr.result.write_result``) from per-object posteriors: per
+    object its output shape as ``best.ply`` and its hypotheses with non-zero probability
+    (renormalised against rounding) as weighted hypotheses.
 
-    The world frame is the one ``ipr.scene.load_scene`` builds for frame 0 (camera poses, or the
-    support plane); each model (BOP, mm -> m) is placed with ``world_from_camera[0] @
-    camera_from_model`` and given probability 1, method ``"ground-truth"``. With
-    ``visible_only`` (default) only objects visible in frame 0 by the metrics' rule
-    (``ipr.metrics.visible_pixel_counts`` >= ``min_visible_px``) are written, so that the oracle
-    scores 1 in both spaces. ``extra["ground_truth"]`` records the scene, the BOP ``obj_id`` of
-    each written object (in object order) and the excluded ones.
+    ``world_from_camera``: frame id -> (4, 4) OpenCV camera-to-world (frame 0 required).
+    ``extra["objects_summary"]`` records each object's id, inference mode and volumes;
+    ``extra`` adds further keys and ``extra_files`` further files (name -> bytes).
     """
-    from ipr.metrics import frame0_ground_truth, visible_pixel_counts
-    from ipr.scene import load_scene
-
-    scene = load_scene(scene_path)
-    poses, models, models_dir = frame0_ground_truth(scene_path, models_dir)
-    world_from_camera = scene.frames[0].world_from_camera
-    keep = [True] * len(poses)
-    if visible_only:
-        counts, _ = visible_pixel_counts(scene, poses, models)
-        keep = [int(c) >= min_visible_px for c in counts]
-    objects = []
-    for pose, mesh, kept in zip(poses, models, keep, strict=True):
-        if kept:
-            placed = mesh.copy()
-            placed.apply_transform(world_from_camera @ pose.camera_from_model)
-            objects.append((placed, []))
-    extra = {
-        "ground_truth": {
-            "scene": str(Path(scene_path).resolve()),
-            "models_dir": str(Path(models_dir).resolve()),
-            "obj_ids": [pose.obj_id for pose, kept in zip(poses, keep, strict=True) if kept],
-            "excluded_obj_ids": [
-                pose.obj_id for pose, kept in zip(poses, keep, strict=True) if not kept
-            ],
-        }
-    }
+    objects, summary = [], []
+    for posterior in posteriors:
+        keep = np.flatnonzero(posterior.probabilities > 0)
+        weights = posterior.probabilities[keep] / posterior.probabilities[keep].sum()
+        hypotheses = [
+            (posterior.written_mesh(k), float(w)) for k, w in zip(keep, weights, strict=True)
+        ]
+        best_probability = float(posterior.probabilities[posterior.best])
+        objects.append((posterior.output_mesh, hypotheses, best_probability))
+        summary.append(
+            {
+                "object_id": posterior.object_id,
+                "inference": posterior.inference,
+                "hypotheses": len(posterior.hypotheses),
+                "nonzero": int(keep.size),
+                "best_volume_m3": posterior.best_hypothesis.volume_m3,
+                "carved": posterior.output_meshes is not None
+                and posterior.output_meshes[posterior.best] is not None,
+                "volumes_m3": volume_spread(posterior.hypotheses),
+                "generation_s": posterior.generation_s,
+            }
+        )
     return write_result(
         out_dir,
-        GROUND_TRUTH_METHOD,
-        {0: world_from_camera},
+        method,
+        dict(world_from_camera),
         objects,
-        {"total": 0.0},
-        extra,
+        timing_s,
+        {"objects_summary": summary, **dict(extra or {})},
+        extra_files=extra_files,
         overwrite=overwrite,
     )

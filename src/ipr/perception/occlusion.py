@@ -28,15 +28,10 @@ import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
 from ipr import voxels
-from ipr.hypotheses import (
-    PlaneRegion,
-    allowed_voxels,
-    convex_mesh,
-    plane_regions,
-    unary_report,
-)
+from ipr.geometry.convex import convex_mesh
 from ipr.perception.config import OccludedPiecesConfig
 from ipr.perception.free_space import SeenSpace
+from ipr.perception.occupancy import PlaneRegion, allowed_voxels, plane_regions, unary_report
 from ipr.perception.tracking import SegmentFeatures, colour_distance, merged_features
 from ipr.perception.types import KnownPlane, PartialObject
 
@@ -47,7 +42,7 @@ def _offending_voxels(
     keys: np.ndarray, pitch_m: float, space: SeenSpace, regions: tuple[PlaneRegion, ...]
 ) -> int:
     """Voxels (``ipr.voxels`` keys at ``pitch_m``) seen free plus those inside a known wall
-    (``ipr.hypotheses.unary_report``, the hypotheses' own count)."""
+    (``ipr.perception.occupancy.unary_report``, the hypotheses' own count)."""
     # The vertices only feed the depth below the support, which is not used here.
     report = unary_report(np.zeros((1, 3)), keys, pitch_m, space, regions)
     return report.free_voxels + report.wall_voxels

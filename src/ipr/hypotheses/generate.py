@@ -80,13 +80,13 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import ConvexHull, QhullError
 
 from ipr import voxels
+from ipr.geometry.convex import clip_halfspace, convex_mesh
 from ipr.perception.free_space import FREE, SeenSpace
+from ipr.perception.occupancy import PlaneRegion, allowed_voxels, plane_regions, unary_report
 from ipr.perception.types import KnownPlane, PartialObject
+from ipr.products import ShapeHypothesis, volume_spread
 
 logger = logging.getLogger(__name__)
-
-#: Volumes below this (m^3) are degenerate (flat or collinear point sets).
-_MIN_VOLUME_M3 = 1e-9
 
 
 @dataclass(frozen=True)
@@ -152,6 +152,8 @@ class HypothesisConfig:
         timeout_s: seconds per object before the remaining hypotheses are simplified; None
             (default): no wall-clock limit, so results do not depend on the machine's load.
         seed: seed used when no rng is given (combined with the object id).
+        budget_share: share of a run's time budget given to generation (when a budget is
+            given), split over the objects as their ``timeout_s``; inference gets the rest.
     """
 
     count: int = 32
@@ -177,6 +179,7 @@ class HypothesisConfig:
     support_band_m: float = 0.01
     timeout_s: float | None = None
     seed: int = 0
+    budget_share: float = 0.6
 
     def __post_init__(self) -> None:
         if self.count < 1:
@@ -187,6 +190,8 @@ class HypothesisConfig:
             raise ValueError(f"ray_quantile must be in [0, 1], got {self.ray_quantile}")
         if self.max_attempts < 1 or self.max_rounds < 1:
             raise ValueError("max_attempts and max_rounds must be >= 1")
+        if not 0.0 < self.budget_share < 1.0:
+            raise ValueError(f"budget_share must be in (0, 1), got {self.budget_share}")
         if self.timeout_s is not None and not self.timeout_s > 0:
             raise ValueError(f"timeout_s must be None or > 0, got {self.timeout_s}")
         if not (self.support_snap_m >= 0 and self.support_band_m >= 0):
@@ -196,265 +201,12 @@ class HypothesisConfig:
             )
 
 
-@dataclass(frozen=True, eq=False)
-class ShapeHypothesis:
-    """One complete shape X_i^j of an object: a closed convex mesh, world frame, metres.
-
-    Attributes:
-        object_id: the PartialObject's id.
-        index: j, the hypothesis' index among the object's hypotheses (-1: minimum shape).
-        vertices: (V, 3) float64 hull vertices (m, world).
-        faces: (F, 3) int64 triangles, counter-clockwise seen from outside (outward normals).
-        volume_m3: enclosed volume.
-        distances_m: (K,) the sampled distance d of each mirrored facet, in mirroring order.
-        facet_normals: (K, 3) unit normal N of each mirrored facet.
-        facet_sources: (K,) "observed", "hull" or "object" (all points as one facet) per facet.
-        rounds: rounds of the repeat loop used.
-        attempts: samples drawn before this one was kept.
-        feasible: passed the unary checks at generation (support, walls, free space).
-        free_voxels: voxels in seen-free space beyond ``forced_free_voxels``.
-        wall_voxels: voxels inside known walls beyond those the observed hull has.
-        forced_free_voxels: seen-free voxels of the observed points' own hull (forced).
-        forced_wall_voxels: wall voxels of the observed points' own hull (forced).
-        voxel_keys: sorted ``ipr.voxels`` keys of its voxels at ``voxel_pitch_m`` (None when
-            not voxelised, e.g. without a free-space map).
-        voxel_pitch_m: pitch of ``voxel_keys`` (m).
-    """
-
-    object_id: int
-    index: int
-    vertices: np.ndarray
-    faces: np.ndarray
-    volume_m3: float
-    distances_m: np.ndarray
-    facet_normals: np.ndarray
-    facet_sources: tuple[str, ...] = ()
-    rounds: int = 0
-    attempts: int = 1
-    feasible: bool = True
-    free_voxels: int = 0
-    wall_voxels: int = 0
-    forced_free_voxels: int = 0
-    forced_wall_voxels: int = 0
-    voxel_keys: np.ndarray | None = None
-    voxel_pitch_m: float = voxels.DEFAULT_PITCH_M
-
-    @property
-    def bounds(self) -> np.ndarray:
-        """(2, 3) axis-aligned bounding box [minimum, maximum] (m, world)."""
-        return np.stack([self.vertices.min(axis=0), self.vertices.max(axis=0)])
-
-    @property
-    def mesh(self) -> tuple[np.ndarray, np.ndarray]:
-        """(vertices, faces), the pair ``ipr.voxels`` and ``ipr.result`` accept."""
-        return self.vertices, self.faces
-
-    def face_planes(self) -> np.ndarray:
-        """(F, 4) outward face planes (unit normal, offset): inside iff n . x + offset <= 0."""
-        tri = self.vertices[self.faces]
-        normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-        lengths = np.linalg.norm(normals, axis=1)
-        keep = lengths > 1e-15
-        normals = normals[keep] / lengths[keep, None]
-        return np.column_stack([normals, -np.einsum("ij,ij->i", normals, tri[keep, 0])])
-
-    def contains(self, points: np.ndarray, tolerance_m: float = 1e-6) -> np.ndarray:
-        """(N,) bool: which (N, 3) world points lie inside the hull (within ``tolerance_m``)."""
-        planes = self.face_planes()
-        return np.all(points @ planes[:, :3].T + planes[:, 3] <= tolerance_m, axis=1)
-
-    def keys(self, pitch_m: float | None = None) -> np.ndarray:
-        """Voxel keys at ``pitch_m`` (default: the stored pitch); cached ones when they match."""
-        pitch = self.voxel_pitch_m if pitch_m is None else pitch_m
-        if self.voxel_keys is not None and np.isclose(pitch, self.voxel_pitch_m):
-            return self.voxel_keys
-        return voxels.scanline_voxels(self.vertices, self.faces, pitch)
-
-    def to_trimesh(self):
-        """The hull as a ``trimesh.Trimesh`` (not re-processed)."""
-        import trimesh
-
-        return trimesh.Trimesh(self.vertices.copy(), self.faces.copy(), process=False)
-
-
-def hypotheses_to_trimesh(hypotheses: tuple[ShapeHypothesis, ...] | list[ShapeHypothesis]):
-    """Trimesh meshes of a sequence of hypotheses, in order."""
-    return [h.to_trimesh() for h in hypotheses]
-
-
-def volume_spread(hypotheses: tuple[ShapeHypothesis, ...] | list[ShapeHypothesis]) -> dict:
-    """Volumes of an object's hypotheses: min, median, max (m^3) and max / min."""
-    volumes = np.array([h.volume_m3 for h in hypotheses], dtype=float)
-    if volumes.size == 0:
-        return {"min": 0.0, "median": 0.0, "max": 0.0, "ratio": 1.0}
-    return {
-        "min": float(volumes.min()),
-        "median": float(np.median(volumes)),
-        "max": float(volumes.max()),
-        "ratio": float(volumes.max() / max(volumes.min(), 1e-12)),
-    }
-
-
 # --------------------------------------------------------------------------------------------
 # Known planes: the support as a half-space, walls as slabs bounded by their points' outline
 
 
-@dataclass(frozen=True, eq=False)
-class PlaneRegion:
-    """A known plane prepared for fast inside tests.
-
-    Attributes:
-        plane: the KnownPlane.
-        axes: (2, 3) orthonormal in-plane directions.
-        outline: (P, 3) 2-D half-planes (a, b, c) of the wall's points' outline in ``axes``
-            coordinates, inside iff a s + b t + c <= 0; None for an unbounded plane.
-        thickness_m: slab depth behind the visible face (walls).
-    """
-
-    plane: KnownPlane
-    axes: np.ndarray
-    outline: np.ndarray | None
-    thickness_m: float
-
-    @property
-    def is_support(self) -> bool:
-        """True for the support plane (a half-space), False for a wall (a slab)."""
-        return self.plane.kind == "support"
-
-    def in_wall(self, points: np.ndarray, margin_m: float = 0.0) -> np.ndarray:
-        """(N,) bool: (N, 3) points inside the wall's slab, shrunk by ``margin_m`` all round."""
-        distance = self.plane.signed_distance(points)
-        inside = (distance < -margin_m) & (distance > -(self.thickness_m - margin_m))
-        if self.outline is not None and inside.any():
-            st = points[inside] @ self.axes.T
-            lateral = np.all(st @ self.outline[:, :2].T + self.outline[:, 2] <= -margin_m, axis=1)
-            inside[np.flatnonzero(inside)[~lateral]] = False
-        return inside
-
-
-def plane_regions(
-    planes: tuple[KnownPlane, ...], wall_min_thickness_m: float = 0.005
-) -> tuple[PlaneRegion, ...]:
-    """Prepare known planes for inside tests (walls at least ``wall_min_thickness_m`` thick)."""
-    regions = []
-    for plane in planes:
-        normal = np.asarray(plane.normal, float)
-        helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
-        u = np.cross(normal, helper)
-        u /= np.linalg.norm(u)
-        axes = np.stack([u, np.cross(normal, u)])
-        outline = None
-        if plane.kind != "support":
-            points = np.asarray(plane.points, float).reshape(-1, 3)
-            if len(points) >= 3:
-                try:
-                    hull = ConvexHull(points @ axes.T)
-                    outline = hull.equations
-                except (QhullError, ValueError):
-                    logger.warning("wall outline is degenerate; treating the wall as unbounded")
-            else:
-                logger.warning("wall has fewer than 3 points; treating it as unbounded")
-        thickness = max(float(plane.thickness_m), wall_min_thickness_m)
-        regions.append(PlaneRegion(plane, axes, outline, thickness))
-    return tuple(regions)
-
-
-@dataclass(frozen=True)
-class UnaryReport:
-    """Unary constraint measurements of one convex shape.
-
-    Attributes:
-        voxel_count: voxels (centres inside) at the pitch used.
-        free_voxels: of those, voxels seen FREE.
-        wall_voxels: voxels inside a known wall's slab.
-        below_support_m: deepest vertex below a support plane (m, >= 0).
-    """
-
-    voxel_count: int
-    free_voxels: int
-    wall_voxels: int
-    below_support_m: float
-
-
-def unary_report(
-    vertices: np.ndarray,
-    keys: np.ndarray | None,
-    pitch_m: float,
-    space: SeenSpace | None,
-    regions: tuple[PlaneRegion, ...],
-) -> UnaryReport:
-    """Measure a convex shape (vertices (V, 3), voxel ``keys`` at ``pitch_m``) against the space
-    map and known planes. Support: exact from the vertices (the hull's lowest point is one)."""
-    below = 0.0
-    for region in regions:
-        if region.is_support:
-            below = max(below, float(-region.plane.signed_distance(vertices).min()))
-    free = walls = 0
-    count = 0 if keys is None else int(keys.size)
-    if keys is not None and keys.size:
-        centres = voxels.centres(keys, pitch_m)
-        if space is not None:
-            free = int(np.count_nonzero(space.state_at(centres) == FREE))
-        wall_mask = np.zeros(len(centres), dtype=bool)
-        for region in regions:
-            if not region.is_support:
-                wall_mask |= region.in_wall(centres)
-        walls = int(np.count_nonzero(wall_mask))
-    return UnaryReport(count, free, walls, below)
-
-
-def allowed_voxels(voxel_count: int, share: float, count: int) -> int:
-    """Offending voxels tolerated in a shape of ``voxel_count`` voxels: max(share x n, count)."""
-    return max(int(np.floor(share * voxel_count)), int(count))
-
-
 # --------------------------------------------------------------------------------------------
 # Convex hull meshes
-
-
-def convex_mesh(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float] | None:
-    """Convex hull of (N, 3) points as (vertices (V, 3), outward faces (F, 3), volume m^3);
-    None when the points span no volume (fewer than 4, coplanar or collinear)."""
-    if len(points) < 4:
-        return None
-    try:
-        hull = ConvexHull(points)
-    except (QhullError, ValueError):
-        return None
-    if hull.volume < _MIN_VOLUME_M3:
-        return None
-    return _oriented_mesh(hull)
-
-
-def _oriented_mesh(hull: ConvexHull) -> tuple[np.ndarray, np.ndarray, float]:
-    """Compact, outward-oriented triangle mesh of a scipy hull."""
-    simplices = hull.simplices.copy()
-    tri = hull.points[simplices]
-    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    flip = np.einsum("ij,ij->i", normals, hull.equations[:, :3]) < 0
-    simplices[flip] = simplices[flip][:, [0, 2, 1]]
-    used, inverse = np.unique(simplices, return_inverse=True)
-    return hull.points[used].copy(), inverse.reshape(-1, 3).astype(np.int64), float(hull.volume)
-
-
-def clip_halfspace(
-    vertices: np.ndarray, faces: np.ndarray, normal: np.ndarray, offset: float
-) -> np.ndarray:
-    """Vertices (K, 3) of a convex mesh cut to {x : normal . x + offset >= 0}: the vertices on
-    that side plus the crossings of the mesh's edges with the plane (their hull is the cut)."""
-    distance = vertices @ normal + offset
-    if distance.min() >= 0:
-        return vertices
-    edges = np.unique(
-        np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1),
-        axis=0,
-    )
-    da, db = distance[edges[:, 0]], distance[edges[:, 1]]
-    crossing = (da < 0) != (db < 0)
-    a, b = edges[crossing, 0], edges[crossing, 1]
-    t = (da[crossing] / (da[crossing] - db[crossing]))[:, None]
-    cut = vertices[a] + t * (vertices[b] - vertices[a])
-    return np.concatenate([vertices[distance >= 0], cut])
 
 
 def _thicken(points: np.ndarray, direction: np.ndarray, thickness_m: float) -> np.ndarray:

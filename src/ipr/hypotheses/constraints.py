@@ -37,15 +37,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ipr import voxels
-from ipr.hypotheses import (
-    ShapeHypothesis,
-    UnaryTolerances,
-    allowed_voxels,
-    plane_regions,
-    unary_report,
-)
+from ipr.hypotheses.generate import UnaryTolerances
 from ipr.perception.free_space import SeenSpace
+from ipr.perception.occupancy import allowed_voxels, plane_regions, unary_report
 from ipr.perception.types import KnownPlane
+from ipr.products import ShapeHypothesis
 
 logger = logging.getLogger(__name__)
 

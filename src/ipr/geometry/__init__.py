@@ -1,0 +1,1 @@
+"""Geometry below every stage: plane fits, convex hulls and the compiled loops they need."""

@@ -1,0 +1,58 @@
+"""Convex hulls as closed, outward-oriented triangle meshes (metres), and half-space cuts.
+
+Every hypothesis is convex (the physics needs convex shapes), and perception joins occluded
+pieces by testing their joint hull: both use these helpers, so they sit below both stages.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import ConvexHull, QhullError
+
+#: Volumes below this (m^3) are degenerate (flat or collinear point sets).
+_MIN_VOLUME_M3 = 1e-9
+
+
+def convex_mesh(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """Convex hull of (N, 3) points as (vertices (V, 3), outward faces (F, 3), volume m^3);
+    None when the points span no volume (fewer than 4, coplanar or collinear)."""
+    if len(points) < 4:
+        return None
+    try:
+        hull = ConvexHull(points)
+    except (QhullError, ValueError):
+        return None
+    if hull.volume < _MIN_VOLUME_M3:
+        return None
+    return _oriented_mesh(hull)
+
+
+def _oriented_mesh(hull: ConvexHull) -> tuple[np.ndarray, np.ndarray, float]:
+    """Compact, outward-oriented triangle mesh of a scipy hull."""
+    simplices = hull.simplices.copy()
+    tri = hull.points[simplices]
+    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    flip = np.einsum("ij,ij->i", normals, hull.equations[:, :3]) < 0
+    simplices[flip] = simplices[flip][:, [0, 2, 1]]
+    used, inverse = np.unique(simplices, return_inverse=True)
+    return hull.points[used].copy(), inverse.reshape(-1, 3).astype(np.int64), float(hull.volume)
+
+
+def clip_halfspace(
+    vertices: np.ndarray, faces: np.ndarray, normal: np.ndarray, offset: float
+) -> np.ndarray:
+    """Vertices (K, 3) of a convex mesh cut to {x : normal . x + offset >= 0}: the vertices on
+    that side plus the crossings of the mesh's edges with the plane (their hull is the cut)."""
+    distance = vertices @ normal + offset
+    if distance.min() >= 0:
+        return vertices
+    edges = np.unique(
+        np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1),
+        axis=0,
+    )
+    da, db = distance[edges[:, 0]], distance[edges[:, 1]]
+    crossing = (da < 0) != (db < 0)
+    a, b = edges[crossing, 0], edges[crossing, 1]
+    t = (da[crossing] / (da[crossing] - db[crossing]))[:, None]
+    cut = vertices[a] + t * (vertices[b] - vertices[a])
+    return np.concatenate([vertices[distance >= 0], cut])

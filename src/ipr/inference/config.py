@@ -1,0 +1,76 @@
+"""Settings of IPR inference (``ipr.inference``): the simulated world, the likelihood, tree
+sampling and how samples become marginals."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal, get_args
+
+from ipr.likelihood import LikelihoodConfig
+from ipr.physics import PhysicsConfig
+
+#: How samples become marginals (``InferenceConfig.weighting``).
+Weighting = Literal["hypothesis", "object", "joint"]
+WEIGHTINGS: tuple[str, ...] = get_args(Weighting)
+#: What a stability test measures per hypothesis (``InferenceConfig.stability_measure``).
+StabilityMeasure = Literal["drop", "displacement"]
+STABILITY_MEASURES: tuple[str, ...] = get_args(StabilityMeasure)
+
+
+@dataclass(frozen=True)
+class InferenceConfig:
+    """Settings of IPR inference (module doc).
+
+    Attributes:
+        physics: the simulated world's parameters.
+        likelihood: Eq. 2's parameters.
+        stability_alpha_per_m: alpha of the exploration probabilities exp(-alpha * dist)
+            (1/m): a hypothesis that moves 1 cm while settling is e^-1 as likely to be explored
+            as one that stays put.
+        neighbour_margin_m: objects whose candidate envelopes are this close interact in
+            stability tests.
+        budget_per_object_s: default inference budget (s) per object when no time budget is
+            given (hypotheses and perception come on top: about 0.5 s per object more, so that
+            a whole run stays within 3 s per object on two cores).
+        max_samples: stop after this many samples (None: only the budget stops).
+        workers: processes evaluating samples (None: all cores; 1: in this process).
+        size_prior_exponent: the size prior's exponent (module doc).
+        max_exhaustive_objects: largest scene ``exhaustive`` accepts.
+        max_exhaustive_models: largest number of joint models ``exhaustive`` accepts.
+        weighting: how samples become marginals (module doc, step 3): "hypothesis" (each
+            candidate's own likelihood term averaged over the samples that chose it, combined
+            with the priors and the pairwise constraints by exact elimination), "object" (each
+            object's marginal weighs samples by its own likelihood term, prior and exploration
+            probability, Algorithm 2's per-object update) or "joint" (every object by the
+            joint weight).
+        max_factor_table: largest table (entries) of the exact elimination of "hypothesis"
+            weighting; larger components combine their objects' factors independently.
+    """
+
+    physics: PhysicsConfig = field(default_factory=PhysicsConfig)
+    likelihood: LikelihoodConfig = field(default_factory=LikelihoodConfig)
+    stability_alpha_per_m: float = 100.0
+    neighbour_margin_m: float = 0.02
+    budget_per_object_s: float = 1.75
+    max_samples: int | None = None
+    workers: int | None = None
+    size_prior_exponent: float = 1.0
+    max_exhaustive_objects: int = 4
+    max_exhaustive_models: int = 20_000
+    weighting: Weighting = "hypothesis"
+    stability_measure: StabilityMeasure = "drop"
+    max_factor_table: float = 1e6
+
+    def __post_init__(self) -> None:
+        if not self.stability_alpha_per_m >= 0:
+            raise ValueError("stability_alpha_per_m must be >= 0")
+        if not self.budget_per_object_s > 0:
+            raise ValueError("budget_per_object_s must be positive")
+        if self.max_samples is not None and self.max_samples < 1:
+            raise ValueError("max_samples must be at least 1")
+        if self.workers is not None and self.workers < 1:
+            raise ValueError("workers must be at least 1")
+        if not self.max_factor_table >= 1:
+            raise ValueError(f"max_factor_table must be >= 1, got {self.max_factor_table}")
+        if self.weighting not in WEIGHTINGS:
+            raise ValueError(f"weighting must be one of {WEIGHTINGS}, got {self.weighting!r}")
