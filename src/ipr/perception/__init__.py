@@ -13,11 +13,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ipr.kernels import object_pixel_geometry
 from ipr.perception.config import PerceptionConfig
 from ipr.perception.denoise import objects_plane_depth
 from ipr.perception.facets import object_facets
 from ipr.perception.free_space import SpaceMap, VoxelGrid, observe_space
+from ipr.perception.kernels import object_pixel_geometry
 from ipr.perception.tracking import split_merged_objects, track_segments
 from ipr.perception.types import FrameSegmentation, KnownPlane, PartialObject
 from ipr.scene import Scene

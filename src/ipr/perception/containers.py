@@ -45,7 +45,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
-from ipr import kernels
+from ipr.perception import kernels
 from ipr.perception.config import PerceptionConfig
 from ipr.perception.types import KnownPlane
 
@@ -222,7 +222,7 @@ def _borders(
     # Only the labelled pixels' bounding box can hold borders.
     rows, cols = np.nonzero(labels > 0)
     box = (slice(rows.min(), rows.max() + 1), slice(cols.min(), cols.max() + 1))
-    # Compiled (``ipr.kernels``): both passes over the pixel pairs without temporaries.
+    # Compiled (``kernels``): both passes over the pixel pairs without temporaries.
     contact_counts, front_counts = kernels.border_pair_counts(
         np.ascontiguousarray(labels[box]),
         points[box],

@@ -1,108 +1,19 @@
-"""Plane detection in point clouds: RANSAC with a least-squares refit on the inliers.
+"""The known planes of a frame: the support (table) and the walls of containers and drawers.
 
-The paper's authors find the support (table) plane by RANSAC with a 1 cm inlier threshold and
-1000 iterations; the same routine finds further large planes (container walls, the occluding
-front of a drawer).
+The paper's authors find the support plane by RANSAC with a 1 cm inlier threshold and 1000
+iterations (``ipr.geometry.planes.fit_plane_ransac``); vertical planes found the same way among
+the points above it are kept as walls when their cues say so (``find_walls``).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
-from ipr import kernels
+from ipr.geometry import kernels as geometry_kernels
+from ipr.geometry.planes import fit_plane_ransac
+from ipr.perception import kernels
 from ipr.perception.config import PerceptionConfig
 from ipr.perception.types import KnownPlane
-
-
-@dataclass(frozen=True, eq=False)
-class Plane:
-    """The plane {x : normal . x + offset = 0}; ``normal`` is a unit (3,) vector.
-
-    ``inliers`` are indices into the point array the plane was fitted to.
-    """
-
-    normal: np.ndarray
-    offset: float
-    inliers: np.ndarray
-
-    def signed_distance(self, points: np.ndarray) -> np.ndarray:
-        """Signed distances (N,) in metres of (N, 3) points, positive on the normal's side."""
-        return points @ self.normal + self.offset
-
-    def oriented_towards(self, point: np.ndarray) -> Plane:
-        """The same plane with its normal flipped, if needed, to point towards ``point``."""
-        if float(self.signed_distance(point[None])[0]) >= 0:
-            return self
-        return Plane(-self.normal, -self.offset, self.inliers)
-
-
-def fit_plane_ransac(
-    points: np.ndarray,
-    *,
-    threshold_m: float = 0.01,
-    iterations: int = 1000,
-    min_inliers: int = 500,
-    rng: np.random.Generator | None = None,
-    axis: np.ndarray | None = None,
-    max_tilt_deg: float = 90.0,
-    sample_size: int = 4000,
-) -> Plane | None:
-    """Dominant plane of (N, 3) points by RANSAC, refined by least squares on its inliers.
-
-    Hypotheses are scored on a subsample of ``sample_size`` points (one compiled pass per
-    hypothesis, ``kernels.plane_inlier_counts``) and the best is re-scored on all points. With ``axis`` (unit (3,)),
-    only planes whose normal is within ``max_tilt_deg`` of +-axis are considered (hypotheses and
-    refits alike). Returns None when fewer than ``min_inliers`` points support any plane.
-    Deterministic for a given ``rng`` (seed 0 when None).
-    """
-    points = np.asarray(points, dtype=np.float64)
-    if len(points) < max(3, min_inliers):
-        return None
-    rng = np.random.default_rng(0) if rng is None else rng
-    # Scoring on a subsample keeps the cost independent of the image size.
-    sample = points[rng.choice(len(points), size=min(len(points), sample_size), replace=False)]
-    triples = points[rng.integers(0, len(points), size=(iterations, 3))]
-    normals = np.cross(triples[:, 1] - triples[:, 0], triples[:, 2] - triples[:, 0])
-    norms = np.linalg.norm(normals, axis=1)
-    valid = norms > 1e-9
-    if axis is not None:
-        min_cos = np.cos(np.radians(max_tilt_deg))
-        valid &= np.abs(normals @ np.asarray(axis, float)) >= min_cos * np.maximum(norms, 1e-12)
-    if not valid.any():
-        return None
-    normals = normals[valid] / norms[valid, None]
-    offsets = -np.einsum("ij,ij->i", normals, triples[valid, 0])
-    # Compiled scoring (``ipr.kernels``): no (sample, hypotheses) distance arrays.
-    best = int(np.argmax(kernels.plane_inlier_counts(sample, normals, offsets, threshold_m)))
-    normal, offset = normals[best], offsets[best]
-    # The refits use at most 20000 inliers (evenly spread: they fix the plane as well as all of
-    # them, at a fraction of the cost of a decomposition of a large matrix), so their inliers
-    # are looked for among an even subset of at most 50000 points: on a 640x480 frame this
-    # spares two of the three passes over all ~300000 points (3.5 ms).
-    refit_points = points[:: max(1, len(points) // 50000)]
-    for _ in range(2):  # least-squares refits on the inliers
-        inliers = kernels.plane_inliers(refit_points, normal, float(offset), threshold_m)
-        if len(inliers) < 3:
-            return None
-        centroid, scatter = kernels.centred_scatter(
-            refit_points, inliers[:: max(1, len(inliers) // 20000)]
-        )
-        _, vectors = np.linalg.eigh(scatter)
-        refit = vectors[:, 0] * (1.0 if vectors[:, 0] @ normal >= 0 else -1.0)
-        if axis is not None and abs(float(refit @ axis)) < np.cos(np.radians(max_tilt_deg)):
-            break  # the refit would leave the allowed orientations: keep the hypothesis
-        normal = refit
-        offset = -float(normal @ centroid)
-    inliers = kernels.plane_inliers(points, normal, float(offset), threshold_m)
-    if len(inliers) < min_inliers:
-        return None
-    return Plane(normal, offset, inliers)
-
-
-# --------------------------------------------------------------------------------------------
-# Known planes of a frame: the support and the walls of containers and drawers
 
 
 def find_known_planes(
@@ -341,7 +252,7 @@ def find_walls(
         cues = _wall_cues(points, normals, height, normal, offset, up, config, unknown, normals_up)
         if cues is not None:
             candidates.append(cues)
-        # Surfaces crossing the slab stay in the pool (compiled: ``ipr.kernels``).
+        # Surfaces crossing the slab stay in the pool (compiled: ``kernels``).
         pool = kernels.outside_slab(
             points,
             points if normals is None else normals,
@@ -630,9 +541,9 @@ def _fit_vertical_plane(
         return None
     normal = normal[valid] / norms[valid, None]
     offset = -np.einsum("ij,ij->i", normal, points[pairs[valid, 0]])
-    # Compiled scoring (``ipr.kernels``): no (sample, hypotheses) arrays.
+    # Compiled scoring (``geometry_kernels``, ``kernels``): no (sample, hypotheses) arrays.
     if normals is None:
-        votes = kernels.plane_inlier_counts(sample, normal, offset, threshold)
+        votes = geometry_kernels.plane_inlier_counts(sample, normal, offset, threshold)
     else:
         sample_normals = np.ascontiguousarray(normals[sample_index], dtype=np.float64)
         sample_unknown = ~sample_normals.any(axis=1) if unknown is None else unknown[sample_index]
@@ -647,7 +558,7 @@ def _fit_vertical_plane(
         unknown = ~normals.any(axis=1)
     for _ in range(2):
         if normals is None:
-            inliers = kernels.plane_inliers(points, best_normal, best_offset, threshold)
+            inliers = geometry_kernels.plane_inliers(points, best_normal, best_offset, threshold)
         else:
             inliers = kernels.facing_plane_inliers(
                 points, normals, unknown, best_normal, best_offset, threshold, _FACING_COS
@@ -656,7 +567,7 @@ def _fit_vertical_plane(
             return None
         # The least-squares line of the inliers seen from above: the 3D moments projected on
         # the horizontal basis (the moments of the projected points).
-        centroid_3d, scatter_3d = kernels.centred_scatter(
+        centroid_3d, scatter_3d = geometry_kernels.centred_scatter(
             points, inliers[:: max(1, len(inliers) // 5000)]
         )
         centroid = basis.T @ centroid_3d
@@ -708,7 +619,7 @@ def _wall_cues(
         normals_up = normals @ up
     if normals is not None and unknown is None:
         unknown = ~normals.any(axis=1)
-    # Compiled (``ipr.kernels``): depth, position along the plane and face membership in one
+    # Compiled (``kernels``): depth, position along the plane and face membership in one
     # pass; surfaces crossing the plane are not part of it (unless seen edge-on).
     depth, s, on_plane = kernels.vertical_plane_coordinates(
         pts,

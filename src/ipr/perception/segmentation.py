@@ -24,8 +24,8 @@ from scipy.sparse import coo_matrix, csr_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import eigsh
 
-from ipr import kernels
 from ipr.errors import IprError
+from ipr.perception import kernels
 from ipr.perception.config import PerceptionConfig
 from ipr.perception.containers import join_container_insides
 from ipr.perception.planes import find_support_plane, find_walls, static_geometry_mask
@@ -222,7 +222,7 @@ def fill_label_holes(labels: np.ndarray, valid: np.ndarray, max_distance_px: flo
     if box_valid.all() or not box_valid.any():
         return labels
     result = labels.copy()
-    # Compiled (``ipr.kernels``): each pixel without depth tries the offsets until one is valid.
+    # Compiled (``kernels``): each pixel without depth tries the offsets until one is valid.
     kernels.fill_from_nearest(
         np.ascontiguousarray(box),
         np.ascontiguousarray(box_valid),
@@ -506,7 +506,7 @@ def kmeans_labels(
                 index = rng.integers(m)
             centres[c] = points[index]
             closest = np.minimum(closest, np.sum((points - centres[c]) ** 2, axis=1))
-        # Lloyd iterations compiled (``ipr.kernels``): tens of small numpy calls per iteration.
+        # Lloyd iterations compiled (``kernels``): tens of small numpy calls per iteration.
         labels, inertia = kernels.lloyd_iterations(points, centres, max_iterations)
         if inertia < best_inertia:
             best_labels, best_inertia = labels, inertia

@@ -37,7 +37,7 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from ipr import kernels
+from ipr.perception import kernels
 from ipr.perception.config import PerceptionConfig
 from ipr.perception.types import Supervoxels
 from ipr.scene import Frame
@@ -99,7 +99,7 @@ def organised_normals_at(
     flat = padded.reshape(-1)
     rows, cols = np.divmod(pixels, width)
     at = (rows + r) * padded_width + (cols + r)  # the pixels' flat indices in ``padded``
-    # The per-pixel arithmetic runs compiled, in float32 as before (``ipr.kernels``).
+    # The per-pixel arithmetic runs compiled, in float32 as before (``kernels``).
     return kernels.organised_normals(
         flat,
         padded_width,
@@ -143,7 +143,7 @@ def compute_supervoxels(
         points_world = frame.points_world()
     flat_points = np.asarray(points_world.reshape(-1, 3), dtype=np.float64)
     voxel = config.voxel_size_m
-    # Compiled (``ipr.kernels``): every kept pixel's voxel key without gathering its point.
+    # Compiled (``kernels``): every kept pixel's voxel key without gathering its point.
     all_keys, dims = kernels.voxel_keys(flat_points, pixels, voxel)
     # Close-up frames have tens of pixels per voxel: the statistics come from an even subset
     # of at most supervoxel_max_points pixels, and every pixel then joins its voxel's label.
@@ -438,7 +438,7 @@ def _dominant_faces(
     ``dominant_face_deg`` of the group's mean normal and re-average; the centre and the plane
     fit then use those pixels only (all pixels when fewer than 6 remain).
     """
-    # Compiled (``ipr.kernels``): the selections and moments in a few passes over the pixels.
+    # Compiled (``kernels``): the selections and moments in a few passes over the pixels.
     centres, covariance, sizes, normal = kernels.dominant_face_moments(
         groups,
         np.ascontiguousarray(points, dtype=np.float64),

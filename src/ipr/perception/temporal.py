@@ -41,8 +41,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ipr import kernels
 from ipr.camera import invert_transform
+from ipr.perception import kernels
 from ipr.perception.config import PerceptionConfig
 from ipr.perception.planes import static_geometry_mask
 from ipr.perception.types import KnownPlane, Supervoxels
@@ -120,7 +120,7 @@ def compare_frames(
         inside = in_front & (u >= 0) & (u < previous_width) & (v >= 0) & (v < previous_height)
         pixel = np.where(inside, v.astype(np.int64) * previous_width + u.astype(np.int64), 0)
     else:
-        # From frame t's depth and pixel grid in float32, compiled (``ipr.kernels``): the same
+        # From frame t's depth and pixel grid in float32, compiled (``kernels``): the same
         # operations as ``_in_previous_camera`` and the projection above, in one pass.
         f32 = np.float32
         relative = (invert_transform(previous_world_from_camera) @ world_from_camera).astype(f32)
@@ -133,7 +133,7 @@ def compare_frames(
             np.asarray(previous_K, dtype=f32),
             *previous_depth_m.shape,
         )
-    # Compiled (``ipr.kernels``): the states in one pass. Each quantity keeps the precision
+    # Compiled (``kernels``): the states in one pass. Each quantity keeps the precision
     # numpy gave it: tolerances in z's, the depth difference in the wider of the two depths'.
     dtype = np.result_type(z.dtype, previous_depth_m.dtype)
     state, previous_label, near = kernels.pixel_changes(
@@ -230,7 +230,7 @@ def supervoxel_anchors(
         zero = np.zeros(0, dtype=np.int64)
         return SupervoxelChange(anchor, zero, zero.copy())
     near = change.near.reshape(-1) if change.near is not None else np.zeros(state.size, bool)
-    # Compiled (``ipr.kernels``): every count in two passes over the pixels.
+    # Compiled (``kernels``): every count in two passes over the pixels.
     compatible, incompatible, table, pixels = kernels.supervoxel_anchor_counts(
         flat_supervoxel,
         state,
