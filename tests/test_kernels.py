@@ -296,10 +296,10 @@ def test_container_borders_match_the_numpy_version_in_order():
     K = np.array([[300.0, 0.0, 40.0], [0.0, 300.0, 30.0], [0.0, 0.0, 1.0]])
     points = geometry_kernels.world_points(depth, K, world_from_camera)
     config = PerceptionConfig()
-    low, high = config.inside_front_step_m
+    low, high = config.containers.front_step_m
     contacts, fronts = _borders(labels, points, depth, valid, config)
     expected = _reference_borders(
-        labels, points, depth, valid, config.inside_contact_gap_m, low, high
+        labels, points, depth, valid, config.containers.contact_gap_m, low, high
     )
     assert list(contacts.items()) == list(expected[0].items())
     assert list(fronts.items()) == list(expected[1].items())
