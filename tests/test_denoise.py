@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.spatial import ConvexHull
 
-from ipr.perception.config import PerceptionConfig
+from ipr.perception.config import DenoiseConfig, PerceptionConfig
 from ipr.perception.denoise import object_plane_depth
 
 
@@ -72,8 +72,8 @@ def test_small_or_line_shaped_objects_keep_their_readings():
 
 
 def test_an_even_window_is_refused_with_a_clear_message():
-    with pytest.raises(ValueError, match="denoise_window_px must be odd"):
-        PerceptionConfig(denoise_window_px=4)
+    with pytest.raises(ValueError, match="window_px must be odd"):
+        PerceptionConfig(denoise=DenoiseConfig(window_px=4))
     with pytest.raises(ValueError, match="must be odd"):
         object_plane_depth(np.ones((5, 5), np.float32), np.arange(25), 4)
-    assert PerceptionConfig(denoise_window_px=0).denoise_window_px == 0
+    assert PerceptionConfig(denoise=DenoiseConfig(window_px=0)).denoise.window_px == 0

@@ -1,4 +1,5 @@
-"""Each compiled kernel (``ipr.kernels``) gives what the numpy expression it replaced gave.
+"""Each compiled perception kernel (``ipr.perception.kernels``) gives what the numpy expression it
+replaced gave (the geometry kernels: ``test_geometry_kernels.py``).
 
 The references below are the earlier numpy implementations, kept here only to pin the results:
 same bits where the kernel keeps numpy's order of operations, equal to rounding otherwise
@@ -11,8 +12,9 @@ import numpy as np
 import pytest
 from scipy.ndimage import uniform_filter
 
-from ipr import kernels
-from ipr.camera import backproject, backproject_pixels, look_at
+from ipr.camera import backproject_pixels, look_at
+from ipr.geometry import kernels as geometry_kernels
+from ipr.perception import kernels
 from ipr.perception.denoise import objects_plane_depth
 from ipr.perception.facets import pixel_areas
 
@@ -25,24 +27,6 @@ def _normalise(vectors: np.ndarray) -> np.ndarray:
 def _group_sum(groups: np.ndarray, values: np.ndarray, count: int) -> np.ndarray:
     return np.stack(
         [np.bincount(groups, weights=values[:, c], minlength=count) for c in range(3)], axis=1
-    )
-
-
-def test_world_points_equal_backprojection_then_transform():
-    rng = np.random.default_rng(3)
-    K = np.array([[520.0, 0.0, 319.5], [0.0, 525.0, 241.2], [0.0, 0.0, 1.0]])
-    world_from_camera = look_at(np.array([0.6, -0.4, 0.7]), np.array([0.0, 0.1, 0.0]))
-    depth = rng.uniform(0.3, 2.0, (48, 64)).astype(np.float32)
-    depth[rng.random(depth.shape) < 0.1] = 0.0
-    K[0, 2], K[1, 2] = 31.5, 24.2
-    expected = backproject(depth, K) @ world_from_camera[:3, :3].T + world_from_camera[:3, 3]
-    points = kernels.world_points(depth, K, world_from_camera)
-    assert points.shape == (48, 64, 3) and points.dtype == np.float64
-    # BLAS may fuse the products: equal to a few units in the last place, not bit for bit.
-    np.testing.assert_allclose(points, expected, rtol=0, atol=1e-14)
-    # Zero depth is the camera centre, as backproject gives it.
-    np.testing.assert_allclose(
-        points[depth == 0], np.broadcast_to(world_from_camera[:3, 3], (int((depth == 0).sum()), 3))
     )
 
 
@@ -310,12 +294,12 @@ def test_container_borders_match_the_numpy_version_in_order():
     valid = rng.random(labels.shape) > 0.03
     world_from_camera = look_at(np.array([0.2, -0.5, 0.6]), np.zeros(3))
     K = np.array([[300.0, 0.0, 40.0], [0.0, 300.0, 30.0], [0.0, 0.0, 1.0]])
-    points = kernels.world_points(depth, K, world_from_camera)
+    points = geometry_kernels.world_points(depth, K, world_from_camera)
     config = PerceptionConfig()
-    low, high = config.inside_front_step_m
+    low, high = config.containers.front_step_m
     contacts, fronts = _borders(labels, points, depth, valid, config)
     expected = _reference_borders(
-        labels, points, depth, valid, config.inside_contact_gap_m, low, high
+        labels, points, depth, valid, config.containers.contact_gap_m, low, high
     )
     assert list(contacts.items()) == list(expected[0].items())
     assert list(fronts.items()) == list(expected[1].items())
@@ -513,7 +497,9 @@ def test_projection_to_the_previous_camera_is_bit_identical_to_numpy():
     assert 0 < inside.mean() < 1  # some land outside the previous image
 
 
-def test_plane_kernels_match_the_numpy_expressions():
+def test_facing_plane_and_row_kernels_match_the_numpy_expressions():
+    # The data of ``test_geometry_kernels.test_plane_kernels_match_the_numpy_expressions``
+    # (same seed, same draws), then the normals and the subset of the perception kernels.
     rng = np.random.default_rng(31)
     points = rng.uniform(-0.5, 0.5, (4000, 3))
     points[:1500, 2] = rng.normal(0.0, 0.003, 1500)  # a table at z = 0
@@ -523,9 +509,6 @@ def test_plane_kernels_match_the_numpy_expressions():
     offsets = rng.uniform(-0.1, 0.1, 300)
     offsets[0] = 0.0
     distances = np.abs(points @ normals.T + offsets)
-    counts = kernels.plane_inlier_counts(points, normals, offsets, 0.01)
-    np.testing.assert_array_equal(counts, (distances < 0.01).sum(axis=0))
-    assert int(np.argmax(counts)) == 0
     point_normals = rng.normal(size=(4000, 3))
     point_normals /= np.linalg.norm(point_normals, axis=1, keepdims=True)
     unknown = rng.random(4000) < 0.1
@@ -536,16 +519,10 @@ def test_plane_kernels_match_the_numpy_expressions():
         ),
         ((distances < 0.01) & facing).sum(axis=0),
     )
-    inliers = kernels.plane_inliers(points, normals[0], 0.0, 0.01)
-    np.testing.assert_array_equal(inliers, np.flatnonzero(distances[:, 0] < 0.01))
     np.testing.assert_array_equal(
         kernels.facing_plane_inliers(points, point_normals, unknown, normals[0], 0.0, 0.01, 0.8),
         np.flatnonzero((distances[:, 0] < 0.01) & facing[:, 0]),
     )
-    centroid, scatter = kernels.centred_scatter(points, inliers)
-    centred = points[inliers] - points[inliers].mean(axis=0)
-    np.testing.assert_allclose(centroid, points[inliers].mean(axis=0), atol=1e-15)
-    np.testing.assert_allclose(scatter, centred.T @ centred, rtol=1e-10, atol=1e-15)
     subset = np.flatnonzero(rng.random(4000) < 0.5)
     np.testing.assert_array_equal(kernels.rows_at(points, subset), points[subset])
     np.testing.assert_array_equal(

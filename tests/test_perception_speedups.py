@@ -14,7 +14,7 @@ from scipy.sparse.csgraph import connected_components
 
 from ipr.camera import look_at
 from ipr.perception import supervoxels as supervoxels_module
-from ipr.perception.config import PerceptionConfig
+from ipr.perception.config import PerceptionConfig, SupervoxelsConfig
 from ipr.perception.facets import _components, mean_shift_directions, pixel_areas
 from ipr.perception.robot import robot_pixels
 from ipr.perception.supervoxels import _VoxelIndex, compute_supervoxels, organised_normals_at
@@ -73,8 +73,11 @@ def _reference_normals(depth_m, K, pixels, config):
         return np.stack([(c - cx) / fx * zz, (r - cy) / fy * zz, zz], axis=1)
 
     centre = backproject_at(rows.astype(np.float32), cols.astype(np.float32), z)
-    r = int(config.normal_radius_px)
-    limit = np.float32(config.normal_max_jump_m) + np.float32(config.normal_max_jump_ratio * r) * z
+    r = int(config.supervoxels.normal_radius_px)
+    limit = (
+        np.float32(config.supervoxels.normal_max_jump_m)
+        + np.float32(config.supervoxels.normal_max_jump_ratio * r) * z
+    )
 
     def neighbour(dv, du):
         nr, nc = rows + dv, cols + du
@@ -188,7 +191,8 @@ def test_supervoxels_are_the_same_with_and_without_dense_tables(monkeypatch):
     frame = _frame(4)
     points = frame.points_world()
     keep = (points[..., 2] > 0.01) & (frame.depth_m > 0)
-    config = PerceptionConfig(supervoxel_max_points=3000)  # a subsample: the pixel lookup too
+    # A subsample: the pixel lookup too.
+    config = PerceptionConfig(supervoxels=SupervoxelsConfig(max_points=3000))
     dense = compute_supervoxels(frame, keep, config, points_world=points)
     monkeypatch.setattr(supervoxels_module, "_DENSE_CELLS_MAX", 0)
     sorted_keys = compute_supervoxels(frame, keep, config, points_world=points)
@@ -210,7 +214,7 @@ def test_robot_pixels_are_the_points_inside_the_capsule():
     a = np.array(push.start_m) - [0.0, 0.0, half]
     t = np.clip((points - a) @ [0.0, 0.0, 1.0], 0.0, 2.0 * half)
     distance = np.linalg.norm(points - a - t[:, None] * [0.0, 0.0, 1.0], axis=1)
-    expected = (distance <= pusher.radius_m + config.pusher_margin_m) & (
+    expected = (distance <= pusher.radius_m + config.robot.pusher_margin_m) & (
         frame.depth_m.reshape(-1) > 0
     )
     assert expected.any()

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ipr.camera import backproject
-from ipr.perception.config import PerceptionConfig
+from ipr.perception.config import PerceptionConfig, TemporalConfig
 from ipr.perception.segmentation import anchor_parts
 from ipr.perception.temporal import (
     ARRIVED,
@@ -202,5 +202,5 @@ def test_a_frame_keeps_the_grouping_of_objects_that_did_not_move():
         segment_of_point(pushed, moved.labels, p) for p in ([-0.1, 0, 0.08], [0.1, 0.1, 0.06])
     ]
     assert moved_ids[0] != moved_ids[1] and min(moved_ids) > 0
-    off = PerceptionConfig(temporal_anchoring=False)
+    off = PerceptionConfig(temporal=TemporalConfig(anchoring=False))
     assert segment_frame(still, previous=(first, merged), config=off).segment_ids == [1, 2]

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from ipr.camera import look_at
-from ipr.perception.config import PerceptionConfig
+from ipr.perception.config import ContainersConfig, PerceptionConfig, WallsConfig
 from ipr.perception.planes import find_known_planes, static_geometry_mask
 from ipr.perception.robot import robot_pixels
 from ipr.perception.segmentation import (
@@ -172,7 +172,7 @@ def test_single_box_is_one_segment_and_the_table_is_not_labelled():
         assert segment_of_point(frame, result.labels, table_point) == 0
     # Every labelled pixel with depth is more than the clearance above the table.
     points = frame.points_world()[(result.labels > 0) & (frame.depth_m > 0)]
-    assert points[:, 2].min() > PerceptionConfig().support_clearance_m - 0.004
+    assert points[:, 2].min() > PerceptionConfig().support.clearance_m - 0.004
 
 
 def test_touching_boxes_of_different_heights_are_split():
@@ -371,7 +371,7 @@ def test_faces_lined_up_in_a_plane_are_a_wall_only_when_solid_with_a_straight_to
         box(-0.125, face_y, (0.02, thin, 0.12)),
         box(0.125, face_y, (0.02, thin, 0.12)),
     ]
-    without_the_cues = PerceptionConfig(wall_min_top_agreement=0.0, wall_min_face_fill=0.0)
+    without_the_cues = PerceptionConfig(walls=WallsConfig(min_top_agreement=0.0, min_face_fill=0.0))
     for boxes in (row, bridge):
         assert known_plane_kinds(boxes, without_the_cues) == ["support", "wall"]
         assert known_plane_kinds(boxes) == ["support"]
@@ -411,7 +411,8 @@ def test_a_side_wall_seen_edge_on_completes_the_container():
             -p.offset * p.normal[0] for p in planes if p.kind == "wall" and abs(p.normal[0]) > 0.99
         ]
 
-    assert len(side_walls(PerceptionConfig(wall_complete_corners=False))) == 1  # the left one
+    no_corners = PerceptionConfig(walls=WallsConfig(complete_corners=False))
+    assert len(side_walls(no_corners)) == 1  # the left one
     found = sorted(side_walls(PerceptionConfig()))
     assert len(found) == 2 and abs(found[1] - 0.12) < 0.01
     # The rim is static geometry, not an object.
@@ -419,7 +420,7 @@ def test_a_side_wall_seen_edge_on_completes_the_container():
     rim = valid & (np.abs(points[..., 0] - 0.12) < 0.0075) & (points[..., 2] > 0.075)
     assert rim.sum() > 30
     assert np.mean(segment_frame(frame).labels[rim] > 0) < 0.1
-    without = segment_frame(frame, config=PerceptionConfig(wall_complete_corners=False))
+    without = segment_frame(frame, config=no_corners)
     assert np.mean(without.labels[rim] > 0) > 0.5
 
 
@@ -444,7 +445,7 @@ def test_a_wall_cut_in_two_by_an_object_in_front_of_it_is_static_on_both_sides()
     result = segment_frame(frame)
     assert np.mean(result.labels[far_face] > 0) < 0.02
     assert len(result.segment_ids) == 2  # the two boxes
-    only_the_run = segment_frame(frame, config=PerceptionConfig(wall_max_span_m=0.0))
+    only_the_run = segment_frame(frame, config=PerceptionConfig(walls=WallsConfig(max_span_m=0.0)))
     assert np.mean(only_the_run.labels[short_run] > 0) > 0.5
 
 
@@ -521,7 +522,9 @@ def test_a_mugs_inside_joins_the_mug_and_a_neighbour_stays_apart(shared_data: Pa
     truth = np.where(index == 0, 1, np.where(index == 1, 2, 0))
 
     joined = segment_frame(frame)
-    apart = segment_frame(frame, config=PerceptionConfig(join_container_insides=False))
+    apart = segment_frame(
+        frame, config=PerceptionConfig(containers=ContainersConfig(join_insides=False))
+    )
     mug_f, block_f = (row.f_measure for row in segmentation_scores(joined.labels, truth).objects)
     assert mug_f >= 0.75
     assert segmentation_scores(apart.labels, truth).objects[0].f_measure < 0.7

@@ -23,6 +23,7 @@ from PIL import Image
 from ipr.atomic import staged_directory
 from ipr.camera import backproject, invert_transform, make_transform
 from ipr.errors import SceneError
+from ipr.geometry.planes import fit_plane_ransac
 
 ACTIONS_FORMAT = "ipr-actions/1"
 FRAME_NAME = re.compile(r"^(\d{6})\.(png|jpg|jpeg)$")
@@ -61,7 +62,7 @@ class Frame:
     def points_world(self) -> np.ndarray:
         """(H, W, 3) world-frame points of every pixel (meaningless where depth is 0)."""
         # Imported here: numba's import (0.4 s) is only worth paying where points are needed.
-        from ipr.kernels import world_points
+        from ipr.geometry.kernels import world_points
 
         return world_points(self.depth_m, self.K, self.world_from_camera)
 
@@ -418,8 +419,6 @@ def world_from_support_plane(
     z is the plane normal pointing towards the camera, the origin is the camera centre projected
     on the plane, and x is the camera's x axis projected on the plane.
     """
-    from ipr.perception.planes import fit_plane_ransac
-
     points = backproject(depth_m, K)[depth_m > 0]
     plane = fit_plane_ransac(
         points,

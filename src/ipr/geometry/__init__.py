@@ -1,1 +1,3 @@
-"""Geometry below every stage: plane fits, convex hulls and the compiled loops they need."""
+"""Geometry shared by every stage, below perception: world points of depth images, plane fits
+and convex hulls (``kernels``, ``planes``, ``convex``). Imports nothing from ipr but
+``ipr.camera``."""

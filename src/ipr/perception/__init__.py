@@ -13,11 +13,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ipr.kernels import object_pixel_geometry
 from ipr.perception.config import PerceptionConfig
 from ipr.perception.denoise import objects_plane_depth
 from ipr.perception.facets import object_facets
 from ipr.perception.free_space import SpaceMap, VoxelGrid, observe_space
+from ipr.perception.kernels import object_pixel_geometry
 from ipr.perception.tracking import split_merged_objects, track_segments
 from ipr.perception.types import FrameSegmentation, KnownPlane, PartialObject
 from ipr.scene import Scene
@@ -104,7 +104,7 @@ def perceive_scene(
                 frame.K,
                 frame.world_from_camera,
                 grid,
-                surface_margin_m=config.surface_margin_m,
+                surface_margin_m=config.free_space.surface_margin_m,
                 ignore_mask=ignore,
             )
             free_seconds[index] = time.perf_counter() - started
@@ -193,7 +193,7 @@ def _partial_objects(
         frame.depth_m,
         order,
         np.append(starts, len(order)),
-        config.denoise_window_px if config.denoise_window_px >= 3 else 1,
+        config.denoise.window_px if config.denoise.window_px >= 3 else 1,
     )
     supervoxel_all = flat_supervoxel[order]
     has_all = supervoxel_all >= 0
@@ -227,7 +227,7 @@ def _partial_objects(
             ),
             world,
             areas,
-            bandwidth=config.facet_bandwidth,
+            bandwidth=config.facets.bandwidth,
         )
         assigned = facet_of_point >= 0
         facet_image[pixels[assigned]] = facet_of_point[assigned] + next_facet
@@ -257,7 +257,7 @@ def workspace_grid(
     stacked = np.concatenate(all_points)
     low = np.percentile(stacked, 0.5, axis=0)
     high = np.percentile(stacked, 99.5, axis=0)
-    margin = config.workspace_margin_m
+    margin = config.free_space.workspace_margin_m
     minimum = np.array([low[0] - margin, low[1] - margin, low[2] - 0.05])
     maximum = np.array([high[0] + margin, high[1] + margin, high[2] + margin])
-    return VoxelGrid.around(minimum, maximum, config.free_space_voxel_m)
+    return VoxelGrid.around(minimum, maximum, config.free_space.voxel_m)

@@ -7,28 +7,28 @@ the inside in several pieces, none of them reaching F >= 0.75 alone (``docs/DESI
 the support plane:
 
 - P meets C: their surfaces touch (4-neighbour pixels whose points are closer than
-  ``inside_contact_gap_m``) or C's near wall hides P's lower part (C nearer by a depth step
-  within ``inside_front_step_m``), along at least ``inside_min_contact_px``
+  ``containers.contact_gap_m``) or C's near wall hides P's lower part (C nearer by a depth step
+  within ``containers.front_step_m``), along at least ``containers.min_contact_px``
   pixel pairs in all (a real sensor often loses the thin rim, so the inside only meets the
   outer wall by occlusion);
-- P does not rise above C (its top at most ``inside_top_tolerance_m`` above C's): an inside is
+- P does not rise above C (its top at most ``containers.top_tolerance_m`` above C's): an inside is
   below the rim;
-- P does not reach lower than C (its bottom at most ``inside_bottom_tolerance_m`` below C's):
+- P does not reach lower than C (its bottom at most ``containers.bottom_tolerance_m`` below C's):
   an inside sits on the container's floor, whereas a piece of another object seen under C's
   overhang stands on the support below C's lowest visible point;
 - P does not stand in front of C: the pixel pairs at which P is nearer than C by such a step are at
-  most ``inside_max_front_ratio`` of those along which they meet (an object resting on a box
+  most ``containers.max_front_ratio`` of those along which they meet (an object resting on a box
   stands in front of it; an inside meets its container at the rim or behind its wall);
 - P has C's colour: mean chromaticities (r, g, b) / (r + g + b), which shading does not change
-  (an inside is darker than the outside), at most ``inside_max_chroma`` apart (L1);
-- P lies within C's footprint on the support: at least ``inside_footprint_fraction`` of P's
-  points project, with a margin of ``inside_margin_m``, either into the circle fitted to C's
-  footprint, when one fits (RMS at most ``inside_circle_rms_m``, radius at most
-  ``inside_max_radius_m``: a round wall, which surrounds its inside at its full height), or
+  (an inside is darker than the outside), at most ``containers.max_chroma`` apart (L1);
+- P lies within C's footprint on the support: at least ``containers.footprint_fraction`` of P's
+  points project, with a margin of ``containers.margin_m``, either into the circle fitted to C's
+  footprint, when one fits (RMS at most ``containers.circle_rms_m``, radius at most
+  ``containers.max_radius_m``: a round wall, which surrounds its inside at its full height), or
   into the convex hull of C's footprint. A camera sees only the front half of a mug's outer
   wall, whose hull is a crescent that misses the inside; the circle does not. In the hull case
-  C's points within ``inside_rim_radius_m`` of P's on the support must also reach P's top (98th
-  percentile at most ``inside_top_tolerance_m`` below it): a rim surrounds an inside, whereas
+  C's points within ``containers.rim_radius_m`` of P's on the support must also reach P's top (98th
+  percentile at most ``containers.top_tolerance_m`` below it): a rim surrounds an inside, whereas
   an object resting on a box rises above the box's face.
 
 Pieces are joined one at a time, the pair that meets along the most pixel pairs first, and the
@@ -45,7 +45,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
-from ipr import kernels
+from ipr.perception import kernels
 from ipr.perception.config import PerceptionConfig
 from ipr.perception.types import KnownPlane
 
@@ -123,14 +123,14 @@ def join_container_insides(
     Returns:
         The relabelled (labels, segment_of_supervoxel); the inputs when nothing is joined.
     """
-    if not config.join_container_insides or labels.max() < 2:
+    if not config.containers.join_insides or labels.max() < 2:
         return labels, segment_of_supervoxel
     height, width = labels.shape
     contacts, fronts = _borders(
         labels, points.reshape(height, width, 3), depth_m, valid.reshape(height, width), config
     )
     meets = _meetings(contacts, fronts)
-    if not any(count >= config.inside_min_contact_px for count in meets.values()):
+    if not any(count >= config.containers.min_contact_px for count in meets.values()):
         return labels, segment_of_supervoxel
     normal = support.normal / np.linalg.norm(support.normal)
     axis_u = np.cross(normal, [1.0, 0.0, 0.0])
@@ -159,12 +159,12 @@ def join_container_insides(
     while True:
         best = None
         for (a, b), count in meets.items():
-            if count < config.inside_min_contact_px or (best is not None and count <= best[0]):
+            if count < config.containers.min_contact_px or (best is not None and count <= best[0]):
                 continue
             piece, container = (a, b) if len(members[a]) < len(members[b]) else (b, a)
             if len(members[piece]) < 3:
                 continue
-            if fronts.get((piece, container), 0) > config.inside_max_front_ratio * count:
+            if fronts.get((piece, container), 0) > config.containers.max_front_ratio * count:
                 continue
             if (piece, container) not in verdicts:
                 verdicts[piece, container] = _is_inside(summary(piece), summary(container), config)
@@ -214,21 +214,21 @@ def _borders(
 
     All pairs of segments at once (``tracking.contact_pixels`` counts one pair's contacts).
     Returns ``contacts`` {(a, b): count, a < b} of pairs whose world points are less than
-    ``inside_contact_gap_m`` apart (the two surfaces meet there) and ``fronts`` {(nearer,
-    farther): count} of pairs whose depths differ within ``inside_front_step_m`` (one segment
+    ``containers.contact_gap_m`` apart (the two surfaces meet there) and ``fronts`` {(nearer,
+    farther): count} of pairs whose depths differ within ``containers.front_step_m`` (one segment
     stands in front of the other there).
     """
-    low, high = config.inside_front_step_m
+    low, high = config.containers.front_step_m
     # Only the labelled pixels' bounding box can hold borders.
     rows, cols = np.nonzero(labels > 0)
     box = (slice(rows.min(), rows.max() + 1), slice(cols.min(), cols.max() + 1))
-    # Compiled (``ipr.kernels``): both passes over the pixel pairs without temporaries.
+    # Compiled (``kernels``): both passes over the pixel pairs without temporaries.
     contact_counts, front_counts = kernels.border_pair_counts(
         np.ascontiguousarray(labels[box]),
         points[box],
         depth_m[box],
         valid[box],
-        float(config.inside_contact_gap_m),
+        float(config.containers.contact_gap_m),
         # The depth step is compared in the depth's own precision, as numpy compared it.
         depth_m.dtype.type(low),
         depth_m.dtype.type(high),
@@ -278,38 +278,39 @@ def _summary(
         footprint=footprint,
         heights=heights,
         chroma=(colour / colour.sum(axis=1, keepdims=True)).mean(axis=0),
-        circle_rms_m=config.inside_circle_rms_m,
-        max_radius_m=config.inside_max_radius_m,
+        circle_rms_m=config.containers.circle_rms_m,
+        max_radius_m=config.containers.max_radius_m,
     )
 
 
 def _is_inside(piece: _Segment, container: _Segment, config: PerceptionConfig) -> bool:
     """Whether ``piece`` is (part of) the inside of ``container`` (module doc)."""
-    if piece.top > container.top + config.inside_top_tolerance_m:
+    if piece.top > container.top + config.containers.top_tolerance_m:
         return False
-    if piece.bottom < container.bottom - config.inside_bottom_tolerance_m:
+    if piece.bottom < container.bottom - config.containers.bottom_tolerance_m:
         return False
-    if np.abs(piece.chroma - container.chroma).sum() > config.inside_max_chroma:
+    if np.abs(piece.chroma - container.chroma).sum() > config.containers.max_chroma:
         return False
-    fraction = config.inside_footprint_fraction
+    fraction = config.containers.footprint_fraction
     if container.circle is not None:
         # A round wall (mug, cup, bowl) surrounds its inside at its full height, which the top
         # rule has checked.
         centre, radius = container.circle
         distance = np.linalg.norm(piece.footprint - centre, axis=1)
-        if np.mean(distance <= radius + config.inside_margin_m) >= fraction:
+        if np.mean(distance <= radius + config.containers.margin_m) >= fraction:
             return True
     if container.hull is None:
         return False
     # Distance outside the hull: the largest signed distance to its edge lines.
     outside = piece.footprint @ container.hull[:, :2].T + container.hull[:, 2]
-    if np.mean(outside.max(axis=1) <= config.inside_margin_m) < fraction:
+    if np.mean(outside.max(axis=1) <= config.containers.margin_m) < fraction:
         return False
     # Any other shape: its surface around the piece (a rim) must reach up to the piece's top.
     distance, _ = cKDTree(piece.footprint).query(
-        container.footprint, distance_upper_bound=config.inside_rim_radius_m
+        container.footprint, distance_upper_bound=config.containers.rim_radius_m
     )
     around = container.heights[np.isfinite(distance)]
     return bool(
-        around.size > 0 and np.percentile(around, 98) >= piece.top - config.inside_top_tolerance_m
+        around.size > 0
+        and np.percentile(around, 98) >= piece.top - config.containers.top_tolerance_m
     )

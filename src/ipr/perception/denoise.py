@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ipr import kernels
+from ipr.perception import kernels
 
 
 def object_plane_depth(depth_m: np.ndarray, pixels: np.ndarray, window: int) -> np.ndarray:
@@ -42,7 +42,7 @@ def objects_plane_depth(
     (``starts`` (K + 1,) ascending, from 0 to N). Returns (N,) float64 depth (m)."""
     if window >= 3 and window % 2 == 0:
         raise ValueError(f"the denoising window must be odd, got {window}")
-    # Compiled (``ipr.kernels``): the window sums of each pixel taken directly, in one pass.
+    # Compiled (``kernels``): the window sums of each pixel taken directly, in one pass.
     return kernels.objects_plane_depth(
         np.ascontiguousarray(depth_m),
         np.asarray(pixels, dtype=np.int64),

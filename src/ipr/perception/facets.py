@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ipr import kernels
+from ipr.perception import kernels
 from ipr.perception.types import Facet
 
 
@@ -24,7 +24,7 @@ def mean_shift_directions(
     tens of supervoxels, so the dense N x N kernel is cheaper than a general-purpose estimator's
     set-up (scikit-learn's MeanShift costs about 20 ms per call even on 30 points).
     """
-    # Compiled (``ipr.kernels``): objects have a few to a few hundred supervoxels, where
+    # Compiled (``kernels``): objects have a few to a few hundred supervoxels, where
     # numpy's per-call costs exceed the arithmetic.
     return kernels.mean_shift_directions(
         np.ascontiguousarray(normals, dtype=np.float64),
@@ -132,7 +132,7 @@ def object_facets(
 def _components(pairs: np.ndarray, count: int) -> np.ndarray:
     """(count,) int64 connected component of each node of the undirected graph with edges
     (E, 2) ``pairs``, numbered as scipy's ``connected_components`` numbers them: in the order
-    of each component's smallest node. Compiled union-find (``ipr.kernels``): the graphs here
+    of each component's smallest node. Compiled union-find (``kernels``): the graphs here
     (one object's supervoxels) have a few to a few hundred nodes, where scipy's sparse-matrix
     set-up costs several times the work itself."""
     return kernels.connected_components(np.asarray(pairs, dtype=np.int64).reshape(-1, 2), count)

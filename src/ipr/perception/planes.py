@@ -1,108 +1,19 @@
-"""Plane detection in point clouds: RANSAC with a least-squares refit on the inliers.
+"""The known planes of a frame: the support (table) and the walls of containers and drawers.
 
-The paper's authors find the support (table) plane by RANSAC with a 1 cm inlier threshold and
-1000 iterations; the same routine finds further large planes (container walls, the occluding
-front of a drawer).
+The paper's authors find the support plane by RANSAC with a 1 cm inlier threshold and 1000
+iterations (``ipr.geometry.planes.fit_plane_ransac``); vertical planes found the same way among
+the points above it are kept as walls when their cues say so (``find_walls``).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
-from ipr import kernels
+from ipr.geometry import kernels as geometry_kernels
+from ipr.geometry.planes import fit_plane_ransac
+from ipr.perception import kernels
 from ipr.perception.config import PerceptionConfig
 from ipr.perception.types import KnownPlane
-
-
-@dataclass(frozen=True, eq=False)
-class Plane:
-    """The plane {x : normal . x + offset = 0}; ``normal`` is a unit (3,) vector.
-
-    ``inliers`` are indices into the point array the plane was fitted to.
-    """
-
-    normal: np.ndarray
-    offset: float
-    inliers: np.ndarray
-
-    def signed_distance(self, points: np.ndarray) -> np.ndarray:
-        """Signed distances (N,) in metres of (N, 3) points, positive on the normal's side."""
-        return points @ self.normal + self.offset
-
-    def oriented_towards(self, point: np.ndarray) -> Plane:
-        """The same plane with its normal flipped, if needed, to point towards ``point``."""
-        if float(self.signed_distance(point[None])[0]) >= 0:
-            return self
-        return Plane(-self.normal, -self.offset, self.inliers)
-
-
-def fit_plane_ransac(
-    points: np.ndarray,
-    *,
-    threshold_m: float = 0.01,
-    iterations: int = 1000,
-    min_inliers: int = 500,
-    rng: np.random.Generator | None = None,
-    axis: np.ndarray | None = None,
-    max_tilt_deg: float = 90.0,
-    sample_size: int = 4000,
-) -> Plane | None:
-    """Dominant plane of (N, 3) points by RANSAC, refined by least squares on its inliers.
-
-    Hypotheses are scored on a subsample of ``sample_size`` points (one compiled pass per
-    hypothesis, ``kernels.plane_inlier_counts``) and the best is re-scored on all points. With ``axis`` (unit (3,)),
-    only planes whose normal is within ``max_tilt_deg`` of +-axis are considered (hypotheses and
-    refits alike). Returns None when fewer than ``min_inliers`` points support any plane.
-    Deterministic for a given ``rng`` (seed 0 when None).
-    """
-    points = np.asarray(points, dtype=np.float64)
-    if len(points) < max(3, min_inliers):
-        return None
-    rng = np.random.default_rng(0) if rng is None else rng
-    # Scoring on a subsample keeps the cost independent of the image size.
-    sample = points[rng.choice(len(points), size=min(len(points), sample_size), replace=False)]
-    triples = points[rng.integers(0, len(points), size=(iterations, 3))]
-    normals = np.cross(triples[:, 1] - triples[:, 0], triples[:, 2] - triples[:, 0])
-    norms = np.linalg.norm(normals, axis=1)
-    valid = norms > 1e-9
-    if axis is not None:
-        min_cos = np.cos(np.radians(max_tilt_deg))
-        valid &= np.abs(normals @ np.asarray(axis, float)) >= min_cos * np.maximum(norms, 1e-12)
-    if not valid.any():
-        return None
-    normals = normals[valid] / norms[valid, None]
-    offsets = -np.einsum("ij,ij->i", normals, triples[valid, 0])
-    # Compiled scoring (``ipr.kernels``): no (sample, hypotheses) distance arrays.
-    best = int(np.argmax(kernels.plane_inlier_counts(sample, normals, offsets, threshold_m)))
-    normal, offset = normals[best], offsets[best]
-    # The refits use at most 20000 inliers (evenly spread: they fix the plane as well as all of
-    # them, at a fraction of the cost of a decomposition of a large matrix), so their inliers
-    # are looked for among an even subset of at most 50000 points: on a 640x480 frame this
-    # spares two of the three passes over all ~300000 points (3.5 ms).
-    refit_points = points[:: max(1, len(points) // 50000)]
-    for _ in range(2):  # least-squares refits on the inliers
-        inliers = kernels.plane_inliers(refit_points, normal, float(offset), threshold_m)
-        if len(inliers) < 3:
-            return None
-        centroid, scatter = kernels.centred_scatter(
-            refit_points, inliers[:: max(1, len(inliers) // 20000)]
-        )
-        _, vectors = np.linalg.eigh(scatter)
-        refit = vectors[:, 0] * (1.0 if vectors[:, 0] @ normal >= 0 else -1.0)
-        if axis is not None and abs(float(refit @ axis)) < np.cos(np.radians(max_tilt_deg)):
-            break  # the refit would leave the allowed orientations: keep the hypothesis
-        normal = refit
-        offset = -float(normal @ centroid)
-    inliers = kernels.plane_inliers(points, normal, float(offset), threshold_m)
-    if len(inliers) < min_inliers:
-        return None
-    return Plane(normal, offset, inliers)
-
-
-# --------------------------------------------------------------------------------------------
-# Known planes of a frame: the support and the walls of containers and drawers
 
 
 def find_known_planes(
@@ -139,23 +50,23 @@ def find_support_plane(
 ) -> KnownPlane | None:
     """The support (table) among (N, 3) world points (m, z up), or None.
 
-    The RANSAC plane (``plane_threshold_m``, ``plane_iterations``, scored on
-    ``ransac_sample_size`` points) with the most inliers among planes whose normal is within
-    ``support_max_tilt_deg`` of world +z; it needs ``support_min_points`` inliers and
-    ``support_min_fraction`` of the points. Its normal points up.
+    The RANSAC plane (``planes.threshold_m``, ``support.iterations``, scored on
+    ``planes.sample_size`` points) with the most inliers among planes whose normal is within
+    ``support.max_tilt_deg`` of world +z; it needs ``support.min_points`` inliers and
+    ``support.min_fraction`` of the points. Its normal points up.
     """
     points = np.asarray(points_world, dtype=np.float64)
     rng = np.random.default_rng(config.seed) if rng is None else rng
-    min_inliers = max(config.support_min_points, int(config.support_min_fraction * len(points)))
+    min_inliers = max(config.support.min_points, int(config.support.min_fraction * len(points)))
     plane = fit_plane_ransac(
         points,
-        threshold_m=config.plane_threshold_m,
-        iterations=config.plane_iterations,
+        threshold_m=config.planes.threshold_m,
+        iterations=config.support.iterations,
         min_inliers=min_inliers,
         rng=rng,
         axis=np.array([0.0, 0.0, 1.0]),
-        max_tilt_deg=config.support_max_tilt_deg,
-        sample_size=config.ransac_sample_size,
+        max_tilt_deg=config.support.max_tilt_deg,
+        sample_size=config.planes.sample_size,
     )
     if plane is None:
         return None
@@ -172,10 +83,10 @@ def static_geometry_mask(
 ) -> np.ndarray:
     """(N,) bool: the (N, 3) world points that belong to the known planes (static geometry).
 
-    Support: every point less than ``support_clearance_m`` above it, and everything below it
-    (table edges, the floor). Wall: points within ``plane_threshold_m`` in front of its visible
+    Support: every point less than ``support.clearance_m`` above it, and everything below it
+    (table edges, the floor). Wall: points within ``planes.threshold_m`` in front of its visible
     face or up to ``thickness_m`` behind it (the wall's rim and hidden inner face), within the
-    wall's extent along the support and at most ``wall_top_margin_m`` above its top there (the
+    wall's extent along the support and at most ``walls.top_margin_m`` above its top there (the
     highest of its ``points`` in 2 cm columns along it, widened by one column).
     """
     points = np.asarray(points_world, dtype=np.float64)
@@ -184,8 +95,8 @@ def static_geometry_mask(
     if support is None:
         return mask
     height = support.signed_distance(points)
-    mask |= height < config.support_clearance_m
-    margin = config.plane_threshold_m
+    mask |= height < config.support.clearance_m
+    margin = config.planes.threshold_m
     for wall in planes:
         if wall.kind != "wall" or len(wall.points) == 0:
             continue
@@ -212,7 +123,7 @@ def static_geometry_mask(
             & (s < start + columns * 0.02)
         )
         local_top = column_top[((s[candidate] - start) / 0.02).astype(np.int64)]
-        mask[candidate[height[candidate] < local_top + config.wall_top_margin_m]] = True
+        mask[candidate[height[candidate] < local_top + config.walls.top_margin_m]] = True
     return mask
 
 
@@ -273,8 +184,8 @@ def find_walls(
     world, m. Points at or below the support are ignored, so the caller may pass only the
     points above it.
 
-    Vertical planes are extracted one after the other by RANSAC (``wall_iterations``), at most
-    ``wall_max_candidates`` of them; after each, the points of its slab (the face and a wall's
+    Vertical planes are extracted one after the other by RANSAC (``walls.iterations``), at most
+    ``walls.max_candidates`` of them; after each, the points of its slab (the face and a wall's
     thickness behind it) that face its way leave the pool so that the same wall is not found
     twice. Candidates are accepted by the rules of ``_select_walls``. A wall's normal points to
     the side the camera sees; its ``thickness_m`` is the depth of the static slab behind the
@@ -286,7 +197,7 @@ def find_walls(
     objects lined up in a plane accepted as lone walls before the straight-top and solid-face
     cues, none after (docs/DESIGN_NOTES.md).
 
-    With ``edge_on`` (and ``wall_complete_corners``), side walls seen edge-on are then looked
+    With ``edge_on`` (and ``walls.complete_corners``), side walls seen edge-on are then looked
     for at the open ends of the accepted walls (``_edge_on_walls``). The segmentation asks for
     them in a scene's first frame only: later frames keep the walls found before (walls do not
     move, ``temporal.consistent_walls``), and a pushed object that stopped near a container's
@@ -295,15 +206,15 @@ def find_walls(
     points = np.asarray(points_world, dtype=np.float64)
     rng = np.random.default_rng(config.seed) if rng is None else rng
     viewpoint = np.asarray(viewpoint, dtype=np.float64)
-    if config.wall_max_candidates <= 0:
+    if config.walls.max_candidates <= 0:
         return ()
     up = support.normal
     height = support.signed_distance(points)
-    context = np.flatnonzero(height > config.support_clearance_m)
-    if len(context) > config.wall_max_points:
+    context = np.flatnonzero(height > config.support.clearance_m)
+    if len(context) > config.walls.max_points:
         # An even subset: the cues are fractions and percentiles, and a wall has thousands of
         # points, so this bounds the cost on close-up frames without changing the decisions.
-        context = context[:: -(-len(context) // config.wall_max_points)]
+        context = context[:: -(-len(context) // config.walls.max_points)]
     points, height = points[context], height[context]
     unknown = normals_up = None
     if normals is not None:
@@ -312,17 +223,17 @@ def find_walls(
         normals = np.asarray(normals[context], dtype=np.float64)
         unknown = ~normals.any(axis=1)
         normals_up = normals @ up
-    above = height < config.wall_max_height_m + 0.05
+    above = height < config.walls.max_height_m + 0.05
     pool_mask = above.copy()
     if normals is not None:
         # Vertical surfaces only (pixel normals are noisy: a generous tilt).
-        pool_mask &= np.abs(normals_up) < np.sin(np.radians(config.wall_normal_tilt_deg))
+        pool_mask &= np.abs(normals_up) < np.sin(np.radians(config.walls.normal_tilt_deg))
     pool = np.flatnonzero(pool_mask)
     basis = np.linalg.svd(np.eye(3) - np.outer(up, up))[0][:, :2]  # horizontal directions
-    margin = config.plane_threshold_m
+    margin = config.planes.threshold_m
     candidates: list[dict] = []
-    for _ in range(config.wall_max_candidates):
-        if len(pool) < config.wall_min_points:
+    for _ in range(config.walls.max_candidates):
+        if len(pool) < config.walls.min_points:
             break
         plane = _fit_vertical_plane(
             points[pool],
@@ -341,7 +252,7 @@ def find_walls(
         cues = _wall_cues(points, normals, height, normal, offset, up, config, unknown, normals_up)
         if cues is not None:
             candidates.append(cues)
-        # Surfaces crossing the slab stay in the pool (compiled: ``ipr.kernels``).
+        # Surfaces crossing the slab stay in the pool (compiled: ``kernels``).
         pool = kernels.outside_slab(
             points,
             points if normals is None else normals,
@@ -350,12 +261,12 @@ def find_walls(
             normal,
             float(offset),
             2 * margin,
-            config.wall_max_thickness_m + 2 * margin,
+            config.walls.max_thickness_m + 2 * margin,
             _FACING_COS,
             normals is not None,
         )
     walls = _select_walls(candidates, config)
-    if edge_on and config.wall_complete_corners:
+    if edge_on and config.walls.complete_corners:
         walls += _edge_on_walls(points, normals, height, walls, up, viewpoint, config)
     return tuple(
         KnownPlane(
@@ -385,16 +296,16 @@ def _edge_on_walls(
     stayed as thin "objects" that the physics then completed into slabs (on the development
     scenes these were most of the predicted volume lying outside every object). At each end of
     an accepted wall's face (its ``span``) with no perpendicular wall within
-    ``wall_corner_gap_m``, vertical planes perpendicular to it are tried every 5 mm within
-    ``wall_corner_gap_m`` of the end, with every point in their slab counted whatever its
+    ``walls.corner_gap_m``, vertical planes perpendicular to it are tried every 5 mm within
+    ``walls.corner_gap_m`` of the end, with every point in their slab counted whatever its
     normal (the rim faces up). A plane is accepted as a wall when its face reaches an accepted
-    wall perpendicular to it (within ``wall_corner_gap_m``: the wall it was looked for from or,
+    wall perpendicular to it (within ``walls.corner_gap_m``: the wall it was looked for from or,
     when objects hide that corner, the opposite one), its top matches an accepted wall's top
-    within ``wall_partner_top_match_m`` (a container's walls share their height), its top is
-    straight (``wall_min_top_agreement``) and the scene lies on one side of it
-    (``wall_max_outside_fraction``); of the planes accepted at one end, the one with the most
+    within ``walls.partner_top_match_m`` (a container's walls share their height), its top is
+    straight (``walls.min_top_agreement``) and the scene lies on one side of it
+    (``walls.max_outside_fraction``); of the planes accepted at one end, the one with the most
     points in its run. Only walls square to another accepted wall (parallel or perpendicular:
-    part of a container's frame) are completed, and a plane within ``wall_corner_gap_m`` of a
+    part of a container's frame) are completed, and a plane within ``walls.corner_gap_m`` of a
     parallel known wall is not tried (that wall's own rim). The capped rule does not apply:
     seen from outside, a side wall has the container's contents behind it at its rim's height.
 
@@ -403,7 +314,7 @@ def _edge_on_walls(
     walls' cues.
     """
     added: list[dict] = []
-    gap = config.wall_corner_gap_m
+    gap = config.walls.corner_gap_m
     tops = [wall["top"] for wall in walls]
     for wall in walls:
         if not any(_square(wall, other) for other in walls if other is not wall):
@@ -418,10 +329,10 @@ def _edge_on_walls(
             # The points near this end, off the wall's own slab, within a container's width.
             region = np.flatnonzero(
                 (np.abs(s_all - end) < gap + 0.08)
-                & (np.abs(depth_wall) < config.wall_partner_separation_m[1])
-                & ((depth_wall > config.plane_threshold_m) | (depth_wall < -wall["thickness"]))
+                & (np.abs(depth_wall) < config.walls.partner_separation_m[1])
+                & ((depth_wall > config.planes.threshold_m) | (depth_wall < -wall["thickness"]))
             )
-            if len(region) < config.wall_min_points:
+            if len(region) < config.walls.min_points:
                 continue
             best = None
             for position in end + np.arange(-gap, gap + 1e-9, 0.005):
@@ -440,21 +351,21 @@ def _edge_on_walls(
                     config,
                     edge_on=True,
                 )
-                if cues is None or len(cues["run_points"]) < config.wall_min_points:
+                if cues is None or len(cues["run_points"]) < config.walls.min_points:
                     continue
                 if (
                     _meets_wall(cues, walls, gap)
                     and min(abs(cues["top"] - top) for top in tops)
-                    <= config.wall_partner_top_match_m
-                    and cues["top_agreement"] >= config.wall_min_top_agreement
-                    and cues["outside"] <= config.wall_max_outside_fraction
+                    <= config.walls.partner_top_match_m
+                    and cues["top_agreement"] >= config.walls.min_top_agreement
+                    and cues["outside"] <= config.walls.max_outside_fraction
                     and (best is None or len(cues["run_points"]) > len(best["run_points"]))
                 ):
                     best = cues
             if best is not None:
                 # The plane is only placed to 5 mm and the rim's thickness is poorly seen
                 # edge-on: remove the thickest slab a wall may have.
-                best["thickness"] = config.wall_max_thickness_m
+                best["thickness"] = config.walls.max_thickness_m
                 added.append(best)
     return added
 
@@ -494,38 +405,38 @@ def _select_walls(candidates: list[dict], config: PerceptionConfig) -> list[dict
     look like one on its own:
 
     - *height*: its top (the height of its rim, see ``_wall_cues``) is between
-      ``wall_min_height_m`` and ``wall_max_height_m`` above the support;
+      ``walls.min_height_m`` and ``walls.max_height_m`` above the support;
     - *one-sided*: of the other points above the support near it (within its extent and
-      ``wall_side_range_m``), at most ``wall_max_outside_fraction`` lie on its minority side
+      ``walls.side_range_m``), at most ``walls.max_outside_fraction`` lie on its minority side
       (the objects are inside the container);
-    - *long*: its run along the support (gaps up to ``wall_max_gap_m`` bridged) is at least
-      ``wall_partner_min_length_m``;
+    - *long*: its run along the support (gaps up to ``walls.max_gap_m`` bridged) is at least
+      ``walls.partner_min_length_m``;
 
     and then either stand alone as a wall:
 
     - *standing, long and thin*: its lowest inliers (2nd percentile) are within
-      ``wall_support_gap_m`` of the support, it is at least ``wall_min_length_m`` long, and it
-      is not capped: at most ``wall_max_capped_fraction`` of its length has an upward-facing
+      ``walls.support_gap_m`` of the support, it is at least ``walls.min_length_m`` long, and it
+      is not capped: at most ``walls.max_capped_fraction`` of its length has an upward-facing
       surface at the height of its top just behind it, past a wall's thickness (a box has its
       top face there; a wall has a 1-1.5 cm rim and then nothing at that height, or objects at
       other heights); and it looks like one solid face with a straight top: its top edge at its
-      top height over ``wall_min_top_agreement`` of its length and its face (bottom to top)
-      ``wall_min_face_fill`` covered (the faces of a row of objects standing side by side line
+      top height over ``walls.min_top_agreement`` of its length and its face (bottom to top)
+      ``walls.min_face_fill`` covered (the faces of a row of objects standing side by side line
       up in a plane but are of many heights, with gaps between them);
 
     or be part of a container frame with another candidate, at least one of the two standing:
 
-    - *parallel partner*: normals within 5 degrees, the planes ``wall_partner_separation_m``
+    - *parallel partner*: normals within 5 degrees, the planes ``walls.partner_separation_m``
       apart (opposite walls), runs overlapping along the wall, the longer one at least
-      ``wall_min_length_m`` long;
+      ``walls.min_length_m`` long;
     - *corner partner*: normals within 5 degrees of perpendicular, the corner where the planes
-      meet within ``wall_corner_gap_m`` of an end of both runs, both runs at least
-      ``wall_min_length_m`` long (two faces of one box meet at a corner too, but no YCB box has
+      meet within ``walls.corner_gap_m`` of an end of both runs, both runs at least
+      ``walls.min_length_m`` long (two faces of one box meet at a corner too, but no YCB box has
       two faces that long);
 
-    with tops differing by at most ``wall_partner_max_top_difference_m`` (a drawer front is
+    with tops differing by at most ``walls.partner_max_top_difference_m`` (a drawer front is
     taller than the sides) or, for a partner whose bottom is hidden (the inner face of a far
-    wall behind the objects), by at most ``wall_partner_top_match_m``; and at least one of the
+    wall behind the objects), by at most ``walls.partner_top_match_m``; and at least one of the
     two not capped (seen from above, the far wall of a container has nothing on its top, while
     the faces of boxes all have the box's top behind them). Two faces of one convex object are
     never parallel and both visible, which is what makes the parallel rule safe.
@@ -533,20 +444,20 @@ def _select_walls(candidates: list[dict], config: PerceptionConfig) -> list[dict
     basic = [
         c
         for c in candidates
-        if config.wall_min_height_m <= c["top"] <= config.wall_max_height_m
-        and c["outside"] <= config.wall_max_outside_fraction
-        and c["length"] >= config.wall_partner_min_length_m
+        if config.walls.min_height_m <= c["top"] <= config.walls.max_height_m
+        and c["outside"] <= config.walls.max_outside_fraction
+        and c["length"] >= config.walls.partner_min_length_m
     ]
     for c in basic:
-        c["standing"] = c["bottom"] <= config.wall_support_gap_m
+        c["standing"] = c["bottom"] <= config.walls.support_gap_m
     accepted = {
         i
         for i, c in enumerate(basic)
         if c["standing"]
-        and c["length"] >= config.wall_min_length_m
-        and c["capped"] <= config.wall_max_capped_fraction
-        and c["top_agreement"] >= config.wall_min_top_agreement
-        and c["face_fill"] >= config.wall_min_face_fill
+        and c["length"] >= config.walls.min_length_m
+        and c["capped"] <= config.walls.max_capped_fraction
+        and c["top_agreement"] >= config.walls.min_top_agreement
+        and c["face_fill"] >= config.walls.min_face_fill
     }
     for i, a in enumerate(basic):
         for j in range(i + 1, len(basic)):
@@ -560,34 +471,34 @@ def _partners(a: dict, b: dict, config: PerceptionConfig) -> bool:
     if not (a["standing"] or b["standing"]):
         return False
     top_tolerance = (
-        config.wall_partner_max_top_difference_m
+        config.walls.partner_max_top_difference_m
         if a["standing"] and b["standing"]
-        else config.wall_partner_top_match_m
+        else config.walls.partner_top_match_m
     )
     if abs(a["top"] - b["top"]) > top_tolerance:
         return False
-    if min(a["capped"], b["capped"]) > config.wall_max_capped_fraction:
+    if min(a["capped"], b["capped"]) > config.walls.max_capped_fraction:
         return False  # two faces of boxes (their tops behind both); a container has a free rim
     cosine = float(a["normal"] @ b["normal"])
     tolerance = np.radians(5.0)
     if abs(cosine) > np.cos(tolerance):  # parallel: opposite walls
         sign = 1.0 if cosine > 0 else -1.0
         separation = abs(a["offset"] - sign * b["offset"])
-        low, high = config.wall_partner_separation_m
+        low, high = config.walls.partner_separation_m
         if not low <= separation <= high:
             return False
-        if max(a["length"], b["length"]) < config.wall_min_length_m:
+        if max(a["length"], b["length"]) < config.walls.min_length_m:
             return False
         # Runs overlap along the walls (b's run expressed in a's along-axis).
         b_along = b["run_points"] @ a["along"]
         return bool(b_along.max() > a["s_range"][0] and b_along.min() < a["s_range"][1])
     if abs(cosine) < np.sin(tolerance):  # perpendicular: a corner
-        if min(a["length"], b["length"]) < config.wall_min_length_m:
+        if min(a["length"], b["length"]) < config.walls.min_length_m:
             return False
         # Corner: the horizontal point on both planes (solve in the plane spanned by the normals).
         matrix = np.stack([a["normal"], b["normal"]])
         corner = np.linalg.lstsq(matrix, -np.array([a["offset"], b["offset"]]), rcond=None)[0]
-        gap = config.wall_corner_gap_m
+        gap = config.walls.corner_gap_m
         for wall in (a, b):
             s_corner = float(corner @ wall["along"])
             low, high = wall["s_range"]
@@ -616,11 +527,11 @@ def _fit_vertical_plane(
     (N,) bool (``~normals.any(axis=1)``) and ``basis`` (3, 2) (two horizontal unit directions,
     from the SVD of the projection orthogonal to ``up``) may be passed when already known.
     """
-    threshold = config.plane_threshold_m
+    threshold = config.planes.threshold_m
     count = len(points)
-    sample_index = rng.choice(count, size=min(count, config.ransac_sample_size), replace=False)
+    sample_index = rng.choice(count, size=min(count, config.planes.sample_size), replace=False)
     sample = points[sample_index]
-    pairs = rng.integers(0, count, size=(config.wall_iterations, 2))
+    pairs = rng.integers(0, count, size=(config.walls.iterations, 2))
     along = points[pairs[:, 1]] - points[pairs[:, 0]]
     along -= np.outer(along @ up, up)
     normal = _cross_rows(up, along)
@@ -630,9 +541,9 @@ def _fit_vertical_plane(
         return None
     normal = normal[valid] / norms[valid, None]
     offset = -np.einsum("ij,ij->i", normal, points[pairs[valid, 0]])
-    # Compiled scoring (``ipr.kernels``): no (sample, hypotheses) arrays.
+    # Compiled scoring (``geometry_kernels``, ``kernels``): no (sample, hypotheses) arrays.
     if normals is None:
-        votes = kernels.plane_inlier_counts(sample, normal, offset, threshold)
+        votes = geometry_kernels.plane_inlier_counts(sample, normal, offset, threshold)
     else:
         sample_normals = np.ascontiguousarray(normals[sample_index], dtype=np.float64)
         sample_unknown = ~sample_normals.any(axis=1) if unknown is None else unknown[sample_index]
@@ -647,16 +558,16 @@ def _fit_vertical_plane(
         unknown = ~normals.any(axis=1)
     for _ in range(2):
         if normals is None:
-            inliers = kernels.plane_inliers(points, best_normal, best_offset, threshold)
+            inliers = geometry_kernels.plane_inliers(points, best_normal, best_offset, threshold)
         else:
             inliers = kernels.facing_plane_inliers(
                 points, normals, unknown, best_normal, best_offset, threshold, _FACING_COS
             )
-        if len(inliers) < config.wall_min_points:
+        if len(inliers) < config.walls.min_points:
             return None
         # The least-squares line of the inliers seen from above: the 3D moments projected on
         # the horizontal basis (the moments of the projected points).
-        centroid_3d, scatter_3d = kernels.centred_scatter(
+        centroid_3d, scatter_3d = geometry_kernels.centred_scatter(
             points, inliers[:: max(1, len(inliers) // 5000)]
         )
         centroid = basis.T @ centroid_3d
@@ -695,20 +606,20 @@ def _wall_cues(
     (N,) (``normals @ up``) may be passed when already known. Returns the plane, its run (along-axis, range and length, m), top and
     bottom (m above the support), thickness (m), capped and outside fractions and the run's face
     points, the face points of the plane's other runs with the wall's top (``extra_points``, a
-    wall cut by an occluder; ``wall_max_span_m``) and the extent of both along the wall
+    wall cut by an occluder; ``walls.max_span_m``) and the extent of both along the wall
     (``span``); None when the plane has too few inliers or cannot be a wall (a run shorter than
-    ``wall_partner_min_length_m`` or a top outside the wall heights, which ``_select_walls``
+    ``walls.partner_min_length_m`` or a top outside the wall heights, which ``_select_walls``
     rejects anyway; most candidates are faces of objects, and this spares their costly cues).
     ``edge_on``: every point in the plane's slab is an inlier whatever its normal (a wall seen
     along its length shows its rim, which faces up; ``_edge_on_walls``).
     """
-    threshold = config.plane_threshold_m
+    threshold = config.planes.threshold_m
     along = _cross_rows(up, normal[None])[0]
     if normals is not None and normals_up is None:
         normals_up = normals @ up
     if normals is not None and unknown is None:
         unknown = ~normals.any(axis=1)
-    # Compiled (``ipr.kernels``): depth, position along the plane and face membership in one
+    # Compiled (``kernels``): depth, position along the plane and face membership in one
     # pass; surfaces crossing the plane are not part of it (unless seen edge-on).
     depth, s, on_plane = kernels.vertical_plane_coordinates(
         pts,
@@ -719,14 +630,14 @@ def _wall_cues(
         float(offset),
         along,
         threshold,
-        config.wall_max_height_m + threshold,
+        config.walls.max_height_m + threshold,
         _FACING_COS,
         normals is not None and not edge_on,
     )
-    if on_plane.sum() < config.wall_min_points:
+    if on_plane.sum() < config.walls.min_points:
         return None
     s_in, h_in = s[on_plane], h[on_plane]
-    # Largest run of occupied bins along the plane, bridging gaps up to wall_max_gap_m.
+    # Largest run of occupied bins along the plane, bridging gaps up to walls.max_gap_m.
     bin_m = 0.01
     first = float(s_in.min())
     bins = ((s_in - first) / bin_m).astype(np.int64)
@@ -734,7 +645,7 @@ def _wall_cues(
     occupied = np.flatnonzero(weights >= 2)
     if occupied.size == 0:
         return None
-    breaks = np.flatnonzero(np.diff(occupied) * bin_m > config.wall_max_gap_m)
+    breaks = np.flatnonzero(np.diff(occupied) * bin_m > config.walls.max_gap_m)
     starts = np.concatenate([[0], breaks + 1])
     ends = np.concatenate([breaks, [occupied.size - 1]])
     cumulative = np.concatenate([[0], np.cumsum(weights)])
@@ -742,7 +653,7 @@ def _wall_cues(
     best = int(np.argmax(mass))
     s_lo = first + occupied[starts[best]] * bin_m
     s_hi = first + (occupied[ends[best]] + 1) * bin_m
-    if s_hi - s_lo < config.wall_partner_min_length_m:
+    if s_hi - s_lo < config.walls.partner_min_length_m:
         return None  # too short for any wall rule (``_select_walls``): skip the costly cues
     in_run = (s_in >= s_lo) & (s_in <= s_hi)
     heights = h_in[in_run]
@@ -753,15 +664,15 @@ def _wall_cues(
     column_top = np.full(int(column.max()) + 1, -np.inf)
     np.maximum.at(column_top, column, heights)
     top = float(np.median(column_top[np.isfinite(column_top)]))
-    thickness = config.wall_max_thickness_m
+    thickness = config.walls.max_thickness_m
     if normals is not None:
         rim = (
             (depth < threshold)
-            & (depth > -(config.wall_max_thickness_m + threshold))
+            & (depth > -(config.walls.max_thickness_m + threshold))
             & (s >= s_lo)
             & (s <= s_hi)
             & (normals_up > np.cos(np.radians(30.0)))
-            & (h > config.wall_min_height_m - threshold)
+            & (h > config.walls.min_height_m - threshold)
         )
         rim_bins = np.unique(((s[rim] - s_lo) / 0.02).astype(np.int64))
         if rim_bins.size >= max(2, 0.2 * np.isfinite(column_top).sum()):
@@ -772,8 +683,8 @@ def _wall_cues(
             rim &= np.abs(h - top) < 0.015
             if rim.sum() >= 10:
                 thickness = 2.0 * float(np.median(np.maximum(-depth[rim], 0.0))) + 0.003
-                thickness = float(np.clip(thickness, 0.005, config.wall_max_thickness_m))
-    if not config.wall_min_height_m <= top <= config.wall_max_height_m:
+                thickness = float(np.clip(thickness, 0.005, config.walls.max_thickness_m))
+    if not config.walls.min_height_m <= top <= config.walls.max_height_m:
         return None  # no wall rule accepts this top (``_select_walls``)
     bottom = float(np.percentile(heights, 2))
     # Straight top and solid face (the lone-wall rule): the share of columns whose top edge is
@@ -791,8 +702,8 @@ def _wall_cues(
     face_fill = float(face.mean())
     # Capped: an upward-facing surface at the height of the top, just behind the face.
     behind = (
-        (depth < -(config.wall_max_thickness_m + threshold))
-        & (depth > -config.wall_cap_depth_m)
+        (depth < -(config.walls.max_thickness_m + threshold))
+        & (depth > -config.walls.cap_depth_m)
         & (h > top - 0.015)
         & (h < top + 0.03)  # the face's top edge is often partly hidden or dropped
         & (s >= s_lo)
@@ -807,9 +718,9 @@ def _wall_cues(
     )
     capped = float(np.mean(capped_counts >= 3))
     # One-sided: the rest of the scene near the wall lies on one side.
-    slab = (depth < threshold) & (depth > -(config.wall_max_thickness_m + threshold))
+    slab = (depth < threshold) & (depth > -(config.walls.max_thickness_m + threshold))
     near = (
-        ~slab & (np.abs(depth) < config.wall_side_range_m) & (s > s_lo - 0.05) & (s < s_hi + 0.05)
+        ~slab & (np.abs(depth) < config.walls.side_range_m) & (s > s_lo - 0.05) & (s < s_hi + 0.05)
     )
     outside = 0.0
     if near.any():
@@ -822,13 +733,13 @@ def _wall_cues(
     for other in range(len(starts)):
         low = first + occupied[starts[other]] * bin_m
         high = first + (occupied[ends[other]] + 1) * bin_m
-        if other == best or max(high, s_hi) - min(low, s_lo) > config.wall_max_span_m:
+        if other == best or max(high, s_hi) - min(low, s_lo) > config.walls.max_span_m:
             continue
         members = (s_in >= low) & (s_in <= high)
         tops = np.full(int((high - low) / 0.02) + 1, -np.inf)
         np.maximum.at(tops, ((s_in[members] - low) / 0.02).astype(np.int64), h_in[members])
         tops = tops[np.isfinite(tops)]
-        if tops.size >= 2 and np.mean(np.abs(tops - top) < 0.02) >= config.wall_min_top_agreement:
+        if tops.size >= 2 and np.mean(np.abs(tops - top) < 0.02) >= config.walls.min_top_agreement:
             extra |= members
     extra &= h_in <= top + threshold
     span = (float(s_in[in_run | extra].min()), float(s_in[in_run | extra].max()))

@@ -29,10 +29,10 @@ def robot_pixels(
     """(H, W) bool: pixels of ``frame`` that show the robot or the pusher.
 
     A pixel is the robot's when ``frame.robot_mask`` says so, or when its 3D point (valid depth
-    only) lies within ``pusher.radius_m + config.pusher_margin_m`` of the pusher's axis segment
-    at the start of a push whose ``before_frame`` is this frame or at the end of a push whose
-    ``after_frame`` is this frame. ``points_world`` (H, W, 3), when given, saves recomputing
-    ``frame.points_world()``.
+    only) lies within ``pusher.radius_m + config.robot.pusher_margin_m`` of the pusher's axis
+    segment at the start of a push whose ``before_frame`` is this frame or at the end of a push
+    whose ``after_frame`` is this frame. ``points_world`` (H, W, 3), when given, saves
+    recomputing ``frame.points_world()``.
     """
     height, width = frame.shape
     mask = (
@@ -55,7 +55,7 @@ def robot_pixels(
     axis = np.asarray(pusher.axis, dtype=np.float64)
     axis = axis / np.linalg.norm(axis)
     half = max(pusher.length_m / 2.0 - pusher.radius_m, 0.0)  # centre to the caps' centres
-    reach = pusher.radius_m + config.pusher_margin_m
+    reach = pusher.radius_m + config.robot.pusher_margin_m
     inside = np.zeros(valid.size, dtype=bool)
     for centre in centres:
         centre = np.asarray(centre, dtype=np.float64)

@@ -24,8 +24,8 @@ from scipy.sparse import coo_matrix, csr_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import eigsh
 
-from ipr import kernels
 from ipr.errors import IprError
+from ipr.perception import kernels
 from ipr.perception.config import PerceptionConfig
 from ipr.perception.containers import join_container_insides
 from ipr.perception.planes import find_support_plane, find_walls, static_geometry_mask
@@ -57,8 +57,8 @@ def segment_frame(
     """Segment ``frame`` into objects (``points_world``: its (H, W, 3) world points, if known).
 
     With ``previous`` (the frame before and its segmentation), surfaces that did not move since
-    that frame keep their earlier grouping (``config.temporal_anchoring``; ``anchor_parts``) and
-    the walls found there stay (``config.temporal_walls``; ``ipr.perception.temporal``).
+    that frame keep their earlier grouping (``config.temporal.anchoring``; ``anchor_parts``) and
+    the walls found there stay (``config.temporal.walls``; ``ipr.perception.temporal``).
 
     Returns labels (H, W) int32 with 0 for background, support, walls, robot and large depth
     holes, and 1..k for the k segments (numbered by decreasing size); pixels without depth near
@@ -84,18 +84,18 @@ def segment_frame(
     if support is None:
         raise SegmentationError(
             f"frame {frame.index}: no support plane found (no plane within "
-            f"{config.support_max_tilt_deg:g} deg of world z holding "
-            f"{config.support_min_fraction:.0%} of the {usable.size} valid points); make the "
+            f"{config.support.max_tilt_deg:g} deg of world z holding "
+            f"{config.support.min_fraction:.0%} of the {usable.size} valid points); make the "
             "table visible, or check the camera poses (world z must point up)"
         )
     # Everything at or below the support is static. The wall search looks at an even subset
-    # of the points above it (``wall_max_points``), so only those need normals here.
+    # of the points above it (``walls.max_points``), so only those need normals here.
     above = kernels.indices_above(
-        flat_points, usable, support.normal, float(support.offset), config.support_clearance_m
+        flat_points, usable, support.normal, float(support.offset), config.support.clearance_m
     )
     above_points = kernels.rows_at(flat_points, above)
     frame_change = None
-    if previous is not None and (config.temporal_anchoring or config.temporal_walls):
+    if previous is not None and (config.temporal.anchoring or config.temporal.walls):
         previous_frame, previous_segmentation = previous
         frame_change = compare_frames(
             points,
@@ -108,7 +108,7 @@ def segment_frame(
             K=frame.K,
             world_from_camera=frame.world_from_camera,
         )
-    wall_sample = above[:: -(-len(above) // config.wall_max_points)] if len(above) else above
+    wall_sample = above[:: -(-len(above) // config.walls.max_points)] if len(above) else above
     wall_normals = organised_normals_at(frame.depth_m, frame.K, wall_sample, config)
     walls = find_walls(
         flat_points[wall_sample],
@@ -119,7 +119,7 @@ def segment_frame(
         viewpoint=frame.world_from_camera[:3, 3],
         edge_on=previous is None,
     )
-    if frame_change is not None and config.temporal_walls and previous[1].planes:
+    if frame_change is not None and config.temporal.walls and previous[1].planes:
         walls = consistent_walls(
             tuple(plane for plane in previous[1].planes if plane.kind == "wall"),
             walls,
@@ -136,11 +136,13 @@ def segment_frame(
         frame, keep.reshape(height, width), config, points_world=points
     )
     change = None
-    if frame_change is not None and config.temporal_anchoring:
+    if frame_change is not None and config.temporal.anchoring:
         change = supervoxel_anchors(supervoxels, frame_change, config)
     segment_of_supervoxel = cluster_supervoxels(supervoxels, config, change)
     lookup = np.append(segment_of_supervoxel, 0).astype(np.int32)  # label -1 -> last -> 0
-    labels = fill_label_holes(lookup[supervoxels.labels], valid | robot, config.label_fill_px)
+    labels = fill_label_holes(
+        lookup[supervoxels.labels], valid | robot, config.segmentation.label_fill_px
+    )
     labels, segment_of_supervoxel = drop_support_residue(
         labels, segment_of_supervoxel, flat_points, valid.reshape(-1), support, config
     )
@@ -170,7 +172,7 @@ def drop_support_residue(
     Far from the camera, depth noise and a slightly curved or tilted real table leave patches just
     above the support clearance; they segment as flat "objects" a few millimetres high (on the
     real YCB-Video frames, over a dozen per frame beyond 1.2 m). A segment whose 90th-percentile
-    height above the support is below ``min_object_height_m`` is such a patch.
+    height above the support is below ``segmentation.min_object_height_m`` is such a patch.
 
     Args:
         labels: (H, W) segment labels; segment_of_supervoxel: (M,) segment of each supervoxel.
@@ -184,7 +186,7 @@ def drop_support_residue(
     # Every segment's 90th percentile (lower value), compiled: a sort per segment.
     heights = support.signed_distance(points[labelled])
     segments, p90 = kernels.grouped_order_statistic(flat[labelled], heights, 0.9)
-    residue = segments[p90 < config.min_object_height_m]
+    residue = segments[p90 < config.segmentation.min_object_height_m]
     if residue.size == 0:
         return labels, segment_of_supervoxel
     flat[np.isin(flat, residue)] = 0
@@ -222,7 +224,7 @@ def fill_label_holes(labels: np.ndarray, valid: np.ndarray, max_distance_px: flo
     if box_valid.all() or not box_valid.any():
         return labels
     result = labels.copy()
-    # Compiled (``ipr.kernels``): each pixel without depth tries the offsets until one is valid.
+    # Compiled (``kernels``): each pixel without depth tries the offsets until one is valid.
     kernels.fill_from_nearest(
         np.ascontiguousarray(box),
         np.ascontiguousarray(box_valid),
@@ -276,19 +278,20 @@ def edge_weights(supervoxels: Supervoxels, config: PerceptionConfig) -> np.ndarr
     the connection (Stein et al. 2014) and turn its verdict into a two-level weight:
 
     - convex: (n_i - n_j) . d > 0 with d = (c_i - c_j) / |c_i - c_j| (the paper's w_ij > 0);
-    - flat: normals within ``concavity_tolerance_deg`` (LCCP: 10 degrees; noise makes flat
-      neighbours look slightly concave half of the time);
+    - flat: normals within ``segmentation.concavity_tolerance_deg`` (LCCP: 10 degrees; noise
+      makes flat neighbours look slightly concave half of the time);
     - sanity check (LCCP): a convex connection whose d runs along the crease, i.e. the angle
-      between d and n_i x n_j is below ``sanity_angle_deg`` / (1 + exp(-0.25 (alpha - 25))),
-      alpha the angle between the normals in degrees, is a singular configuration (a step seen
-      edge-on), not a convex edge; with ``sanity_sigmoid`` False the threshold is the fixed
-      ``sanity_angle_deg`` (the authors' |(n_i x n_j) . d| > cos 45 variant);
+      between d and n_i x n_j is below ``segmentation.sanity_angle_deg`` / (1 + exp(-0.25
+      (alpha - 25))), alpha the angle between the normals in degrees, is a singular
+      configuration (a step seen edge-on), not a convex edge; with
+      ``segmentation.sanity_sigmoid`` False the threshold is the fixed
+      ``segmentation.sanity_angle_deg`` (the authors' |(n_i x n_j) . d| > cos 45 variant);
     - smoothness check (LCCP): neighbours whose centres are offset along their normals by more
-      than |n_i x n_j| * seed size + ``smoothness_threshold`` * voxel size form a step between
-      parallel surfaces (a box on a box), not one surface.
+      than |n_i x n_j| * seed size + ``segmentation.smoothness_threshold`` * voxel size form a
+      step between parallel surfaces (a box on a box), not one surface.
 
     Strong = (flat or convex and sane) and smooth: weight 1. Concave or not smooth:
-    ``concave_weight``; convex but singular: ``singular_weight``.
+    ``segmentation.concave_weight``; convex but singular: ``segmentation.singular_weight``.
 
     Measured on the development scenes (share of objects with F >= 0.75, static / dynamic):
     LCCP's sigmoid sanity threshold (60 deg) 0.864 / 0.885, the fixed 45 deg threshold
@@ -306,12 +309,12 @@ def edge_weights(supervoxels: Supervoxels, config: PerceptionConfig) -> np.ndarr
     direction = offset / np.maximum(distance, 1e-12)[:, None]
     cos_normals = np.clip(np.einsum("ec,ec->e", n_i, n_j), -1.0, 1.0)
     normal_angle = np.degrees(np.arccos(cos_normals))
-    flat = normal_angle < config.concavity_tolerance_deg
+    flat = normal_angle < config.segmentation.concavity_tolerance_deg
     convex = np.einsum("ec,ec->e", n_i - n_j, direction) > 0
     crease = np.cross(n_i, n_j)
     crease_norm = np.linalg.norm(crease, axis=1)
-    sanity = np.full(len(pairs), config.sanity_angle_deg)
-    if config.sanity_sigmoid:
+    sanity = np.full(len(pairs), config.segmentation.sanity_angle_deg)
+    if config.segmentation.sanity_sigmoid:
         sanity = sanity / (1.0 + np.exp(-0.25 * (normal_angle - 25.0)))
     along_crease = np.abs(np.einsum("ec,ec->e", crease, direction)) > np.cos(
         np.radians(sanity)
@@ -320,11 +323,11 @@ def edge_weights(supervoxels: Supervoxels, config: PerceptionConfig) -> np.ndarr
     step = np.minimum(
         np.abs(np.einsum("ec,ec->e", offset, n_i)), np.abs(np.einsum("ec,ec->e", offset, n_j))
     )
-    slack = config.smoothness_threshold * config.voxel_size_m
-    smooth = step <= crease_norm * config.seed_size_m + slack
+    slack = config.segmentation.smoothness_threshold * config.supervoxels.voxel_size_m
+    smooth = step <= crease_norm * config.supervoxels.seed_size_m + slack
     strong = (flat | (convex & ~singular)) & smooth
-    weights = np.where(strong, 1.0, config.concave_weight)
-    weights[singular & smooth] = config.singular_weight
+    weights = np.where(strong, 1.0, config.segmentation.concave_weight)
+    weights[singular & smooth] = config.segmentation.singular_weight
     return weights
 
 
@@ -336,8 +339,8 @@ def cluster_supervoxels(
     Spectral clustering per connected component of the adjacency graph; clusters that k-means
     left in pieces are split into their connected parts; with ``change`` (the comparison with
     the previous frame) the anchors are imposed (``anchor_parts``); segments smaller than
-    ``min_object_pixels`` join the neighbouring segment they are most strongly connected to,
-    or are dropped when they touch none.
+    ``segmentation.min_object_pixels`` join the neighbouring segment they are most strongly
+    connected to, or are dropped when they touch none.
     """
     count = supervoxels.count
     if count == 0:
@@ -444,13 +447,13 @@ def spectral_clusters(weights: csr_matrix, config: PerceptionConfig) -> np.ndarr
 
     L_sym = D^-1/2 (D - W) D^-1/2; the number of clusters k is chosen from its smallest
     eigenvalues (``choose_cluster_count``); the rows of the first k eigenvectors, normalised
-    to unit length, are clustered by k-means (seeded, ``kmeans_restarts`` restarts).
+    to unit length, are clustered by k-means (seeded, ``segmentation.kmeans_restarts`` restarts).
     """
     m = weights.shape[0]
     degree = np.asarray(weights.sum(axis=1)).ravel()
     scale = 1.0 / np.sqrt(np.maximum(degree, 1e-12))
-    wanted = min(config.max_objects + 1, m - 1)
-    if m <= config.dense_eigen_limit:
+    wanted = min(config.segmentation.max_objects + 1, m - 1)
+    if m <= config.segmentation.dense_eigen_limit:
         normalised = (weights.toarray() * scale[:, None]) * scale[None, :]
         laplacian = np.eye(m) - normalised
         values, vectors = eigh(laplacian, subset_by_index=[0, wanted - 1])
@@ -467,7 +470,7 @@ def spectral_clusters(weights: csr_matrix, config: PerceptionConfig) -> np.ndarr
         return np.zeros(m, dtype=np.int64)
     embedding = vectors[:, :k]
     embedding = embedding / np.maximum(np.linalg.norm(embedding, axis=1, keepdims=True), 1e-12)
-    return kmeans_labels(embedding, k, config.kmeans_restarts, config.seed)
+    return kmeans_labels(embedding, k, config.segmentation.kmeans_restarts, config.seed)
 
 
 def kmeans_labels(
@@ -506,7 +509,7 @@ def kmeans_labels(
                 index = rng.integers(m)
             centres[c] = points[index]
             closest = np.minimum(closest, np.sum((points - centres[c]) ** 2, axis=1))
-        # Lloyd iterations compiled (``ipr.kernels``): tens of small numpy calls per iteration.
+        # Lloyd iterations compiled (``kernels``): tens of small numpy calls per iteration.
         labels, inertia = kernels.lloyd_iterations(points, centres, max_iterations)
         if inertia < best_inertia:
             best_labels, best_inertia = labels, inertia
@@ -517,18 +520,19 @@ def choose_cluster_count(eigenvalues: np.ndarray, config: PerceptionConfig) -> i
     """Number of clusters from the ascending eigenvalues of L_sym of one connected graph.
 
     The paper cuts the ranked eigenvalues "at the first value that significantly differs from
-    the others". With strong edges of weight 1 inside objects and ``concave_weight`` between
-    them, the first k eigenvalues of a k-object graph are of the order of the concave weight
-    and the next ones of the order of the objects' own connectivity, orders of magnitude apart.
-    The cut is therefore the largest ratio between consecutive eigenvalues, each offset by
-    ``eigengap_floor`` (a noise floor that keeps ratios of near-zero values meaningless):
-    k = argmax_k (lambda_k + floor) / (lambda_{k-1} + floor). A single object wins when its
-    lambda_1 stands out from lambda_0 = 0 more than any later jump.
+    the others". With strong edges of weight 1 inside objects and
+    ``segmentation.concave_weight`` between them, the first k eigenvalues of a k-object graph
+    are of the order of the concave weight and the next ones of the order of the objects' own
+    connectivity, orders of magnitude apart. The cut is therefore the largest ratio between
+    consecutive eigenvalues, each offset by ``segmentation.eigengap_floor`` (a noise floor
+    that keeps ratios of near-zero values meaningless): k = argmax_k (lambda_k + floor) /
+    (lambda_{k-1} + floor). A single object wins when its lambda_1 stands out from
+    lambda_0 = 0 more than any later jump.
     """
     values = np.maximum(np.asarray(eigenvalues, dtype=np.float64), 0.0)
     if len(values) < 2:
         return 1
-    logs = np.log(values + config.eigengap_floor)
+    logs = np.log(values + config.segmentation.eigengap_floor)
     return int(np.argmax(np.diff(logs))) + 1
 
 
@@ -552,15 +556,16 @@ def _absorb_small(
 ) -> np.ndarray:
     """Segments 1..k (by decreasing size) from parts (M,), small parts merged or dropped.
 
-    Parts with fewer than ``min_object_pixels`` pixels are merged, smallest first, into the
-    adjacent part with the largest total edge weight to them (with only concave edges between
-    them, the one they share the most edges with); a small part with no neighbour is dropped.
+    Parts with fewer than ``segmentation.min_object_pixels`` pixels are merged, smallest
+    first, into the adjacent part with the largest total edge weight to them (with only
+    concave edges between them, the one they share the most edges with); a small part with no
+    neighbour is dropped.
     """
     parts = parts.copy()
     n_parts = int(parts.max()) + 1
     size = np.bincount(parts, weights=supervoxels.sizes, minlength=n_parts)
     for part in np.argsort(size, kind="stable"):
-        if size[part] == 0 or size[part] >= config.min_object_pixels:
+        if size[part] == 0 or size[part] >= config.segmentation.min_object_pixels:
             continue
         a, b = parts[pairs[:, 0]], parts[pairs[:, 1]]
         touching = (a == part) ^ (b == part)

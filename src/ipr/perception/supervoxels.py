@@ -6,8 +6,9 @@ normal 1). This module does the same in vectorised numpy:
 
 1. per-pixel normals from the organised cloud (``organised_normals_at``: image-space
    neighbours, one-sided at discontinuities);
-2. the kept points are binned into ``voxel_size_m`` voxels (mean position, normal, colour);
-3. one seed per occupied ``seed_size_m`` cell (the voxel nearest the cell centre);
+2. the kept points are binned into ``supervoxels.voxel_size_m`` voxels (mean position, normal,
+   colour);
+3. one seed per occupied ``supervoxels.seed_size_m`` cell (the voxel nearest the cell centre);
 4. a few k-means rounds assign every voxel to the nearest seed among those of the 27
    surrounding seed cells, in VCCS's distance ((distance / seed size)^2 + normal weight x
    (1 - cos of the normals' angle));
@@ -37,7 +38,7 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from ipr import kernels
+from ipr.perception import kernels
 from ipr.perception.config import PerceptionConfig
 from ipr.perception.types import Supervoxels
 from ipr.scene import Frame
@@ -79,17 +80,18 @@ def organised_normals_at(
     (P,) of a (H, W) depth image (m) with intrinsics K; rows of 0 where unknown.
 
     Each pixel's normal is the cross product of the differences between its neighbours
-    ``normal_radius_px`` pixels away horizontally and vertically (image-space neighbours of the
-    organised cloud). A neighbour that has no depth, or whose depth differs from the pixel's by
-    more than ``normal_max_jump_m`` plus ``normal_max_jump_ratio`` of the depth per pixel of
-    offset (a discontinuity: another surface), is replaced by the pixel itself (a one-sided
+    ``supervoxels.normal_radius_px`` pixels away horizontally and vertically (image-space
+    neighbours of the organised cloud). A neighbour that has no depth, or whose depth differs
+    from the pixel's by more than ``supervoxels.normal_max_jump_m`` plus
+    ``supervoxels.normal_max_jump_ratio`` of the depth per pixel of offset (a discontinuity:
+    another surface), is replaced by the pixel itself (a one-sided
     difference); pixels left without a difference in either direction get no normal. Only the
     requested pixels are computed (the support, most of the image, needs none).
     """
     depth = np.asarray(depth_m, dtype=np.float32)
     height, width = depth.shape
     pixels = np.asarray(pixels, dtype=np.int64)
-    r = int(config.normal_radius_px)
+    r = int(config.supervoxels.normal_radius_px)
     # A border of r zero-depth pixels makes every neighbour lookup an in-bounds read: outside
     # the image reads as "no depth", which is what the bounds test gave (one gather per
     # neighbour instead of bounds masks, clamped indices and selects).
@@ -99,7 +101,7 @@ def organised_normals_at(
     flat = padded.reshape(-1)
     rows, cols = np.divmod(pixels, width)
     at = (rows + r) * padded_width + (cols + r)  # the pixels' flat indices in ``padded``
-    # The per-pixel arithmetic runs compiled, in float32 as before (``ipr.kernels``).
+    # The per-pixel arithmetic runs compiled, in float32 as before (``kernels``).
     return kernels.organised_normals(
         flat,
         padded_width,
@@ -108,8 +110,8 @@ def organised_normals_at(
         cols,
         np.asarray(K, dtype=np.float64),
         r,
-        float(config.normal_max_jump_m),
-        float(config.normal_max_jump_ratio),
+        float(config.supervoxels.normal_max_jump_m),
+        float(config.supervoxels.normal_max_jump_ratio),
     )
 
 
@@ -142,12 +144,12 @@ def compute_supervoxels(
     if points_world is None:
         points_world = frame.points_world()
     flat_points = np.asarray(points_world.reshape(-1, 3), dtype=np.float64)
-    voxel = config.voxel_size_m
-    # Compiled (``ipr.kernels``): every kept pixel's voxel key without gathering its point.
+    voxel = config.supervoxels.voxel_size_m
+    # Compiled (``kernels``): every kept pixel's voxel key without gathering its point.
     all_keys, dims = kernels.voxel_keys(flat_points, pixels, voxel)
     # Close-up frames have tens of pixels per voxel: the statistics come from an even subset
-    # of at most supervoxel_max_points pixels, and every pixel then joins its voxel's label.
-    step = -(-len(pixels) // config.supervoxel_max_points)
+    # of at most supervoxels.max_points pixels, and every pixel then joins its voxel's label.
+    step = -(-len(pixels) // config.supervoxels.max_points)
     sample = np.arange(0, len(pixels), step)
     points = flat_points[pixels[sample]]
     keys = all_keys[sample]
@@ -179,7 +181,7 @@ def compute_supervoxels(
     voxel_edges = np.stack([np.concatenate(edge_a), np.concatenate(edge_b)], axis=1)
 
     # 3. Seeds: per occupied seed cell, the voxel nearest the cell centre.
-    seed_size = config.seed_size_m
+    seed_size = config.supervoxels.seed_size_m
     seed_cells = np.floor(voxel_centre / seed_size).astype(np.int64)
     seed_cells -= seed_cells.min(axis=0) - 1
     seed_dims = seed_cells.max(axis=0) + 2
@@ -225,10 +227,10 @@ def compute_supervoxels(
         voxel_centre[seed_voxels],
         voxel_normal[seed_voxels],
         voxel_colour[seed_voxels],
-        config.supervoxel_iterations,
+        config.supervoxels.iterations,
         seed_size,
-        config.supervoxel_normal_weight,
-        config.supervoxel_colour_weight,
+        config.supervoxels.normal_weight,
+        config.supervoxels.colour_weight,
     )
 
     # 5. Connected parts of each supervoxel (26-connectivity), then crumbs merged.
@@ -238,7 +240,7 @@ def compute_supervoxels(
         shape=(n_voxels, n_voxels),
     )
     _, parts = connected_components(graph, directed=False)
-    parts = _merge_crumbs(parts, voxel_count * step, voxel_edges, config.supervoxel_min_points)
+    parts = _merge_crumbs(parts, voxel_count * step, voxel_edges, config.supervoxels.min_points)
     _, supervoxel_of_voxel = np.unique(parts, return_inverse=True)
     n_supervoxels = int(supervoxel_of_voxel.max()) + 1
 
@@ -247,7 +249,7 @@ def compute_supervoxels(
     counts = np.bincount(supervoxel_of_point, minlength=n_supervoxels)
     centres = _group_mean(supervoxel_of_point, points, n_supervoxels, counts)
     mean_normals = _normalise(_group_sum(supervoxel_of_point, pixel_normals, n_supervoxels))
-    if config.dominant_face_deg > 0:
+    if config.supervoxels.dominant_face_deg > 0:
         centres, normals = _dominant_faces(
             supervoxel_of_point, points, pixel_normals, mean_normals, counts, config
         )
@@ -435,15 +437,15 @@ def _dominant_faces(
     A supervoxel that straddles a crease mixes two faces; its least-squares plane lies between
     them and its edges to both look concave, so it ends up alone as a sliver segment. The
     dominant face is found from the pixel normals: twice, keep the pixels whose normal is within
-    ``dominant_face_deg`` of the group's mean normal and re-average; the centre and the plane
-    fit then use those pixels only (all pixels when fewer than 6 remain).
+    ``supervoxels.dominant_face_deg`` of the group's mean normal and re-average; the centre and
+    the plane fit then use those pixels only (all pixels when fewer than 6 remain).
     """
-    # Compiled (``ipr.kernels``): the selections and moments in a few passes over the pixels.
+    # Compiled (``kernels``): the selections and moments in a few passes over the pixels.
     centres, covariance, sizes, normal = kernels.dominant_face_moments(
         groups,
         np.ascontiguousarray(points, dtype=np.float64),
         np.ascontiguousarray(pixel_normals, dtype=np.float64),
         np.ascontiguousarray(mean_normals, dtype=np.float64),
-        float(np.cos(np.radians(config.dominant_face_deg))),
+        float(np.cos(np.radians(config.supervoxels.dominant_face_deg))),
     )
     return centres, _normals_of_covariances(covariance, sizes, normal)

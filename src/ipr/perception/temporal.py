@@ -9,20 +9,20 @@ clustering of the new frame (its eigengap sees a pile whose shape the push chang
 into the previous camera (so a moving camera is handled too) and its depth there compared with
 the previous reading. A pixel is
 
-- *unchanged* when the two agree within ``temporal_depth_tolerance_m`` (plus a term growing with
+- *unchanged* when the two agree within ``temporal.depth_tolerance_m`` (plus a term growing with
   depth squared, as sensor noise does); it carries the previous frame's segment there;
 - *revealed* when the current surface lies behind the previous one (what was in front moved
   away: a surface of a static object, or the table, that a pushed object hid);
 - *arrived* when it lies in front of the previous one (something moved there: a pushed object).
 
 ``supervoxel_anchors`` then decides, per previous segment, whether it stayed (at least
-``temporal_static_fraction`` of the pixels it covered are unchanged: one that moved reveals what
+``temporal.static_fraction`` of the pixels it covered are unchanged: one that moved reveals what
 was behind it, or covers its old place at another depth; one newly hidden behind a pushed object
 is not trusted either) and anchors each supervoxel whose pixels are mostly unchanged pixels of a
 segment that stayed to that segment. ``ipr.perception.segmentation.anchor_parts`` imposes the
 anchors on the clustering: the anchored supervoxels of one previous segment form one segment,
 and the rest is kept with them only if it is revealed (or shifted by at most
-``temporal_near_m``: a nudged object) rather than arrived. Objects that moved are clustered
+``temporal.near_m``: a nudged object) rather than arrived. Objects that moved are clustered
 afresh.
 
 ``consistent_walls`` keeps the previous frame's walls (they do not move) and rejects a wall
@@ -41,8 +41,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ipr import kernels
 from ipr.camera import invert_transform
+from ipr.perception import kernels
 from ipr.perception.config import PerceptionConfig
 from ipr.perception.planes import static_geometry_mask
 from ipr.perception.types import KnownPlane, Supervoxels
@@ -61,7 +61,7 @@ class FrameChange:
             along the previous camera's ray) or ``ARRIVED`` (nearer).
         previous_label: (H, W) int32 previous frame's segment label at the pixel's projection
             into the previous frame (0 = none or not compared).
-        near: (H, W) bool, compared pixels whose depth changed by at most ``temporal_near_m``
+        near: (H, W) bool, compared pixels whose depth changed by at most ``temporal.near_m``
             (None: not computed; counted as False).
     """
 
@@ -120,7 +120,7 @@ def compare_frames(
         inside = in_front & (u >= 0) & (u < previous_width) & (v >= 0) & (v < previous_height)
         pixel = np.where(inside, v.astype(np.int64) * previous_width + u.astype(np.int64), 0)
     else:
-        # From frame t's depth and pixel grid in float32, compiled (``ipr.kernels``): the same
+        # From frame t's depth and pixel grid in float32, compiled (``kernels``): the same
         # operations as ``_in_previous_camera`` and the projection above, in one pass.
         f32 = np.float32
         relative = (invert_transform(previous_world_from_camera) @ world_from_camera).astype(f32)
@@ -133,7 +133,7 @@ def compare_frames(
             np.asarray(previous_K, dtype=f32),
             *previous_depth_m.shape,
         )
-    # Compiled (``ipr.kernels``): the states in one pass. Each quantity keeps the precision
+    # Compiled (``kernels``): the states in one pass. Each quantity keeps the precision
     # numpy gave it: tolerances in z's, the depth difference in the wider of the two depths'.
     dtype = np.result_type(z.dtype, previous_depth_m.dtype)
     state, previous_label, near = kernels.pixel_changes(
@@ -144,9 +144,9 @@ def compare_frames(
         inside,
         previous_depth_m.reshape(-1),
         previous_labels.reshape(-1),
-        z.dtype.type(config.temporal_depth_tolerance_m),
-        z.dtype.type(config.temporal_depth_tolerance_quadratic),
-        dtype.type(config.temporal_near_m),
+        z.dtype.type(config.temporal.depth_tolerance_m),
+        z.dtype.type(config.temporal.depth_tolerance_quadratic),
+        dtype.type(config.temporal.near_m),
         (UNCHANGED, REVEALED, ARRIVED, NOT_COMPARED),
     )
     return FrameChange(
@@ -215,10 +215,10 @@ def supervoxel_anchors(
     """Anchor supervoxels to the previous segments that stayed (module doc).
 
     A previous segment L stayed when its unchanged pixels number at least
-    ``min_object_pixels`` and are at least ``temporal_static_fraction`` of its unchanged plus
-    revealed pixels (pixels newly hidden behind something that arrived do not count either
-    way). A supervoxel is anchored to L when L's unchanged pixels are at least
-    ``temporal_anchor_fraction`` of its pixels.
+    ``segmentation.min_object_pixels`` and are at least ``temporal.static_fraction`` of its
+    unchanged plus revealed pixels (pixels newly hidden behind something that arrived do not
+    count either way). A supervoxel is anchored to L when L's unchanged pixels are at least
+    ``temporal.anchor_fraction`` of its pixels.
     """
     count = supervoxels.count
     flat_supervoxel = supervoxels.labels.reshape(-1)
@@ -230,7 +230,7 @@ def supervoxel_anchors(
         zero = np.zeros(0, dtype=np.int64)
         return SupervoxelChange(anchor, zero, zero.copy())
     near = change.near.reshape(-1) if change.near is not None else np.zeros(state.size, bool)
-    # Compiled (``ipr.kernels``): every count in two passes over the pixels.
+    # Compiled (``kernels``): every count in two passes over the pixels.
     compatible, incompatible, table, pixels = kernels.supervoxel_anchor_counts(
         flat_supervoxel,
         state,
@@ -239,26 +239,26 @@ def supervoxel_anchors(
         count,
         n_labels,
         (NOT_COMPARED, UNCHANGED, REVEALED, ARRIVED),
-        config.min_object_pixels,
-        float(config.temporal_static_fraction),
+        config.segmentation.min_object_pixels,
+        float(config.temporal.static_fraction),
     )
     # Unchanged pixels of segments that stayed, per (supervoxel, segment): the most voted
     # segment anchors the supervoxel when it holds enough of its pixels.
     if table.any():
         best_label = np.argmax(table, axis=1)  # ties: the lowest label
         votes = table[np.arange(count), best_label]
-        enough = (votes > 0) & (votes >= config.temporal_anchor_fraction * pixels)
+        enough = (votes > 0) & (votes >= config.temporal.anchor_fraction * pixels)
         anchor[enough] = best_label[enough]
     return SupervoxelChange(anchor, compatible, incompatible)
 
 
 def same_plane(first: KnownPlane, second: KnownPlane, config: PerceptionConfig) -> bool:
-    """True when two planes (world frame) agree within ``temporal_wall_angle_deg`` and
-    ``temporal_wall_offset_m``."""
+    """True when two planes (world frame) agree within ``temporal.wall_angle_deg`` and
+    ``temporal.wall_offset_m``."""
     cos_angle = float(np.dot(first.normal, second.normal))
     return (
-        cos_angle >= np.cos(np.radians(config.temporal_wall_angle_deg))
-        and abs(first.offset - second.offset) <= config.temporal_wall_offset_m
+        cos_angle >= np.cos(np.radians(config.temporal.wall_angle_deg))
+        and abs(first.offset - second.offset) <= config.temporal.wall_offset_m
     )
 
 
@@ -275,7 +275,7 @@ def consistent_walls(
 
     A wall found again (``same_plane``) is kept as found now; a previous wall not found again
     (hidden, or missed by the search) is kept as it was; a wall found for the first time is
-    kept unless more than ``temporal_wall_max_arrived`` of its compared pixels arrived since
+    kept unless more than ``temporal.wall_max_arrived`` of its compared pixels arrived since
     the previous frame: a face of a pushed or toppled box, not a wall revealed by the push (its
     pixels are revealed) or one the previous search missed (unchanged).
 
@@ -295,7 +295,7 @@ def consistent_walls(
         states = flat_state[on_wall]
         compared = int(np.count_nonzero(states != NOT_COMPARED))
         arrived = int(np.count_nonzero(states == ARRIVED))
-        if arrived <= config.temporal_wall_max_arrived * compared:
+        if arrived <= config.temporal.wall_max_arrived * compared:
             walls.append(wall)
     walls.extend(old for i, old in enumerate(previous_walls) if i not in found_again)
     return tuple(walls)

@@ -67,7 +67,7 @@ from itertools import combinations
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from ipr import kernels
+from ipr.perception import kernels
 from ipr.perception.config import PerceptionConfig, TrackingConfig
 
 #: Histogram bins per RGB channel.
@@ -106,7 +106,7 @@ def segment_features(
     flat_points = points.reshape(-1, 3)
     # A pixel without depth back-projects to the camera centre: labels may cover depth holes, so
     # geometry comes from pixels with a reading (segments without any use all their pixels,
-    # whose points are all zero). One compiled pass gives every segment's sums (``ipr.kernels``;
+    # whose points are all zero). One compiled pass gives every segment's sums (``kernels``;
     # a frame has a dozen segments of up to tens of thousands of pixels).
     depth = np.ones(len(flat_points)) if depth_m is None else depth_m.reshape(-1)
     ids, order, starts, with_depth, used, point_sums, used_z, histograms, footprints = (

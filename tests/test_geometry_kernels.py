@@ -1,0 +1,50 @@
+"""Each compiled geometry kernel (``ipr.geometry.kernels``) gives what the numpy expression it
+replaced gave: same bits where the kernel keeps numpy's order of operations, equal to rounding
+otherwise (stated per test). The perception kernels: ``test_kernels.py``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ipr.camera import backproject, look_at
+from ipr.geometry import kernels
+
+
+def test_world_points_equal_backprojection_then_transform():
+    rng = np.random.default_rng(3)
+    K = np.array([[520.0, 0.0, 319.5], [0.0, 525.0, 241.2], [0.0, 0.0, 1.0]])
+    world_from_camera = look_at(np.array([0.6, -0.4, 0.7]), np.array([0.0, 0.1, 0.0]))
+    depth = rng.uniform(0.3, 2.0, (48, 64)).astype(np.float32)
+    depth[rng.random(depth.shape) < 0.1] = 0.0
+    K[0, 2], K[1, 2] = 31.5, 24.2
+    expected = backproject(depth, K) @ world_from_camera[:3, :3].T + world_from_camera[:3, 3]
+    points = kernels.world_points(depth, K, world_from_camera)
+    assert points.shape == (48, 64, 3) and points.dtype == np.float64
+    # BLAS may fuse the products: equal to a few units in the last place, not bit for bit.
+    np.testing.assert_allclose(points, expected, rtol=0, atol=1e-14)
+    # Zero depth is the camera centre, as backproject gives it.
+    np.testing.assert_allclose(
+        points[depth == 0], np.broadcast_to(world_from_camera[:3, 3], (int((depth == 0).sum()), 3))
+    )
+
+
+def test_plane_kernels_match_the_numpy_expressions():
+    rng = np.random.default_rng(31)
+    points = rng.uniform(-0.5, 0.5, (4000, 3))
+    points[:1500, 2] = rng.normal(0.0, 0.003, 1500)  # a table at z = 0
+    normals = rng.normal(size=(300, 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    normals[0] = [0.0, 0.0, 1.0]
+    offsets = rng.uniform(-0.1, 0.1, 300)
+    offsets[0] = 0.0
+    distances = np.abs(points @ normals.T + offsets)
+    counts = kernels.plane_inlier_counts(points, normals, offsets, 0.01)
+    np.testing.assert_array_equal(counts, (distances < 0.01).sum(axis=0))
+    assert int(np.argmax(counts)) == 0
+    inliers = kernels.plane_inliers(points, normals[0], 0.0, 0.01)
+    np.testing.assert_array_equal(inliers, np.flatnonzero(distances[:, 0] < 0.01))
+    centroid, scatter = kernels.centred_scatter(points, inliers)
+    centred = points[inliers] - points[inliers].mean(axis=0)
+    np.testing.assert_allclose(centroid, points[inliers].mean(axis=0), atol=1e-15)
+    np.testing.assert_allclose(scatter, centred.T @ centred, rtol=1e-10, atol=1e-15)
