@@ -1,4 +1,5 @@
-"""Development measurement of view fusion (docs/DESIGN_NOTES.md, "View fusion").
+"""Development measurement of view fusion (docs/DESIGN_NOTES.md, "View fusion"; figures in
+docs/experiments/2026-11-24-view-fusion.md and the later and pusher free-space files).
 
 Usage: ``python -m benchmarks.dev_fusion [--seed 9100] [--count 10]``.
 

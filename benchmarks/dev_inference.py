@@ -1,4 +1,5 @@
-"""Development measurements of IPR inference (docs/DESIGN_NOTES.md, "Physics and inference").
+"""Development measurements of IPR inference (docs/DESIGN_NOTES.md, "Physics and inference";
+figures in docs/experiments/2026-11-21-likelihood-and-weighting.md and the files beside it).
 
 Usage: ``python -m benchmarks.dev_inference [--seed 9100] [--count 10] [--samples 40]``.
 

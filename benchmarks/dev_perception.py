@@ -1,4 +1,5 @@
-"""Development measurement of segmentation and tracking (docs/DESIGN_NOTES.md, "Perception").
+"""Development measurement of segmentation and tracking (docs/DESIGN_NOTES.md, "Perception";
+the figures in docs/experiments/).
 
 Usage: ``python -m benchmarks.dev_perception [--sets 8000:12 8100:24 ...] [--containers]
 [--tracker-only] [--lost]``.
@@ -13,8 +14,8 @@ share of (object, frame) rows with F >= 0.75, and the median perception ms per f
 
 ``--containers`` scores the sets whose generator pool also holds open containers (bowl, mug,
 cups; ``benchmarks.common.CONTAINER_OBJECTS``): by default static seed 7100 (16 scenes) and
-dynamic seed 7200 (12), the sets of the design notes' "Open-container insides"; a set is then
-``seed:count[:kind]``.
+dynamic seed 7200 (12), the sets of docs/experiments/2026-11-25-open-container-insides.md; a
+set is then ``seed:count[:kind]``.
 
 ``--tracker-only`` caches each scene's untracked segmentation labels (``--cache``) on first use
 and then reruns only the tracker on them (segmentation does not depend on the tracker: its

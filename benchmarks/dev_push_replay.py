@@ -1,5 +1,6 @@
 """How well the simulator reproduces the pushes with the *true* shapes (docs/DESIGN_NOTES.md,
-"Physics and inference"): the ceiling of the evidence the pushes can give about hidden shapes.
+"The pushes' evidence is weak"; docs/experiments/2026-11-24-push-replay.md): the ceiling of the
+evidence the pushes can give about hidden shapes.
 
 Usage: ``python -m benchmarks.dev_push_replay [--seed 9100] [--count 10] [--friction 1.0]
 [--timestep 0.004]``.

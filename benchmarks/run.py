@@ -4,7 +4,8 @@ Usage: ``python -m benchmarks.run [--only SECTION ...]``. Suites are generated o
 cached (see ``ipr.suites``); figures are medians over each suite's scenes. Each section sits
 between ``<!-- section: NAME -->`` and ``<!-- end section: NAME -->`` in the page; ``--only``
 reruns the named sections and keeps the others as the page has them (a section the page lacks
-is appended).
+is appended). The inference section keeps each of its runs on disk (``benchmarks.inference_run``):
+rerunning it on unchanged code only rescores and rerenders them.
 """
 
 from __future__ import annotations

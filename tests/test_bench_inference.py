@@ -1,11 +1,11 @@
-"""The inference benchmark's own figures (``benchmarks.inference``)."""
+"""The inference benchmark's scores and tables (``benchmarks.inference_score``, ``_render``)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 import pytest
-from benchmarks.inference import best_hypothesis_iou
+from benchmarks.inference_score import best_hypothesis_iou
 
 from ipr.ground_truth import write_ground_truth_result
 from ipr.metrics import evaluate
@@ -54,7 +54,7 @@ def test_the_best_hypothesis_ceiling_finds_the_true_shape_among_the_hypotheses(s
 
 
 def _row(scene: str, method: str, iou: float, samples: int | None) -> dict:
-    from benchmarks.inference import SCORE_KEYS
+    from benchmarks.inference_score import SCORE_KEYS
 
     return {
         "scene": scene, "method": method, "error": None, **dict.fromkeys(SCORE_KEYS, iou),
@@ -66,7 +66,7 @@ def _row(scene: str, method: str, iou: float, samples: int | None) -> dict:
 
 def test_every_inference_table_has_as_many_cells_per_row_as_columns(tmp_path):
     from benchmarks.common import markdown_table
-    from benchmarks.inference import BUDGETS_S, budget_section, method_table
+    from benchmarks.inference_render import BUDGETS_S, budget_section, method_table
 
     with pytest.raises(ValueError, match="cells"):
         markdown_table(["a", "b"], [[1, 2, 3]])
