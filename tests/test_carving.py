@@ -171,5 +171,5 @@ def test_surface_views_use_later_frames_only_with_motions():
     assert len(views) == 2 and set(views[1].frame_from_frame0) == {3}
     assert views[1].margin_m == config.later_frame_margin_m
     assert len(surface_views(frames, objects, motions, CarvingConfig(later_frames=False))) == 1
-    with pytest.raises(ValueError, match="margins"):
+    with pytest.raises(ValueError, match="first_frame_margin_m"):
         CarvingConfig(first_frame_margin_m=-0.001)

@@ -128,3 +128,44 @@ def test_bad_perception_values_are_refused_with_the_range():
         replace(DenoiseConfig(), window_px=6)
     assert DenoiseConfig(window_px=1).window_px == 1
     assert DenoiseConfig(window_px=7).window_px == 7
+
+
+def test_every_field_of_the_whole_configuration_is_declared():
+    from ipr.config import Config
+
+    groups = _groups(Config())[1:]  # the sections and their nested groups
+    assert {type(g).__name__ for g in groups} >= {
+        "InferenceConfig", "HypothesisConfig", "UnaryTolerances", "ConstraintConfig",
+        "CollisionCheckerConfig", "PhysicsConfig", "LikelihoodConfig", "FusionConfig",
+        "CarvingConfig", "PerceptionConfig",
+    }  # fmt: skip
+    for group in groups:
+        declared = set()
+        for key in type(group).CHECKS:
+            declared |= set(key) if isinstance(key, tuple) else {key}
+        fields = {
+            item.name
+            for item in dataclasses.fields(group)
+            if not dataclasses.is_dataclass(getattr(group, item.name))
+            and not isinstance(getattr(group, item.name), bool)
+        }
+        assert fields <= declared, (type(group).__name__, fields - declared)
+
+
+@pytest.mark.parametrize(
+    ("section", "changes", "message"),
+    [
+        ("inference", {"weighting": "mean"}, "InferenceConfig.weighting must be one of"),
+        ("inference", {"stability_measure": "fall"}, "InferenceConfig.stability_measure"),
+        ("inference", {"workers": 0}, "InferenceConfig.workers must be None or an integer"),
+        ("hypotheses", {"min_room_m": 0.05}, "ordered: min_room_m <= min_thickness_m"),
+        ("fusion", {"fine_gate_m": 0.1}, r"FusionConfig.\(fine_gate_m, coarse_gate_m\)"),
+        ("carving", {"hole_fill_window_px": 4}, "a positive odd number of pixels"),
+        ("collision_checker", {"gibbs_chains": 0}, "CollisionCheckerConfig.gibbs_chains"),
+    ],
+)
+def test_bad_values_anywhere_are_refused_with_the_range(section, changes, message):
+    from ipr.config import Config
+
+    with pytest.raises(ValueError, match=message):
+        replace(getattr(Config(), section), **changes)

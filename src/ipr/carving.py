@@ -37,12 +37,14 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
+from typing import ClassVar
 
 import numpy as np
 from scipy.ndimage import minimum_filter
 
 from ipr import voxels
 from ipr.camera import invert_transform
+from ipr.checks import Checks, Interval, Options, Predicate, check_fields
 from ipr.perception.types import PartialObject
 from ipr.products import ObjectPosterior
 from ipr.scene import Frame
@@ -65,6 +67,17 @@ class CarvingConfig:
             0.664 / 0.665 (ipr+action+uniform, frame 0).
     """
 
+    CHECKS: ClassVar[Checks] = {
+        "enabled": Options(True, False),
+        "first_frame_margin_m": Interval(0, None),
+        "later_frame_margin_m": Interval(0, None),
+        "later_frames": Options(True, False),
+        "hole_fill_window_px": Predicate(
+            lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 1 and v % 2 == 1,
+            "a positive odd number of pixels",
+        ),
+    }
+
     enabled: bool = True
     first_frame_margin_m: float = 0.0
     later_frame_margin_m: float = 0.005
@@ -72,10 +85,7 @@ class CarvingConfig:
     hole_fill_window_px: int = 3
 
     def __post_init__(self) -> None:
-        if self.first_frame_margin_m < 0 or self.later_frame_margin_m < 0:
-            raise ValueError("carving margins must be >= 0 metres")
-        if self.hole_fill_window_px < 1 or self.hole_fill_window_px % 2 == 0:
-            raise ValueError("hole_fill_window_px must be a positive odd number of pixels")
+        check_fields(self)
 
 
 @dataclass(frozen=True, eq=False)

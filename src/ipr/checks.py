@@ -145,3 +145,16 @@ def check_fields(instance: Any, checks: Checks | None = None) -> None:
         if not constraint.accepts(value):
             label = f"({', '.join(names)})" if isinstance(key, tuple) else key
             raise ValueError(f"{owner}.{label} must be {constraint.describe()}, got {value!r}")
+
+
+@dataclass(frozen=True)
+class OrNone:
+    """None, or a value that ``other`` accepts (an optional setting)."""
+
+    other: Constraint
+
+    def accepts(self, value: Any) -> bool:
+        return value is None or self.other.accepts(value)
+
+    def describe(self) -> str:
+        return f"None or {self.other.describe()}"

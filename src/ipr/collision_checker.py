@@ -24,9 +24,11 @@ import logging
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
+from ipr.checks import Checks, Interval, check_fields
 from ipr.factor_graph import (
     TableTooLarge,
     elimination_table_size,
@@ -62,11 +64,22 @@ class CollisionCheckerConfig:
             pairwise constraints when nothing is jointly feasible.
     """
 
+    CHECKS: ClassVar[Checks] = {
+        "max_exact_table": Interval(1, None, integer=True),
+        "gibbs_chains": Interval(1, None, integer=True),
+        "gibbs_sweeps": Interval(1, None, integer=True),
+        "gibbs_burn_in": Interval(0, None, integer=True),
+        "relax_steps": Interval(0, None, integer=True),
+    }
+
     max_exact_table: int = 2_000_000
     gibbs_chains: int = 4
     gibbs_sweeps: int = 300
     gibbs_burn_in: int = 30
     relax_steps: int = 3
+
+    def __post_init__(self) -> None:
+        check_fields(self)
 
 
 # --------------------------------------------------------------------------------------------

@@ -45,10 +45,12 @@ import dataclasses
 import functools
 import logging
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ipr.checks import Checks, Interval, Options, Pair, check_fields
 from ipr.perception.free_space import FREE, UNKNOWN, SpaceMap, VoxelGrid
 from ipr.perception.types import Facet, KnownPlane, PartialObject
 from ipr.scene import Push, Pusher
@@ -88,6 +90,24 @@ class FusionConfig:
             stopped once it is withdrawn.
     """
 
+    CHECKS: ClassVar[Checks] = {
+        "enabled": Options(True, False),
+        "max_points": Interval(10, None, integer=True),
+        "yaw_starts": Interval(1, None, integer=True),
+        "iterations": Interval(1, None, integer=True),
+        ("fine_gate_m", "coarse_gate_m"): Pair(Interval(0, None, closed="neither")),
+        "normal_neighbours": Interval(3, None, integer=True),
+        "min_overlap": Interval(0, 1),
+        "max_free_share": Interval(0, 1),
+        "free_weight": Interval(0, None),
+        "novel_distance_m": Interval(0, None, closed="neither"),
+        "min_novel_points": Interval(0, None, integer=True),
+        "later_free_space": Options(True, False),
+        "pusher_free_space": Options(True, False),
+        "static_tolerance_m": Interval(0, None),
+        "settle_margin_m": Interval(0, None),
+    }
+
     enabled: bool = True
     max_points: int = 1500
     yaw_starts: int = 12
@@ -106,14 +126,7 @@ class FusionConfig:
     settle_margin_m: float = 0.003
 
     def __post_init__(self) -> None:
-        if self.max_points < 10 or self.yaw_starts < 1 or self.iterations < 1:
-            raise ValueError("max_points >= 10, yaw_starts >= 1 and iterations >= 1 required")
-        if not 0 < self.fine_gate_m <= self.coarse_gate_m:
-            raise ValueError("0 < fine_gate_m <= coarse_gate_m required")
-        if not (0 <= self.min_overlap <= 1 and 0 <= self.max_free_share <= 1):
-            raise ValueError("min_overlap and max_free_share are shares in [0, 1]")
-        if self.normal_neighbours < 3 or self.novel_distance_m <= 0:
-            raise ValueError("normal_neighbours >= 3 and novel_distance_m > 0 required")
+        check_fields(self)
 
 
 @dataclass(frozen=True)

@@ -26,9 +26,11 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
+from ipr.checks import Checks, Interval, check_fields
 from ipr.physics import decimated_camera, decimated_pixels
 from ipr.rendering import PinholeCamera
 from ipr.scene import Frame
@@ -48,18 +50,20 @@ class LikelihoodConfig:
         occlusion_margin_m: an observed surface this much nearer than the prediction hides it.
     """
 
+    CHECKS: ClassVar[Checks] = {
+        "alpha_per_m": Interval(0, None),
+        "decimation": Interval(1, None, integer=True),
+        "error_cap_m": Interval(0, None, closed="neither"),
+        "occlusion_margin_m": Interval(0, None),
+    }
+
     alpha_per_m: float = 0.2
     decimation: int = 4
     error_cap_m: float = 0.1
     occlusion_margin_m: float = 0.01
 
     def __post_init__(self) -> None:
-        if not self.alpha_per_m >= 0:
-            raise ValueError(f"alpha_per_m must be >= 0, got {self.alpha_per_m}")
-        if not (isinstance(self.decimation, int) and self.decimation >= 1):
-            raise ValueError(f"decimation must be an integer >= 1, got {self.decimation}")
-        if not self.error_cap_m > 0 or not self.occlusion_margin_m >= 0:
-            raise ValueError("error_cap_m must be positive and occlusion_margin_m >= 0")
+        check_fields(self)
 
 
 @dataclass(frozen=True, eq=False)

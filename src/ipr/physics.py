@@ -33,12 +33,13 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 import mujoco
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
+from ipr.checks import Checks, Interval, check_fields
 from ipr.perception.types import KnownPlane
 from ipr.rendering import (
     PinholeCamera,
@@ -78,6 +79,23 @@ class PhysicsConfig:
         wall_min_thickness_m: thinnest wall slab (m); thinner slabs let objects tunnel.
     """
 
+    CHECKS: ClassVar[Checks] = {
+        "timestep_s": Interval(0, None, closed="neither"),
+        "density_kg_m3": Interval(0, None, closed="neither"),
+        "friction": Interval(0, 5),
+        "torsional_friction": Interval(0, None),
+        "rolling_friction_m": Interval(0, None),
+        "gravity_m_s2": Interval(0, None, closed="neither"),
+        "settle_max_s": Interval(0, None, closed="neither"),
+        "settle_linear_m_s": Interval(0, None),
+        "settle_angular_rad_s": Interval(0, None),
+        "stability_s": Interval(0, None, closed="neither"),
+        "push_stop_intrusion_m": Interval(0, None),
+        "flung_m": Interval(0, None, closed="neither"),
+        "support_half_extent_m": Interval(0, None, closed="neither"),
+        "wall_min_thickness_m": Interval(0, None),
+    }
+
     timestep_s: float = 0.004
     density_kg_m3: float = 400.0
     friction: float = 1.0
@@ -94,21 +112,7 @@ class PhysicsConfig:
     wall_min_thickness_m: float = 0.01
 
     def __post_init__(self) -> None:
-        for name in (
-            "timestep_s",
-            "density_kg_m3",
-            "gravity_m_s2",
-            "settle_max_s",
-            "stability_s",
-            "flung_m",
-            "support_half_extent_m",
-        ):
-            if not getattr(self, name) > 0:
-                raise ValueError(
-                    f"PhysicsConfig.{name} must be positive, got {getattr(self, name)}"
-                )
-        if not 0 <= self.friction <= 5:
-            raise ValueError(f"PhysicsConfig.friction must be in [0, 5], got {self.friction}")
+        check_fields(self)
 
 
 @dataclass(frozen=True, eq=False)

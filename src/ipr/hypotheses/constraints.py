@@ -33,10 +33,12 @@ from __future__ import annotations
 import logging
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
 from ipr import voxels
+from ipr.checks import Checks, Interval, Options, check_fields
 from ipr.hypotheses.generate import UnaryTolerances
 from ipr.perception.free_space import SeenSpace
 from ipr.perception.occupancy import allowed_voxels, plane_regions, unary_report
@@ -61,8 +63,16 @@ class ConstraintConfig:
     ``HypothesisConfig.unary`` so that generation and checking use the same values.
     """
 
+    CHECKS: ClassVar[Checks] = {
+        "overlap_tolerance_m": Interval(0, None),
+        "relax_forced_overlap": Options(True, False),
+    }
+
     overlap_tolerance_m: float = 0.005
     relax_forced_overlap: bool = True
+
+    def __post_init__(self) -> None:
+        check_fields(self)
 
 
 # --------------------------------------------------------------------------------------------

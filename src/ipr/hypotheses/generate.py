@@ -73,6 +73,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 from scipy.sparse import coo_matrix
@@ -80,6 +81,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import ConvexHull, QhullError
 
 from ipr import voxels
+from ipr.checks import Checks, Interval, OrNone, Predicate, check_fields
 from ipr.geometry.convex import clip_halfspace, convex_mesh
 from ipr.perception.free_space import FREE, SeenSpace
 from ipr.perception.occupancy import PlaneRegion, allowed_voxels, plane_regions, unary_report
@@ -104,10 +106,20 @@ class UnaryTolerances:
         wall_min_thickness_m: walls without a measured thickness are slabs this thick (m).
     """
 
+    CHECKS: ClassVar[Checks] = {
+        "free_space_tolerance": Interval(0, 1),
+        "free_space_tolerance_voxels": Interval(0, None, integer=True),
+        "support_tolerance_m": Interval(0, None),
+        "wall_min_thickness_m": Interval(0, None),
+    }
+
     free_space_tolerance: float = 0.02
     free_space_tolerance_voxels: int = 20
     support_tolerance_m: float = 0.005
     wall_min_thickness_m: float = 0.005
+
+    def __post_init__(self) -> None:
+        check_fields(self)
 
 
 @dataclass(frozen=True)
@@ -156,6 +168,35 @@ class HypothesisConfig:
             given), split over the objects as their ``timeout_s``; inference gets the rest.
     """
 
+    CHECKS: ClassVar[Checks] = {
+        "count": Interval(1, None, integer=True),
+        "min_room_m": Interval(0, None, closed="neither"),
+        "min_thickness_m": Interval(0, None, closed="neither"),
+        "max_depth_m": Interval(0, None, closed="neither"),
+        "border_max_depth_m": Interval(0, None, closed="neither"),
+        ("min_room_m", "min_thickness_m", "max_depth_m"): Predicate(
+            lambda v: v[0] <= v[1] <= v[2], "ordered: min_room_m <= min_thickness_m <= max_depth_m"
+        ),
+        "min_facet_area_m2": Interval(0, None),
+        "normal_merge_deg": Interval(0, 180),
+        "hull_group_deg": Interval(0, 180),
+        "ray_quantile": Interval(0, 1),
+        "ray_step_m": OrNone(Interval(0, None, closed="neither")),
+        "rim_width_m": Interval(0, None),
+        "max_rays": Interval(1, None, integer=True),
+        "hull_facet_rays": Interval(1, None, integer=True),
+        "max_hull_facets": Interval(0, None, integer=True),
+        "hull_spacing_m": Interval(0, None, closed="neither"),
+        "max_rounds": Interval(1, None, integer=True),
+        "facet_tolerance_m": Interval(0, None),
+        "max_attempts": Interval(1, None, integer=True),
+        "support_snap_m": Interval(0, None),
+        "support_band_m": Interval(0, None),
+        "timeout_s": OrNone(Interval(0, None, closed="neither")),
+        "seed": Interval(0, None, integer=True),
+        "budget_share": Interval(0, 1, closed="neither"),
+    }
+
     count: int = 32
     min_thickness_m: float = 0.02
     max_depth_m: float = 0.3
@@ -182,23 +223,7 @@ class HypothesisConfig:
     budget_share: float = 0.6
 
     def __post_init__(self) -> None:
-        if self.count < 1:
-            raise ValueError(f"count must be >= 1, got {self.count}")
-        if not 0 < self.min_room_m <= self.min_thickness_m <= self.max_depth_m:
-            raise ValueError("need 0 < min_room_m <= min_thickness_m <= max_depth_m")
-        if not 0.0 <= self.ray_quantile <= 1.0:
-            raise ValueError(f"ray_quantile must be in [0, 1], got {self.ray_quantile}")
-        if self.max_attempts < 1 or self.max_rounds < 1:
-            raise ValueError("max_attempts and max_rounds must be >= 1")
-        if not 0.0 < self.budget_share < 1.0:
-            raise ValueError(f"budget_share must be in (0, 1), got {self.budget_share}")
-        if self.timeout_s is not None and not self.timeout_s > 0:
-            raise ValueError(f"timeout_s must be None or > 0, got {self.timeout_s}")
-        if not (self.support_snap_m >= 0 and self.support_band_m >= 0):
-            raise ValueError(
-                f"support_snap_m and support_band_m must be >= 0 (0 disables the snap), got "
-                f"{self.support_snap_m} and {self.support_band_m}"
-            )
+        check_fields(self)
 
 
 # --------------------------------------------------------------------------------------------

@@ -4,8 +4,9 @@ sampling and how samples become marginals."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Literal, get_args
+from typing import ClassVar, Literal, get_args
 
+from ipr.checks import Checks, Interval, Options, OrNone, check_fields
 from ipr.likelihood import LikelihoodConfig
 from ipr.physics import PhysicsConfig
 
@@ -47,6 +48,20 @@ class InferenceConfig:
             weighting; larger components combine their objects' factors independently.
     """
 
+    CHECKS: ClassVar[Checks] = {
+        "stability_alpha_per_m": Interval(0, None),
+        "neighbour_margin_m": Interval(0, None),
+        "budget_per_object_s": Interval(0, None, closed="neither"),
+        "max_samples": OrNone(Interval(1, None, integer=True)),
+        "workers": OrNone(Interval(1, None, integer=True)),
+        "size_prior_exponent": Interval(0, None),
+        "max_exhaustive_objects": Interval(1, None, integer=True),
+        "max_exhaustive_models": Interval(1, None, integer=True),
+        "weighting": Options(*WEIGHTINGS),
+        "stability_measure": Options(*STABILITY_MEASURES),
+        "max_factor_table": Interval(1, None),
+    }
+
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)
     likelihood: LikelihoodConfig = field(default_factory=LikelihoodConfig)
     stability_alpha_per_m: float = 100.0
@@ -62,15 +77,4 @@ class InferenceConfig:
     max_factor_table: float = 1e6
 
     def __post_init__(self) -> None:
-        if not self.stability_alpha_per_m >= 0:
-            raise ValueError("stability_alpha_per_m must be >= 0")
-        if not self.budget_per_object_s > 0:
-            raise ValueError("budget_per_object_s must be positive")
-        if self.max_samples is not None and self.max_samples < 1:
-            raise ValueError("max_samples must be at least 1")
-        if self.workers is not None and self.workers < 1:
-            raise ValueError("workers must be at least 1")
-        if not self.max_factor_table >= 1:
-            raise ValueError(f"max_factor_table must be >= 1, got {self.max_factor_table}")
-        if self.weighting not in WEIGHTINGS:
-            raise ValueError(f"weighting must be one of {WEIGHTINGS}, got {self.weighting!r}")
+        check_fields(self)
