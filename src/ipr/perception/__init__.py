@@ -18,6 +18,8 @@ from ipr.perception.denoise import objects_plane_depth
 from ipr.perception.facets import object_facets
 from ipr.perception.free_space import SpaceMap, VoxelGrid, observe_space
 from ipr.perception.kernels import object_pixel_geometry
+from ipr.perception.robot import robot_pixels
+from ipr.perception.segmentation import segment_frame
 from ipr.perception.tracking import split_merged_objects, track_segments
 from ipr.perception.types import FrameSegmentation, KnownPlane, PartialObject
 from ipr.scene import Scene
@@ -59,9 +61,6 @@ def perceive_scene(
     scene: Scene, config: PerceptionConfig | None = None, *, with_free_space: bool = True
 ) -> Perception:
     """Segment, track and decompose every frame of a scene into partial objects with facets."""
-    from ipr.perception.robot import robot_pixels
-    from ipr.perception.segmentation import segment_frame
-
     config = config or PerceptionConfig()
     segment_seconds, segmentations, points = [], [], []
     for position, frame in enumerate(scene.frames):

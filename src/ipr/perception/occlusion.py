@@ -32,7 +32,12 @@ from ipr.geometry.convex import convex_mesh
 from ipr.perception.config import OccludedPiecesConfig
 from ipr.perception.free_space import SeenSpace
 from ipr.perception.occupancy import PlaneRegion, allowed_voxels, plane_regions, unary_report
-from ipr.perception.tracking import SegmentFeatures, colour_distance, merged_features
+from ipr.perception.tracking import (
+    SegmentFeatures,
+    colour_distance,
+    merged_features,
+    segment_features,
+)
 from ipr.perception.types import KnownPlane, PartialObject
 
 logger = logging.getLogger(__name__)
@@ -183,8 +188,6 @@ def join_first_frame_pieces(scene, perception, config: OccludedPiecesConfig | No
     """``perception`` (an ``ipr.perception.Perception`` of ``scene``) with frame 0's partial
     objects passed through ``join_occluded_pieces``, and the joins made. Only the objects
     change: the label images keep the pieces' ids, so ``ipr segment`` output is unaffected."""
-    from ipr.perception.tracking import segment_features
-
     config = config or OccludedPiecesConfig()
     if not config.enabled or not perception.objects or not perception.objects[0]:
         return perception, []

@@ -69,6 +69,7 @@ from scipy.optimize import linear_sum_assignment
 
 from ipr.perception import kernels
 from ipr.perception.config import PerceptionConfig, TrackingConfig
+from ipr.perception.temporal import ARRIVED, UNCHANGED, compare_frames
 
 #: Histogram bins per RGB channel.
 COLOUR_BINS = 6
@@ -835,8 +836,6 @@ def split_merged_objects(
     Returns:
         (H, W) int32 label images (new arrays for the frames changed).
     """
-    from ipr.perception.temporal import ARRIVED, UNCHANGED, compare_frames
-
     tracking = config.tracking
     result = [np.asarray(labels, dtype=np.int32) for labels in tracked]  # copied on change
     # Ids present in each frame (np.unique over whole images would cost more than the rest).
