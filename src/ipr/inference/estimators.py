@@ -52,7 +52,9 @@ def hypothesis_log_likelihoods(
     ]
 
 
-def factor_marginals(unary_log: Sequence[np.ndarray], problem: InferenceProblem) -> list:
+def factor_marginals(
+    unary_log: Sequence[np.ndarray], problem: InferenceProblem
+) -> list[np.ndarray]:
     """Marginals of P(X) proportional to prod_k exp(unary_log[k][X_k]) times the pairwise
     constraints (``problem.compatible``), exact by variable elimination per connected group of
     interacting objects; a group whose tables would exceed ``max_factor_table`` (or that has

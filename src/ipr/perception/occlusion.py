@@ -29,6 +29,7 @@ from scipy.spatial import ConvexHull, QhullError
 
 from ipr import voxels
 from ipr.geometry.convex import convex_mesh
+from ipr.perception import Perception
 from ipr.perception.config import OccludedPiecesConfig
 from ipr.perception.free_space import SeenSpace
 from ipr.perception.occupancy import PlaneRegion, allowed_voxels, plane_regions, unary_report
@@ -39,6 +40,7 @@ from ipr.perception.tracking import (
     segment_features,
 )
 from ipr.perception.types import KnownPlane, PartialObject
+from ipr.scene import Scene
 
 logger = logging.getLogger(__name__)
 
@@ -184,7 +186,9 @@ def join_occluded_pieces(
         del current[j]
 
 
-def join_first_frame_pieces(scene, perception, config: OccludedPiecesConfig | None = None):
+def join_first_frame_pieces(
+    scene: Scene, perception: Perception, config: OccludedPiecesConfig | None = None
+) -> tuple[Perception, list[tuple[int, int]]]:
     """``perception`` (an ``ipr.perception.Perception`` of ``scene``) with frame 0's partial
     objects passed through ``join_occluded_pieces``, and the joins made. Only the objects
     change: the label images keep the pieces' ids, so ``ipr segment`` output is unaffected."""
