@@ -59,7 +59,7 @@ from ipr.errors import SceneError
 from ipr.scene import Frame, default_models_dir, load_ground_truth, load_model, read_json
 
 #: BOP visibility tolerance (m): a rendered surface up to this far behind the observed depth is
-#: still seen (the same value as ``ipr.metrics.VISIBILITY_TOLERANCE_M``).
+#: still seen (the same value as ``ipr.ground_truth.VISIBILITY_TOLERANCE_M``).
 VISIBILITY_TOLERANCE_M = 0.015
 #: Ground-truth pixels an object needs to be scored (the contract's visibility threshold).
 DEFAULT_MIN_VISIBLE_PX = 100

@@ -140,14 +140,15 @@ class HypothesisConfig:
             cannot resolve).
         max_attempts: samples tried per hypothesis before keeping an infeasible one.
         support_snap_m: a hull whose lowest point is at most this far above the support is
-            extended down to it (0: never), the minimum shape included. The support's RANSAC
-            band (``PerceptionConfig.plane_threshold_m``, 1 cm) takes an object's lowest
-            centimetre of points, so the observed points stop short of a support the object
-            rests on.
+            extended down to it (0: never), the minimum shape included. The points within
+            ``PerceptionConfig.support.clearance_m`` (1 cm) of the support are removed with it,
+            an object's lowest centimetre among them, so the observed points stop short of a
+            support the object rests on.
         support_band_m: the hull's vertices within this height of its lowest one are the
             bottom projected onto the support.
         unary: tolerances of the unary constraints (support, seen-free space, walls), shared
-            with ``ipr.constraints.unary_feasible`` so generation and checking agree.
+            with ``ipr.hypotheses.constraints.unary_feasible`` so generation and checking
+            agree.
         timeout_s: seconds per object before the remaining hypotheses are simplified; None
             (default): no wall-clock limit, so results do not depend on the machine's load.
         seed: seed used when no rng is given (combined with the object id).
