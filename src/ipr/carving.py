@@ -151,11 +151,11 @@ def carve_voxels(
     views: Sequence[SurfaceView],
     pitch_m: float = voxels.DEFAULT_PITCH_M,
 ) -> np.ndarray:
-    """The ``ipr.voxels`` keys (sorted) of a shape's voxels that no view saw empty.
+    """The (K,) int64 ``ipr.voxels`` keys (sorted) of a shape's voxels that no view saw empty.
 
-    ``keys`` are the shape's voxels at ``pitch_m`` in its frame-0 pose; a view with motions
-    sees the object moved by ``frame_from_frame0[object_id]`` (and skips objects it has no
-    motion for).
+    ``keys`` (N,) int64 are the shape's voxels at ``pitch_m`` (m) in its frame-0 pose (world
+    frame); a view with motions sees the object moved by ``frame_from_frame0[object_id]`` (and
+    skips objects it has no motion for).
     """
     if keys.size == 0:
         return keys

@@ -702,6 +702,11 @@ def track_segments(
     over its last ``max_sightings`` sightings), or the next unused id; objects found to be
     pieces of one (``merge_split_objects``) end with one id in every frame. Returns new (H, W)
     int32 label images.
+
+    Args:
+        frames_labels: per frame, (H, W) int segment labels (0 = none); frames_points: (H, W, 3)
+            world points (m); frames_rgb: (H, W, 3) uint8; frames_depth: (H, W) depth (m, 0 =
+            no reading), or None (all valid).
     """
     config = config or TrackingConfig()
     tracked: list[np.ndarray] = []
