@@ -34,10 +34,11 @@ def apply_transform(transform: np.ndarray, points: np.ndarray) -> np.ndarray:
 
 
 def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = (0.0, 0.0, 1.0)) -> np.ndarray:
-    """World-from-camera transform (OpenCV camera) of a camera at ``eye`` looking at ``target``.
+    """World-from-camera (4, 4) transform (OpenCV camera, m) of a camera at ``eye`` looking at
+    ``target`` ((3,) world points, m).
 
-    ``up`` is the world direction that appears upward in the image; it must not be parallel to
-    the viewing direction.
+    ``up`` (3,) is the world direction that appears upward in the image; it must not be parallel
+    to the viewing direction.
     """
     eye = np.asarray(eye, dtype=float)
     forward = np.asarray(target, dtype=float) - eye

@@ -21,16 +21,12 @@ later frame, where the object moved and its registration (``ipr.fusion``) is a f
 off, when it is more than ``later_frame_margin_m`` in front. Later frames are used by the
 methods that use the pushes (their fused views carry the motions), frame 0 by every method.
 
-Development (``benchmarks.dev_inference``'s scenes, seeds 9100 and 9400, 20 scenes, 90
-objects; a throwaway script), object / scene IoU. Collision Checker: 0.612 / 0.657 uncarved;
-carved against the raw depth with margins 0 / 1 / 2.5 / 4 mm, object IoU 0.634 / 0.635 /
-0.632 / 0.629; against the denoised surface with margin 0, 0.638 / 0.691 (the denoised
-surface needs no noise margin); by the frame-0 free-space map instead (1 cm margin,
-min-filtered footprints) 0.615 / 0.662. Adding the later frames through the fused views'
-motions with margins 0 / 2.5 / 5 / 10 mm: 0.639 / 0.641 / 0.641 / 0.641. ``ipr+action+uniform``
-(20 samples per scene): 0.637 / 0.677 uncarved, 0.664 / 0.711 with frame 0, 0.671 / 0.717
-with the later frames at 5 mm. On the two real YCB-Video scenes (Collision Checker, frame 0;
-measured, not tuned on): 0.574 -> 0.593.
+Why the denoised surface and not the free-space map: that map is conservative by design (a
+voxel is free only when its whole footprint saw past it), whereas carving needs the best
+estimate of where the surface is, and against the denoised surface no noise margin is needed.
+Carving raised every method's object IoU on development scenes; the later frames' margin is
+about the registration error, not tuned (docs/DESIGN_NOTES.md, "Carving by what the camera saw
+empty").
 """
 
 from __future__ import annotations
@@ -62,9 +58,10 @@ class CarvingConfig:
             motion (m); it absorbs the registration error.
         later_frames: also carve with the later frames (methods that use the pushes only).
         hole_fill_window_px: a pixel without a reading takes the minimum depth over this
-            window (odd; 1: holes carve nothing). Development (module doc): 3 against 1 and
-            7, object IoU 0.641 / 0.638 / 0.639 (Collision Checker, frame 0) and 0.667 /
-            0.664 / 0.665 (ipr+action+uniform, frame 0).
+            window (odd; 1: holes carve nothing): sensors drop readings at depth
+            discontinuities, so a missing pixel in front of a bulging hull would carve nothing;
+            3 scored a little above 1 and 7 on development scenes (docs/DESIGN_NOTES.md,
+            "Carving by what the camera saw empty").
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -164,11 +161,11 @@ def carve_voxels(
     views: Sequence[SurfaceView],
     pitch_m: float = voxels.DEFAULT_PITCH_M,
 ) -> np.ndarray:
-    """The ``ipr.voxels`` keys (sorted) of a shape's voxels that no view saw empty.
+    """The (K,) int64 ``ipr.voxels`` keys (sorted) of a shape's voxels that no view saw empty.
 
-    ``keys`` are the shape's voxels at ``pitch_m`` in its frame-0 pose; a view with motions
-    sees the object moved by ``frame_from_frame0[object_id]`` (and skips objects it has no
-    motion for).
+    ``keys`` (N,) int64 are the shape's voxels at ``pitch_m`` (m) in its frame-0 pose (world
+    frame); a view with motions sees the object moved by ``frame_from_frame0[object_id]`` (and
+    skips objects it has no motion for).
     """
     if keys.size == 0:
         return keys

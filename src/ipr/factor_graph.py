@@ -60,8 +60,10 @@ def exact_marginals(
 ) -> dict[int, np.ndarray] | None:
     """Exact marginals by variable elimination (one min-degree elimination per object).
 
-    ``unary`` (optional) gives each object's non-negative factor over its values (default:
-    ones, the uniform distribution over feasible assignments).
+    ``sizes`` gives each node's number of values m_i; ``edges`` maps (a, b) to the (m_a, m_b)
+    bool compatibility matrix. ``unary`` (optional) gives each object's non-negative (m_i,)
+    factor over its values (default: ones, the uniform distribution over feasible
+    assignments). Returns node -> (m_i,) float64 marginal summing to 1.
 
     Each step multiplies the factors that hold the eliminated object and sums it out in one
     ``numpy.einsum`` over their variables (cost: the table's size); tables are rescaled to a
@@ -131,7 +133,8 @@ def gibbs_marginals(
     """Sampled marginals of the uniform distribution over feasible assignments (module doc):
     ``chains`` restarts of ``sweeps`` sweeps, counting feasible states ``burn_in`` sweeps after
     a chain first becomes feasible, until ``deadline`` (``time.perf_counter()`` seconds) once
-    something was counted; None when no chain found a feasible assignment."""
+    something was counted. ``edges`` and ``sizes`` as in ``exact_marginals``. Returns node ->
+    (m_i,) marginal summing to 1; None when no chain found a feasible assignment."""
     neighbours: dict[int, list[tuple[int, np.ndarray]]] = {i: [] for i in nodes}
     for (a, b), matrix in edges.items():
         neighbours[a].append((b, ~matrix))  # conflicts of a's values given b's value

@@ -1,8 +1,8 @@
 """Views of later frames registered into frame 0: pushes show the objects' hidden sides.
 
 The paper scores shapes by how well their simulated motion under the pushes predicts the later
-depth images. The later images also *show* parts that were hidden in frame 0: on the generated
-dynamic scenes a pushed object turns a median 24 degrees. This stage uses that directly (what
+depth images. The later images also *show* parts that were hidden in frame 0: a pushed object
+usually turns, so later frames see its hidden sides. This stage uses that directly (what
 the paper leaves to future work): each object's points in a later frame t are registered onto
 its frame-0 points by a rigid transform, and the points that are new (farther than
 ``novel_distance_m`` from every frame-0 point) join the frame-0 object, with the later frame's
@@ -27,9 +27,8 @@ Registration (frame t -> frame 0, both in the world frame, metres):
   them there, and the constraints would then reject every shape of the object); a later facet
   joins when at least half of its points are new.
 
-Measured on development scenes only (``ipr synth --kind dynamic``, seeds 9100 and 9400, 10
-scenes each, 44 + 46 visible objects; docs/DESIGN_NOTES.md): Collision Checker object IoU
-0.633 -> 0.642 and 0.568 -> 0.605 with the fused objects, 0.45 s per object.
+Fused objects give better shapes on development scenes, at a cost taken out of the default
+inference budget (docs/DESIGN_NOTES.md, "Later views fused into the frame-0 objects").
 
 The registered motions also carry the later frames' free space back to frame 0
 (``TrackedFreeSpace``, ``tracked_free_spaces``): an object's hypotheses must stay out of the
@@ -80,9 +79,9 @@ class FusionConfig:
             the space those frames saw empty, through its registered motion
             (``TrackedFreeSpace``).
         pusher_free_space: ... and out of the volumes the pusher occupied where the object was
-            not (``pushed_through``). Off: no measurable gain (Collision Checker IoU +0.004,
-            +0.004 and -0.002 on three development sets; -0.004 on the ycb-dynamic suite;
-            docs/DESIGN_NOTES.md).
+            not (``pushed_through``). Off by default: no measurable gain; kept, tested, for
+            pushes from behind an object, whose end capsule bounds its hidden back
+            (docs/DESIGN_NOTES.md, "The pusher's volume as free space (off)").
         static_tolerance_m: an object whose observed points moved less than this (mean, m)
             between the frames before and after a push, by their registered motions, stayed
             put during that push.
@@ -561,8 +560,8 @@ class TrackedFreeSpace:
     *unknown* voxels free), so registration errors cannot contradict what frame 0 saw; the
     maps' surface margin (1 cm) absorbs a few millimetres of registration error. A wrong
     registration does not: a yaw that fits the seen points but sends the hidden side elsewhere
-    puts true hidden voxels in this space (on development scenes 4 % of the true voxels, in 10
-    of 60 objects; docs/DESIGN_NOTES.md).
+    puts true hidden voxels in this space, for a few objects; kept because it is a plain fact of
+    the observations (docs/DESIGN_NOTES.md, "Later frames' free space (on)").
 
     It answers ``state_at`` and ``grid`` like a ``SpaceMap``, which is all the hypotheses and
     constraints ask of a space.

@@ -41,10 +41,10 @@ class LikelihoodConfig:
     """Parameters of the physical likelihood (module doc).
 
     Attributes:
-        alpha_per_m: alpha of Eq. 2 (1/m), the weight of the depth error norm. 0.2 on two
-            development sets of 44 and 46 objects, where IoU was highest at 0.05-0.2 and fell
-            as alpha rose to 10 (docs/DESIGN_NOTES.md): the depth evidence is weak and noisy,
-            so it should tilt, not decide.
+        alpha_per_m: alpha of Eq. 2 (1/m), the weight of the depth error norm (full-resolution
+            L2 norm, m). Small, since the depth evidence is weak and noisy, so it should tilt,
+            not decide: IoU fell as alpha rose on development scenes (docs/DESIGN_NOTES.md,
+            "Likelihood: alpha 0.2 per metre, whole rendered scene").
         decimation: images are compared at 1/decimation of the input resolution.
         error_cap_m: largest per-pixel depth error (m).
         occlusion_margin_m: an observed surface this much nearer than the prediction hides it.

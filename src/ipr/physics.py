@@ -499,7 +499,9 @@ def decimated_camera(
 ) -> PinholeCamera:
     """A camera whose pixel (u', v') sees the same ray as pixel (factor u' + factor // 2,
     factor v' + factor // 2) of the full image (``factor`` >= 1), so that rendered images
-    compare with the full image sampled at those pixels (``decimated_pixels``)."""
+    compare with the full image sampled at those pixels (``decimated_pixels``). ``K`` (3, 3)
+    intrinsics (px) and ``width`` x ``height`` (px) are the full image's; ``world_from_camera``
+    (4, 4) its OpenCV camera pose (m), kept."""
     if factor < 1:
         raise ValueError(f"decimation factor must be >= 1, got {factor}")
     K = np.asarray(K, float)

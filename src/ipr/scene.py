@@ -61,7 +61,7 @@ class Frame:
 
     def points_world(self) -> np.ndarray:
         """(H, W, 3) world-frame points of every pixel (meaningless where depth is 0)."""
-        # Imported here: numba's import (0.4 s) is only worth paying where points are needed.
+        # Imported here: numba's slow import is only worth paying where points are needed.
         from ipr.geometry.kernels import world_points
 
         return world_points(self.depth_m, self.K, self.world_from_camera)

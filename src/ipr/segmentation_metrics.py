@@ -11,9 +11,9 @@ ground-truth object (a wall, a drawer front, the robot) hides the model by more 
 therefore do not count, and pixels without a depth reading do. Scenes made by ``ipr.synth`` list
 their container/drawer walls in ``synth.json``; those walls are rendered too and hide what lies
 behind them exactly (a 1 cm wall is thinner than the tolerance, so the depth test alone would
-let objects pressed against it show through). The masks then agree with the generator's own
-``px_count_visib`` to within 1 % (the suites' objects); labels are the object's position in the
-frame's ``scene_gt.json`` list plus one; 0 is background.
+let objects pressed against it show through). The masks then agree closely with the
+generator's own ``px_count_visib``; labels are the object's position in the frame's
+``scene_gt.json`` list plus one; 0 is background.
 
 Overlap scores (``segmentation_scores``), the OSD/OCID object-overlap convention: for each
 *visible* ground-truth object G (at least ``min_visible_px`` pixels in the ground-truth label
@@ -59,7 +59,7 @@ from ipr.errors import SceneError
 from ipr.scene import Frame, default_models_dir, load_ground_truth, load_model, read_json
 
 #: BOP visibility tolerance (m): a rendered surface up to this far behind the observed depth is
-#: still seen (the same value as ``ipr.metrics.VISIBILITY_TOLERANCE_M``).
+#: still seen (the same value as ``ipr.ground_truth.VISIBILITY_TOLERANCE_M``).
 VISIBILITY_TOLERANCE_M = 0.015
 #: Ground-truth pixels an object needs to be scored (the contract's visibility threshold).
 DEFAULT_MIN_VISIBLE_PX = 100

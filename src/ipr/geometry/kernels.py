@@ -10,17 +10,16 @@ expression everywhere.
 Why compiled: on the 2-core cloud machines ipr is measured on, numpy's per-pixel arithmetic is
 bound by memory traffic: each operator of an expression makes a full-size temporary, and a
 640x480 frame's (H, W, 3) float64 points are 7 MB. A loop compiled by numba does the same
-arithmetic in one pass with no temporaries: the world points of a real frame take 1 ms instead
-of 10-12 ms (docs/DESIGN_NOTES.md, "Compiled kernels"). Each kernel here states the numpy
-expression it replaces; ``tests/test_geometry_kernels.py`` pins every one against that
-expression.
+arithmetic in one pass with no temporaries (docs/DESIGN_NOTES.md, "Compiled kernels"). Each
+kernel here states the numpy expression it replaces; ``tests/test_geometry_kernels.py`` pins
+every one against that expression.
 
 Kernels are compiled on first use and cached on disk (``cache=True``, in ``__pycache__`` or
 ``NUMBA_CACHE_DIR``). numba checks a cached kernel against its own source file only: after
 editing a helper here, clear the cache of ``ipr/perception/kernels.py`` too (its kernels have
 the helpers compiled in). ``NUMBA_DISABLE_JIT=1`` runs them as plain Python, for debugging.
-This module imports numba (about 0.4 s): modules that must start fast (``ipr.scene``,
-``ipr.geometry.planes``) import it inside the functions that need it.
+This module imports numba, which is slow to import: modules that must start fast
+(``ipr.scene``, ``ipr.geometry.planes``) import it inside the functions that need it.
 """
 
 from __future__ import annotations
@@ -55,7 +54,8 @@ def _rotated(x: float, y: float, z: float, transform: np.ndarray, axis: int) -> 
     """Coordinate ``axis`` of transform[:3, :3] @ (x, y, z) + transform[:3, 3], with the products
     accumulated by fused multiply-adds in x, y, z order as OpenBLAS's double-precision kernels
     accumulate them on x86-64 CPUs with FMA: the same bits as numpy's ``points @ R.T + t``
-    there (checked on 34 frames of the three benchmark suites), equal to rounding elsewhere."""
+    there (a plain sum differs in the last bit, which can flip a borderline segment), equal to
+    rounding elsewhere."""
     accumulated = x * transform[axis, 0]
     accumulated = _fused_multiply_add(y, transform[axis, 1], accumulated)
     accumulated = _fused_multiply_add(z, transform[axis, 2], accumulated)

@@ -81,7 +81,7 @@ def fit_plane_ransac(
     # The refits use at most 20000 inliers (evenly spread: they fix the plane as well as all of
     # them, at a fraction of the cost of a decomposition of a large matrix), so their inliers
     # are looked for among an even subset of at most 50000 points: on a 640x480 frame this
-    # spares two of the three passes over all ~300000 points (3.5 ms).
+    # spares two of the three passes over all ~300000 points.
     refit_points = points[:: max(1, len(points) // 50000)]
     for _ in range(2):  # least-squares refits on the inliers
         inliers = kernels.plane_inliers(refit_points, normal, float(offset), threshold_m)

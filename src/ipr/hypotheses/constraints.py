@@ -6,15 +6,12 @@ inside a known wall. Tolerances absorb sensor noise: observed surfaces are a few
 so two objects in contact may appear to overlap slightly.
 
 Overlap measure: penetration depth (m), computed exactly by MuJoCo's ``mj_geomDistance``
-between convex meshes. Measured on this machine (2 cores) on convex hulls of 8 YCB objects
-(88-461 hull vertices, 64 overlapping pairs): MuJoCo 15 us per pair after compiling all
-meshes into one model (0.56 ms per mesh, once), against 0.8 ms per pair for manifold3d's exact
-intersection volume (plus 0.29 ms per mesh to build the manifolds); MuJoCo's depths agree with
-the exact depth from the Minkowski-difference hull to 3e-9 m. A scene of 8 objects x 32
-hypotheses has up to 28 x 1024 pairs, so only the 55x faster query fits the per-object budget.
-Depth is also the better tolerance: noise is a distance (mm), whereas the volume of a noisy
-contact grows with the contact's area. ``intersection_volume`` (manifold3d) stays available for
-reporting and tests.
+between convex meshes, all of a scene's hypotheses compiled once into one model. A scene of 8
+objects x 32 hypotheses has up to 28 x 1024 pairs, and only this query, far faster per pair
+than manifold3d's exact intersection volume, fits the per-object budget (docs/DESIGN_NOTES.md,
+"Overlap by penetration depth"). Depth is also the better tolerance: noise is a distance (mm),
+whereas the volume of a noisy contact grows with the contact's area. ``intersection_volume``
+(manifold3d) stays available for reporting and tests.
 
 A bounding-box pre-test skips most pairs: the depth along the axis where the boxes overlap
 least bounds the penetration depth from above (moving one shape that far apart along that axis
@@ -108,13 +105,14 @@ def _mesh_model(hypotheses: Sequence[ShapeHypothesis]):
 
 def penetration_depth(a: ShapeHypothesis, b: ShapeHypothesis) -> float:
     """Penetration depth (m, >= 0; 0 when apart or touching) of two convex hypotheses, exact
-    (MuJoCo ``mj_geomDistance``). Builds a two-mesh model (about 1 ms): use ``OverlapCache``
+    (MuJoCo ``mj_geomDistance``). Compiles a two-mesh model per call: use ``OverlapCache``
     for many pairs."""
     return OverlapCache([a, b]).depth(a, b)
 
 
 def intersection_volume(a: ShapeHypothesis, b: ShapeHypothesis) -> float:
-    """Exact intersection volume (m^3) of two convex hypotheses (manifold3d, about 1 ms)."""
+    """Exact intersection volume (m^3) of two convex hypotheses (manifold3d; slow: for
+    reporting and tests, not the constraints)."""
     import manifold3d
 
     first = manifold3d.Manifold.hull_points(np.asarray(a.vertices, float))
@@ -138,9 +136,9 @@ def _box_bounds(lo_a: np.ndarray, hi_a: np.ndarray, lo_b: np.ndarray, hi_b: np.n
 class OverlapCache:
     """Penetration depths between hypotheses, computed once per pair.
 
-    All hypotheses given at construction are compiled into one MuJoCo model (about 0.6 ms per
-    mesh); a pair's depth is then one ``mj_geomDistance`` query (about 15 us), cached under
-    the pair of keys (object id, hypothesis index). Keys must be unique.
+    All hypotheses given at construction are compiled into one MuJoCo model (once: compiling
+    costs far more than a query); a pair's depth is then one ``mj_geomDistance`` query, cached
+    under the pair of keys (object id, hypothesis index). Keys must be unique.
     """
 
     def __init__(self, hypotheses: Iterable[ShapeHypothesis]) -> None:

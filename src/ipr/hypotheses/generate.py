@@ -43,29 +43,28 @@ Choices made here (the paper leaves them open):
   facet already mirrored: the mirror of a facet is the opposite face, so both directions are done.
 - Resting on the support: a hull whose lowest point is within ``support_snap_m`` (2 cm) above
   the support is extended down to it (its bottom vertices projected onto the plane). The
-  support's RANSAC band removes an object's lowest centimetre of points with the table, so
-  without this every standing object floats a few millimetres to a centimetre above its
-  support and misses its bottom (on development scenes the Collision Checker's shapes started
-  a median 5 mm above the true bottom; docs/DESIGN_NOTES.md).
-- Unary constraints at generation (the checks of ``ipr.constraints`` with this module's
+  support's band removes an object's lowest centimetre of points with the table, so without
+  this every standing object floats a few millimetres to a centimetre above its support and
+  misses its bottom (docs/DESIGN_NOTES.md, "Shapes rest on the support they nearly touch").
+- Unary constraints at generation (the checks of ``ipr.hypotheses.constraints`` with this module's
   tolerances): the hull is clipped at the support plane (exact, convex), so nothing is below it;
   voxels (the free-space grid's pitch) in seen-free space or inside a wall's slab may not exceed
-  ``free_space_tolerance`` (share) or ``free_space_tolerance_voxels`` (count), whichever is
-  larger, *beyond those the observed points already force* (the hull of a concave object such as
-  a bowl covers seen-free space whatever is hidden). The voxel map calls everything within its
-  surface margin (1 cm) of an observed surface occupied, so it cannot stop growth just in front
-  of a facet; instead every hypothesis is cut at each observed facet's support plane (the
-  object's outermost observed point along N, plus ``facet_tolerance_m``): for a convex object
-  the point with normal N lies on that facet, so nothing of the object is in front of it. A hypothesis that
-  fails is resampled with its observed facets' variates halved each attempt (pulling d towards D_min), at most
-  ``max_attempts`` times; if every attempt fails, the one with the fewest offending voxels is
+  ``free_space_tolerance`` (share) or ``free_space_tolerance_voxels`` (count), whichever is larger,
+  *beyond those the observed points already force* (the hull of a concave object such as a bowl
+  covers seen-free space whatever is hidden). The voxel map calls everything within its surface
+  margin (1 cm) of an observed surface occupied, so it cannot stop growth just in front of a facet;
+  instead every hypothesis is cut at each observed facet's support plane (the object's outermost
+  observed point along N, plus ``facet_tolerance_m``): for a convex object the point with normal N
+  lies on that facet, so nothing of the object is in front of it. A hypothesis that fails is
+  resampled with its observed facets' variates halved each attempt (pulling d towards D_min), at
+  most ``max_attempts`` times; if every attempt fails, the one with the fewest offending voxels is
   kept with ``feasible=False`` (logged) for the constraint stage to reject.
 - Work and time: an object costs at most ``count * max_attempts * max_rounds`` rounds of
-  Algorithm 1 (on the suites at most 1 s per object, median 0.16 s), so by default there is no
-  wall-clock limit and the output is a function of the inputs and the rng alone, on any machine
-  and under any load. With ``timeout_s`` set (a run given a time budget sets it), the
-  hypotheses left after ``timeout_s`` for an object use one round and one attempt (logged);
-  output then depends on the machine's speed.
+  Algorithm 1, so by default there is no wall-clock limit and the output is a function of the
+  inputs and the rng alone, on any machine and under any load (docs/DESIGN_NOTES.md, "No
+  wall-clock limit on hypothesis generation"). With ``timeout_s`` set (a run given a time budget
+  sets it), the hypotheses left after ``timeout_s`` for an object use one round and one attempt
+  (logged); output then depends on the machine's speed.
 """
 
 from __future__ import annotations
@@ -153,14 +152,15 @@ class HypothesisConfig:
             cannot resolve).
         max_attempts: samples tried per hypothesis before keeping an infeasible one.
         support_snap_m: a hull whose lowest point is at most this far above the support is
-            extended down to it (0: never), the minimum shape included. The support's RANSAC
-            band (``PerceptionConfig.plane_threshold_m``, 1 cm) takes an object's lowest
-            centimetre of points, so the observed points stop short of a support the object
-            rests on.
+            extended down to it (0: never), the minimum shape included. The points within
+            ``PerceptionConfig.support.clearance_m`` (1 cm) of the support are removed with it,
+            an object's lowest centimetre among them, so the observed points stop short of a
+            support the object rests on.
         support_band_m: the hull's vertices within this height of its lowest one are the
             bottom projected onto the support.
         unary: tolerances of the unary constraints (support, seen-free space, walls), shared
-            with ``ipr.constraints.unary_feasible`` so generation and checking agree.
+            with ``ipr.hypotheses.constraints.unary_feasible`` so generation and checking
+            agree.
         timeout_s: seconds per object before the remaining hypotheses are simplified; None
             (default): no wall-clock limit, so results do not depend on the machine's load.
         seed: seed used when no rng is given (combined with the object id).

@@ -33,8 +33,9 @@ of some jointly feasible model) are candidates. Then, repeated until the time bu
    self-normalised sum of w_i over the samples that chose j. ``"joint"``: the full
    w = P(O | X, mu) P(X) / q(X) for every object (q(X) the product of the draws' exploration
    probabilities; the object order is a deterministic function of earlier draws): consistent
-   for the joint posterior, but at the sample counts a budget allows its effective sample size
-   was about 1 on development scenes and its shapes were worse (docs/DESIGN_NOTES.md).
+   for the joint posterior, but at the sample counts a budget allows the proposal correction
+   1/q(X) sets its weights and its shapes were worse (docs/DESIGN_NOTES.md, 'Weighting:
+   "hypothesis" (default), "object", "joint"').
 
 Priors: ``uniform``, or ``size``: P(X_i^j) proportional to volume(X_i^j)^-size_prior_exponent
 (smaller models are more probable, the paper's informed prior), normalised per object.

@@ -31,8 +31,8 @@ class InferenceConfig:
         neighbour_margin_m: objects whose candidate envelopes are this close interact in
             stability tests.
         budget_per_object_s: default inference budget (s) per object when no time budget is
-            given (hypotheses and perception come on top: about 0.5 s per object more, so that
-            a whole run stays within 3 s per object on two cores).
+            given (hypotheses and perception come on top, so that a default run stays within
+            the target of 3 s per object on two cores).
         max_samples: stop after this many samples (None: only the budget stops).
         workers: processes evaluating samples (None: all cores; 1: in this process).
         size_prior_exponent: the size prior's exponent (module doc).

@@ -41,9 +41,9 @@ class Sampler:
     def _distances(self, i: int, placed: dict[int, int], deadline: float) -> np.ndarray:
         """(m_i,) how far each candidate of i falls among its neighbours (cached).
 
-        A world per context: compiling it (about 18 ms for 7 objects) cost the same as
-        keeping one world per object with every neighbour shape and switching them on and off,
-        whose extra geoms slowed every step (measured on development scenes)."""
+        A world per context: compiling it costs about as much as keeping one world per object
+        with every neighbour shape and switching them on and off, whose extra geoms slow every
+        step (docs/DESIGN_NOTES.md, "Stability tests per object")."""
         problem = self.problem
         context = tuple((k, placed.get(k, -1)) for k in problem.neighbours[i])
         key = (i, context)

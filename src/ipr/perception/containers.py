@@ -2,9 +2,8 @@
 
 The convexity graph (``segmentation.edge_weights``) cuts at concave edges, and the inside of an
 open container is concave everywhere: a mug seen from above comes out as its outer wall plus
-the inside in several pieces, none of them reaching F >= 0.75 alone (``docs/DESIGN_NOTES.md``,
-"Open-container insides"). A piece P is the inside of a larger segment C when, measured on
-the support plane:
+the inside in several pieces, none of them a well-segmented object alone. A piece P is the
+inside of a larger segment C when, measured on the support plane:
 
 - P meets C: their surfaces touch (4-neighbour pixels whose points are closer than
   ``containers.contact_gap_m``) or C's near wall hides P's lower part (C nearer by a depth step
@@ -33,8 +32,9 @@ the support plane:
 
 Pieces are joined one at a time, the pair that meets along the most pixel pairs first, and the
 container's figures are recomputed after each join, so the inside's pieces that touch only
-each other join in turn. Measured on development scenes with containers
-(``benchmarks.dev_perception --containers``; ``docs/DESIGN_NOTES.md``).
+each other join in turn. The rules are strict because a looser footprint-only join also
+merged different objects on ordinary scenes (``docs/DESIGN_NOTES.md``, "Open-container insides
+are joined to the container"; measured with ``benchmarks.dev_perception --containers``).
 """
 
 from __future__ import annotations

@@ -4,9 +4,9 @@ Every hypothesis is a convex hull of (among others) the object's observed points
 takes the extreme points: with axial sensor noise of sigma (about 1-3 mm at 0.5-1 m for a
 Kinect-like sensor), the few thousand points of an object always include some several sigma in
 front of the true surface, so every hull bulges out by several millimetres over the whole
-visible surface. At the 5 mm voxels of the evaluation that is a large share of a small object
-(development scenes: the minimum shapes' voxels were 82 % inside the true object, although
-fewer than 0.2 % of the points were more than 5 mm outside it).
+visible surface. At the 5 mm voxels of the evaluation that is a large share of a small object,
+although the points themselves are right (docs/DESIGN_NOTES.md, "Partial objects from
+plane-fitted depth").
 
 Each pixel's depth is replaced by the value at that pixel of the plane ``depth = a + b*u +
 c*v`` fitted by least squares to the pixels of the same object (tracked label) with a reading

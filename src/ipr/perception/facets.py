@@ -20,9 +20,10 @@ def mean_shift_directions(
 ) -> np.ndarray:
     """Mode index (N,) of each unit normal (N, 3) under weighted Gaussian mean shift on the sphere.
 
-    ``bandwidth`` is a chord length between unit vectors (0.35 is about 20 degrees). An object has
-    tens of supervoxels, so the dense N x N kernel is cheaper than a general-purpose estimator's
-    set-up (scikit-learn's MeanShift costs about 20 ms per call even on 30 points).
+    ``weights`` (N,) weigh the normals (supervoxel sizes). ``bandwidth`` is a chord length between
+    unit vectors (0.35 is about 20 degrees). An object has tens of supervoxels, so the dense N x N
+    kernel is cheaper than a general-purpose estimator's per-call set-up (scikit-learn's
+    MeanShift).
     """
     # Compiled (``kernels``): objects have a few to a few hundred supervoxels, where
     # numpy's per-call costs exceed the arithmetic.

@@ -43,7 +43,8 @@ class VoxelGrid:
 
     @staticmethod
     def around(minimum: np.ndarray, maximum: np.ndarray, voxel_size_m: float = 0.005) -> VoxelGrid:
-        """The grid of voxels aligned to multiples of ``voxel_size_m`` that covers a box.
+        """The grid of voxels aligned to multiples of ``voxel_size_m`` (m) that covers the box
+        with (3,) world corners ``minimum`` and ``maximum`` (m).
 
         Aligning to the global lattice (centres at (n + 1/2) * size, as the metrics use) keeps
         grids of different frames and stages interchangeable.

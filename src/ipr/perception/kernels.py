@@ -9,10 +9,10 @@ pin every one against that expression. The world points and the plane fit's kern
 scene loader needs too, are in ``ipr.geometry.kernels``; the kernels here share its helpers
 ``_rotated`` (world points in numpy's FMA order), ``_dot`` and ``_columns``.
 
-Kernels are compiled on first use and cached on disk (``cache=True``: about 0.3 s to load in a
-new process instead of about 1 s to compile). numba checks a cached kernel against this file
-only, not against the helpers it calls from ``ipr.geometry.kernels``: after editing those,
-clear this module's cache (``__pycache__/kernels.*.nbi`` and ``.nbc`` here, or the
+Kernels are compiled on first use and cached on disk (``cache=True``: a new process loads them
+instead of compiling them again). numba checks a cached kernel against this file only, not
+against the helpers it calls from ``ipr.geometry.kernels``: after editing those, clear this
+module's cache (``__pycache__/kernels.*.nbi`` and ``.nbc`` here, or the
 ``NUMBA_CACHE_DIR``). ``NUMBA_DISABLE_JIT=1`` runs them as plain Python, for debugging.
 """
 

@@ -16,7 +16,9 @@ when the evidence allows one solid:
   hidden link, not inside it).
 
 Pairs are joined greedily, the most alike first, and the test is repeated on the joined
-objects until no pair passes. Measured on development scenes only (docs/DESIGN_NOTES.md).
+objects until no pair passes. Joined pieces get one set of hypotheses of the whole object, which
+improved shapes on development scenes (docs/DESIGN_NOTES.md, "Pieces cut apart by an occluder
+are joined for inference").
 """
 
 from __future__ import annotations

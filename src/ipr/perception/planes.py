@@ -189,13 +189,11 @@ def find_walls(
     thickness behind it) that face its way leave the pool so that the same wall is not found
     twice. Candidates are accepted by the rules of ``_select_walls``. A wall's normal points to
     the side the camera sees; its ``thickness_m`` is the depth of the static slab behind the
-    visible face (``static_geometry_mask``), estimated from its rim. Measured on the development
-    scenes (36 static, 36 dynamic, all frames): 93-96 % of the wall pixels above the support
-    removed, 0.5-1.2 % of the object pixels above it removed with them (objects pressed against
-    a wall or lying across its rim); no wall accepted in any of the 73 table frames. Frame 0
-    of 178 development scenes (62 on a table): 370 true walls accepted either way; 4 faces of
-    objects lined up in a plane accepted as lone walls before the straight-top and solid-face
-    cues, none after (docs/DESIGN_NOTES.md).
+    visible face (``static_geometry_mask``), estimated from its rim. Objects pressed against a
+    wall or lying across its rim lose those pixels with it. A lone wall must also have a
+    straight top and a solid face: without those cues, faces of objects lined up in a plane were
+    taken for walls and their slabs cut the objects apart (docs/DESIGN_NOTES.md, "Lone walls
+    need a straight top and a solid face").
 
     With ``edge_on`` (and ``walls.complete_corners``), side walls seen edge-on are then looked
     for at the open ends of the accepted walls (``_edge_on_walls``). The segmentation asks for
@@ -293,10 +291,10 @@ def _edge_on_walls(
 
     A container's side wall seen along its length shows the camera its rim and a sliver of a
     face at a grazing angle: too few points facing its way for the RANSAC search, so the rim
-    stayed as thin "objects" that the physics then completed into slabs (on the development
-    scenes these were most of the predicted volume lying outside every object). At each end of
-    an accepted wall's face (its ``span``) with no perpendicular wall within
-    ``walls.corner_gap_m``, vertical planes perpendicular to it are tried every 5 mm within
+    stayed as thin "objects" that the physics then completed into slabs, predicted volume
+    outside every object (docs/DESIGN_NOTES.md, "Edge-on side walls and walls cut by an
+    occluder"). At each end of an accepted wall's face (its ``span``) with no perpendicular wall
+    within ``walls.corner_gap_m``, vertical planes perpendicular to it are tried every 5 mm within
     ``walls.corner_gap_m`` of the end, with every point in their slab counted whatever its
     normal (the rim faces up). A plane is accepted as a wall when its face reaches an accepted
     wall perpendicular to it (within ``walls.corner_gap_m``: the wall it was looked for from or,

@@ -170,13 +170,16 @@ def drop_support_residue(
     """Remove segments that are slivers of the support rather than objects.
 
     Far from the camera, depth noise and a slightly curved or tilted real table leave patches just
-    above the support clearance; they segment as flat "objects" a few millimetres high (on the
-    real YCB-Video frames, over a dozen per frame beyond 1.2 m). A segment whose 90th-percentile
-    height above the support is below ``segmentation.min_object_height_m`` is such a patch.
+    above the support clearance; they segment as flat "objects" a few millimetres high, many per
+    real frame. A segment whose 90th-percentile height above the support is below
+    ``segmentation.min_object_height_m`` is such a patch.
 
     Args:
         labels: (H, W) segment labels; segment_of_supervoxel: (M,) segment of each supervoxel.
-        points: (H*W, 3) world points; valid: (H*W,) pixels with a depth reading.
+        points: (H*W, 3) world points (m); valid: (H*W,) pixels with a depth reading.
+
+    Returns:
+        The (labels, segment_of_supervoxel) with those segments set to 0.
     """
     flat = labels.reshape(-1).copy()
     # Every 4th pixel estimates the percentile well and quarters the sort.
@@ -209,7 +212,7 @@ def fill_label_holes(labels: np.ndarray, valid: np.ndarray, max_distance_px: flo
     The nearest valid pixel is found by trying the pixel offsets within the distance in order
     of increasing length (``_offsets_by_distance``; ties go to the first in row-major order):
     for a few pixels of reach this costs a quarter of a Euclidean distance transform with
-    indices (scipy), which was 10-25 ms of every real 640x480 frame.
+    indices (scipy), a noticeable share of a real frame's perception time.
     """
     labelled = np.flatnonzero(labels.any(axis=1)), np.flatnonzero(labels.any(axis=0))
     if max_distance_px <= 0 or valid.all() or labelled[0].size == 0:
@@ -293,11 +296,8 @@ def edge_weights(supervoxels: Supervoxels, config: PerceptionConfig) -> np.ndarr
     Strong = (flat or convex and sane) and smooth: weight 1. Concave or not smooth:
     ``segmentation.concave_weight``; convex but singular: ``segmentation.singular_weight``.
 
-    Measured on the development scenes (share of objects with F >= 0.75, static / dynamic):
-    LCCP's sigmoid sanity threshold (60 deg) 0.864 / 0.885, the fixed 45 deg threshold
-    0.841 / 0.874, no sanity check 0.790 / 0.749; concave weight 0.001 against 0.01:
-    0.755 / 0.836 against 0.755 / 0.803 (before later changes); singular edges weighted 0.1
-    or 1 instead of 0.001 merged touching objects (0.852 / 0.859 and 0.790 / 0.800).
+    LCCP's sigmoid sanity threshold segmented better than the fixed one or none, and heavier
+    singular edges merged touching objects (docs/DESIGN_NOTES.md, "Edge weights").
     """
     pairs = supervoxels.adjacency
     if len(pairs) == 0:
@@ -354,7 +354,7 @@ def cluster_supervoxels(
     order = np.argsort(component, kind="stable")
     bounds = np.searchsorted(component[order], np.arange(n_components + 1))
     # The graph permuted once so that each component is a diagonal block: a block is a cheap
-    # slice, where fancy-indexing the graph per component cost ~7 ms per real frame.
+    # slice, where fancy-indexing the graph per component cost several ms per real frame.
     grouped = graph[order][:, order] if n_components > 1 else graph
     for c in range(n_components):
         nodes = order[bounds[c] : bounds[c + 1]]
@@ -481,8 +481,9 @@ def kmeans_labels(
 
     The spectral embeddings are small (tens to a few thousand rows, k <= 21 columns) and their
     clusters well separated, so plain numpy beats scikit-learn's KMeans, whose per-call set-up
-    and OpenMP start-up cost 2-60 ms per call (45 % of the segmentation time on the real
-    YCB-Video frames, most of it waiting for threads on a busy machine).
+    and OpenMP start-up cost far more per call than the clustering itself, most of it waiting
+    for threads on a busy machine (docs/DESIGN_NOTES.md, "Perception speed without changing
+    results").
     """
     points = np.asarray(points, dtype=np.float64)
     m = len(points)

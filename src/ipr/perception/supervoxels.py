@@ -21,15 +21,10 @@ Adjacency is the 26-neighbourhood of voxels: two supervoxels are adjacent when s
 voxels touch, i.e. when their surfaces come within about a voxel of each other in 3D. Pixels on
 either side of a depth discontinuity are centimetres apart in 3D and so never adjacent.
 
-Why voxels rather than superpixels on the organised image: both were tried in the same pipeline
-on the development scenes (36 static and 36 dynamic generated scenes, 640x480, seeds
-7000/7100/8000/8100, none from a benchmark suite). The alternative was a SLIC-like superpixel
-pass on the image (grid cells sized to 2 cm at the foreground's median depth, three k-means
-rounds in pixel position, 3D position and normal, cells split into depth-continuous parts,
-adjacency between image neighbours closer than 1.5 voxels in 3D). Share of objects segmented
-with F >= 0.75, static / dynamic: voxels 0.915 / 0.924, superpixels 0.909 / 0.883. Time of this
-step per 640x480 frame (median of 24 frames, one core): voxels 14 ms, superpixels 80 ms (every
-foreground pixel takes part in the k-means rounds, against one voxel per 10-80 pixels here).
+Why voxels rather than superpixels on the organised image: a SLIC-like superpixel pass in the
+same pipeline segmented worse and took several times as long, since every foreground pixel
+takes part in its k-means rounds, against one voxel per tens of pixels here
+(docs/DESIGN_NOTES.md, "Supervoxels").
 """
 
 from __future__ import annotations
@@ -286,8 +281,8 @@ def compute_supervoxels(
 
 
 #: Above this many cells in the voxel grid's bounding box, voxels are indexed by sorting their
-#: keys instead of through a dense cell table (16 MB of int32 at this size; the real 640x480
-#: frames need 0.1-0.7 million cells).
+#: keys instead of through a dense cell table (16 MB of int32 at this size; real 640x480 frames
+#: need far fewer cells).
 _DENSE_CELLS_MAX = 4_000_000
 
 
@@ -300,8 +295,8 @@ class _VoxelIndex:
     each key in [0, ``n_cells``), -1 where no point has that key.
 
     When the grid's bounding box is small enough (``_DENSE_CELLS_MAX``), a dense table from
-    cell to voxel replaces the sort and the binary searches: lookups become one gather, about
-    five times faster on the ~100000 kept pixels and ~13 x 20000 neighbour keys of a frame.
+    cell to voxel replaces the sort and the binary searches: lookups become one gather, several
+    times faster on a frame's kept pixels and neighbour keys.
     """
 
     def __init__(self, point_keys: np.ndarray, n_cells: int) -> None:

@@ -29,10 +29,8 @@ afresh.
 found for the first time whose pixels arrived since the previous frame (the face of a pushed or
 toppled box).
 
-Development scenes (dynamic, 1202 (object, later frame) pairs, docs/DESIGN_NOTES.md), former
-perception / the tracker's split-piece corrections alone / with this module too: ids kept
-1098 / 1108 / 1113; lost pairs of objects that did not move 12 / 10 / 8; segmentation failures
-of pushed objects 30 / 30 / 21; share of objects with F >= 0.75 0.908 / 0.908 / 0.909.
+Anchoring keeps more ids of objects that did not move and fails fewer pushed objects, for a
+few milliseconds per later frame (docs/DESIGN_NOTES.md, "Temporal consistency").
 """
 
 from __future__ import annotations
@@ -166,8 +164,9 @@ def _in_previous_camera(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(N,) x, y, z (m) in the previous camera of the ``valid`` pixels (flat indices) of frame t.
 
-    With frame t's intrinsics and pose, from its depth and pixel grid in float32 (a third of the
-    cost of transforming the (H, W, 3) float64 world points, which are used otherwise).
+    With frame t's intrinsics and pose, from its (H, W) depth (m) and pixel grid in float32
+    (cheaper than transforming the (H, W, 3) float64 world points, which are used otherwise).
+    Camera poses are (4, 4) world from OpenCV camera (m); ``K`` (3, 3) intrinsics (px).
     """
     camera_from_world = invert_transform(previous_world_from_camera)
     if K is None or world_from_camera is None:

@@ -43,20 +43,12 @@ back to frame 0 (``split_merged_objects``); and within one frame, a segment that
 object left unmatched besides its own (two objects pushed into contact, segmented as one) gives
 that object the pixels its colour singles out (``split_merged_segments``).
 
-Development scenes (dynamic, seeds 8000-8011 and 8100-8123, 343 (object, later frame) pairs;
-held-out check on seeds 8050-8073, 231 pairs), ids kept: overlap, colour, distance and height
-with one gated assignment 0.875 / 0.926; the two-stage assignment 0.904 / 0.944; with the size
-cue and the weights below 0.930 / 0.970; with the earlier sightings 0.942 / 0.974. Of the 20
-pairs still lost on the development scenes, 11 are segmentation failures in the later frame
-(no segment with F >= 0.5) that no tracker can keep. The two corrections: 0.936 / 0.978 on
-these sets, and 1108 against 1098 of 1202 pairs over all development sets
-(docs/DESIGN_NOTES.md). With the temporal segmentation, 1113 of 1202 (held-out 227 of 231);
-joining split pieces, a stronger size cue and the largest recent sighting: 1127 (held-out 227),
-share of objects with F >= 0.75 0.909 -> 0.919 (joined pieces are scored as one segment).
-Joining objects split in an earlier frame: 1132 of 1198 pairs (fewer pairs count, as joined
-frame-0 pieces change which objects are segmented well enough to count), F >= 0.75 0.922;
-held-out 227 of 232, 0.946 (was 0.938). Of the 36 id changes left before it, 19 were to the id
-of another piece of the same object in frame 0.
+The cues' weights, the two-stage assignment, the earlier sightings and each correction were
+chosen on development scenes and checked on held-out ones, never on a benchmark suite; each kept
+ids there that the steps before it lost (docs/DESIGN_NOTES.md, "Tracking cues and the two-stage
+assignment", "Temporal consistency", "Objects split in an earlier frame are joined", "Objects
+merged in frame 0 are split once pushed apart", "Objects pushed into one segment are split
+again"; the defaults' figures are in docs/experiments/perception-config-notes.md).
 """
 
 from __future__ import annotations
@@ -476,10 +468,9 @@ def merge_split_pieces(
     For each known object, among its ``merge_candidates`` cheapest segments that cost at most
     ``piece_max_cost`` and are unmatched, matched to that object or matched to another object
     they resemble less (a leftover pairing of the assignment's second stage, which loses the
-    segment if it is joined: 1135 against 1132 of 1198 development pairs, F >= 0.75 0.925
-    against 0.922, held-out 227 of 232 and 0.949 against 0.946), two that touch
-    (``merge_min_contact_px`` neighbouring pixel pairs whose points are within
-    ``merge_contact_gap_m``: surfaces that meet, not one in front of the other) and whose
+    segment if it is joined; docs/DESIGN_NOTES.md, "Objects split in an earlier frame are
+    joined"), two that touch (``merge_min_contact_px`` neighbouring pixel pairs whose points are
+    within ``merge_contact_gap_m``: surfaces that meet, not one in front of the other) and whose
     colours are within ``merge_max_colour`` are joined when the union's cost (lowest over the
     object's sightings) is below both pieces' by more than ``merge_margin``; the cheapest such
     union wins, and joining repeats with the union as a piece (an object cut in three).
@@ -620,19 +611,18 @@ def split_merged_segments(
     was matched to.
 
     A push often leaves two objects touching, and the segmentation may then give them one
-    segment for a frame: the segment takes one object's id and the other object finds no
-    segment (on the development and held-out scenes, 18 of the 21 (object, later frame) pairs
-    lost for lack of a segment with F >= 0.5 were such unions). For a known object ``b`` left
-    unmatched and a segment matched to object ``a``, each pixel of the segment whose colour is
+    segment for a frame: the segment takes one object's id and the other object finds no segment
+    (most of the pairs lost for lack of a segment were such unions: docs/DESIGN_NOTES.md,
+    "Objects pushed into one segment are split again"). For a known object ``b`` left unmatched
+    and a segment matched to object ``a``, each pixel of the segment whose colour is
     ``segment_split_ratio`` times likelier under ``b``'s colour histogram than under ``a``'s
-    (their latest sightings) votes for ``b``;
-    the largest 8-connected region of such pixels (at least ``segment_split_min_px``) is the
-    candidate part of ``b``. The split is made when that part costs at most ``max_match_cost``
-    as ``b`` and the rest costs less as ``a`` than the whole segment did, by more than
-    ``segment_split_margin`` (a real union resembles neither object as well as its parts do).
-    The part becomes a new segment (``segments`` updated in place) assigned to ``b``; of the
-    candidate segments for one object, the one whose part costs least. Returns the new
-    segment -> object assignment.
+    (their latest sightings) votes for ``b``; the largest 8-connected region of such pixels (at
+    least ``segment_split_min_px``) is the candidate part of ``b``. The split is made when that
+    part costs at most ``max_match_cost`` as ``b`` and the rest costs less as ``a`` than the
+    whole segment did, by more than ``segment_split_margin`` (a real union resembles neither
+    object as well as its parts do). The part becomes a new segment (``segments`` updated in
+    place) assigned to ``b``; of the candidate segments for one object, the one whose part costs
+    least. Returns the new segment -> object assignment.
 
     Args:
         shape: (H, W) of the frame; points: (H, W, 3) world points (m); rgb: (H, W, 3) uint8;
@@ -713,6 +703,11 @@ def track_segments(
     over its last ``max_sightings`` sightings), or the next unused id; objects found to be
     pieces of one (``merge_split_objects``) end with one id in every frame. Returns new (H, W)
     int32 label images.
+
+    Args:
+        frames_labels: per frame, (H, W) int segment labels (0 = none); frames_points: (H, W, 3)
+            world points (m); frames_rgb: (H, W, 3) uint8; frames_depth: (H, W) depth (m, 0 =
+            no reading), or None (all valid).
     """
     config = config or TrackingConfig()
     tracked: list[np.ndarray] = []
@@ -742,8 +737,7 @@ def track_segments(
                     assignment, cost, segment_ids, known_ids, segments, config
                 )
             if config.larger_object_takes_segment:
-                # Each object's largest recent view: its latest may be half hidden (1123 against
-                # 1122 development pairs with the latest, no pair lost).
+                # Each object's largest recent view: its latest may be half hidden.
                 latest = {o: max(seen, key=lambda f: f.area) for o, seen in sightings.items()}
                 assignment = prefer_larger_objects(
                     assignment, cost, segment_ids, known_ids, latest, config
