@@ -61,6 +61,7 @@ import queue
 import time
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 
@@ -112,6 +113,8 @@ assert tuple(VARIANTS) == PHYSICS_METHODS, "ipr.methods lists the same methods"
 
 #: How samples become marginals (``InferenceConfig.weighting``).
 WEIGHTINGS = ("hypothesis", "object", "joint")
+#: How far a candidate moves in a stability test (``InferenceConfig.stability_measure``).
+STABILITY_MEASURES = ("drop", "displacement")
 
 
 @dataclass(frozen=True)
@@ -140,6 +143,8 @@ class InferenceConfig:
             object's marginal weighs samples by its own likelihood term, prior and exploration
             probability, Algorithm 2's per-object update) or "joint" (every object by the
             joint weight).
+        stability_measure: a candidate's distance in a stability test: "drop" (how far its
+            centre of mass fell) or "displacement" (how far its vertices moved, on average).
         max_factor_table: largest table (entries) of the exact elimination of "hypothesis"
             weighting; larger components combine their objects' factors independently.
     """
@@ -155,7 +160,7 @@ class InferenceConfig:
     max_exhaustive_objects: int = 4
     max_exhaustive_models: int = 20_000
     weighting: str = "hypothesis"
-    stability_measure: str = "drop"
+    stability_measure: Literal["drop", "displacement"] = "drop"
     max_factor_table: float = 1e6
 
     def __post_init__(self) -> None:
@@ -171,6 +176,11 @@ class InferenceConfig:
             raise ValueError(f"max_factor_table must be >= 1, got {self.max_factor_table}")
         if self.weighting not in WEIGHTINGS:
             raise ValueError(f"weighting must be one of {WEIGHTINGS}, got {self.weighting!r}")
+        if self.stability_measure not in STABILITY_MEASURES:
+            raise ValueError(
+                f"stability_measure must be one of {STABILITY_MEASURES}, "
+                f"got {self.stability_measure!r}"
+            )
 
 
 # --------------------------------------------------------------------------------------------
