@@ -7,7 +7,7 @@ IPR    := $(VENV)/bin/ipr
 STAMP  := $(VENV)/.installed
 DEMO_OUT ?= out/demo
 
-.PHONY: setup demo test bench lint format clean
+.PHONY: setup demo test bench lint format clean mutants
 
 setup: $(STAMP)
 
@@ -29,6 +29,10 @@ test: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) -m benchmarks.run
+
+# Mutation testing of the core (scripts/mutants.py): writes docs/MUTANTS.md.
+mutants: $(STAMP)
+	$(PY) scripts/mutants.py
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check src tests benchmarks

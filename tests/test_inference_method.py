@@ -531,6 +531,9 @@ def test_posterior_medoid_maximises_expected_iou_among_probable_hypotheses():
     assert posterior_medoid(with_middle, np.append(probabilities, 0.0)) == medoid
     assert posterior_medoid(with_middle, np.array([0.5, 0, 0, 0.5, 0.0])) in (0, 3)
     assert posterior_medoid(NESTED, np.array([0.0, 0.0, 1.0, 0.0])) == 2
+    # Not even an improbable duplicate of the output, listed first.
+    assert posterior_medoid([NESTED[1], NESTED[1]], np.array([0.0, 1.0])) == 1
+    assert posterior_medoid([NESTED[1], *NESTED], np.array([0.0, 0.37, 0.22, 0.21, 0.2])) == 2
 
 
 def test_the_collision_checker_outputs_the_medoid_of_its_uniform_posterior():
