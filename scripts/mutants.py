@@ -274,6 +274,51 @@ MUTANTS: tuple[Mutant, ...] = (
         "evidence = np.where(chosen, means, 0.0) if chosen.any() else np.zeros(len(means))",
         _t("inference"),
     ),
+    Mutant(
+        "stability-cache-ignores-context",
+        "inference",
+        "stability distances are cached per object, whatever the placed neighbours",
+        "key = (i, context)",
+        "key = (i,)",
+        _t("inference_method", "inference"),
+    ),
+    Mutant(
+        "no-neighbours",
+        "inference",
+        "no object is another's neighbour: stability tests stand every candidate alone",
+        "and np.all(box[0] - margin <= other[1])",
+        "and False",
+        _t("inference_method", "inference"),
+    ),
+    Mutant(
+        "exploded-stability-test-not-split",
+        "inference",
+        "a stability test that explodes is not redone candidate by candidate",
+        "if world.exploded and len(candidates) > 1:",
+        "if False:",
+        _t("inference_method", "inference"),
+        survives="no test scene makes a stability test explode: MuJoCo stayed stable with every "
+        "box scene tried (candidates sunk 4 cm into a static box, 2 mm cubes inside one, 50 ms "
+        "steps), so the branch that retests candidates one by one after an explosion is never "
+        "taken. Killing it needs a reproducible exploding candidate (real, noisy hypotheses "
+        "produce them); not pinned.",
+    ),
+    Mutant(
+        "exhaustive-not-exact",
+        "inference",
+        "exhaustive enumeration weighs models like the sampler instead of by the joint weight",
+        "estimate = marginals(samples, problem, joint=variant.exhaustive)",
+        "estimate = marginals(samples, problem, joint=False)",
+        _t("inference_method", "inference"),
+    ),
+    Mutant(
+        "samples-share-one-seed",
+        "inference",
+        "every sample draws from the same random stream (the same joint model each time)",
+        "rng = np.random.default_rng([self.problem.seed, index])",
+        "rng = np.random.default_rng(self.problem.seed)",
+        _t("inference_method", "inference"),
+    ),
     # ---------------------------------------------------------------- collision checker
     Mutant(
         "collision-checker-mode-not-medoid",
