@@ -741,7 +741,7 @@ def _cell(text: str) -> str:
 
 
 def _code(text: str) -> str:
-    text = " ".join(line.strip() for line in text.splitlines())
+    text = " ⏎ ".join(line.strip() for line in text.splitlines())
     return f"`{text}`" if "`" not in text else _cell(text)
 
 
@@ -826,6 +826,12 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"{m.id:45s} ERROR {error}")
         return 0
 
+    def interrupt(signum, frame):
+        raise KeyboardInterrupt
+
+    # Ctrl-C and a plain kill both stop the tests in flight and clean up (the finally blocks).
+    signal.signal(signal.SIGINT, interrupt)
+    signal.signal(signal.SIGTERM, interrupt)
     WORKSPACE.mkdir(parents=True, exist_ok=True)
     NUMBA_CACHE.mkdir(parents=True, exist_ok=True)
     lock = open(WORKSPACE / ".lock", "w")  # noqa: SIM115 (held for the whole run)
