@@ -7,7 +7,7 @@ IPR    := $(VENV)/bin/ipr
 STAMP  := $(VENV)/.installed
 DEMO_OUT ?= out/demo
 
-.PHONY: setup demo test test-slow bench lint format clean
+.PHONY: setup demo test test-slow mutants bench lint format clean
 
 setup: $(STAMP)
 
@@ -34,9 +34,13 @@ test-slow: $(STAMP)
 bench: $(STAMP)
 	$(PY) -m benchmarks.run
 
+# Mutation testing of the core (scripts/mutants.py): writes docs/MUTANTS.md.
+mutants: $(STAMP)
+	$(PY) scripts/mutants.py
+
 lint: $(STAMP)
-	$(VENV)/bin/ruff check src tests benchmarks
-	$(VENV)/bin/ruff format --check src tests benchmarks
+	$(VENV)/bin/ruff check src tests benchmarks scripts
+	$(VENV)/bin/ruff format --check src tests benchmarks scripts
 
 format: $(STAMP)
 	$(VENV)/bin/ruff check --fix src tests benchmarks

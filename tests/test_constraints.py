@@ -109,3 +109,21 @@ def test_joint_feasibility_of_choices():
     assert joint_feasible({1: 0, 2: 0}, hypotheses, None, (SUPPORT,))
     assert not joint_feasible({1: 1, 2: 0}, hypotheses, None, (SUPPORT,))  # they intersect
     assert not joint_feasible({1: 0, 2: 1}, hypotheses, None, (SUPPORT,))  # below support
+
+
+def test_free_voxels_that_the_observed_points_force_are_forgiven():
+    import dataclasses
+
+    grid = VoxelGrid.around(np.array([-0.2, -0.2, -0.1]), np.array([0.3, 0.3, 0.3]))
+    state = np.zeros(grid.shape, dtype=np.uint8)
+    state[grid.centres()[..., 0] > 0.15] = FREE  # seen empty beyond x = 0.15
+    space = SpaceMap(grid, state)
+    poking = cube(1, 4, [0.055, 0, 0])  # 400 of its 8000 voxels are in free space
+    assert not unary_feasible(poking, space, (SUPPORT,), UnaryTolerances())
+    # The observed points' own hull already has those voxels there: the observation forces
+    # them (noise, a thin gap), so they are not held against the hypothesis.
+    forced = dataclasses.replace(poking, forced_free_voxels=400)
+    assert unary_feasible(forced, space, (SUPPORT,), UnaryTolerances())
+    assert not unary_feasible(
+        dataclasses.replace(poking, forced_free_voxels=100), space, (SUPPORT,), UnaryTolerances()
+    )

@@ -261,3 +261,25 @@ def test_a_push_that_moved_an_object_frees_only_where_the_pusher_stopped(views):
         True,
     ]
     assert not end.contains(np.array([[-0.15, 0.0, 0.04], [-0.05, 0.0, 0.02]])).any()
+
+
+def test_registration_keeps_frame_0s_points_out_of_the_later_frames_free_space():
+    # Frame 0 saw a flat 10 x 4 cm patch; the later view a 4 x 4 cm square of it, which fits
+    # the patch at any quarter turn equally well. The later frame saw empty space on both
+    # sides of the square along x: frame 0's patch can only lie along y there (turned a
+    # quarter turn), not along x.
+    from ipr.perception.free_space import VoxelGrid
+
+    long_side, short_side = np.linspace(-0.05, 0.05, 41), np.linspace(-0.02, 0.02, 17)
+    reference = np.array([[x, y, 0.05] for x in long_side for y in short_side])
+    view = np.array([[x, y, 0.05] for x in short_side for y in short_side])
+    grid = VoxelGrid.around(np.array([-0.1, -0.1, 0.0]), np.array([0.1, 0.1, 0.1]), 0.005)
+    state = np.full(grid.shape, UNKNOWN, dtype=np.uint8)
+    state[np.abs(grid.centres()[..., 0]) > 0.03] = FREE
+    registration = register_view(
+        view, reference, np.array([0.0, 0.0, 1.0]), None, SpaceMap(grid, state)
+    )
+    assert registration is not None
+    assert registration.overlap == 1.0 and registration.reverse_free_share == 0.0
+    rotation = registration.frame0_from_frame[:3, :3]
+    assert abs(rotation[0, 0]) < 1e-6 and abs(abs(rotation[0, 1]) - 1.0) < 1e-6

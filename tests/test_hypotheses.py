@@ -273,3 +273,42 @@ def test_shapes_whose_points_stop_short_of_the_support_rest_on_it(oblique):
 def test_a_negative_support_snap_is_refused():
     with pytest.raises(ValueError, match="support_snap_m"):
         HypothesisConfig(support_snap_m=-0.01)
+
+
+def test_contains_means_inside_every_face_plane():
+    vertices, faces = box_mesh(np.array([0.05, 0.05, 0.05]), np.array([0.05, 0.05, 0.05]))
+    cube = ShapeHypothesis(1, 0, vertices, faces, 1e-3, np.zeros(0), np.zeros((0, 3)))
+    points = np.array(
+        [
+            [0.05, 0.05, 0.05],  # centre
+            [0.1, 0.05, 0.05],  # on a face
+            [0.11, 0.05, 0.05],  # beyond one face, inside the other five planes
+            [0.05, -0.01, 0.05],
+            [0.11, 0.11, 0.11],
+        ]
+    )
+    assert cube.contains(points).tolist() == [True, True, False, False, False]
+
+
+def test_a_curved_facet_is_mirrored_about_its_tangent_plane():
+    # One observed facet facing the camera (-y): a flat front at y = 0, 6 cm wide, and sides
+    # sloping back to y = 2 cm over 1 cm each. Mirrored about the plane through its centroid
+    # and moved d back, its back is flat (the mirrored front) and reaches y = 2 * mean(y) + d;
+    # moved without mirroring it would reach y = 2 cm + d.
+    rng = np.random.default_rng(0)
+    x = rng.uniform(-0.04, 0.04, 2000)
+    y = np.clip((np.abs(x) - 0.03) * 2.0, 0.0, None)
+    z = rng.uniform(0.02, 0.06, 2000)
+    points = np.column_stack([x, y, z])
+    facet = Facet(points.mean(axis=0), np.array([0.0, -1.0, 0.0]), points, 0.08 * 0.04)
+    obj = PartialObject(
+        1, 0, np.arange(len(points)), points, np.zeros((2000, 3), np.uint8), (facet,)
+    )
+    config = HypothesisConfig(count=4, max_rounds=1)
+    hypotheses = generate_hypotheses(obj, None, (), config, np.random.default_rng(0))
+    mean_y = points[:, 1].mean()
+    assert mean_y < 0.005  # most points are on the flat front
+    for h in hypotheses:
+        (d,) = h.distances_m
+        assert h.vertices[:, 1].max() == pytest.approx(2 * mean_y + d, abs=1e-3)
+        assert h.vertices[:, 1].min() == pytest.approx(0.0, abs=1e-6)

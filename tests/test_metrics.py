@@ -293,3 +293,26 @@ def test_object_order_does_not_matter(ycbv, tmp_path):
         data.pop("time_s")
     assert first == second
     assert 0.3 < first["object_space"]["iou"] < 0.95  # the offsets do change the figures
+
+
+def test_pixels_without_a_depth_reading_show_the_front_most_model():
+    from ipr.ground_truth import rendered_visible_pixel_counts
+
+    camera_from_model = _translation([0.0, 0.0, 0.6])  # a 10 cm cube 0.6 m ahead
+    counts = {}
+    for reading in (0.0, 1.0, 0.3):  # none, behind the cube, in front of it
+        depth = np.full((HEIGHT, WIDTH), reading, np.float32)
+        frame = Frame(0, np.zeros((HEIGHT, WIDTH, 3), np.uint8), depth, K, np.eye(4))
+        (counts[reading],) = rendered_visible_pixel_counts(frame, [camera_from_model], [_box(0.1)])
+    assert counts[0.0] == counts[1.0] > 1000
+    assert counts[0.3] == 0
+
+
+def test_a_prediction_that_overlaps_no_ground_truth_is_not_its_match(tmp_path):
+    scene = _box_scene(tmp_path, [BOX_1])
+    evaluation = evaluate(scene, _result(tmp_path / "res", [_box(0.1, (0.6, 0.6, 0.05))]))
+    # The one-to-one assignment pairs them (nothing else to pair), but they do not overlap.
+    assert evaluation.n_matched == 0
+    assert evaluation.ground_truth[0].matched_id is None
+    assert evaluation.predictions[0].matched_gt_index is None
+    assert _figures(evaluation.object_space) == (0.0, 0.0, 0.0, 0.0)

@@ -44,6 +44,8 @@ class InferenceConfig:
             object's marginal weighs samples by its own likelihood term, prior and exploration
             probability, Algorithm 2's per-object update) or "joint" (every object by the
             joint weight).
+        stability_measure: a candidate's distance in a stability test: "drop" (how far its
+            centre of mass fell) or "displacement" (how far its vertices moved, on average).
         max_factor_table: largest table (entries) of the exact elimination of "hypothesis"
             weighting; larger components combine their objects' factors independently.
     """
