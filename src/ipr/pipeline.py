@@ -33,7 +33,7 @@ from ipr.config import Config
 from ipr.errors import IprError
 from ipr.fusion import fuse_views, tracked_free_spaces
 from ipr.hypotheses import prepare_hypotheses
-from ipr.inference import infer_shapes
+from ipr.inference import InferenceOutcome, infer_shapes
 from ipr.likelihood import observed_frames
 from ipr.methods import DEFAULT_METHOD, Method, get_method
 from ipr.perception import Perception, perceive_scene
@@ -168,6 +168,57 @@ def fuse(scene: Scene, perception: Perception, method: Method, config: Config) -
     return FusedObjects(fused.objects, object_spaces, fused.motions, fused_views)
 
 
+def infer_with_physics(
+    scene: Scene,
+    perception: Perception,
+    fused: FusedObjects,
+    method: Method,
+    config: Config,
+    rng: np.random.Generator,
+    remaining_s: float | None,
+    deadline: float | None,
+    *,
+    seed: int,
+    workers: int | None,
+) -> tuple[InferenceOutcome, float]:
+    """Hypotheses with their constraints, then a physics-based method's posteriors; also the
+    seconds the hypotheses took. ``remaining_s``: the run's time left (hypotheses take their
+    share); ``deadline``: ``time.perf_counter()`` time inference stops at (None: its default
+    budget)."""
+    started = time.perf_counter()
+    prepared = prepare_hypotheses(
+        fused.objects,
+        perception.free_space[0],
+        perception.planes[0],
+        config.hypotheses,
+        config.constraints,
+        rng,
+        remaining_s,
+        fused.object_spaces,
+    )
+    hypotheses_s = time.perf_counter() - started
+    observed = observed_frames(
+        scene.frames, perception.labels, config.inference.likelihood.decimation
+    )
+    try:
+        outcome = infer_shapes(
+            prepared,
+            perception.planes[0],
+            observed,
+            method=method.name,
+            pusher=scene.pusher,
+            pushes=scene.pushes,
+            config=config.inference,
+            collision_checker_config=config.collision_checker,
+            seed=seed,
+            deadline=deadline,
+            workers=workers,
+        )
+    except IprError as error:  # say which scene the method refused
+        raise IprError(f"{scene.path}: {error}") from None
+    return outcome, hypotheses_s
+
+
 def run_pipeline(
     scene: Scene,
     config: Config | None = None,
@@ -224,52 +275,24 @@ def run_pipeline(
             hypotheses=config.hypotheses,
             constraints=config.constraints,
         )
-        finished = time.perf_counter()
         generation = float(sum(p.generation_s for p in posteriors))
         timing = StageTimings(
             segmentation=perceived - budget.started,
             hypotheses=generation,
-            inference=max(finished - perceived - generation, 0.0),
+            inference=max(time.perf_counter() - perceived - generation, 0.0),
         )
     else:
-        prepared = prepare_hypotheses(
-            fused.objects,
-            perception.free_space[0],
-            perception.planes[0],
-            config.hypotheses,
-            config.constraints,
-            rng,
-            remaining,
-            fused.object_spaces,
-        )
-        generated = time.perf_counter()
-        observed = observed_frames(
-            scene.frames, perception.labels, config.inference.likelihood.decimation
-        )
-        try:
-            outcome = infer_shapes(
-                prepared,
-                perception.planes[0],
-                observed,
-                method=method,
-                pusher=scene.pusher,
-                pushes=scene.pushes,
-                config=config.inference,
-                collision_checker_config=config.collision_checker,
-                seed=seed,
-                deadline=budget.deadline,
-                workers=workers,
-            )
-        except IprError as error:  # say which scene the method refused
-            raise IprError(f"{scene.path}: {error}") from None
-        finished = time.perf_counter()
+        outcome, hypotheses_s = infer_with_physics(
+            scene, perception, fused, chosen, config, rng, remaining, budget.deadline,
+            seed=seed, workers=workers,
+        )  # fmt: skip
         posteriors = outcome.posteriors
         summary = dataclasses.replace(summary, sampling=outcome.summary)
         timing = StageTimings(
             segmentation=perceived - budget.started,
             fusion=fused_at - perceived,
-            hypotheses=generated - fused_at,
-            inference=finished - generated,
+            hypotheses=hypotheses_s,
+            inference=time.perf_counter() - fused_at - hypotheses_s,
             inference_collision_checker=outcome.timing_s["collision_checker"],
             inference_sampling=outcome.timing_s["sampling"],
         )
