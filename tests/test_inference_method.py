@@ -340,6 +340,8 @@ def test_each_push_decides_the_hidden_depth_of_the_object_it_passed(push_scene):
         ("ipr+uniform", (PUSH_BACK,), 2),  # frames 0 and 1: object 1's move is unexplained
         ("ipr+uniform", (), 3),  # no push: every frame
         ("ipr+action+uniform", (PUSH_FRONT, PUSH_BACK), 3),
+        # A push after the last observed frame: every frame is before it.
+        ("ipr+uniform", (Push(2, 3, PUSH_BACK.start_m, PUSH_BACK.direction, 0.06, 0.05),), 3),
     ],
 )
 def test_gravity_only_variants_compare_only_the_frames_before_the_first_push(

@@ -7,7 +7,8 @@ of some jointly feasible model) are candidates. Then, repeated until the time bu
 
 1. **Tree sampling of one joint model.** Starting from the support (and walls) alone, at each
    stage every unplaced object i gets exploration probabilities over its candidates j:
-   exp(-alpha_s * dist_ij), where dist_ij is how far (mean vertex displacement, m) hypothesis j
+   exp(-alpha_s * dist_ij), where dist_ij is how far (m; ``InferenceConfig.stability_measure``:
+   by default how far its centre of mass drops, or its mean vertex displacement) hypothesis j
    moves in ``stability_s`` of simulated gravity among the placed objects (at their sampled
    shapes) and the unplaced ones (at their minimum shapes), and 0 when j overlaps a placed
    object's sampled shape (Constraints(X)). The object with the largest total ("mass") is

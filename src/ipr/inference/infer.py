@@ -97,7 +97,10 @@ def infer_shapes(
     if not variant.actions:
         first_push = min((p.after_frame for p in pushes), default=None)
         if first_push is not None:
-            frames = observed.only(max(1, observed.frames.index(first_push)))
+            # The frames observed before the first push (frame 0 at least); a push after
+            # every observed frame leaves them all.
+            before = sum(1 for frame in observed.frames if frame < first_push)
+            frames = observed.only(max(1, before))
     problem, indices = build_problem(
         prepared, uniform, planes, frames,
         variant=variant, pusher=pusher, pushes=pushes, config=config, seed=seed,
