@@ -2,7 +2,7 @@
 the figures in docs/experiments/).
 
 Usage: ``python -m benchmarks.dev_perception [--sets 8000:12 8100:24 ...] [--containers]
-[--tracker-only] [--lost]``.
+[--tracker-only] [--lost] [--config FILE]``.
 
 Generates (or reuses) the development dynamic scenes of the design notes with ``ipr synth``
 (base seeds 8000 (12 scenes), 8100 (24), 8012 (38), 8150 (50), and the held-out check 8050
@@ -84,6 +84,21 @@ def tracker_only_perceive(cache: Path, overrides: dict[str, float] | None = None
     return perceive
 
 
+def configured_perceive(path: Path):
+    """A ``benchmarks.segmentation.Perceive`` running the perception with the settings of a
+    TOML file (``ipr.config.read_config``; one timing run)."""
+    from ipr.config import read_config
+    from ipr.perception import perceive_scene
+
+    config = read_config(path).perception
+
+    def perceive(scene: object) -> tuple[list[np.ndarray], list[float]]:
+        perception = perceive_scene(scene, config, with_free_space=False)
+        return list(perception.labels), [float(s) for s in perception.timing_s["per_frame"]]
+
+    return perceive
+
+
 def _line(name: str, figures: dict) -> str:
     return (
         f"{name:14s} ids kept {figures['ids_consistent']:4d} / {figures['ids_counted']:4d} "
@@ -113,6 +128,12 @@ def main(argv: list[str] | None = None) -> int:
         metavar="NAME=VALUE",
         help="with --tracker-only: TrackingConfig fields to change (Python literals)",
     )
+    parser.add_argument(
+        "--config",
+        type=Path,
+        metavar="FILE",
+        help="TOML settings over the defaults (its [perception] sections; 'ipr config show')",
+    )
     parser.add_argument("--scenes", type=Path, default=Path("/tmp/ipr-dev-perception"))
     parser.add_argument("--cache", type=Path, default=Path("/tmp/ipr-dev-perception/untracked"))
     args = parser.parse_args(argv)
@@ -132,11 +153,14 @@ def main(argv: list[str] | None = None) -> int:
     overrides = {k: ast.literal_eval(v) for k, v in (s.split("=", 1) for s in args.set)}
     if overrides and not args.tracker_only:
         parser.error("--set needs --tracker-only")
-    perceive = (
-        tracker_only_perceive(args.cache, overrides)
-        if args.tracker_only
-        else default_perceive(timing_runs=1)
-    )
+    if args.config is not None and args.tracker_only:
+        parser.error("--config needs the full run (without --tracker-only)")
+    if args.config is not None:
+        perceive = configured_perceive(args.config)
+    elif args.tracker_only:
+        perceive = tracker_only_perceive(args.cache, overrides)
+    else:
+        perceive = default_perceive(timing_runs=1)
 
     pooled = []
     for group, sets in (("development", development), ("held-out", held_out)):
