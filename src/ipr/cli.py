@@ -371,9 +371,12 @@ def build_parser() -> argparse.ArgumentParser:
         "suite",
         help="generate (or find cached) benchmark suites",
         description="Benchmark suites are generated from fixed seeds on first use and cached "
-        "outside the repository ($IPR_CACHE, default ~/.cache/ipr).",
+        "outside the repository ($IPR_CACHE, default ~/.cache/ipr); the real suites (ycbv-real, "
+        "bins-real) are read from the shared data.",
     )
-    suite.add_argument("name", choices=["ycb-static", "ycb-dynamic", "ycbv-real", "all"])
+    suite.add_argument(
+        "name", choices=["ycb-static", "ycb-dynamic", "ycbv-real", "bins-real", "all"]
+    )
     suite.set_defaults(handler=_cmd_suite)
     return parser
 
