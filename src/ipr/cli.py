@@ -165,7 +165,13 @@ def _cmd_segment(args: argparse.Namespace) -> int:
     config = _config(args)
     scene = load_scene(Path(args.scene))
     perception = perceive_scene(scene, config.perception if config else None)
-    out = write_segmentation(scene, perception, Path(args.out), overwrite=args.overwrite)
+    out = write_segmentation(
+        scene,
+        perception,
+        Path(args.out),
+        overwrite=args.overwrite,
+        config=config.perception if config else None,
+    )
     per_frame = perception.timing_s["per_frame"]
     print(
         f"{out}: {len(perception.object_ids)} objects over {len(scene.frames)} frames "
