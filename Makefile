@@ -7,7 +7,7 @@ IPR    := $(VENV)/bin/ipr
 STAMP  := $(VENV)/.installed
 DEMO_OUT ?= out/demo
 
-.PHONY: setup demo test test-slow mutants bench lint format clean
+.PHONY: setup demo test test-slow mutants bench gallery lint format clean
 
 setup: $(STAMP)
 
@@ -33,6 +33,11 @@ test-slow: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) -m benchmarks.run
+	$(PY) -m benchmarks.gallery
+
+# Overlays of the perception on the real frames a person judges: docs/GALLERY.md, docs/gallery/.
+gallery: $(STAMP)
+	$(PY) -m benchmarks.gallery
 
 # Mutation testing of the core (scripts/mutants.py): writes docs/MUTANTS.md.
 mutants: $(STAMP)

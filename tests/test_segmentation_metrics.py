@@ -1,6 +1,7 @@
 """Segmentation metrics: hand-made label images give their exact expected scores, the scores do
 not depend on label values, id consistency counts (object, later frame) pairs, and the
-ground-truth masks agree with the generator's visibility counts and with real YCB-Video frames."""
+ground-truth masks agree with the generator's visibility counts and with real YCB-Video frames,
+and BOP mask_visib/ files are read (and refused, naming the file, when malformed)."""
 
 from __future__ import annotations
 
@@ -10,10 +11,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from PIL import Image
 
 import ipr  # noqa: F401  (GL backend before MuJoCo loads)
+from ipr.errors import SceneError
 from ipr.rendering import Renderer
-from ipr.scene import load_scene, load_visible_pixel_counts
+from ipr.scene import Frame, load_scene, load_visible_pixel_counts
 from ipr.segmentation_metrics import (
     ground_truth_masks,
     id_consistency,
@@ -267,3 +270,164 @@ def test_ground_truth_masks_hide_objects_behind_generated_walls(tmp_path: Path) 
     for ours, theirs in zip(visible_px, expected, strict=True):
         assert abs(ours - theirs) <= max(10, 0.03 * theirs), (visible_px, expected)
     assert sum(through_walls) > sum(visible_px)  # the drawer front hides some pixels
+
+
+# --------------------------------------------------------------------------------------------
+# ground_truth_masks from BOP mask_visib/ files
+
+
+def _identity_pose(obj_id: int) -> dict:
+    return {"obj_id": obj_id, "cam_R_m2c": np.eye(3).ravel().tolist(), "cam_t_m2c": [0, 0, 500]}
+
+
+def _mask_scene(root: Path, masks: list[np.ndarray], *, info: bool = True) -> Path:
+    """A 40x30 one-frame scene whose frame 0 lists one object per mask (obj_ids 1, 2, ...),
+    with mask_visib/000000_KKKKKK.png (0/255) and, with ``info``, their px_count_visib; no
+    models folder, so rendering would fail."""
+    scene = root / "masks_scene"
+    (scene / "depth").mkdir(parents=True)
+    (scene / "mask_visib").mkdir()
+    Image.fromarray(np.full((30, 40), 500, dtype=np.uint16)).save(scene / "depth" / "000000.png")
+    camera = {"0": {"cam_K": [50.0, 0, 19.5, 0, 50.0, 14.5, 0, 0, 1], "depth_scale": 1.0}}
+    (scene / "scene_camera.json").write_text(json.dumps(camera))
+    gt = {"0": [_identity_pose(k + 1) for k in range(len(masks))]}
+    (scene / "scene_gt.json").write_text(json.dumps(gt))
+    if info:
+        counts = [{"px_count_visib": int((m > 0).sum())} for m in masks]
+        (scene / "scene_gt_info.json").write_text(json.dumps({"0": counts}))
+    for position, mask in enumerate(masks):
+        path = scene / "mask_visib" / f"000000_{position:06d}.png"
+        Image.fromarray(np.where(mask > 0, 255, 0).astype(np.uint8)).save(path)
+    return scene
+
+
+def _three_masks() -> list[np.ndarray]:
+    """(30, 40) masks: a 10x10 block, a 10x20 block overlapping it by 10x5, and an empty one."""
+    first = np.zeros((30, 40), dtype=bool)
+    first[5:15, 5:15] = True
+    second = np.zeros((30, 40), dtype=bool)
+    second[5:15, 10:30] = True
+    return [first, second, np.zeros((30, 40), dtype=bool)]
+
+
+def test_ground_truth_masks_read_bop_mask_files(tmp_path: Path) -> None:
+    masks = _three_masks()
+    scene = _mask_scene(tmp_path, masks)
+    labels, obj_ids, visible_px = ground_truth_masks(scene, 0)
+    assert labels.shape == (30, 40) and labels.dtype == np.int32
+    assert obj_ids == [1, 2, 3]
+    assert visible_px == [100, 150, 0]  # the shared 10x5 pixels go to the first listed object
+    assert np.array_equal(labels[masks[0]], np.ones(100))
+    assert np.array_equal(labels == 2, masks[1] & ~masks[0])
+    assert not (labels[~(masks[0] | masks[1])]).any()
+    scores = segmentation_scores(labels, labels)
+    assert scores.n_visible == 2 and scores.n_invisible == 0  # the empty mask has no label
+
+    frame = Frame(
+        0, np.zeros((30, 40, 3), np.uint8), np.ones((30, 40), np.float32), np.eye(3), np.eye(4)
+    )
+    again, _, _ = ground_truth_masks(scene, 0, frame=frame)
+    assert np.array_equal(again, labels)
+    with pytest.raises(SceneError, match="obj_000001.ply"):  # mask_files=False renders models
+        ground_truth_masks(scene, 0, mask_files=False)
+
+
+def test_ground_truth_masks_read_mask_files_without_gt_info(tmp_path: Path) -> None:
+    scene = _mask_scene(tmp_path, _three_masks(), info=False)
+    _, _, visible_px = ground_truth_masks(scene, 0)
+    assert visible_px == [100, 150, 0]
+
+
+def _break_missing(scene: Path) -> str:
+    (scene / "mask_visib" / "000000_000001.png").unlink()
+    return "000000_000001.png: is missing"
+
+
+def _break_extra(scene: Path) -> str:
+    Image.fromarray(np.zeros((30, 40), np.uint8)).save(scene / "mask_visib" / "000000_000003.png")
+    return "000000_000003.png: is the mask of object position 3, but scene_gt.json lists 3"
+
+
+def _break_size(scene: Path) -> str:
+    Image.fromarray(np.zeros((20, 40), np.uint8)).save(scene / "mask_visib" / "000000_000002.png")
+    return "000000_000002.png: is 40x20 pixels, the frame 40x30"
+
+
+def _break_channels(scene: Path) -> str:
+    Image.fromarray(np.zeros((30, 40, 3), np.uint8)).save(
+        scene / "mask_visib" / "000000_000002.png"
+    )
+    return "000000_000002.png: has 3 channels"
+
+
+def _break_values(scene: Path) -> str:
+    grey = np.zeros((30, 40), np.uint8)
+    grey[0, 0] = 128
+    Image.fromarray(grey).save(scene / "mask_visib" / "000000_000002.png")
+    return r"000000_000002.png: is not a binary mask \(values 0, 128\)"
+
+
+def _break_not_png(scene: Path) -> str:
+    (scene / "mask_visib" / "000000_000000.png").write_text("not an image")
+    return "000000_000000.png: is not a readable image"
+
+
+def _break_jpeg(scene: Path) -> str:
+    path = scene / "mask_visib" / "000000_000000.png"
+    Image.fromarray(np.zeros((30, 40), np.uint8)).save(path, format="JPEG")
+    return "000000_000000.png: is a JPEG image, not a PNG"
+
+
+def _break_count(scene: Path) -> str:
+    info_path = scene / "scene_gt_info.json"
+    info = json.loads(info_path.read_text())
+    info["0"][1]["px_count_visib"] = 199
+    info_path.write_text(json.dumps(info))
+    return "000000_000001.png: has 200 visible pixels, scene_gt_info.json says px_count_visib 199"
+
+
+def _break_name(scene: Path) -> str:
+    Image.fromarray(np.zeros((30, 40), np.uint8)).save(scene / "mask_visib" / "000000_a.png")
+    return "000000_a.png: is not named FFFFFF_KKKKKK.png"
+
+
+@pytest.mark.parametrize(
+    "breaks",
+    [
+        _break_missing,
+        _break_extra,
+        _break_size,
+        _break_channels,
+        _break_values,
+        _break_not_png,
+        _break_jpeg,
+        _break_count,
+        _break_name,
+    ],
+)
+def test_malformed_mask_files_are_refused_naming_the_file(tmp_path: Path, breaks) -> None:
+    scene = _mask_scene(tmp_path, _three_masks())
+    expected = breaks(scene)
+    with pytest.raises(SceneError, match=expected):
+        ground_truth_masks(scene, 0)
+
+
+def test_ground_truth_masks_of_bins_real_are_its_mask_files() -> None:
+    from ipr.data import bins_real_dir
+
+    root = bins_real_dir()
+    if root is None:
+        pytest.skip("bins_real data (../shared/data/bins_real or $IPR_DATA) is absent")
+    scene = root / "bins_000"
+    labels, obj_ids, visible_px = ground_truth_masks(scene, 0)
+    gt = json.loads((scene / "scene_gt.json").read_text())["0"]
+    assert obj_ids == [item["obj_id"] for item in gt] and len(obj_ids) >= 11
+    assert visible_px == load_visible_pixel_counts(scene)[0]  # the masks do not overlap here
+    for position in range(len(gt)):
+        with Image.open(scene / "mask_visib" / f"000000_{position:06d}.png") as image:
+            assert np.array_equal(labels == position + 1, np.asarray(image) > 0)
+    # The files and the masks rendered from the box models with the same rule agree.
+    rendered, _, _ = ground_truth_masks(scene, 0, mask_files=False)
+    scores = segmentation_scores(rendered, labels)
+    assert scores.n_visible == len(gt)
+    assert min(row.f_measure for row in scores.objects) > 0.99

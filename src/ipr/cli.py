@@ -165,7 +165,13 @@ def _cmd_segment(args: argparse.Namespace) -> int:
     config = _config(args)
     scene = load_scene(Path(args.scene))
     perception = perceive_scene(scene, config.perception if config else None)
-    out = write_segmentation(scene, perception, Path(args.out), overwrite=args.overwrite)
+    out = write_segmentation(
+        scene,
+        perception,
+        Path(args.out),
+        overwrite=args.overwrite,
+        config=config.perception if config else None,
+    )
     per_frame = perception.timing_s["per_frame"]
     print(
         f"{out}: {len(perception.object_ids)} objects over {len(scene.frames)} frames "
@@ -371,9 +377,12 @@ def build_parser() -> argparse.ArgumentParser:
         "suite",
         help="generate (or find cached) benchmark suites",
         description="Benchmark suites are generated from fixed seeds on first use and cached "
-        "outside the repository ($IPR_CACHE, default ~/.cache/ipr).",
+        "outside the repository ($IPR_CACHE, default ~/.cache/ipr); the real suites (ycbv-real, "
+        "bins-real) are read from the shared data.",
     )
-    suite.add_argument("name", choices=["ycb-static", "ycb-dynamic", "ycbv-real", "all"])
+    suite.add_argument(
+        "name", choices=["ycb-static", "ycb-dynamic", "ycbv-real", "bins-real", "all"]
+    )
     suite.set_defaults(handler=_cmd_suite)
     return parser
 

@@ -1,4 +1,5 @@
-"""Where the shared reference data lives (YCB meshes, real YCB-Video frames).
+"""Where the shared reference data lives (YCB meshes, real YCB-Video frames, real bin-picking
+frames, real unlabelled tabletop frames).
 
 The data is read from ``$IPR_DATA`` when set, else from ``../shared/data`` beside the repository
 (or the current directory). It is never copied into the repository; callers fall back to
@@ -11,6 +12,8 @@ import os
 from pathlib import Path
 
 _REPO_ROOT = Path(__file__).resolve().parents[2]
+#: Sub-folders of which any one marks a folder as the shared data.
+_DATA_SETS = ("ycb", "ycbv_real", "bins_real", "real_unlabelled")
 
 
 def shared_data_dir() -> Path | None:
@@ -20,7 +23,7 @@ def shared_data_dir() -> Path | None:
         candidates.append(Path(os.environ["IPR_DATA"]))
     candidates += [_REPO_ROOT.parent / "shared" / "data", Path.cwd().parent / "shared" / "data"]
     for candidate in candidates:
-        if (candidate / "ycb").is_dir() or (candidate / "ycbv_real").is_dir():
+        if any((candidate / name).is_dir() for name in _DATA_SETS):
             return candidate.resolve()
     return None
 
@@ -36,6 +39,21 @@ def ycbv_real_dir() -> Path | None:
     """Folder of the real YCB-Video scenes in BOP format, or None."""
     root = shared_data_dir()
     folder = root / "ycbv_real" if root else None
+    return folder if folder and folder.is_dir() else None
+
+
+def bins_real_dir() -> Path | None:
+    """Folder of the real bin-picking scenes in BOP format (``bins_NNN/``, ``models/``; ground
+    truth with ``mask_visib/``), or None."""
+    root = shared_data_dir()
+    folder = root / "bins_real" if root else None
+    return folder if folder and folder.is_dir() else None
+
+
+def real_unlabelled_dir() -> Path | None:
+    """Folder of the real unlabelled tabletop scenes (BOP frames, no ground truth), or None."""
+    root = shared_data_dir()
+    folder = root / "real_unlabelled" if root else None
     return folder if folder and folder.is_dir() else None
 
 

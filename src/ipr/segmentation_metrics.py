@@ -15,6 +15,17 @@ let objects pressed against it show through). The masks then agree closely with 
 generator's own ``px_count_visib``; labels are the object's position in the frame's
 ``scene_gt.json`` list plus one; 0 is background.
 
+Scenes that come with BOP visible masks (``mask_visib/FFFFFF_KKKKKK.png``: frame id ``F``, then
+the position ``K`` of the object in ``scene_gt.json[F]``, non-zero = visible) are not rendered:
+when a frame has any such file, its masks are read instead (``read_mask_files``) and must be
+complete and well formed — one single-channel PNG of the frame's size per listed object, values
+0 and 255 (or 0 and 1), no file for an object the frame does not list, and, when
+``scene_gt_info.json`` gives the frame's ``px_count_visib``, exactly that many non-zero pixels
+per mask — else a ``SceneError`` names the file. BOP masks may overlap (each object's mask is
+tested against the sensor depth alone): a pixel in several masks goes to the first listed of
+them. The visibility threshold below then applies to the masks' pixel counts, which equal
+``px_count_visib`` where the masks do not overlap.
+
 Overlap scores (``segmentation_scores``), the OSD/OCID object-overlap convention: for each
 *visible* ground-truth object G (at least ``min_visible_px`` pixels in the ground-truth label
 image), among the predicted segments S (labels > 0) the one with the best F-measure is chosen,
@@ -56,7 +67,14 @@ from PIL import Image
 
 from ipr.camera import invert_transform, make_transform
 from ipr.errors import SceneError
-from ipr.scene import Frame, default_models_dir, load_ground_truth, load_model, read_json
+from ipr.scene import (
+    Frame,
+    default_models_dir,
+    load_ground_truth,
+    load_model,
+    load_visible_pixel_counts,
+    read_json,
+)
 
 #: BOP visibility tolerance (m): a rendered surface up to this far behind the observed depth is
 #: still seen (the same value as ``ipr.ground_truth.VISIBILITY_TOLERANCE_M``).
@@ -231,6 +249,136 @@ def _read_frame(
     return K, depth_m, world_from_camera
 
 
+def mask_file_paths(scene_path: Path | str, frame_index: int) -> dict[int, Path]:
+    """The BOP visible-mask files of one frame, ``<scene>/mask_visib/FFFFFF_KKKKKK.png``, by
+    object position ``K`` (module doc); empty when the scene has none for the frame."""
+    folder = Path(scene_path) / "mask_visib"
+    if not folder.is_dir():
+        return {}
+    prefix = f"{frame_index:06d}_"
+    found = {}
+    for path in folder.glob(f"{prefix}*.png"):
+        position = path.stem[len(prefix) :]
+        if not position.isdigit():
+            raise SceneError(
+                path,
+                "is not named FFFFFF_KKKKKK.png (frame id, then the object's position in "
+                "scene_gt.json)",
+                "rename or remove it",
+            )
+        found[int(position)] = path
+    return dict(sorted(found.items()))
+
+
+def _frame_shape(scene_path: Path, frame_index: int) -> tuple[int, int]:
+    """(H, W) of a frame from its depth image's header (the pixels are not read)."""
+    depth_path = scene_path / "depth" / f"{frame_index:06d}.png"
+    if not depth_path.is_file():
+        raise SceneError(depth_path, "depth image is missing", "add the frame's depth PNG")
+    with Image.open(depth_path) as image:
+        width, height = image.size
+    return height, width
+
+
+def _read_mask(path: Path, shape: tuple[int, int]) -> np.ndarray:
+    """One BOP mask as (H, W) bool; SceneError naming the file when it is not a binary,
+    single-channel PNG of ``shape``."""
+    fix = "write a single-channel PNG of the frame's size, 255 where the object is visible"
+    try:
+        with Image.open(path) as image:
+            image.load()
+            fmt, array = image.format, np.asarray(image)
+    except (OSError, ValueError, SyntaxError) as error:
+        raise SceneError(path, f"is not a readable image ({error})", fix) from None
+    if fmt != "PNG":
+        raise SceneError(path, f"is a {fmt} image, not a PNG", fix)
+    if array.ndim != 2:
+        raise SceneError(path, f"has {array.shape[2]} channels, not one", fix)
+    if array.shape != tuple(shape):
+        raise SceneError(
+            path,
+            f"is {array.shape[1]}x{array.shape[0]} pixels, the frame {shape[1]}x{shape[0]}",
+            fix,
+        )
+    if array.dtype == bool:
+        return array
+    values = np.unique(array)
+    if not (set(values.tolist()) <= {0, 255} or set(values.tolist()) <= {0, 1}):
+        shown = ", ".join(str(v) for v in values[:6]) + (", ..." if values.size > 6 else "")
+        raise SceneError(path, f"is not a binary mask (values {shown})", fix)
+    return array > 0
+
+
+def read_mask_files(
+    scene_path: Path | str, frame_index: int, n_objects: int, shape: tuple[int, int]
+) -> tuple[np.ndarray, list[int]]:
+    """Ground-truth labels of one frame from its BOP ``mask_visib/`` files (module doc).
+
+    Args:
+        scene_path: scene folder.
+        frame_index: frame id.
+        n_objects: objects listed for the frame in ``scene_gt.json``.
+        shape: (H, W) of the frame.
+
+    Returns:
+        labels: (H, W) int32, ``k + 1`` where object ``k``'s mask is set (the first listed
+            object where masks overlap), 0 elsewhere;
+        visible_px: the label's pixel count of each object.
+
+    Raises:
+        SceneError: naming the file, when a mask is missing, extra, unreadable, not binary, not
+            of the frame's size, or disagrees with ``px_count_visib`` of ``scene_gt_info.json``.
+    """
+    scene_path = Path(scene_path)
+    paths = mask_file_paths(scene_path, frame_index)
+    extra = [position for position in paths if position >= n_objects]
+    if extra:
+        raise SceneError(
+            paths[extra[0]],
+            f"is the mask of object position {extra[0]}, but scene_gt.json lists "
+            f"{n_objects} objects in frame {frame_index}",
+            "remove it, or list the object in scene_gt.json",
+        )
+    counts = _px_count_visib(scene_path, frame_index, n_objects)
+    labels = np.zeros(shape, dtype=np.int32)
+    for position in range(n_objects):
+        path = scene_path / "mask_visib" / f"{frame_index:06d}_{position:06d}.png"
+        if position not in paths:
+            raise SceneError(
+                path,
+                f"is missing: frame {frame_index} has mask files, but none for object position "
+                f"{position} of scene_gt.json",
+                "add the mask (an empty one when the object is hidden), or remove the frame's "
+                "masks to render them from the models",
+            )
+        mask = _read_mask(path, shape)
+        if counts is not None and int(mask.sum()) != counts[position]:
+            raise SceneError(
+                path,
+                f"has {int(mask.sum())} visible pixels, scene_gt_info.json says "
+                f"px_count_visib {counts[position]}",
+                "regenerate the masks or scene_gt_info.json so they agree",
+            )
+        labels[mask & (labels == 0)] = position + 1
+    visible_px = np.bincount(labels.ravel(), minlength=n_objects + 1)[1:]
+    return labels, [int(count) for count in visible_px]
+
+
+def _px_count_visib(scene_path: Path, frame_index: int, n_objects: int) -> list[int] | None:
+    """``px_count_visib`` of each object of the frame, or None when the scene gives none."""
+    counts = load_visible_pixel_counts(scene_path)
+    if counts is None or frame_index not in counts:
+        return None
+    if len(counts[frame_index]) != n_objects:
+        raise SceneError(
+            scene_path / "scene_gt_info.json",
+            f"frame {frame_index} lists {len(counts[frame_index])} objects, scene_gt.json "
+            f"{n_objects}",
+            "regenerate scene_gt_info.json from scene_gt.json",
+        )
+    return counts[frame_index]
+
+
 def ground_truth_masks(
     scene_path: Path | str,
     frame_index: int,
@@ -240,8 +388,10 @@ def ground_truth_masks(
     frame: Frame | None = None,
     walls: bool = True,
     tolerance_m: float = VISIBILITY_TOLERANCE_M,
+    mask_files: bool = True,
 ) -> tuple[np.ndarray, list[int], list[int]]:
-    """Visible ground-truth object masks of one frame (BOP visibility rule, module doc).
+    """Visible ground-truth object masks of one frame (BOP visibility rule, module doc): the
+    scene's ``mask_visib/`` files of the frame when it has them, else rendered from the models.
 
     Args:
         scene_path: scene folder with ``scene_gt.json`` (and ``scene_camera.json``, ``depth/``
@@ -255,6 +405,9 @@ def ground_truth_masks(
             used instead of reading the files).
         walls: also render the walls of a generated scene (``synth_walls``) as occluders.
         tolerance_m: visibility tolerance behind the observed depth, metres.
+        mask_files: read the frame's BOP ``mask_visib/`` files when there are any (``walls``,
+            ``tolerance_m``, ``models_dir`` and ``renderer`` are then not used); False always
+            renders.
 
     Returns:
         labels: (H, W) int32, 0 background, ``k + 1`` for the k-th object of the frame's
@@ -271,6 +424,10 @@ def ground_truth_masks(
             f'give the frame-{frame_index} object poses under key "{frame_index}"',
         )
     poses = ground_truth[frame_index]
+    if mask_files and mask_file_paths(scene_path, frame_index):
+        shape = frame.shape if frame is not None else _frame_shape(scene_path, frame_index)
+        labels, visible_px = read_mask_files(scene_path, frame_index, len(poses), shape)
+        return labels, [pose.obj_id for pose in poses], visible_px
     if frame is not None:
         K, observed = np.asarray(frame.K, dtype=np.float64), frame.depth_m
         world_from_camera = np.asarray(frame.world_from_camera, dtype=np.float64)

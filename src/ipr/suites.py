@@ -3,6 +3,10 @@
 - ``ycb-static``: 24 static piles (twice the paper's 12 static YCB scenes).
 - ``ycb-dynamic``: 26 piles with 1-3 pushes each (twice the paper's 13 dynamic scenes).
 - ``ycbv-real``: the real YCB-Video frames in the shared data (BOP format, static).
+- ``bins-real``: the real bin-picking frames in the shared data (BOP format with ``mask_visib/``,
+  one static frame each, boxes in a bin, no camera pose).
+
+Real suites are read in place from the shared data (``ipr.data``), never copied or cached.
 
 Generated suites live in ``<cache>/suites/<name>-<key>/`` where ``key`` hashes the generator's
 source and default configuration, so a change to the generator makes a new suite instead of
@@ -23,7 +27,7 @@ from dataclasses import dataclass
 from multiprocessing import get_context
 from pathlib import Path
 
-from ipr.data import cache_dir, ycb_models_dir, ycbv_real_dir
+from ipr.data import bins_real_dir, cache_dir, ycb_models_dir, ycbv_real_dir
 from ipr.errors import IprError
 from ipr.synth import ARRANGEMENTS
 
@@ -41,7 +45,12 @@ GENERATED = {
     "ycb-static": SuiteSpec("static", 2018_12, 24),
     "ycb-dynamic": SuiteSpec("dynamic", 2018_13, 26),
 }
-SUITES = [*GENERATED, "ycbv-real"]
+#: Real suites: name -> where the shared data keeps their scenes (None when absent).
+REAL: dict[str, Callable[[], Path | None]] = {
+    "ycbv-real": ycbv_real_dir,
+    "bins-real": bins_real_dir,
+}
+SUITES = [*GENERATED, *REAL]
 
 
 def generator_key() -> str:
@@ -87,10 +96,10 @@ def suite_scenes(
     progress: Callable[[int, int], None] | None = None,
 ) -> list[Path]:
     """Scene folders of a suite, generating and caching a generated suite on first use."""
-    if name == "ycbv-real":
-        root = ycbv_real_dir()
+    if name in REAL:
+        root = REAL[name]()
         if root is None:
-            raise IprError("suite ycbv-real needs the shared data (../shared/data or $IPR_DATA)")
+            raise IprError(f"suite {name} needs the shared data (../shared/data or $IPR_DATA)")
         return sorted(path for path in root.iterdir() if (path / "scene_camera.json").exists())
     if name not in GENERATED:
         raise IprError(f"unknown suite {name!r}; choose one of {', '.join(SUITES)}")

@@ -4,7 +4,9 @@ Layout of OUT (written to a temporary folder, then renamed into place):
 
     labels/NNNNNN.png    uint16; 0 = background or support, k >= 1 = object k (same k in every frame)
     facets/NNNNNN.png    uint16; 0 = none, f >= 1 = facet f of that frame
-    overlay/NNNNNN.png   RGB with objects tinted by id, facet borders and id labels
+    overlay/NNNNNN.png   RGB with objects tinted by id, facet borders and id labels; the known
+                         planes' pixels in flat colours (``known_plane_pixels``): the support
+                         blue, what lies below it dark blue, walls ochre
     segmentation.json    per frame: objects (id, pixels, facets, border), planes; timings
 """
 
@@ -17,8 +19,20 @@ from PIL import Image, ImageDraw, ImageFont
 
 from ipr.atomic import staged_directory, write_json
 from ipr.errors import IprError
-from ipr.perception import Perception
-from ipr.scene import Scene
+from ipr.perception import Perception, PerceptionConfig
+from ipr.perception.planes import static_geometry_mask
+from ipr.perception.types import KnownPlane
+from ipr.scene import Frame, Scene
+
+#: Codes of ``known_plane_pixels``: no known plane, on the support (within its clearance),
+#: below the support, on a wall.
+KNOWN_NONE, KNOWN_SUPPORT, KNOWN_BELOW, KNOWN_WALL = 0, 1, 2, 3
+#: Flat overlay colour of each code (none: the dimmed image itself).
+KNOWN_COLOURS = {
+    KNOWN_SUPPORT: (40, 110, 230),
+    KNOWN_BELOW: (20, 40, 100),
+    KNOWN_WALL: (200, 150, 40),
+}
 
 
 def palette(ids: np.ndarray) -> np.ndarray:
@@ -40,10 +54,48 @@ def palette(ids: np.ndarray) -> np.ndarray:
     return (55 + 200 * rgb).astype(np.uint8)
 
 
-def overlay_image(rgb: np.ndarray, labels: np.ndarray, facet_labels: np.ndarray) -> Image.Image:
-    """RGB (H, W, 3) with objects tinted by id, facet borders darkened and ids written."""
+def known_plane_pixels(
+    frame: Frame, planes: tuple[KnownPlane, ...], config: PerceptionConfig | None = None
+) -> np.ndarray:
+    """(H, W) uint8 code of each pixel with a depth reading by the frame's known planes:
+    ``KNOWN_SUPPORT`` less than ``support.clearance_m`` above or below the support (what was
+    taken as the table), ``KNOWN_BELOW`` further below it, ``KNOWN_WALL`` a wall's pixels
+    (``static_geometry_mask``), else ``KNOWN_NONE`` (also every pixel when there is no
+    support)."""
+    config = config or PerceptionConfig()
+    height, width = frame.shape
+    codes = np.zeros(height * width, dtype=np.uint8)
+    support = next((plane for plane in planes if plane.kind == "support"), None)
+    if support is None:
+        return codes.reshape(height, width)
+    valid = np.flatnonzero(frame.depth_m.reshape(-1) > 0)
+    points = frame.points_world().reshape(-1, 3)[valid].astype(np.float64)
+    heights = support.signed_distance(points)
+    clearance = config.support.clearance_m
+    static = static_geometry_mask(points, planes, config)
+    codes[valid[static]] = KNOWN_WALL
+    codes[valid[np.abs(heights) < clearance]] = KNOWN_SUPPORT
+    codes[valid[heights <= -clearance]] = KNOWN_BELOW
+    return codes.reshape(height, width)
+
+
+def overlay_image(
+    rgb: np.ndarray,
+    labels: np.ndarray,
+    facet_labels: np.ndarray,
+    known: np.ndarray | None = None,
+) -> Image.Image:
+    """RGB (H, W, 3) with objects tinted by id, facet borders darkened and ids written; with
+    ``known`` (``known_plane_pixels``), the known planes' pixels that are not objects in their
+    colours (``KNOWN_COLOURS``, with a quarter of the pixel's grey so edges stay visible)."""
     image = rgb.astype(np.float32) * 0.45
     objects = labels > 0
+    if known is not None:
+        # Nearly flat: a quarter of the pixel's grey keeps the edges of what lies there visible.
+        grey = rgb.astype(np.float32).mean(axis=-1, keepdims=True)
+        for code, colour in KNOWN_COLOURS.items():
+            mask = (known == code) & ~objects
+            image[mask] = 0.75 * np.asarray(colour, np.float32) + 0.25 * grey[mask]
     colours = palette(labels[objects])
     image[objects] = 0.45 * rgb[objects] + 0.55 * colours
     # Facet borders: pixels whose right or lower neighbour has another facet.
@@ -67,9 +119,15 @@ def overlay_image(rgb: np.ndarray, labels: np.ndarray, facet_labels: np.ndarray)
 
 
 def write_segmentation(
-    scene: Scene, perception: Perception, out_dir: Path, *, overwrite: bool = False
+    scene: Scene,
+    perception: Perception,
+    out_dir: Path,
+    *,
+    overwrite: bool = False,
+    config: PerceptionConfig | None = None,
 ) -> Path:
-    """Write the label, facet and overlay images and a JSON summary; returns ``out_dir``."""
+    """Write the label, facet and overlay images and a JSON summary; returns ``out_dir``.
+    ``config`` is the perception's (its support clearance colours the overlays' support)."""
     out_dir = Path(out_dir)
     if out_dir.exists() and not overwrite:
         raise IprError(
@@ -90,7 +148,9 @@ def write_segmentation(
             name = f"{frame.index:06d}.png"
             Image.fromarray(labels.astype(np.uint16)).save(staging / "labels" / name)
             Image.fromarray(facet_labels.astype(np.uint16)).save(staging / "facets" / name)
-            overlay_image(frame.rgb, labels, facet_labels).save(staging / "overlay" / name)
+            known = known_plane_pixels(frame, planes, config)
+            overlay = overlay_image(frame.rgb, labels, facet_labels, known)
+            overlay.save(staging / "overlay" / name)
             frames.append(
                 {
                     "frame": frame.index,
