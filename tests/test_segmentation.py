@@ -13,7 +13,12 @@ import numpy as np
 import pytest
 
 from ipr.camera import look_at
-from ipr.perception.config import ContainersConfig, PerceptionConfig, WallsConfig
+from ipr.perception.config import (
+    ContainersConfig,
+    PerceptionConfig,
+    SegmentationConfig,
+    WallsConfig,
+)
 from ipr.perception.planes import find_known_planes, static_geometry_mask
 from ipr.perception.robot import robot_pixels
 from ipr.perception.segmentation import (
@@ -24,6 +29,7 @@ from ipr.perception.segmentation import (
     segment_frame,
 )
 from ipr.perception.supervoxels import compute_supervoxels, organised_normals
+from ipr.perception.types import Supervoxels
 from ipr.scene import Frame, Push, Pusher, load_scene
 from ipr.synth import SynthConfig, generate_scene
 
@@ -553,3 +559,35 @@ def test_a_cube_on_a_box_is_not_its_inside():
     below = segment_of_point(frame, labels, (0.05, 0.05, 0.05))
     on_top = segment_of_point(frame, labels, (0.0, 0.0, 0.08))
     assert below > 0 and on_top > 0 and below != on_top
+
+
+def _two_patches(angle_deg: float, colours) -> Supervoxels:
+    """Two supervoxels 2 cm apart on a concave fold (a bowl's inside, seen from above): each
+    normal tilted by half the angle towards the other."""
+    half = np.radians(angle_deg / 2)
+    centres = np.array([[-0.01, 0.0, 0.0], [0.01, 0.0, 0.0]])
+    normals = np.array([[np.sin(half), 0.0, np.cos(half)], [-np.sin(half), 0.0, np.cos(half)]])
+    return Supervoxels(
+        labels=np.zeros((1, 2), np.int32),
+        centres=centres,
+        normals=normals,
+        colours=np.asarray(colours, float),
+        sizes=np.array([100, 100]),
+        adjacency=np.array([[0, 1]]),
+    )
+
+
+def test_a_gently_concave_surface_of_one_colour_stays_joined_only_when_asked():
+    lccp = PerceptionConfig()
+    join = PerceptionConfig(
+        segmentation=SegmentationConfig(concave_join_deg=30.0, concave_join_colour=0.04)
+    )
+    teal = [[0.1, 0.5, 0.5], [0.05, 0.25, 0.25]]  # one colour, one patch in shade
+    # LCCP cuts a 20-degree concave fold; the join keeps it when the colours agree.
+    assert edge_weights(_two_patches(20.0, teal), lccp)[0] == lccp.segmentation.concave_weight
+    assert edge_weights(_two_patches(20.0, teal), join)[0] == 1.0
+    # Not across a colour edge, nor at a sharp crease, nor when the fold is convex.
+    teal_red = [[0.1, 0.5, 0.5], [0.6, 0.1, 0.1]]
+    assert edge_weights(_two_patches(20.0, teal_red), join)[0] < 1.0
+    assert edge_weights(_two_patches(60.0, teal), join)[0] < 1.0
+    assert edge_weights(_two_patches(-20.0, teal), join)[0] == 1.0  # convex: strong anyway

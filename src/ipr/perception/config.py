@@ -282,6 +282,12 @@ class SegmentationConfig:
             1 / (1 + exp(-0.25 (normal angle - 25))) (the authors' code: a fixed 45 degrees;
             LCCP: 60 with the sigmoid).
         smoothness_threshold: LCCP smoothness slack, in voxel sizes (the authors: 0.1).
+        concave_join_deg: a concave edge whose normals differ by less than this (deg) is still
+            strong when its two supervoxels have alike colours (``concave_join_colour``): a
+            curved concave surface (a bowl's inside) changes its normal a little at every
+            step, while two objects meet at a crease or a colour edge. 0: off (LCCP).
+        concave_join_colour: largest distance between the two supervoxels' mean
+            chromaticities (r, g, b over their sum) for ``concave_join_deg`` to apply.
         concave_weight: graph weight of concave (or not smooth) edges; convex and flat edges
             weigh 1, so the clustering cuts at concavities.
         singular_weight: graph weight of convex edges that fail the sanity check.
@@ -304,6 +310,8 @@ class SegmentationConfig:
         "concavity_tolerance_deg": _ANGLE,
         "sanity_angle_deg": _ANGLE,
         "smoothness_threshold": _NON_NEGATIVE,
+        "concave_join_deg": _ANGLE,
+        "concave_join_colour": _NON_NEGATIVE,
         "concave_weight": _NON_NEGATIVE,
         "singular_weight": _NON_NEGATIVE,
         "dense_eigen_limit": _COUNT,
@@ -319,6 +327,8 @@ class SegmentationConfig:
     sanity_angle_deg: float = 60.0
     sanity_sigmoid: bool = True
     smoothness_threshold: float = 0.1
+    concave_join_deg: float = 0.0
+    concave_join_colour: float = 0.02
     concave_weight: float = 0.001
     singular_weight: float = 0.001
     dense_eigen_limit: int = 400

@@ -326,6 +326,15 @@ def edge_weights(supervoxels: Supervoxels, config: PerceptionConfig) -> np.ndarr
     slack = config.segmentation.smoothness_threshold * config.supervoxels.voxel_size_m
     smooth = step <= crease_norm * config.supervoxels.seed_size_m + slack
     strong = (flat | (convex & ~singular)) & smooth
+    join_deg = config.segmentation.concave_join_deg
+    if join_deg > 0:
+        colours = supervoxels.colours
+        chroma = colours / np.maximum(colours.sum(axis=1, keepdims=True), 1e-6)
+        alike = (
+            np.linalg.norm(chroma[pairs[:, 0]] - chroma[pairs[:, 1]], axis=1)
+            <= config.segmentation.concave_join_colour
+        )
+        strong |= ~convex & (normal_angle < join_deg) & alike & smooth
     weights = np.where(strong, 1.0, config.segmentation.concave_weight)
     weights[singular & smooth] = config.segmentation.singular_weight
     return weights
