@@ -326,3 +326,28 @@ def test_infer_rejects_bad_worker_and_sample_counts(scene_dir: Path, tmp_path: P
             main(["infer", str(scene_dir), "-o", str(tmp_path / "r"), flag, "0"])
         assert exit_info.value.code == 2
         assert "at least 1" in capsys.readouterr().err
+
+
+def _listing(folder: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(folder)): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
+
+
+@pytest.mark.parametrize("command", ["infer", "segment", "ground-truth"])
+def test_no_output_may_replace_the_input_scene(command: str, scene_dir: Path, capsys):
+    """The output folder is replaced whole when it is written: the scene itself, a folder
+    inside it and a folder holding it are all refused before any work, with --overwrite too."""
+    before = _listing(scene_dir.parent)
+    for out in (scene_dir, scene_dir / "result", scene_dir.parent):
+        code = main([command, str(scene_dir), "-o", str(out), "--overwrite"])
+        assert code == EXIT_INPUT_ERROR, out
+        error = capsys.readouterr().err
+        assert "would replace the input" in error and len(error.strip().splitlines()) == 1
+    assert _listing(scene_dir.parent) == before
+
+
+def test_an_output_path_through_a_file_is_refused_before_the_run(scene_dir: Path, tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    assert main(["segment", str(scene_dir), "-o", str(blocker)]) == EXIT_INPUT_ERROR
+    assert main(["segment", str(scene_dir), "-o", str(blocker / "out")]) == EXIT_INPUT_ERROR
+    assert blocker.read_text() == "x"

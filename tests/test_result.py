@@ -10,7 +10,7 @@ import trimesh
 
 from ipr.camera import look_at
 from ipr.data import ycbv_real_dir
-from ipr.errors import ResultError
+from ipr.errors import IprError, ResultError
 from ipr.ground_truth import write_ground_truth_result
 from ipr.result import (
     RESULT_FORMAT,
@@ -290,7 +290,7 @@ def test_ground_truth_result(ycbv_scene, tmp_path):
         )
         assert np.allclose(obj.mesh.vertices, expected, atol=1e-6)
         assert math.isclose(obj.mesh.volume, model.volume, rel_tol=1e-4)
-    with pytest.raises(ResultError, match="already exists"):
+    with pytest.raises(IprError, match="already exists"):
         write_ground_truth_result(ycbv_scene, out)
 
 

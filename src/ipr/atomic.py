@@ -8,7 +8,7 @@ import json
 import os
 import shutil
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -54,3 +54,37 @@ def write_json(path: Path, content: Any) -> None:
         staging.replace(path)
     finally:
         staging.unlink(missing_ok=True)
+
+
+def check_output_location(
+    out: Path | str, inputs: Iterable[Path | str], *, overwrite: bool
+) -> Path:
+    """The output folder ``out``, checked before any work: it is not one of ``inputs``, inside
+    one, or a folder that holds one (writing it replaces the whole folder, so each of those
+    would destroy an input); it is not an existing file, nor an existing folder unless
+    ``overwrite``; its nearest existing parent is a writable folder. IprError (one line: what,
+    where, the fix) otherwise."""
+    from ipr.errors import IprError
+
+    out = Path(out)
+    target = out.resolve()
+    for item in inputs:
+        source = Path(item).resolve()
+        if target == source or source in target.parents or target in source.parents:
+            raise IprError(
+                f"{out}: the output folder would replace the input {item} (it is the input, "
+                "inside it or holds it) (fix: choose an output folder outside the input)"
+            )
+    if out.exists() and not out.is_dir():
+        raise IprError(f"{out}: exists and is not a folder (fix: choose another output path)")
+    if out.exists() and not overwrite:
+        raise IprError(f"{out}: already exists (fix: choose another folder or pass --overwrite)")
+    parent = target.parent
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
+        raise IprError(
+            f"{out}: cannot be written ({parent} is not a writable folder) "
+            "(fix: choose a writable output folder)"
+        )
+    return out

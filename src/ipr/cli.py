@@ -158,10 +158,12 @@ def _cmd_infer(args: argparse.Namespace) -> int:
 
 
 def _cmd_segment(args: argparse.Namespace) -> int:
+    from ipr.atomic import check_output_location
     from ipr.perception import perceive_scene
     from ipr.perception.output import write_segmentation
     from ipr.scene import load_scene
 
+    check_output_location(Path(args.out), [Path(args.scene)], overwrite=args.overwrite)
     config = _config(args)
     scene = load_scene(Path(args.scene))
     perception = perceive_scene(scene, config.perception if config else None)

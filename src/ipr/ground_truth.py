@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from ipr.atomic import check_output_location
 from ipr.errors import SceneError
 from ipr.result import GROUND_TRUTH_METHOD, write_result
 from ipr.scene import (
@@ -127,6 +128,7 @@ def write_ground_truth_result(
     scores 1 in both spaces. ``extra["ground_truth"]`` records the scene, the BOP ``obj_id`` of
     each written object (in object order) and the excluded ones.
     """
+    check_output_location(out_dir, [scene_path], overwrite=overwrite)
     scene = load_scene(scene_path)
     poses, models, models_dir = frame0_ground_truth(scene_path, models_dir)
     world_from_camera = scene.frames[0].world_from_camera

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ipr.atomic import check_output_location
 from ipr.carving import carve_posteriors, surface_views
 from ipr.collision_checker import collision_checker
 from ipr.config import Config
@@ -319,11 +320,7 @@ def infer(
 ) -> Path:
     """Load a scene, run the pipeline and write the result directory (atomically), with
     ``completion.png``: frame 0's RGB beside the completed objects seen from its camera."""
-    out_dir = Path(out_dir)
-    if out_dir.exists() and not overwrite:
-        raise IprError(
-            f"{out_dir}: already exists (fix: choose another folder or pass --overwrite)"
-        )
+    out_dir = check_output_location(out_dir, [scene_path], overwrite=overwrite)
     scene = load_scene(scene_path)
     result = run_pipeline(
         scene,
