@@ -344,6 +344,34 @@ def build_parser() -> argparse.ArgumentParser:
     _add_config_option(infer)
     infer.set_defaults(handler=_cmd_infer)
 
+    batch = commands.add_parser(
+        "batch",
+        help="complete the shapes of many scenes (one result each, a summary, scores)",
+        description="Run 'ipr infer' on many scenes: scene folders, folders of scene folders "
+        "or glob patterns. Each result goes to OUT/<scene folder name>; a scene whose result is "
+        "already there is kept (rerun a batch to finish it); a scene that fails is listed and "
+        "does not stop the others. OUT/summary.md and summary.json list every scene with its "
+        "status, objects, time and, where the scene has ground truth, the 'ipr eval' IoUs. "
+        "Exit status 1 when any scene failed.",
+    )
+    batch.add_argument("scenes", nargs="+", metavar="SCENES")
+    batch.add_argument("-o", "--out", required=True, metavar="OUT")
+    batch.add_argument("--method", default=DEFAULT_METHOD, choices=list(METHODS))
+    batch.add_argument(
+        "--jobs",
+        type=_positive_int,
+        metavar="N",
+        help="scenes run at once, one process each (default: all cores)",
+    )
+    batch.add_argument("--samples", type=_positive_int, metavar="N", help="as for ipr infer")
+    batch.add_argument("--seed", type=int, default=0, help="seed of every scene (default 0)")
+    batch.add_argument(
+        "--time-budget", type=float, metavar="SECONDS", help="budget per scene (as ipr infer)"
+    )
+    batch.add_argument("--no-eval", action="store_true", help="do not score against ground truth")
+    _add_config_option(batch)
+    batch.set_defaults(handler=_cmd_batch)
+
     segment = commands.add_parser(
         "segment",
         help="segment and track the objects of a scene, with facets",
@@ -387,6 +415,35 @@ def build_parser() -> argparse.ArgumentParser:
     )
     suite.set_defaults(handler=_cmd_suite)
     return parser
+
+
+def _cmd_batch(args: argparse.Namespace) -> int:
+    from ipr.batch import BatchOptions, find_scenes, run_batch
+
+    scenes = find_scenes(args.scenes)
+    options = BatchOptions(
+        method=args.method,
+        seed=args.seed,
+        time_budget_s=args.time_budget,
+        samples=args.samples,
+        config=_config(args),
+        evaluate=not args.no_eval,
+    )
+    with _progress() as progress:
+        task = progress.add_task(f"{len(scenes)} scenes", total=len(scenes))
+
+        def advance(outcome) -> None:
+            progress.advance(task)
+            if outcome.status == "failed":
+                progress.console.print(f"{outcome.scene}: failed: {outcome.error}")
+
+        summary = run_batch(scenes, Path(args.out), options, jobs=args.jobs, on_outcome=advance)
+    counts = {s: sum(o.status == s for o in summary.outcomes) for s in ("done", "kept", "failed")}
+    print(
+        f"{args.out}: {counts['done']} run, {counts['kept']} kept, {counts['failed']} failed "
+        f"(summary: {Path(args.out) / 'summary.md'})"
+    )
+    return 1 if summary.failed else 0
 
 
 def _add_config_option(parser: argparse.ArgumentParser) -> None:

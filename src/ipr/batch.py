@@ -1,0 +1,275 @@
+"""Many scenes in one call (``ipr batch``): one result folder per scene, a summary table, and
+``ipr eval`` scores where the scene has ground truth.
+
+- Scenes: scene folders (holding ``scene_camera.json``), folders of scene folders (a suite, a
+  BOP split) or glob patterns; each result goes to ``OUT/<scene folder name>``.
+- Resumable: a scene whose result folder already holds a valid result is kept, not rerun; a
+  scene that fails is reported in the summary and does not stop the others.
+- Parallel: scenes run in a local process pool (one process per core by default), each with one
+  sampling worker, since a pool of pools would oversubscribe the cores.
+- Summary: ``OUT/summary.json`` (every scene's status, objects, seconds, scores, error) and
+  ``OUT/summary.md`` (the same as a table), rewritten atomically after every scene so that an
+  interrupted batch still says what it finished.
+"""
+
+from __future__ import annotations
+
+import glob
+import math
+import multiprocessing
+import os
+import time
+import traceback
+from collections.abc import Callable, Iterable, Sequence
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from ipr.atomic import check_output_location, write_json
+from ipr.config import Config
+from ipr.errors import IprError
+from ipr.methods import DEFAULT_METHOD, get_method
+
+SUMMARY_JSON = "summary.json"
+SUMMARY_MD = "summary.md"
+
+
+@dataclass(frozen=True)
+class BatchOptions:
+    """How every scene of a batch is run (``ipr.pipeline.infer``'s options).
+
+    Attributes:
+        method: inference method (``ipr.methods``).
+        seed: seed of every scene's run.
+        time_budget_s: wall-clock budget per scene (s; None: the method's default).
+        samples: joint models sampled per scene (None: as the budget allows).
+        config: the run's configuration (None: the defaults).
+        evaluate: score each result against the scene's ground truth when it has some.
+    """
+
+    method: str = DEFAULT_METHOD
+    seed: int = 0
+    time_budget_s: float | None = None
+    samples: int | None = None
+    config: Config | None = None
+    evaluate: bool = True
+
+
+@dataclass(frozen=True)
+class SceneOutcome:
+    """One scene's line of the summary.
+
+    Attributes:
+        scene: the scene folder.
+        result: its result folder.
+        status: "done" (run now), "kept" (a valid result was already there) or "failed".
+        objects: objects in the result (None when failed).
+        seconds: wall time of the run (0 when kept).
+        object_iou, scene_iou: ``ipr eval`` IoUs when the scene has ground truth, else None.
+        error: the one-line error of a failed scene.
+    """
+
+    scene: str
+    result: str
+    status: str
+    objects: int | None = None
+    seconds: float = 0.0
+    object_iou: float | None = None
+    scene_iou: float | None = None
+    error: str | None = None
+
+
+@dataclass(frozen=True)
+class BatchSummary:
+    """Every scene's outcome, in the order the scenes were given."""
+
+    out_dir: str
+    method: str
+    outcomes: tuple[SceneOutcome, ...] = field(default_factory=tuple)
+
+    @property
+    def failed(self) -> int:
+        """Scenes that failed."""
+        return sum(o.status == "failed" for o in self.outcomes)
+
+
+def is_scene(folder: Path) -> bool:
+    """A BOP scene folder: it holds ``scene_camera.json``."""
+    return (folder / "scene_camera.json").is_file()
+
+
+def find_scenes(patterns: Iterable[str | Path]) -> list[Path]:
+    """The scene folders named by ``patterns`` (scene folders, folders of scene folders or
+    globs), in order, each once; IprError naming the pattern that matches none."""
+    scenes: list[Path] = []
+    for pattern in patterns:
+        text = str(pattern)
+        matches = (
+            [Path(p) for p in sorted(glob.glob(text))] if glob.has_magic(text) else [Path(text)]
+        )
+        found = []
+        for match in matches:
+            if is_scene(match):
+                found.append(match)
+            elif match.is_dir():
+                found += sorted(p for p in match.iterdir() if p.is_dir() and is_scene(p))
+        if not found:
+            raise IprError(
+                f"{text}: no scene folder (one holding scene_camera.json) there "
+                "(fix: name scene folders, folders of scenes or a glob of them)"
+            )
+        scenes += [s for s in found if s.resolve() not in {x.resolve() for x in scenes}]
+    names = [s.name for s in scenes]
+    clash = sorted({n for n in names if names.count(n) > 1})
+    if clash:
+        raise IprError(
+            f"scenes with the same folder name {clash} would share a result folder "
+            "(fix: run them in separate batches)"
+        )
+    return scenes
+
+
+def _kept(result_dir: Path) -> int | None:
+    """Objects of a valid result already in ``result_dir``, else None."""
+    from ipr.result import load_result
+
+    if not (result_dir / "result.json").is_file():
+        return None
+    try:
+        return len(load_result(result_dir, load_meshes=False).objects)
+    except IprError:
+        return None
+
+
+def _scores(scene: Path, result_dir: Path) -> tuple[float | None, float | None]:
+    """(object IoU, scene IoU) of ``ipr eval``, or Nones when the scene has no ground truth."""
+    from ipr.metrics import evaluate
+
+    if not (scene / "scene_gt.json").is_file():
+        return None, None
+    evaluation = evaluate(scene, result_dir)
+    return evaluation.object_space.iou, evaluation.scene_space.iou
+
+
+def run_scene(scene: Path, result_dir: Path, options: BatchOptions) -> SceneOutcome:
+    """Run (or keep) one scene; never raises: a failure is the outcome's ``error``."""
+    from ipr.pipeline import infer
+
+    base = {"scene": str(scene), "result": str(result_dir)}
+    kept = _kept(result_dir)
+    started = time.perf_counter()
+    try:
+        if kept is None:
+            infer(
+                scene,
+                result_dir,
+                method=options.method,
+                seed=options.seed,
+                time_budget_s=options.time_budget_s,
+                workers=1,
+                samples=options.samples,
+                config=options.config,
+                overwrite=result_dir.exists(),
+            )
+            objects = _kept(result_dir)
+            status, seconds = "done", time.perf_counter() - started
+        else:
+            objects, status, seconds = kept, "kept", 0.0
+        object_iou = scene_iou = None
+        if options.evaluate:
+            object_iou, scene_iou = _scores(scene, result_dir)
+    except (IprError, OSError, ValueError) as error:
+        return SceneOutcome(**base, status="failed", error=" ".join(str(error).split()))
+    except Exception as error:  # noqa: BLE001 - one scene's crash must not stop the batch
+        last = traceback.format_exception_only(type(error), error)[-1].strip()
+        return SceneOutcome(**base, status="failed", error=f"crashed: {last}")
+    return SceneOutcome(**base, status=status, objects=objects, seconds=seconds,
+                        object_iou=object_iou, scene_iou=scene_iou)  # fmt: skip
+
+
+def _summary_markdown(summary: BatchSummary) -> str:
+    def number(value: float | None, digits: int = 3) -> str:
+        return "-" if value is None or not math.isfinite(value) else f"{value:.{digits}f}"
+
+    lines = [
+        f"# ipr batch: {summary.method}",
+        "",
+        "| scene | status | objects | seconds | object IoU | scene IoU | error |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for o in summary.outcomes:
+        lines.append(
+            f"| {Path(o.scene).name} | {o.status} | {'-' if o.objects is None else o.objects} "
+            f"| {number(o.seconds, 1)} | {number(o.object_iou)} | {number(o.scene_iou)} "
+            f"| {(o.error or '').replace('|', '/')} |"
+        )
+    scored = [o for o in summary.outcomes if o.object_iou is not None]
+    if scored:
+        mean = sum(o.object_iou for o in scored) / len(scored)
+        lines += ["", f"Mean object IoU over {len(scored)} scored scenes: {mean:.3f}"]
+    return "\n".join(lines) + "\n"
+
+
+def _write_summary(summary: BatchSummary) -> None:
+    out = Path(summary.out_dir)
+    write_json(out / SUMMARY_JSON, asdict(summary))
+    staging = out / f".{SUMMARY_MD}.{os.getpid()}.tmp"
+    staging.write_text(_summary_markdown(summary), encoding="utf-8")
+    staging.replace(out / SUMMARY_MD)
+
+
+def run_batch(
+    scenes: Sequence[Path],
+    out_dir: Path | str,
+    options: BatchOptions | None = None,
+    *,
+    jobs: int | None = None,
+    on_outcome: Callable[[SceneOutcome], None] | None = None,
+) -> BatchSummary:
+    """Run every scene into ``out_dir/<scene name>`` with ``jobs`` processes (default: the
+    cores this process may use; 1: in this process), keeping valid results already there.
+
+    ``on_outcome`` is called with each scene's outcome as it finishes (progress). The summary
+    files are rewritten after every scene. Raises IprError before any work when the output
+    folder would overlap a scene."""
+    options = options or BatchOptions()
+    get_method(options.method)
+    out = Path(out_dir)
+    scenes = [Path(s) for s in scenes]
+    for scene in scenes:  # OUT, and every result folder, must stay clear of every scene
+        check_output_location(out, [scene], overwrite=True)
+    out.mkdir(parents=True, exist_ok=True)
+    if jobs is None:
+        jobs = max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1)
+    outcomes: dict[int, SceneOutcome] = {}
+
+    def finish(index: int, outcome: SceneOutcome) -> None:
+        outcomes[index] = outcome
+        done = tuple(outcomes[i] for i in sorted(outcomes))
+        _write_summary(BatchSummary(str(out), options.method, done))
+        if on_outcome is not None:
+            on_outcome(outcome)
+
+    if jobs <= 1 or len(scenes) <= 1:
+        for index, scene in enumerate(scenes):
+            finish(index, run_scene(scene, out / scene.name, options))
+    else:
+        context = multiprocessing.get_context("forkserver")
+        with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
+            futures: dict[Future, int] = {
+                pool.submit(run_scene, scene, out / scene.name, options): index
+                for index, scene in enumerate(scenes)
+            }
+            pending = set(futures)
+            while pending:
+                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for future in finished:
+                    index = futures[future]
+                    try:
+                        outcome = future.result()
+                    except Exception as error:  # noqa: BLE001 - a worker died
+                        scene = scenes[index]
+                        outcome = SceneOutcome(str(scene), str(out / scene.name), "failed",
+                                               error=f"worker died: {error}")  # fmt: skip
+                    finish(index, outcome)
+    return BatchSummary(str(out), options.method, tuple(outcomes[i] for i in sorted(outcomes)))
