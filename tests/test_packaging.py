@@ -1,0 +1,84 @@
+"""Packaging: the declared dependencies are the ones the code imports, and the lock holds them and
+what they need (nothing else)."""
+
+from __future__ import annotations
+
+import re
+import tomllib
+from importlib import metadata
+from pathlib import Path
+
+import pytest
+from packaging.requirements import Requirement
+from packaging.utils import canonicalize_name
+
+ROOT = Path(__file__).resolve().parents[1]
+PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
+#: Distribution name -> the module it is imported as, where they differ.
+IMPORT_NAMES = {"pillow": "PIL", "tomli-w": "tomli_w"}
+
+
+def _names(requirements: list[str]) -> list[str]:
+    return [canonicalize_name(Requirement(text).name) for text in requirements]
+
+
+def _lock() -> dict[str, str]:
+    """Canonical name -> pinned version of requirements.lock."""
+    pins = {}
+    for line in (ROOT / "requirements.lock").read_text(encoding="utf-8").splitlines():
+        line = line.split("#", 1)[0].strip()
+        if line:
+            name, version = line.split("==")
+            pins[canonicalize_name(name)] = version
+    return pins
+
+
+def _imported(module: str, folder: str) -> bool:
+    pattern = re.compile(rf"^\s*(import|from) {re.escape(module)}\b", re.MULTILINE)
+    return any(
+        pattern.search(path.read_text(encoding="utf-8")) for path in (ROOT / folder).rglob("*.py")
+    )
+
+
+@pytest.mark.parametrize(
+    "group, folder",
+    [("runtime", "src/ipr"), ("bench", "benchmarks")],
+)
+def test_every_declared_dependency_is_imported(group: str, folder: str):
+    project = PYPROJECT["project"]
+    declared = (
+        project["dependencies"] if group == "runtime" else project["optional-dependencies"][group]
+    )
+    unused = [
+        name
+        for name in _names(declared)
+        if not _imported(IMPORT_NAMES.get(name, name.replace("-", "_")), folder)
+    ]
+    assert not unused, (
+        f"declared in pyproject.toml ({group}) but never imported in {folder}: {unused}"
+    )
+
+
+def test_the_lock_pins_the_declared_dependencies_and_only_what_they_need():
+    project = PYPROJECT["project"]
+    declared = _names(project["dependencies"])
+    for extra in project["optional-dependencies"].values():
+        declared += _names(extra)
+    pins = _lock()
+    assert set(declared) <= set(pins), f"not pinned: {sorted(set(declared) - set(pins))}"
+    # Everything pinned is declared or required by something pinned (installed metadata).
+    needed, queue = set(), list(declared)
+    while queue:
+        name = queue.pop()
+        if name in needed:
+            continue
+        needed.add(name)
+        try:
+            requires = metadata.requires(name) or []
+        except metadata.PackageNotFoundError:
+            continue
+        for text in requires:
+            requirement = Requirement(text)
+            if requirement.marker is None or requirement.marker.evaluate({"extra": ""}):
+                queue.append(canonicalize_name(requirement.name))
+    assert set(pins) <= needed, f"pinned but nothing needs them: {sorted(set(pins) - needed)}"
