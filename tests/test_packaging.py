@@ -1,19 +1,24 @@
-"""Packaging: the declared dependencies are the ones the code imports, and the lock holds them and
-what they need (nothing else)."""
+"""Packaging: the declared dependencies are the ones the code imports, the lock holds them and
+what they need (nothing else), and the pinned set resolves for every supported Python."""
 
 from __future__ import annotations
 
+import json
 import re
+import subprocess
+import sys
 import tomllib
 from importlib import metadata
 from pathlib import Path
 
 import pytest
 from packaging.requirements import Requirement
+from packaging.specifiers import SpecifierSet
 from packaging.utils import canonicalize_name
 
 ROOT = Path(__file__).resolve().parents[1]
 PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
+SUPPORTED = ("3.11", "3.12", "3.13")
 #: Distribution name -> the module it is imported as, where they differ.
 IMPORT_NAMES = {"pillow": "PIL", "tomli-w": "tomli_w"}
 
@@ -38,6 +43,17 @@ def _imported(module: str, folder: str) -> bool:
     return any(
         pattern.search(path.read_text(encoding="utf-8")) for path in (ROOT / folder).rglob("*.py")
     )
+
+
+def test_the_distribution_name_is_not_the_unrelated_ipr_on_the_index():
+    assert PYPROJECT["project"]["name"] == "ipr-shapes"
+    assert PYPROJECT["project"]["scripts"] == {"ipr": "ipr.cli:main"}
+
+
+def test_every_supported_python_is_admitted_and_no_other():
+    specifier = SpecifierSet(PYPROJECT["project"]["requires-python"])
+    assert all(f"{version}.0" in specifier for version in SUPPORTED)
+    assert "3.10.0" not in specifier and "3.14.0" not in specifier
 
 
 @pytest.mark.parametrize(
@@ -82,3 +98,31 @@ def test_the_lock_pins_the_declared_dependencies_and_only_what_they_need():
             if requirement.marker is None or requirement.marker.evaluate({"extra": ""}):
                 queue.append(canonicalize_name(requirement.name))
     assert set(pins) <= needed, f"pinned but nothing needs them: {sorted(set(pins) - needed)}"
+
+
+_UNREACHABLE = re.compile(
+    r"NewConnectionError|Max retries exceeded|ProxyError|Network is unreachable|"
+    r"Temporary failure in name resolution|Name or service not known|ConnectTimeout",
+)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("python", SUPPORTED)
+def test_the_lock_resolves_for_every_supported_python(python: str, tmp_path: Path):
+    """pip resolves requirements.lock for ``python`` from binary wheels alone, and the set it
+    would install is exactly the lock (no pin missing, none conflicting)."""
+    report = tmp_path / "report.json"
+    completed = subprocess.run(
+        [sys.executable, "-m", "pip", "install", "--dry-run", "--ignore-installed", "--quiet",
+         "--only-binary=:all:", "--python-version", python, "--report", str(report),
+         "-r", str(ROOT / "requirements.lock")],
+        capture_output=True, text=True, timeout=900,
+    )  # fmt: skip
+    if completed.returncode != 0 and _UNREACHABLE.search(completed.stderr):
+        pytest.skip(f"the package index is unreachable: {completed.stderr.strip()[-200:]}")
+    assert completed.returncode == 0, completed.stderr[-2000:]
+    installed = {
+        canonicalize_name(item["metadata"]["name"]): item["metadata"]["version"]
+        for item in json.loads(report.read_text())["install"]
+    }
+    assert installed == _lock()
