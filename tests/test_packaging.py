@@ -126,3 +126,15 @@ def test_the_lock_resolves_for_every_supported_python(python: str, tmp_path: Pat
         for item in json.loads(report.read_text())["install"]
     }
     assert installed == _lock()
+
+
+def test_licence_and_citation_match_the_package():
+    assert PYPROJECT["project"]["license"] == "MIT"
+    assert (ROOT / "LICENSE").read_text(encoding="utf-8").startswith("MIT License")
+    citation = (ROOT / "CITATION.cff").read_text(encoding="utf-8")
+    version = re.search(
+        r'^__version__ = "([^"]+)"', (ROOT / "src/ipr/__init__.py").read_text(), re.MULTILINE
+    )
+    assert re.search(rf"^version: {re.escape(version.group(1))}$", citation, re.MULTILINE)
+    assert re.search(r"^license: MIT$", citation, re.MULTILINE)
+    assert "cff-version: 1.2.0" in citation and "Boularias" in citation
