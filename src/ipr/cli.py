@@ -406,6 +406,9 @@ def main(argv: list[str] | None = None) -> int:
     """Run the ``ipr`` command; returns the exit status."""
     args = build_parser().parse_args(argv)
     _configure_logging(args.verbose)
+    from ipr.gl import select_gl_backend
+
+    select_gl_backend()  # an entry point: the backend before MuJoCo loads (ipr.gl)
     try:
         return args.handler(args)
     except (IprError, FileExistsError) as error:
