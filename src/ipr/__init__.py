@@ -10,3 +10,6 @@ OpenGL backend is chosen only where ipr renders (``ipr.gl``).
 
 #: The version; pyproject.toml reads it from here.
 __version__ = "0.1.0"
+#: The distribution's name on the package index (``pip install ipr-shapes``); the import package
+#: and the command are ``ipr`` (docs/DESIGN_NOTES.md, "Distribution name").
+DISTRIBUTION = "ipr-shapes"

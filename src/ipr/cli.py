@@ -42,6 +42,47 @@ def _progress():
     )
 
 
+class _VersionAction(argparse.Action):
+    """``--version``: print the version and exit 0; warn on stderr when another installed
+    distribution also provides the import package ``ipr`` (docs/DESIGN_NOTES.md, "Distribution
+    name"): the two would overwrite each other's files."""
+
+    def __init__(self, option_strings: list[str], dest: str, **kwargs) -> None:
+        kwargs.setdefault("help", "print the version and exit")
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, **kwargs)
+
+    def __call__(self, parser, namespace, values, option_string=None) -> None:
+        import ipr
+
+        print(f"ipr {ipr.__version__} (distribution {ipr.DISTRIBUTION})")
+        for name, version in _other_ipr_distributions():
+            print(
+                f"ipr: warning: {name} {version} is also installed and also provides the import "
+                f"package 'ipr' and the 'ipr' command; the two overwrite each other's files "
+                f"(fix: 'pip uninstall {name}', then reinstall {ipr.DISTRIBUTION})",
+                file=sys.stderr,
+            )
+        parser.exit(0)
+
+
+def _other_ipr_distributions() -> list[tuple[str, str]]:
+    """(name, version) of the installed distributions other than this one that provide ``ipr``."""
+    import re
+    from importlib import metadata
+
+    import ipr
+
+    def canonical(name: str) -> str:
+        return re.sub(r"[-_.]+", "-", name).lower()
+
+    names = set(metadata.packages_distributions().get("ipr", []))
+    return sorted(
+        (name, metadata.version(name))
+        for name in names
+        if canonical(name) != canonical(ipr.DISTRIBUTION)
+    )
+
+
 def _cmd_synth(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
@@ -233,6 +274,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=0,
         help="log progress (-v) and debugging details with tracebacks (-vv)",
     )
+    parser.add_argument("--version", action=_VersionAction)
     # The same flag after the sub-command; SUPPRESS keeps it from resetting the count above.
     verbosity = argparse.ArgumentParser(add_help=False)
     verbosity.add_argument(
