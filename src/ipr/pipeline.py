@@ -8,6 +8,9 @@ The methods that use the pushes' evidence (``+action`` and ``exhaustive``) also 
 the later frames saw of each object into frame 0 (``ipr.fusion``) before the hypotheses; the
 others see frame 0 only, as their likelihood does.
 
+Provenance: ``infer`` records in ``result.json`` (key ``provenance``) what produced the
+result, with the whole configuration as ``config.toml`` beside it.
+
 Time budget: ``time_budget_s`` covers the whole run; hypotheses get their share of what is left
 after perception and fusion (a per-object timeout), and inference the rest. Without one,
 hypotheses have no wall-clock limit (so they do not depend on the machine's load) and inference
@@ -20,16 +23,18 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
+import platform
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
 
 from ipr.carving import carve_posteriors, surface_views
 from ipr.collision_checker import collision_checker
-from ipr.config import Config
+from ipr.config import Config, config_digest, config_to_toml
 from ipr.errors import IprError
 from ipr.fusion import fuse_views, tracked_free_spaces
 from ipr.hypotheses import prepare_hypotheses
@@ -45,6 +50,9 @@ from ipr.result import write_posterior_result
 from ipr.scene import Scene, load_scene
 
 log = logging.getLogger(__name__)
+
+#: The copy of the run's configuration in a result directory.
+CONFIG_FILE = "config.toml"
 
 
 @dataclass(frozen=True, eq=False)
@@ -318,12 +326,15 @@ def infer(
     overwrite: bool = False,
 ) -> Path:
     """Load a scene, run the pipeline and write the result directory (atomically), with
-    ``completion.png``: frame 0's RGB beside the completed objects seen from its camera."""
+    ``completion.png`` (frame 0's RGB beside the completed objects seen from its camera),
+    ``config.toml`` (the whole configuration) and the run's ``provenance`` in result.json
+    (``run_provenance``)."""
     out_dir = Path(out_dir)
     if out_dir.exists() and not overwrite:
         raise IprError(
             f"{out_dir}: already exists (fix: choose another folder or pass --overwrite)"
         )
+    config = config or Config()
     scene = load_scene(scene_path)
     result = run_pipeline(
         scene,
@@ -337,6 +348,10 @@ def infer(
     world_from_camera = {frame.index: frame.world_from_camera for frame in scene.frames}
     details = result.summary.to_dict()
     extra = {"inference": details} if details else {}
+    extra["provenance"] = run_provenance(
+        scene, config, method=result.method, seed=seed,
+        time_budget_s=time_budget_s, workers=workers, samples=samples,
+    )  # fmt: skip
     return write_posterior_result(
         out_dir,
         result.posteriors,
@@ -344,6 +359,49 @@ def infer(
         result.timing_s,
         method=result.method,
         extra=extra,
-        extra_files={"completion.png": completion_png(scene.frames[0], result.posteriors)},
+        extra_files={
+            "completion.png": completion_png(scene.frames[0], result.posteriors),
+            CONFIG_FILE: config_to_toml(config).encode(),
+        },
         overwrite=overwrite,
     )
+
+
+def run_provenance(
+    scene: Scene,
+    config: Config,
+    *,
+    method: str,
+    seed: int,
+    time_budget_s: float | None,
+    workers: int | None,
+    samples: int | None,
+) -> dict:
+    """What produced a result (``result.json``'s ``provenance``; docs/FORMATS.md): the ipr
+    version, method, seed, budget as asked (None: the default), the configuration's digest and
+    file, the scene and the frames read, the main libraries' versions and the time."""
+    import mujoco
+
+    import ipr
+
+    return {
+        "ipr_version": ipr.__version__,
+        "distribution": ipr.DISTRIBUTION,
+        "method": method,
+        "seed": int(seed),
+        "budget": {
+            "time_budget_s": None if time_budget_s is None else float(time_budget_s),
+            "samples": samples,
+            "workers": workers,
+        },
+        "config_digest": config_digest(config),
+        "config_file": CONFIG_FILE,
+        "scene": str(Path(scene.path).resolve()),
+        "frames": [int(frame.index) for frame in scene.frames],
+        "software": {
+            "python": platform.python_version(),
+            "numpy": np.__version__,
+            "mujoco": mujoco.__version__,
+        },
+        "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
+    }
