@@ -12,6 +12,7 @@ non-zero exit status and no traceback (``-v`` shows logs, ``-vv`` also traceback
 from __future__ import annotations
 
 import argparse
+import functools
 import logging
 import sys
 import time
@@ -26,20 +27,97 @@ log = logging.getLogger("ipr")
 EXIT_INPUT_ERROR = 2
 
 
-def _progress():
-    """A rich progress bar on stderr (disabled when stderr is not a terminal)."""
+def _progress(console=None):
+    """A rich progress bar on stderr (or ``console``), disabled when it is not a terminal."""
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    console = Console(stderr=True)
+    console = console or Console(stderr=True)
     return Progress(
         TextColumn("{task.description}"),
         BarColumn(),
         MofNCompleteColumn(),
         TimeElapsedColumn(),
+        _time_left_column(),
         console=console,
         disable=not console.is_terminal,
     )
+
+
+def _time_left_column():
+    """A column counting down to a task's ``deadline`` field (``time.monotonic()``), if any."""
+    from rich.progress import ProgressColumn
+    from rich.text import Text
+
+    class TimeLeft(ProgressColumn):
+        def render(self, task) -> Text:
+            deadline = task.fields.get("deadline")
+            if deadline is None or task.finished:
+                return Text("")
+            return Text(f"{max(deadline - time.monotonic(), 0.0):.0f} s left", style="cyan")
+
+    return TimeLeft()
+
+
+#: Shown once when the numba kernels are about to be compiled (``ipr.progress``, "compiling").
+COMPILING_NOTICE = "ipr: compiling the perception kernels once (about 30 s)..."
+_STAGE_LABELS = {
+    "perception": "perception (frames)",
+    "fusion": "fusion of later views",
+    "hypotheses": "hypotheses (objects)",
+    "sampling": "sampling (joint models)",
+    "carving": "carving",
+}
+
+
+class _ProgressBars:
+    """Draws a run's ``ipr.progress`` events as one rich progress bar per stage."""
+
+    def __init__(self, progress) -> None:
+        self._progress = progress
+        self._tasks: dict[str, int] = {}
+
+    def __call__(self, event) -> None:
+        if event.stage == "compiling":  # _with_progress has announced it
+            return
+        left = event.seconds_left
+        deadline = None if left is None else time.monotonic() + left
+        task = self._tasks.get(event.stage)
+        if task is None:
+            self._tasks[event.stage] = self._progress.add_task(
+                _STAGE_LABELS.get(event.stage, event.stage),
+                total=event.total,
+                completed=event.done,
+                deadline=deadline,
+            )
+        else:
+            self._progress.update(task, total=event.total, completed=event.done, deadline=deadline)
+
+
+def _with_progress(label: str | None = None):
+    """Run a command with progress on stderr when it is a terminal (nothing otherwise): a
+    notice when the numba kernels are about to be compiled, ``args.progress`` (the observer
+    ``ipr.pipeline`` reports to, or None) and, with ``label``, a bar for the whole command."""
+
+    def decorate(handler):
+        @functools.wraps(handler)
+        def run(args: argparse.Namespace) -> int:
+            from ipr.pipeline import kernel_cache_cold, mark_kernel_cache_warm
+
+            with _progress() as progress:
+                args.progress = None if progress.disable else _ProgressBars(progress)
+                if args.progress is not None and kernel_cache_cold():
+                    progress.console.print(COMPILING_NOTICE, highlight=False)
+                task = progress.add_task(label, total=None) if args.progress and label else None
+                status = handler(args)
+                if task is not None:
+                    progress.update(task, total=1, completed=1)
+            mark_kernel_cache_warm()  # a perception finished: the kernels are in the cache
+            return status
+
+        return run
+
+    return decorate
 
 
 class _VersionAction(argparse.Action):
@@ -160,6 +238,7 @@ def _config(args: argparse.Namespace):
     return read_config(Path(args.config))
 
 
+@_with_progress()
 def _cmd_infer(args: argparse.Namespace) -> int:
     import dataclasses
 
@@ -176,6 +255,7 @@ def _cmd_infer(args: argparse.Namespace) -> int:
     out = infer(
         Path(args.scene),
         Path(args.out),
+        progress=args.progress,
         method=args.method,
         seed=args.seed,
         time_budget_s=args.time_budget,
@@ -198,6 +278,7 @@ def _cmd_infer(args: argparse.Namespace) -> int:
     return 0
 
 
+@_with_progress("perception: segmenting and tracking the frames")
 def _cmd_segment(args: argparse.Namespace) -> int:
     from ipr.perception import perceive_scene
     from ipr.perception.output import write_segmentation

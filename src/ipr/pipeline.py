@@ -8,8 +8,9 @@ The methods that use the pushes' evidence (``+action`` and ``exhaustive``) also 
 the later frames saw of each object into frame 0 (``ipr.fusion``) before the hypotheses; the
 others see frame 0 only, as their likelihood does.
 
-Provenance: ``infer`` records in ``result.json`` (key ``provenance``) what produced the
-result, with the whole configuration as ``config.toml`` beside it.
+Progress: ``progress`` (``ipr.progress``) hears of each stage as it advances; nothing is
+reported without one. Provenance: ``infer`` records in ``result.json`` (key ``provenance``)
+what produced the result, with the whole configuration as ``config.toml`` beside it.
 
 Time budget: ``time_budget_s`` covers the whole run; hypotheses get their share of what is left
 after perception and fusion (a per-object timeout), and inference the rest. Without one,
@@ -20,10 +21,13 @@ most half of it).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import hashlib
 import logging
 import math
 import platform
+import sys
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -45,6 +49,7 @@ from ipr.perception import Perception, perceive_scene
 from ipr.perception.occlusion import join_first_frame_pieces
 from ipr.perception.types import PartialObject
 from ipr.products import ObjectPosterior, RunSummary, StageTimings
+from ipr.progress import ProgressCallback, ProgressEvent, report
 from ipr.report import completion_png
 from ipr.result import write_posterior_result
 from ipr.scene import Scene, load_scene
@@ -134,7 +139,47 @@ def perceive(scene: Scene, config: Config) -> Perception:
     """Every frame's perception, with frame 0's occluded pieces joined."""
     perception = perceive_scene(scene, config.perception)
     perception, _ = join_first_frame_pieces(scene, perception, config.perception.occluded_pieces)
+    mark_kernel_cache_warm()
     return perception
+
+
+def _kernel_cache_marker() -> Path | None:
+    """The file saying that the numba kernels (``ipr.geometry.kernels``,
+    ``ipr.perception.kernels``) were compiled into numba's cache folder for their present
+    source, this numba and this Python; None when that folder is unknown (e.g. JIT disabled)."""
+    try:
+        import numba
+
+        from ipr.geometry import kernels as geometry_kernels
+        from ipr.perception import kernels as perception_kernels
+
+        folder = next(
+            Path(value._cache._cache_path)
+            for value in vars(perception_kernels).values()
+            if getattr(getattr(value, "_cache", None), "_cache_path", None)
+        )
+        digest = hashlib.sha256(f"{numba.__version__} {sys.version}".encode())
+        for module in (geometry_kernels, perception_kernels):
+            digest.update(Path(module.__file__).read_bytes())
+        return folder / f"ipr-kernels-{digest.hexdigest()[:16]}.compiled"
+    except Exception:  # numba's internals moved, or no cache: say nothing rather than fail
+        return None
+
+
+def kernel_cache_cold() -> bool:
+    """Whether the next perception will compile the numba kernels first (25-35 s, once after
+    installing or changing them): no perception has finished since their source, numba or
+    Python changed, or their cache folder was cleared. One file test."""
+    marker = _kernel_cache_marker()
+    return marker is not None and not marker.exists()
+
+
+def mark_kernel_cache_warm() -> None:
+    """Record that the kernels are compiled and cached (after a perception finished)."""
+    marker = _kernel_cache_marker()
+    if marker is not None and not marker.exists():
+        with contextlib.suppress(OSError):  # read-only: the next run announces again
+            marker.write_text("ipr: the numba kernels in this folder are compiled\n")
 
 
 @dataclass(frozen=True, eq=False)
@@ -188,6 +233,7 @@ def infer_with_physics(
     *,
     seed: int,
     workers: int | None,
+    progress: ProgressCallback | None = None,
 ) -> tuple[InferenceOutcome, float]:
     """Hypotheses with their constraints, then a physics-based method's posteriors; also the
     seconds the hypotheses took. ``remaining_s``: the run's time left (hypotheses take their
@@ -203,6 +249,7 @@ def infer_with_physics(
         rng,
         remaining_s,
         fused.object_spaces,
+        progress,
     )
     hypotheses_s = time.perf_counter() - started
     observed = observed_frames(
@@ -221,6 +268,7 @@ def infer_with_physics(
             seed=seed,
             deadline=deadline,
             workers=workers,
+            progress=progress,
         )
     except IprError as error:  # say which scene the method refused
         raise IprError(f"{scene.path}: {error}") from None
@@ -236,6 +284,7 @@ def run_pipeline(
     time_budget_s: float | None = None,
     workers: int | None = None,
     samples: int | None = None,
+    progress: ProgressCallback | None = None,
 ) -> PipelineResult:
     """Perceive the scene and infer complete shapes of the objects of frame 0.
 
@@ -244,6 +293,8 @@ def run_pipeline(
     same result with any number of ``workers``. More than one worker (the default on a
     multi-core machine) starts a process pool: as with any Python multiprocessing, a script
     calling this must guard its entry point with ``if __name__ == "__main__":``.
+
+    ``progress``: an observer of the run's stages (``ipr.progress``; None: nothing reported).
     """
     chosen = _checked_arguments(method, time_budget_s, workers, samples)
     config = config or Config()
@@ -252,11 +303,19 @@ def run_pipeline(
             config, inference=dataclasses.replace(config.inference, max_samples=samples)
         )
     budget = RunBudget.start(time_budget_s)
+    if progress is not None and kernel_cache_cold():
+        report(progress, "compiling", 0)
+    report(progress, "perception", 0, len(scene.frames))
     perception = perceive(scene, config)
+    report(progress, "perception", len(scene.frames), len(scene.frames))
     perceived = time.perf_counter()
     if not perception.objects[0]:
         log.warning("%s: no object found in frame 0; the result is empty", scene.path)
+    if chosen.actions and config.fusion.enabled:
+        report(progress, "fusion", 0, 1)
     fused = fuse(scene, perception, chosen, config)
+    if chosen.actions and config.fusion.enabled:
+        report(progress, "fusion", 1, 1)
     fused_at = time.perf_counter()
     per_object = budget.inference_per_object_s(
         config.inference.budget_per_object_s,
@@ -282,6 +341,7 @@ def run_pipeline(
             time_budget_s=remaining,
             hypotheses=config.hypotheses,
             constraints=config.constraints,
+            progress=progress,
         )
         generation = float(sum(p.generation_s for p in posteriors))
         timing = StageTimings(
@@ -292,7 +352,7 @@ def run_pipeline(
     else:
         outcome, hypotheses_s = infer_with_physics(
             scene, perception, fused, chosen, config, rng, remaining, budget.deadline,
-            seed=seed, workers=workers,
+            seed=seed, workers=workers, progress=progress,
         )  # fmt: skip
         posteriors = outcome.posteriors
         summary = dataclasses.replace(summary, sampling=outcome.summary)
@@ -305,10 +365,12 @@ def run_pipeline(
             inference_sampling=outcome.timing_s["sampling"],
         )
     if config.carving.enabled and posteriors:
+        report(progress, "carving", 0, 1)
         carving_started = time.perf_counter()
         views = surface_views(scene.frames, perception.objects, fused.motions, config.carving)
         posteriors = carve_posteriors(posteriors, views)
         timing = dataclasses.replace(timing, carving=time.perf_counter() - carving_started)
+        report(progress, "carving", 1, 1)
     timing = dataclasses.replace(timing, total=time.perf_counter() - budget.started)
     return PipelineResult(chosen.name, posteriors, perception, timing, summary)
 
@@ -324,17 +386,26 @@ def infer(
     samples: int | None = None,
     config: Config | None = None,
     overwrite: bool = False,
+    progress: ProgressCallback | None = None,
 ) -> Path:
     """Load a scene, run the pipeline and write the result directory (atomically), with
     ``completion.png`` (frame 0's RGB beside the completed objects seen from its camera),
     ``config.toml`` (the whole configuration) and the run's ``provenance`` in result.json
-    (``run_provenance``)."""
+    (``run_provenance``). ``progress``: as ``run_pipeline``'s."""
     out_dir = Path(out_dir)
     if out_dir.exists() and not overwrite:
         raise IprError(
             f"{out_dir}: already exists (fix: choose another folder or pass --overwrite)"
         )
     config = config or Config()
+    observer = progress
+    if progress is not None and kernel_cache_cold():  # loading may compile kernels already
+        report(progress, "compiling", 0)
+
+        def observer(event: ProgressEvent) -> None:  # the announcement is made
+            if event.stage != "compiling":
+                progress(event)
+
     scene = load_scene(scene_path)
     result = run_pipeline(
         scene,
@@ -344,6 +415,7 @@ def infer(
         time_budget_s=time_budget_s,
         workers=workers,
         samples=samples,
+        progress=observer,
     )
     world_from_camera = {frame.index: frame.world_from_camera for frame in scene.frames}
     details = result.summary.to_dict()
