@@ -82,6 +82,7 @@ def test_importing_ipr_leaves_the_environment_alone_and_rendering_still_works():
     assert outcome["backend"] == outcome["gl"]
 
 
+@pytest.mark.slow
 def test_a_backend_the_user_chose_is_kept():
     from ctypes.util import find_library
 

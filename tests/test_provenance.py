@@ -83,6 +83,7 @@ def test_the_observer_hears_every_stage_in_order(scene_dir: Path):
     assert all(e.seconds_left is None for e in sampling)  # a fixed count, no deadline
 
 
+@pytest.mark.slow
 def test_sampling_reports_the_time_left_under_a_budget(scene_dir: Path):
     events: list[ProgressEvent] = []
     run_pipeline(load_scene(scene_dir), time_budget_s=6.0, workers=1, progress=events.append)
