@@ -49,7 +49,7 @@ from ipr.perception import Perception, perceive_scene
 from ipr.perception.occlusion import join_first_frame_pieces
 from ipr.perception.types import PartialObject
 from ipr.products import ObjectPosterior, RunSummary, StageTimings
-from ipr.progress import ProgressCallback, ProgressEvent, report
+from ipr.progress import ProgressCallback, report
 from ipr.report import completion_png
 from ipr.result import write_posterior_result
 from ipr.scene import Scene, load_scene
@@ -384,28 +384,17 @@ def infer(
     time_budget_s: float | None = None,
     workers: int | None = None,
     samples: int | None = None,
+    progress: ProgressCallback | None = None,
     config: Config | None = None,
     overwrite: bool = False,
-    progress: ProgressCallback | None = None,
 ) -> Path:
     """Load a scene, run the pipeline and write the result directory (atomically), with
-    ``completion.png`` (frame 0's RGB beside the completed objects seen from its camera),
-    ``config.toml`` (the whole configuration) and the run's ``provenance`` in result.json
-    (``run_provenance``). ``progress``: as ``run_pipeline``'s."""
+    ``completion.png``: frame 0's RGB beside the completed objects seen from its camera."""
     out_dir = Path(out_dir)
     if out_dir.exists() and not overwrite:
         raise IprError(
             f"{out_dir}: already exists (fix: choose another folder or pass --overwrite)"
         )
-    config = config or Config()
-    observer = progress
-    if progress is not None and kernel_cache_cold():  # loading may compile kernels already
-        report(progress, "compiling", 0)
-
-        def observer(event: ProgressEvent) -> None:  # the announcement is made
-            if event.stage != "compiling":
-                progress(event)
-
     scene = load_scene(scene_path)
     result = run_pipeline(
         scene,
@@ -415,11 +404,13 @@ def infer(
         time_budget_s=time_budget_s,
         workers=workers,
         samples=samples,
-        progress=observer,
+        progress=progress,
     )
     world_from_camera = {frame.index: frame.world_from_camera for frame in scene.frames}
     details = result.summary.to_dict()
     extra = {"inference": details} if details else {}
+    # What produced it (module doc): the provenance, and the whole configuration beside it.
+    config = config or Config()
     extra["provenance"] = run_provenance(
         scene, config, method=result.method, seed=seed,
         time_budget_s=time_budget_s, workers=workers, samples=samples,
