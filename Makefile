@@ -1,6 +1,7 @@
 # One-command set-up: the first target run on a fresh machine installs the system packages for
 # offscreen rendering, creates .venv from requirements.lock and installs ipr into it.
-PYTHON ?= python3.11
+# The first of Python 3.11, 3.12, 3.13 found (pyproject's requires-python); override with PYTHON=...
+PYTHON ?= $(firstword $(foreach v,3.11 3.12 3.13,$(shell command -v python$(v) 2>/dev/null)) python3.11)
 VENV   := .venv
 PY     := $(VENV)/bin/python
 IPR    := $(VENV)/bin/ipr
@@ -13,10 +14,12 @@ setup: $(STAMP)
 
 $(STAMP): requirements.lock pyproject.toml scripts/setup_system.sh
 	bash scripts/setup_system.sh
-	@command -v $(PYTHON) >/dev/null || { echo "ipr setup: $(PYTHON) not found; install Python 3.11 or run 'make PYTHON=/path/to/python3.11'" >&2; exit 1; }
+	@command -v $(PYTHON) >/dev/null || { echo "ipr setup: $(PYTHON) not found; install Python 3.11, 3.12 or 3.13 or run 'make PYTHON=/path/to/python3'" >&2; exit 1; }
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -r requirements.lock
+# The distribution was called "ipr" before it became "ipr-shapes": drop the old record.
+	$(PY) -m pip uninstall --quiet --yes ipr >/dev/null 2>&1 || true
 	$(PY) -m pip install --quiet --no-deps -e .
 	$(PY) -c 'import sys, ipr.gl; sys.exit(ipr.gl.main())'
 	touch $(STAMP)

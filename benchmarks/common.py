@@ -16,6 +16,8 @@ def machine_description() -> str:
     import mujoco
     import numpy
 
+    from ipr.gl import select_gl_backend  # the backend the benchmarks render with
+
     cpu = platform.processor() or "unknown CPU"
     try:
         with open("/proc/cpuinfo") as info:
@@ -39,7 +41,7 @@ def machine_description() -> str:
     return (
         f"{cpu}, {os.cpu_count()} cores{memory}; Python {platform.python_version()}, "
         f"MuJoCo {mujoco.__version__}, NumPy {numpy.__version__}, "
-        f"MUJOCO_GL={os.environ.get('MUJOCO_GL', '-')}; commit {commit}"
+        f"MUJOCO_GL={select_gl_backend() or '-'}; commit {commit}"
     )
 
 

@@ -147,7 +147,6 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--samples", type=int, default=40)
     parser.add_argument("--scenes", type=Path, default=Path("/tmp/ipr-dev-inference"))
     args = parser.parse_args(argv)
-    import ipr  # noqa: F401  (GL backend before MuJoCo loads)
     from benchmarks.common import development_scenes
 
     scenes = []

@@ -139,7 +139,6 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     for variable in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ.setdefault(variable, "1")
-    import ipr  # noqa: F401  (GL backend before MuJoCo loads)
     from benchmarks.common import development_scenes
     from benchmarks.segmentation import default_perceive, evaluate_suite, suite_figures
 

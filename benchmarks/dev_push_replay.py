@@ -83,7 +83,6 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if not (args.friction > 0 and args.timestep > 0 and args.count >= 1):
         parser.error("--friction and --timestep must be positive and --count at least 1")
-    import ipr  # noqa: F401  (GL backend before MuJoCo loads)
     from benchmarks.common import development_scenes
 
     rows = []

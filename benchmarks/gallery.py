@@ -79,7 +79,7 @@ def scene_folders(root: Path) -> list[Path]:
 def _one_thread() -> Iterator[None]:
     try:
         from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover (scikit-learn brings threadpoolctl)
+    except ImportError:  # pragma: no cover (the bench extra brings threadpoolctl)
         yield
         return
     with threadpool_limits(limits=1):
@@ -254,7 +254,6 @@ def main(argv: list[str] | None = None) -> int:
     """Regenerate docs/gallery/ and docs/GALLERY.md."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.parse_args(argv)
-    import ipr  # noqa: F401  (GL backend before MuJoCo loads)
 
     run()
     return 0

@@ -157,7 +157,6 @@ def main(argv: list[str] | None = None) -> int:
         help="only delete the kept runs of other code versions than this checkout's",
     )
     args = parser.parse_args(argv)
-    import ipr  # noqa: F401  (GL backend before MuJoCo loads)
 
     if args.prune:
         import shutil

@@ -18,7 +18,6 @@ import time
 from datetime import UTC, datetime
 from pathlib import Path
 
-import ipr  # noqa: F401  (GL backend before MuJoCo loads)
 from benchmarks import foundation, inference, segmentation
 from benchmarks.common import machine_description
 

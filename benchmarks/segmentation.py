@@ -119,7 +119,7 @@ def _one_thread() -> Iterator[None]:
     """Limit BLAS/OpenMP thread pools to one thread (the one-core target), when possible."""
     try:
         from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover (scikit-learn brings threadpoolctl)
+    except ImportError:  # pragma: no cover (the bench extra brings threadpoolctl)
         yield
         return
     with threadpool_limits(limits=1):
@@ -413,7 +413,6 @@ def main(argv: list[str] | None = None) -> int:
         help=f"perception runs per scene whose per-frame median is the time (default {TIMING_RUNS})",
     )
     args = parser.parse_args(argv)
-    import ipr  # noqa: F401  (GL backend before MuJoCo loads)
     from ipr.suites import REAL, SUITES, suite_scenes
 
     names = args.suite or list(REAL)

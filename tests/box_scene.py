@@ -8,7 +8,6 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import ConvexHull
 
-import ipr  # noqa: F401  (selects the GL backend before MuJoCo loads)
 from ipr.camera import backproject, look_at
 from ipr.perception.free_space import FREE, OCCUPIED, SpaceMap, VoxelGrid, observe_space
 from ipr.perception.types import Facet, KnownPlane, PartialObject

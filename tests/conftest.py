@@ -7,7 +7,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import ipr  # noqa: F401  (selects the GL backend before MuJoCo loads)
 from ipr.camera import look_at
 from ipr.data import shared_data_dir
 from ipr.scene import Frame, Push, Pusher, write_scene

@@ -10,7 +10,6 @@ import numpy as np
 from benchmarks import segmentation
 from PIL import Image
 
-import ipr  # noqa: F401  (GL backend before MuJoCo loads)
 from tests.conftest import make_frames
 
 

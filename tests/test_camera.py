@@ -3,7 +3,6 @@
 import numpy as np
 import pytest
 
-import ipr  # noqa: F401  (selects the GL backend before MuJoCo loads)
 from ipr.camera import (
     apply_transform,
     backproject,
@@ -13,6 +12,7 @@ from ipr.camera import (
     mujoco_camera_pose,
     project,
 )
+from ipr.gl import offscreen_context_class
 
 mujoco = pytest.importorskip("mujoco")
 
@@ -28,6 +28,7 @@ def _render_sphere(K, world_from_camera, centre, width=160, height=120):
     model = mujoco.MjModel.from_xml_string(xml)
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
+    offscreen_context_class()  # MuJoCo's own Renderer, on ipr's choice of backend
     with mujoco.Renderer(model, height, width) as renderer:
         renderer.enable_segmentation_rendering()
         renderer.update_scene(data, "c")

@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 import trimesh
 
-import ipr  # noqa: F401  (selects the GL backend before MuJoCo loads)
 from ipr import voxels
 from ipr.camera import look_at
 from ipr.carving import (

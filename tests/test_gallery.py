@@ -8,7 +8,6 @@ from pathlib import Path
 from benchmarks import gallery
 from PIL import Image
 
-import ipr  # noqa: F401  (GL backend before MuJoCo loads)
 from ipr.scene import write_scene
 from tests.conftest import make_frames
 

@@ -9,7 +9,6 @@ import time
 import numpy as np
 import pytest
 
-import ipr  # noqa: F401  (GL backend before MuJoCo loads)
 from ipr.camera import look_at
 from ipr.inference import InferenceConfig, infer_shapes
 from ipr.likelihood import LikelihoodConfig, observed_frames

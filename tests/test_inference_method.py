@@ -14,7 +14,6 @@ import math
 import numpy as np
 import pytest
 
-import ipr  # noqa: F401  (GL backend before MuJoCo loads)
 from ipr.camera import look_at
 from ipr.collision_checker import uniform_posteriors
 from ipr.factor_graph import posterior_medoid

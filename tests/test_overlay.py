@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import numpy as np
 
-import ipr  # noqa: F401  (GL backend before MuJoCo loads)
 from ipr.perception.output import (
     KNOWN_BELOW,
     KNOWN_COLOURS,

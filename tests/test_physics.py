@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import ipr  # noqa: F401  (GL backend before MuJoCo loads)
 from ipr.camera import look_at
 from ipr.perception.types import KnownPlane
 from ipr.physics import (

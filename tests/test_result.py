@@ -64,6 +64,7 @@ def test_round_trip(tmp_path):
         "objects/0/hyp_000.ply",
         "objects/0/hyp_001.ply",
         "objects/1/best.ply",
+        "occupancy.npz",
         "result.json",
     ]
     raw = json.loads((out / "result.json").read_text())

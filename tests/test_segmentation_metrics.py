@@ -13,7 +13,6 @@ import numpy as np
 import pytest
 from PIL import Image
 
-import ipr  # noqa: F401  (GL backend before MuJoCo loads)
 from ipr.errors import SceneError
 from ipr.rendering import Renderer
 from ipr.scene import Frame, load_scene, load_visible_pixel_counts

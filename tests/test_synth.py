@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 from PIL import Image
 
-import ipr  # noqa: F401  (selects the GL backend before MuJoCo loads)
 from ipr.camera import apply_transform, project
 from ipr.data import ycb_models_dir
 from ipr.scene import load_ground_truth, load_model, load_scene

@@ -12,6 +12,7 @@ non-zero exit status and no traceback (``-v`` shows logs, ``-vv`` also traceback
 from __future__ import annotations
 
 import argparse
+import functools
 import logging
 import sys
 import time
@@ -26,19 +27,137 @@ log = logging.getLogger("ipr")
 EXIT_INPUT_ERROR = 2
 
 
-def _progress():
-    """A rich progress bar on stderr (disabled when stderr is not a terminal)."""
+def _progress(console=None):
+    """A rich progress bar on stderr (or ``console``), disabled when it is not a terminal."""
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    console = Console(stderr=True)
+    console = console or Console(stderr=True)
     return Progress(
         TextColumn("{task.description}"),
         BarColumn(),
         MofNCompleteColumn(),
         TimeElapsedColumn(),
+        _time_left_column(),
         console=console,
         disable=not console.is_terminal,
+    )
+
+
+def _time_left_column():
+    """A column counting down to a task's ``deadline`` field (``time.monotonic()``), if any."""
+    from rich.progress import ProgressColumn
+    from rich.text import Text
+
+    class TimeLeft(ProgressColumn):
+        def render(self, task) -> Text:
+            deadline = task.fields.get("deadline")
+            if deadline is None or task.finished:
+                return Text("")
+            return Text(f"{max(deadline - time.monotonic(), 0.0):.0f} s left", style="cyan")
+
+    return TimeLeft()
+
+
+#: Shown once when the numba kernels are about to be compiled (``ipr.progress``, "compiling").
+COMPILING_NOTICE = "ipr: compiling the perception kernels once (about 30 s)..."
+_STAGE_LABELS = {
+    "perception": "perception (frames)",
+    "fusion": "fusion of later views",
+    "hypotheses": "hypotheses (objects)",
+    "sampling": "sampling (joint models)",
+    "carving": "carving",
+}
+
+
+class _ProgressBars:
+    """Draws a run's ``ipr.progress`` events as one rich progress bar per stage."""
+
+    def __init__(self, progress) -> None:
+        self._progress = progress
+        self._tasks: dict[str, int] = {}
+
+    def __call__(self, event) -> None:
+        if event.stage == "compiling":  # _with_progress has announced it
+            return
+        left = event.seconds_left
+        deadline = None if left is None else time.monotonic() + left
+        task = self._tasks.get(event.stage)
+        if task is None:
+            self._tasks[event.stage] = self._progress.add_task(
+                _STAGE_LABELS.get(event.stage, event.stage),
+                total=event.total,
+                completed=event.done,
+                deadline=deadline,
+            )
+        else:
+            self._progress.update(task, total=event.total, completed=event.done, deadline=deadline)
+
+
+def _with_progress(label: str | None = None):
+    """Run a command with progress on stderr when it is a terminal (nothing otherwise): a
+    notice when the numba kernels are about to be compiled, ``args.progress`` (the observer
+    ``ipr.pipeline`` reports to, or None) and, with ``label``, a bar for the whole command."""
+
+    def decorate(handler):
+        @functools.wraps(handler)
+        def run(args: argparse.Namespace) -> int:
+            from ipr.pipeline import kernel_cache_cold, mark_kernel_cache_warm
+
+            with _progress() as progress:
+                args.progress = None if progress.disable else _ProgressBars(progress)
+                if args.progress is not None and kernel_cache_cold():
+                    progress.console.print(COMPILING_NOTICE, highlight=False)
+                task = progress.add_task(label, total=None) if args.progress and label else None
+                status = handler(args)
+                if task is not None:
+                    progress.update(task, total=1, completed=1)
+            mark_kernel_cache_warm()  # a perception finished: the kernels are in the cache
+            return status
+
+        return run
+
+    return decorate
+
+
+class _VersionAction(argparse.Action):
+    """``--version``: print the version and exit 0; warn on stderr when another installed
+    distribution also provides the import package ``ipr`` (docs/DESIGN_NOTES.md, "Distribution
+    name"): the two would overwrite each other's files."""
+
+    def __init__(self, option_strings: list[str], dest: str, **kwargs) -> None:
+        kwargs.setdefault("help", "print the version and exit")
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, **kwargs)
+
+    def __call__(self, parser, namespace, values, option_string=None) -> None:
+        import ipr
+
+        print(f"ipr {ipr.__version__} (distribution {ipr.DISTRIBUTION})")
+        for name, version in _other_ipr_distributions():
+            print(
+                f"ipr: warning: {name} {version} is also installed and also provides the import "
+                f"package 'ipr' and the 'ipr' command; the two overwrite each other's files "
+                f"(fix: 'pip uninstall {name}', then reinstall {ipr.DISTRIBUTION})",
+                file=sys.stderr,
+            )
+        parser.exit(0)
+
+
+def _other_ipr_distributions() -> list[tuple[str, str]]:
+    """(name, version) of the installed distributions other than this one that provide ``ipr``."""
+    import re
+    from importlib import metadata
+
+    import ipr
+
+    def canonical(name: str) -> str:
+        return re.sub(r"[-_.]+", "-", name).lower()
+
+    names = set(metadata.packages_distributions().get("ipr", []))
+    return sorted(
+        (name, metadata.version(name))
+        for name in names
+        if canonical(name) != canonical(ipr.DISTRIBUTION)
     )
 
 
@@ -119,6 +238,7 @@ def _config(args: argparse.Namespace):
     return read_config(Path(args.config))
 
 
+@_with_progress()
 def _cmd_infer(args: argparse.Namespace) -> int:
     import dataclasses
 
@@ -135,6 +255,7 @@ def _cmd_infer(args: argparse.Namespace) -> int:
     out = infer(
         Path(args.scene),
         Path(args.out),
+        progress=args.progress,
         method=args.method,
         seed=args.seed,
         time_budget_s=args.time_budget,
@@ -157,6 +278,7 @@ def _cmd_infer(args: argparse.Namespace) -> int:
     return 0
 
 
+@_with_progress("perception: segmenting and tracking the frames")
 def _cmd_segment(args: argparse.Namespace) -> int:
     from ipr.atomic import check_output_location
     from ipr.perception import perceive_scene
@@ -235,6 +357,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=0,
         help="log progress (-v) and debugging details with tracebacks (-vv)",
     )
+    parser.add_argument("--version", action=_VersionAction)
     # The same flag after the sub-command; SUPPRESS keeps it from resetting the count above.
     verbosity = argparse.ArgumentParser(add_help=False)
     verbosity.add_argument(
@@ -465,6 +588,9 @@ def main(argv: list[str] | None = None) -> int:
     """Run the ``ipr`` command; returns the exit status."""
     args = build_parser().parse_args(argv)
     _configure_logging(args.verbose)
+    from ipr.gl import select_gl_backend
+
+    select_gl_backend()  # an entry point: the backend before MuJoCo loads (ipr.gl)
     try:
         return args.handler(args)
     except (IprError, FileExistsError) as error:

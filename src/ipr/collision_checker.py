@@ -45,6 +45,7 @@ from ipr.hypotheses import (
 from ipr.perception.free_space import SeenSpace, SpaceMap
 from ipr.perception.types import KnownPlane, PartialObject
 from ipr.products import ObjectPosterior, PreparedHypotheses
+from ipr.progress import ProgressCallback
 
 logger = logging.getLogger(__name__)
 
@@ -192,6 +193,7 @@ def collision_checker(
     *,
     hypotheses: HypothesisConfig | None = None,
     constraints: ConstraintConfig | None = None,
+    progress: ProgressCallback | None = None,
 ) -> list[ObjectPosterior]:
     """Marginal shape posteriors of the objects of one frame (frame 0) under a uniform prior
     restricted to jointly feasible models (module doc).
@@ -207,6 +209,7 @@ def collision_checker(
         object_spaces: per object id, a seen-free space replacing ``space`` for that object
             (``prepare_hypotheses``).
         hypotheses, constraints: settings of generation and of the constraints (defaults).
+        progress: observer of the hypotheses' progress (``ipr.progress``).
 
     Returns:
         One ObjectPosterior per object, in the order of ``objects``.
@@ -219,7 +222,7 @@ def collision_checker(
     generation_rng, sampler_rng = rng.spawn(2)
     prepared = prepare_hypotheses(
         objects, space, planes, hypotheses, constraints, generation_rng, time_budget_s,
-        object_spaces,
+        object_spaces, progress,
     )  # fmt: skip
     posteriors = uniform_posteriors(prepared, config, sampler_rng, deadline)
     logger.debug(

@@ -17,7 +17,9 @@ DEMO_SEED = 7
 
 def run_demo(out_dir: Path) -> int:
     """Generate a dynamic scene, segment it, infer shapes, score them; print where things are."""
-    import ipr  # noqa: F401  (GL backend)
+    from ipr.gl import select_gl_backend
+
+    select_gl_backend()  # an entry point: the backend before MuJoCo loads (ipr.gl)
     from ipr.data import ycb_models_dir
     from ipr.ground_truth import write_ground_truth_result
     from ipr.methods import DEFAULT_METHOD

@@ -8,6 +8,10 @@ The methods that use the pushes' evidence (``+action`` and ``exhaustive``) also 
 the later frames saw of each object into frame 0 (``ipr.fusion``) before the hypotheses; the
 others see frame 0 only, as their likelihood does.
 
+Progress: ``progress`` (``ipr.progress``) hears of each stage as it advances; nothing is
+reported without one. Provenance: ``infer`` records in ``result.json`` (key ``provenance``)
+what produced the result, with the whole configuration as ``config.toml`` beside it.
+
 Time budget: ``time_budget_s`` covers the whole run; hypotheses get their share of what is left
 after perception and fusion (a per-object timeout), and inference the rest. Without one,
 hypotheses have no wall-clock limit (so they do not depend on the machine's load) and inference
@@ -17,12 +21,17 @@ most half of it).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import hashlib
 import logging
 import math
+import platform
+import sys
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
@@ -30,7 +39,7 @@ import numpy as np
 from ipr.atomic import check_output_location
 from ipr.carving import carve_posteriors, surface_views
 from ipr.collision_checker import collision_checker
-from ipr.config import Config
+from ipr.config import Config, config_digest, config_to_toml
 from ipr.errors import IprError
 from ipr.fusion import fuse_views, tracked_free_spaces
 from ipr.hypotheses import prepare_hypotheses
@@ -41,11 +50,15 @@ from ipr.perception import Perception, perceive_scene
 from ipr.perception.occlusion import join_first_frame_pieces
 from ipr.perception.types import PartialObject
 from ipr.products import ObjectPosterior, RunSummary, StageTimings
+from ipr.progress import ProgressCallback, report
 from ipr.report import completion_png
 from ipr.result import write_posterior_result
 from ipr.scene import Scene, load_scene
 
 log = logging.getLogger(__name__)
+
+#: The copy of the run's configuration in a result directory.
+CONFIG_FILE = "config.toml"
 
 
 @dataclass(frozen=True, eq=False)
@@ -127,7 +140,47 @@ def perceive(scene: Scene, config: Config) -> Perception:
     """Every frame's perception, with frame 0's occluded pieces joined."""
     perception = perceive_scene(scene, config.perception)
     perception, _ = join_first_frame_pieces(scene, perception, config.perception.occluded_pieces)
+    mark_kernel_cache_warm()
     return perception
+
+
+def _kernel_cache_marker() -> Path | None:
+    """The file saying that the numba kernels (``ipr.geometry.kernels``,
+    ``ipr.perception.kernels``) were compiled into numba's cache folder for their present
+    source, this numba and this Python; None when that folder is unknown (e.g. JIT disabled)."""
+    try:
+        import numba
+
+        from ipr.geometry import kernels as geometry_kernels
+        from ipr.perception import kernels as perception_kernels
+
+        folder = next(
+            Path(value._cache._cache_path)
+            for value in vars(perception_kernels).values()
+            if getattr(getattr(value, "_cache", None), "_cache_path", None)
+        )
+        digest = hashlib.sha256(f"{numba.__version__} {sys.version}".encode())
+        for module in (geometry_kernels, perception_kernels):
+            digest.update(Path(module.__file__).read_bytes())
+        return folder / f"ipr-kernels-{digest.hexdigest()[:16]}.compiled"
+    except Exception:  # numba's internals moved, or no cache: say nothing rather than fail
+        return None
+
+
+def kernel_cache_cold() -> bool:
+    """Whether the next perception will compile the numba kernels first (25-35 s, once after
+    installing or changing them): no perception has finished since their source, numba or
+    Python changed, or their cache folder was cleared. One file test."""
+    marker = _kernel_cache_marker()
+    return marker is not None and not marker.exists()
+
+
+def mark_kernel_cache_warm() -> None:
+    """Record that the kernels are compiled and cached (after a perception finished)."""
+    marker = _kernel_cache_marker()
+    if marker is not None and not marker.exists():
+        with contextlib.suppress(OSError):  # read-only: the next run announces again
+            marker.write_text("ipr: the numba kernels in this folder are compiled\n")
 
 
 @dataclass(frozen=True, eq=False)
@@ -181,6 +234,7 @@ def infer_with_physics(
     *,
     seed: int,
     workers: int | None,
+    progress: ProgressCallback | None = None,
 ) -> tuple[InferenceOutcome, float]:
     """Hypotheses with their constraints, then a physics-based method's posteriors; also the
     seconds the hypotheses took. ``remaining_s``: the run's time left (hypotheses take their
@@ -196,6 +250,7 @@ def infer_with_physics(
         rng,
         remaining_s,
         fused.object_spaces,
+        progress,
     )
     hypotheses_s = time.perf_counter() - started
     observed = observed_frames(
@@ -214,6 +269,7 @@ def infer_with_physics(
             seed=seed,
             deadline=deadline,
             workers=workers,
+            progress=progress,
         )
     except IprError as error:  # say which scene the method refused
         raise IprError(f"{scene.path}: {error}") from None
@@ -229,6 +285,7 @@ def run_pipeline(
     time_budget_s: float | None = None,
     workers: int | None = None,
     samples: int | None = None,
+    progress: ProgressCallback | None = None,
 ) -> PipelineResult:
     """Perceive the scene and infer complete shapes of the objects of frame 0.
 
@@ -237,6 +294,8 @@ def run_pipeline(
     same result with any number of ``workers``. More than one worker (the default on a
     multi-core machine) starts a process pool: as with any Python multiprocessing, a script
     calling this must guard its entry point with ``if __name__ == "__main__":``.
+
+    ``progress``: an observer of the run's stages (``ipr.progress``; None: nothing reported).
     """
     chosen = _checked_arguments(method, time_budget_s, workers, samples)
     config = config or Config()
@@ -245,11 +304,19 @@ def run_pipeline(
             config, inference=dataclasses.replace(config.inference, max_samples=samples)
         )
     budget = RunBudget.start(time_budget_s)
+    if progress is not None and kernel_cache_cold():
+        report(progress, "compiling", 0)
+    report(progress, "perception", 0, len(scene.frames))
     perception = perceive(scene, config)
+    report(progress, "perception", len(scene.frames), len(scene.frames))
     perceived = time.perf_counter()
     if not perception.objects[0]:
         log.warning("%s: no object found in frame 0; the result is empty", scene.path)
+    if chosen.actions and config.fusion.enabled:
+        report(progress, "fusion", 0, 1)
     fused = fuse(scene, perception, chosen, config)
+    if chosen.actions and config.fusion.enabled:
+        report(progress, "fusion", 1, 1)
     fused_at = time.perf_counter()
     per_object = budget.inference_per_object_s(
         config.inference.budget_per_object_s,
@@ -275,6 +342,7 @@ def run_pipeline(
             time_budget_s=remaining,
             hypotheses=config.hypotheses,
             constraints=config.constraints,
+            progress=progress,
         )
         generation = float(sum(p.generation_s for p in posteriors))
         timing = StageTimings(
@@ -285,7 +353,7 @@ def run_pipeline(
     else:
         outcome, hypotheses_s = infer_with_physics(
             scene, perception, fused, chosen, config, rng, remaining, budget.deadline,
-            seed=seed, workers=workers,
+            seed=seed, workers=workers, progress=progress,
         )  # fmt: skip
         posteriors = outcome.posteriors
         summary = dataclasses.replace(summary, sampling=outcome.summary)
@@ -298,10 +366,12 @@ def run_pipeline(
             inference_sampling=outcome.timing_s["sampling"],
         )
     if config.carving.enabled and posteriors:
+        report(progress, "carving", 0, 1)
         carving_started = time.perf_counter()
         views = surface_views(scene.frames, perception.objects, fused.motions, config.carving)
         posteriors = carve_posteriors(posteriors, views)
         timing = dataclasses.replace(timing, carving=time.perf_counter() - carving_started)
+        report(progress, "carving", 1, 1)
     timing = dataclasses.replace(timing, total=time.perf_counter() - budget.started)
     return PipelineResult(chosen.name, posteriors, perception, timing, summary)
 
@@ -315,6 +385,7 @@ def infer(
     time_budget_s: float | None = None,
     workers: int | None = None,
     samples: int | None = None,
+    progress: ProgressCallback | None = None,
     config: Config | None = None,
     overwrite: bool = False,
 ) -> Path:
@@ -330,10 +401,17 @@ def infer(
         time_budget_s=time_budget_s,
         workers=workers,
         samples=samples,
+        progress=progress,
     )
     world_from_camera = {frame.index: frame.world_from_camera for frame in scene.frames}
     details = result.summary.to_dict()
     extra = {"inference": details} if details else {}
+    # What produced it (module doc): the provenance, and the whole configuration beside it.
+    config = config or Config()
+    extra["provenance"] = run_provenance(
+        scene, config, method=result.method, seed=seed,
+        time_budget_s=time_budget_s, workers=workers, samples=samples,
+    )  # fmt: skip
     return write_posterior_result(
         out_dir,
         result.posteriors,
@@ -341,6 +419,49 @@ def infer(
         result.timing_s,
         method=result.method,
         extra=extra,
-        extra_files={"completion.png": completion_png(scene.frames[0], result.posteriors)},
+        extra_files={
+            "completion.png": completion_png(scene.frames[0], result.posteriors),
+            CONFIG_FILE: config_to_toml(config).encode(),
+        },
         overwrite=overwrite,
     )
+
+
+def run_provenance(
+    scene: Scene,
+    config: Config,
+    *,
+    method: str,
+    seed: int,
+    time_budget_s: float | None,
+    workers: int | None,
+    samples: int | None,
+) -> dict:
+    """What produced a result (``result.json``'s ``provenance``; docs/FORMATS.md): the ipr
+    version, method, seed, budget as asked (None: the default), the configuration's digest and
+    file, the scene and the frames read, the main libraries' versions and the time."""
+    import mujoco
+
+    import ipr
+
+    return {
+        "ipr_version": ipr.__version__,
+        "distribution": ipr.DISTRIBUTION,
+        "method": method,
+        "seed": int(seed),
+        "budget": {
+            "time_budget_s": None if time_budget_s is None else float(time_budget_s),
+            "samples": samples,
+            "workers": workers,
+        },
+        "config_digest": config_digest(config),
+        "config_file": CONFIG_FILE,
+        "scene": str(Path(scene.path).resolve()),
+        "frames": [int(frame.index) for frame in scene.frames],
+        "software": {
+            "python": platform.python_version(),
+            "numpy": np.__version__,
+            "mujoco": mujoco.__version__,
+        },
+        "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
+    }

@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from ipr.camera import mujoco_camera_attributes, mujoco_camera_pose
-from ipr.gl import INSTALL_HINT  # importing ipr selects the GL backend before MuJoCo loads
+from ipr.gl import INSTALL_HINT, offscreen_context_class
 
 #: Near and far clipping distances (m) of the models built here.
 DEFAULT_ZNEAR_M = 0.01
@@ -196,8 +196,8 @@ class Renderer:
 
     def __init__(self, width: int, height: int) -> None:
         import mujoco
-        from mujoco.rendering.classic import gl_context
 
+        context_class = offscreen_context_class()  # chooses the backend unless MUJOCO_GL is set
         self._mujoco = mujoco
         self.width = int(width)
         self.height = int(height)
@@ -207,10 +207,10 @@ class Renderer:
         self._model = None
         self._context = None
         self._scene = None
-        if gl_context.GLContext is None:
+        if context_class is None:
             raise RuntimeError(f"no offscreen GL backend available. {INSTALL_HINT}")
         try:
-            self._gl = gl_context.GLContext(self.width, self.height)
+            self._gl = context_class(self.width, self.height)
             self._gl.make_current()
         except Exception as error:  # any backend failure gets the same actionable message
             raise RuntimeError(f"offscreen rendering failed ({error}). {INSTALL_HINT}") from error

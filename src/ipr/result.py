@@ -6,6 +6,10 @@ the object's frame-0 pose, plus the world-from-camera transforms the method used
 truth given in camera frames can be placed in the result's world frame), the method name and
 timings. ``write_posterior_result`` writes a method's per-object posteriors; the oracle result
 built from ground truth is ``ipr.ground_truth``'s (evaluation only).
+
+Every result written here also holds ``occupancy.npz``: per object, the posterior probability
+that each 5 mm voxel of the contract's world grid is occupied, and the same for the scene
+(``posterior_occupancy``, ``load_occupancy``; layout in docs/FORMATS.md).
 """
 
 from __future__ import annotations
@@ -19,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from ipr import voxels
 from ipr.atomic import staged_directory
 from ipr.errors import ResultError
 from ipr.products import ObjectPosterior, volume_spread
@@ -33,6 +38,9 @@ RIGID_TOLERANCE = 1e-3
 RESERVED_KEYS = ("format", "method", "world_from_camera", "objects", "timing_s")
 #: Method name of the oracle result built from ground truth.
 GROUND_TRUTH_METHOD = "ground-truth"
+#: The per-voxel occupancy file of a result, and its format tag.
+OCCUPANCY_FILE = "occupancy.npz"
+OCCUPANCY_FORMAT = "ipr-occupancy/1"
 
 
 @dataclass(frozen=True)
@@ -380,6 +388,159 @@ def load_result(path: Path | str, *, load_meshes: bool = True) -> Result:
 
 
 # --------------------------------------------------------------------------------------------
+# Occupancy
+
+
+@dataclass(frozen=True, eq=False)
+class Occupancy:
+    """Posterior probability of occupancy of the world grid's voxels (``occupancy.npz``).
+
+    Voxel (i, j, k) is the cube of edge ``pitch_m`` centred at ((i, j, k) + 1/2) * pitch_m
+    (metres, world frame; the metric's grid, ``ipr.voxels``). Only voxels with a non-zero
+    probability are listed, in lexicographic (i, j, k) order.
+
+    Attributes:
+        pitch_m: the voxel edge (m).
+        objects: result object id -> (voxels (N, 3) int32, probability (N,) float32): the
+            probability that the object occupies each voxel, i.e. the sum of the probabilities
+            of the object's written hypotheses whose shape holds the voxel's centre.
+        scene: (voxels (M, 3) int32, probability (M,) float32): the probability that any
+            object occupies each voxel, 1 - prod over objects of (1 - p_object), which
+            treats the objects as independent given their marginals.
+    """
+
+    pitch_m: float
+    objects: dict[int, tuple[np.ndarray, np.ndarray]]
+    scene: tuple[np.ndarray, np.ndarray]
+
+    def centres_m(self, voxel_indices: np.ndarray) -> np.ndarray:
+        """(N, 3) float64 world-frame centres (m) of (N, 3) voxel indices."""
+        return (np.asarray(voxel_indices, np.float64) + 0.5) * self.pitch_m
+
+
+def _weighted_voxels(
+    shapes: Sequence[tuple[np.ndarray, float]],
+) -> tuple[np.ndarray, np.ndarray]:
+    """Sorted keys (N,) int64 and their summed weights (N,) float64 of weighted voxel sets."""
+    keys = [k for k, w in shapes if k.size and w > 0]
+    if not keys:
+        return voxels.EMPTY.copy(), np.zeros(0)
+    weights = [np.full(k.size, w) for k, w in shapes if k.size and w > 0]
+    unique, inverse = np.unique(np.concatenate(keys), return_inverse=True)
+    return unique, np.bincount(inverse, weights=np.concatenate(weights), minlength=unique.size)
+
+
+def posterior_occupancy(
+    objects: Mapping[int, Sequence[tuple[Any, float]]],
+    pitch_m: float = voxels.DEFAULT_PITCH_M,
+) -> Occupancy:
+    """The per-voxel occupancy of weighted shapes (``Occupancy``).
+
+    Args:
+        objects: result object id -> its written shapes as (shape, probability) pairs whose
+            probabilities sum to 1; a shape is a mesh (trimesh or (vertices, faces), world
+            frame, m; a mesh that is not closed counts as its convex hull, as the metric
+            reads it) or already its sorted unique ``ipr.voxels`` keys at ``pitch_m``.
+        pitch_m: the grid's voxel edge (m).
+    """
+    per_object: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    scene_keys, scene_logs = [], []
+    for object_id, shapes in objects.items():
+        sets = []
+        for shape, probability in shapes:
+            is_keys = isinstance(shape, np.ndarray) and shape.ndim == 1
+            keys = shape if is_keys else voxels.occupied_voxels(shape, pitch_m)
+            sets.append((np.asarray(keys, np.int64), float(probability)))
+        keys, weights = _weighted_voxels(sets)
+        probability = np.clip(weights, 0.0, 1.0)
+        listed = probability.astype(np.float32) > 0  # what float32 cannot tell from 0 is left out
+        per_object[int(object_id)] = (
+            voxels.unpack(keys[listed]).astype(np.int32),
+            probability[listed].astype(np.float32),
+        )
+        scene_keys.append(keys)
+        scene_logs.append(np.log1p(-np.minimum(probability, 1.0 - 1e-12)))
+    if scene_keys:
+        unique, inverse = np.unique(np.concatenate(scene_keys), return_inverse=True)
+        log_empty = np.bincount(inverse, weights=np.concatenate(scene_logs), minlength=unique.size)
+        scene_probability = np.clip(-np.expm1(log_empty), 0.0, 1.0)
+        listed = scene_probability.astype(np.float32) > 0
+        unique, scene_probability = unique[listed], scene_probability[listed]
+    else:
+        unique, scene_probability = voxels.EMPTY.copy(), np.zeros(0)
+    scene = (voxels.unpack(unique).astype(np.int32), scene_probability.astype(np.float32))
+    return Occupancy(float(pitch_m), per_object, scene)
+
+
+def _occupancy_arrays(occupancy: Occupancy) -> dict[str, np.ndarray]:
+    """The arrays of ``occupancy.npz`` (docs/FORMATS.md)."""
+    arrays = {
+        "format": np.array(OCCUPANCY_FORMAT),
+        "pitch_m": np.array(occupancy.pitch_m, dtype=np.float64),
+        "object_ids": np.array(sorted(occupancy.objects), dtype=np.int64),
+        "scene_voxels": occupancy.scene[0].reshape(-1, 3).astype(np.int32),
+        "scene_probability": occupancy.scene[1].astype(np.float32),
+    }
+    for object_id, (indices, probability) in occupancy.objects.items():
+        arrays[f"object_{object_id}_voxels"] = indices.reshape(-1, 3).astype(np.int32)
+        arrays[f"object_{object_id}_probability"] = probability.astype(np.float32)
+    return arrays
+
+
+def load_occupancy(path: Path | str) -> Occupancy:
+    """Read and check a result's ``occupancy.npz`` (the result directory or the file itself);
+    ResultError naming the file and the problem otherwise."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / OCCUPANCY_FILE
+    if not path.is_file():
+        raise ResultError(
+            path,
+            "occupancy file is missing",
+            "pass a result written by ipr 0.1.0 or later (it holds occupancy.npz)",
+        )
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            arrays = {name: npz[name] for name in npz.files}
+    except Exception as error:  # zip and npy errors come in many types
+        raise ResultError(
+            path, f"occupancy file cannot be read ({type(error).__name__}: {error})"
+        ) from None
+    tag = arrays.get("format")
+    if tag is None or str(tag) != OCCUPANCY_FORMAT:
+        raise ResultError(
+            path, f"unknown or missing format tag {tag!r}", f"expected {OCCUPANCY_FORMAT}"
+        )
+    pitch = float(arrays.get("pitch_m", np.nan))
+    if not (math.isfinite(pitch) and pitch > 0):
+        raise ResultError(path, f"pitch_m must be a positive number, got {pitch}")
+
+    def pair(prefix: str) -> tuple[np.ndarray, np.ndarray]:
+        indices = arrays.get(f"{prefix}_voxels")
+        probability = arrays.get(f"{prefix}_probability")
+        if indices is None or probability is None:
+            raise ResultError(path, f"{prefix}_voxels or {prefix}_probability is missing")
+        if indices.ndim != 2 or indices.shape[1] != 3 or indices.dtype.kind not in "iu":
+            raise ResultError(
+                path,
+                f"{prefix}_voxels must be (N, 3) integers, got {indices.dtype} {indices.shape}",
+            )
+        if probability.shape != (len(indices),) or probability.dtype.kind != "f":
+            raise ResultError(
+                path, f"{prefix}_probability must be (N,) floats matching {prefix}_voxels"
+            )
+        if not np.all(np.isfinite(probability)) or np.any((probability < 0) | (probability > 1)):
+            raise ResultError(path, f"{prefix}_probability has values outside [0, 1]")
+        return indices.astype(np.int32), probability.astype(np.float32)
+
+    ids = arrays.get("object_ids", np.zeros(0, np.int64))
+    if ids.ndim != 1 or ids.dtype.kind not in "iu" or len(set(ids.tolist())) != len(ids):
+        raise ResultError(path, "object_ids must be distinct integers")
+    objects = {int(object_id): pair(f"object_{int(object_id)}") for object_id in ids}
+    return Occupancy(pitch, objects, pair("scene"))
+
+
+# --------------------------------------------------------------------------------------------
 # Writing
 
 #: (best mesh, [(hypothesis mesh, probability), ...]) or the same with the best mesh's
@@ -399,6 +560,7 @@ def write_result(
     *,
     extra_files: Mapping[str, bytes] | None = None,
     overwrite: bool = False,
+    occupancy: Occupancy | None = None,
 ) -> Path:
     """Write a result directory atomically (staged beside ``out_dir``, then renamed into place).
 
@@ -419,7 +581,9 @@ def write_result(
         extra_files: further files, relative name -> content (reports, images); names must stay
             inside the directory and not collide with the contract's files.
 
-    Writes ``result.json`` and ``objects/<k>/best.ply`` (+ ``hyp_NNN.ply``) as binary PLY.
+    Writes ``result.json``, ``objects/<k>/best.ply`` (+ ``hyp_NNN.ply``) as binary PLY and
+    ``occupancy.npz`` (``posterior_occupancy`` of the hypotheses; ``occupancy`` gives it
+    precomputed, e.g. from cached voxels of the same shapes).
     Raises ValueError on invalid inputs and ResultError if ``out_dir`` exists without
     ``overwrite``. Returns ``out_dir``.
     """
@@ -449,7 +613,7 @@ def write_result(
         relative = Path(name)
         if relative.is_absolute() or ".." in relative.parts or not relative.parts:
             raise ValueError(f"extra file name {name!r} must be a relative path inside the result")
-        if relative.parts[0] in ("objects", RESULT_FILE):
+        if relative.parts[0] in ("objects", RESULT_FILE, OCCUPANCY_FILE):
             raise ValueError(f"extra file name {name!r} collides with the result's own files")
         files[relative] = bytes(content)
     prepared = []
@@ -473,7 +637,14 @@ def write_result(
 
     if target.exists() and not overwrite:
         raise ResultError(target, "already exists", "choose another folder or allow overwriting")
+    if occupancy is None:
+        occupancy = posterior_occupancy(
+            {k: hyps if hyps else [(best, 1.0)] for k, (best, hyps, _) in enumerate(prepared)}
+        )
+    elif sorted(occupancy.objects) != list(range(len(prepared))):
+        raise ValueError("occupancy must list exactly the objects written, by their ids")
     with staged_directory(target) as staging:
+        np.savez_compressed(staging / OCCUPANCY_FILE, **_occupancy_arrays(occupancy))
         entries = []
         for relative, content in files.items():
             (staging / relative).parent.mkdir(parents=True, exist_ok=True)

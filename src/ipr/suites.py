@@ -73,7 +73,6 @@ def suite_dir(name: str) -> Path:
 def _generate_one(
     out_dir: str, kind: str, seed: int, arrangement: str, name: str
 ) -> tuple[str, float]:
-    import ipr  # noqa: F401  (GL backend for the worker process)
     from ipr.synth import generate_scene
 
     started = time.perf_counter()

@@ -26,6 +26,7 @@ from ipr.hypotheses.generate import HypothesisConfig, generate_hypotheses, minim
 from ipr.perception.free_space import SeenSpace, SpaceMap
 from ipr.perception.types import KnownPlane, PartialObject
 from ipr.products import PreparedHypotheses, ShapeHypothesis, volume_spread
+from ipr.progress import ProgressCallback, report
 
 logger = logging.getLogger(__name__)
 
@@ -39,6 +40,7 @@ def prepare_hypotheses(
     rng: np.random.Generator | None = None,
     time_budget_s: float | None = None,
     object_spaces: Mapping[int, SeenSpace] | None = None,
+    progress: ProgressCallback | None = None,
 ) -> PreparedHypotheses:
     """Generate each object's hypotheses and minimum shape, keep the unary-feasible ones and
     measure the pairwise penetration depths between interacting objects' hypotheses.
@@ -49,7 +51,8 @@ def prepare_hypotheses(
 
     ``time_budget_s``: generation gets ``config.budget_share`` of it, split over the objects
     (capping their timeouts). ``rng`` defaults to one seeded from ``config.seed``; each object
-    draws from its own child stream (``rng.spawn``).
+    draws from its own child stream (``rng.spawn``). ``progress`` hears of each object done
+    (``ipr.progress``, stage ``hypotheses``).
 
     Returns the objects' hypotheses with their unary and pairwise constraints, in the order of
     ``objects``.
@@ -75,7 +78,8 @@ def prepare_hypotheses(
     minima: dict[int, ShapeHypothesis] = {}
     candidates: dict[int, list[int]] = {}  # object -> indices of unary-feasible hypotheses
     seconds: dict[int, float] = {}
-    for obj, object_rng in zip(objects, object_rngs, strict=True):
+    report(progress, "hypotheses", 0, len(objects))
+    for done, (obj, object_rng) in enumerate(zip(objects, object_rngs, strict=True), start=1):
         begin = time.perf_counter()
         seen = (object_spaces or {}).get(obj.id, space)
         hyps = generate_hypotheses(obj, seen, planes, hypothesis_config, object_rng)
@@ -87,6 +91,7 @@ def prepare_hypotheses(
             feasible = [0]
         generated[obj.id], candidates[obj.id] = hyps, feasible
         seconds[obj.id] = time.perf_counter() - begin
+        report(progress, "hypotheses", done, len(objects))
         logger.debug(
             "object %d: %d/%d feasible, volumes %s",
             obj.id,

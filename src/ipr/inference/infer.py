@@ -23,6 +23,7 @@ from ipr.likelihood import ObservedFrames
 from ipr.methods import DEFAULT_METHOD, get_method
 from ipr.perception.types import KnownPlane
 from ipr.products import ObjectPosterior, PreparedHypotheses, SamplingSummary
+from ipr.progress import ProgressCallback, report
 from ipr.scene import Push, Pusher
 
 logger = logging.getLogger(__name__)
@@ -59,6 +60,7 @@ def infer_shapes(
     seed: int = 0,
     deadline: float | None = None,
     workers: int | None = None,
+    progress: ProgressCallback | None = None,
 ) -> InferenceOutcome:
     """Marginal shape posteriors by IPR (module doc).
 
@@ -74,6 +76,8 @@ def infer_shapes(
         deadline: ``time.perf_counter()`` time to stop at (None: ``budget_per_object_s`` per
             object from now, unless ``config.max_samples`` is set).
         workers: overrides ``config.workers``.
+        progress: observer of the samples drawn and the time left (``ipr.progress``, stage
+            ``sampling``).
     """
     variant = get_method(method)
     if not variant.physics:
@@ -110,10 +114,21 @@ def infer_shapes(
         models = exhaustive_models(problem)
         tasks: Iterable = ((index, choice) for index, choice in enumerate(models))
         workers = min(workers, max(1, len(models)))
+        total = len(models)
     else:
         limit = config.max_samples if config.max_samples else None
         tasks = ((index, None) for index in (range(limit) if limit else itertools.count()))
-    samples = run_samples(problem, tasks, workers=workers, deadline=deadline)
+        total = limit
+
+    def sampled_so_far(done: int) -> None:
+        left = None if math.isinf(deadline) else max(deadline - time.perf_counter(), 0.0)
+        report(progress, "sampling", done, total, left)
+
+    sampled_so_far(0)
+    samples = run_samples(
+        problem, tasks, workers=workers, deadline=deadline,
+        on_result=sampled_so_far if progress is not None else None,
+    )  # fmt: skip
     sampled = time.perf_counter()
     timing["sampling"] = sampled - checked
     estimate = marginals(samples, problem, joint=variant.exhaustive)

@@ -7,7 +7,7 @@ import multiprocessing
 import os
 import queue
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 
 from ipr.inference.problem import InferenceProblem, SampleResult
 from ipr.inference.sampler import Sampler, _Deadline
@@ -53,12 +53,20 @@ def run_samples(
     *,
     workers: int,
     deadline: float,
+    on_result: Callable[[int], None] | None = None,
 ) -> list[SampleResult]:
     """Evaluate ``tasks`` ((index, None) = tree sample ``index``; (index, choice) = score that
     joint model) until they run out or ``deadline`` (``time.perf_counter()``) passes; results
-    in task order, unfinished tasks dropped."""
+    in task order, unfinished tasks dropped. ``on_result`` is called in this process with the
+    number of results so far, each time one arrives."""
     results: list[SampleResult] = []
     tasks = iter(tasks)
+
+    def received(result: SampleResult) -> None:
+        results.append(result)
+        if on_result is not None:
+            on_result(len(results))
+
     if workers <= 1:
         sampler = Sampler(problem)
         try:
@@ -67,9 +75,9 @@ def run_samples(
                     break
                 try:
                     if choice is None:
-                        results.append(sampler.sample(index, deadline))
+                        received(sampler.sample(index, deadline))
                     else:
-                        results.append(sampler.score(index, choice, deadline))
+                        received(sampler.score(index, choice, deadline))
                 except _Deadline:
                     break
         finally:
@@ -121,7 +129,7 @@ def run_samples(
             if isinstance(outcome, BaseException):
                 raise outcome
             if outcome is not None:
-                results.append(outcome)
+                received(outcome)
         clean = in_flight == 0
     finally:
         if clean:

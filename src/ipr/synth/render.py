@@ -18,6 +18,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ipr.camera import backproject, invert_transform, mujoco_camera_attributes, mujoco_camera_pose
+from ipr.gl import offscreen_context_class
 from ipr.synth.piles import GROUP_OBJECTS, GROUP_TABLE, GROUP_WALLS, LABEL_BACKGROUND, PileWorld
 
 #: Geom groups used to render one object alone.
@@ -52,6 +53,7 @@ class SceneRenderer:
         self.width, self.height = config.width, config.height
         _set_camera(world.model, K, world_from_camera, self.width, self.height)
         self.data = mujoco.MjData(world.model)
+        offscreen_context_class()  # the GL backend, unless MUJOCO_GL is set (ipr.gl)
         self.renderer = mujoco.Renderer(world.model, self.height, self.width)
         self.trees = [cKDTree(item.vertices) for item in world.objects]
         self.options = mujoco.MjvOption()

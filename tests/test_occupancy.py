@@ -1,0 +1,163 @@
+"""Per-voxel occupancy of a result (``occupancy.npz``): probabilities from the weighted written
+shapes, the scene's from the objects', the file's layout, and clear rejection of bad files."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from ipr import voxels
+from ipr.camera import look_at
+from ipr.errors import ResultError
+from ipr.products import ObjectPosterior, ShapeHypothesis
+from ipr.result import (
+    OCCUPANCY_FILE,
+    load_occupancy,
+    posterior_occupancy,
+    write_posterior_result,
+    write_result,
+)
+
+WORLD_FROM_CAMERA = look_at(np.array([0.5, -0.4, 0.6]), np.zeros(3))
+PITCH = voxels.DEFAULT_PITCH_M
+
+
+def _box(low, high) -> trimesh.Trimesh:
+    low, high = np.asarray(low, float), np.asarray(high, float)
+    box = trimesh.creation.box(extents=high - low)
+    box.apply_translation((low + high) / 2)
+    return box
+
+
+def _probability_at(pair, point) -> float:
+    """The probability of the voxel holding ``point`` (m), 0 when it is not listed."""
+    indices, probability = pair
+    wanted = np.floor(np.asarray(point) / PITCH).astype(np.int32)
+    match = np.flatnonzero((indices == wanted).all(axis=1))
+    return float(probability[match[0]]) if match.size else 0.0
+
+
+SMALL = _box((0.0, 0.0, 0.0), (0.02, 0.02, 0.02))
+LARGE = _box((0.0, 0.0, 0.0), (0.04, 0.02, 0.02))  # SMALL and a second cube beside it
+
+
+def test_probabilities_are_the_weights_of_the_shapes_holding_each_voxel():
+    occupancy = posterior_occupancy({0: [(SMALL, 0.3), (LARGE, 0.7)]})
+    indices, probability = occupancy.objects[0]
+    assert indices.dtype == np.int32 and indices.shape[1] == 3
+    assert probability.dtype == np.float32
+    assert np.all((probability >= 0) & (probability <= 1))
+    assert _probability_at(occupancy.objects[0], (0.0125, 0.0075, 0.0075)) == pytest.approx(1.0)
+    assert _probability_at(occupancy.objects[0], (0.0325, 0.0075, 0.0075)) == pytest.approx(0.7)
+    assert _probability_at(occupancy.objects[0], (0.0525, 0.0075, 0.0075)) == 0.0
+    # Every voxel of the larger cube is listed: 8 x 4 x 4, half of them at 1.
+    assert len(indices) == 8 * 4 * 4
+    assert np.count_nonzero(np.isclose(probability, 1.0)) == 4 * 4 * 4
+    # Voxel centres are the contract's grid: (n + 1/2) * 5 mm.
+    assert np.allclose(occupancy.centres_m(indices) / PITCH % 1.0, 0.5)
+
+
+def test_the_scene_combines_the_objects_as_independent():
+    beside = _box((0.0, 0.04, 0.0), (0.02, 0.06, 0.02))
+    overlapping = _box((0.0, 0.0, 0.0), (0.02, 0.02, 0.02))
+    occupancy = posterior_occupancy(
+        {0: [(SMALL, 0.4), (LARGE, 0.6)], 1: [(overlapping, 0.5), (beside, 0.5)]}
+    )
+    scene = occupancy.scene
+    # Held by both objects: 1 - (1 - 1) (1 - 0.5) = 1; by object 0 alone (0.6); by 1 alone (0.5).
+    assert _probability_at(scene, (0.0075, 0.0075, 0.0075)) == pytest.approx(1.0)
+    assert _probability_at(scene, (0.0325, 0.0075, 0.0075)) == pytest.approx(0.6)
+    assert _probability_at(scene, (0.0075, 0.0475, 0.0075)) == pytest.approx(0.5)
+    certain = posterior_occupancy({0: [(SMALL, 0.4), (LARGE, 0.6)], 1: [(LARGE, 1.0)]})
+    p = _probability_at(certain.scene, (0.0325, 0.0075, 0.0075))
+    assert p == pytest.approx(1.0)  # object 1 holds it surely
+    two = posterior_occupancy({0: [(LARGE, 0.6), (SMALL, 0.4)], 1: [(LARGE, 0.5), (beside, 0.5)]})
+    assert _probability_at(two.scene, (0.0325, 0.0075, 0.0075)) == pytest.approx(1 - 0.4 * 0.5)
+
+
+def test_every_result_holds_its_occupancy_and_it_loads_back(tmp_path):
+    out = write_result(
+        tmp_path / "r",
+        "test",
+        {0: WORLD_FROM_CAMERA},
+        [(LARGE, [(LARGE, 0.7), (SMALL, 0.3)], 0.7), (_box((0.1, 0, 0), (0.12, 0.02, 0.02)), [])],
+    )
+    with np.load(out / OCCUPANCY_FILE) as npz:
+        assert set(npz.files) == {
+            "format",
+            "pitch_m",
+            "object_ids",
+            "scene_voxels",
+            "scene_probability",
+            "object_0_voxels",
+            "object_0_probability",
+            "object_1_voxels",
+            "object_1_probability",
+        }
+        assert str(npz["format"]) == "ipr-occupancy/1" and float(npz["pitch_m"]) == PITCH
+        assert npz["object_1_voxels"].dtype == np.int32
+    occupancy = load_occupancy(out)
+    assert occupancy.pitch_m == PITCH and sorted(occupancy.objects) == [0, 1]
+    assert _probability_at(occupancy.objects[0], (0.0325, 0.0075, 0.0075)) == pytest.approx(0.7)
+    # An object written without hypotheses is its best shape with probability 1.
+    assert np.allclose(occupancy.objects[1][1], 1.0) and len(occupancy.objects[1][0]) == 64
+    assert load_occupancy(out / OCCUPANCY_FILE).objects[0][0].shape == occupancy.objects[0][0].shape
+
+
+def test_posterior_results_count_the_carved_shapes_that_were_written(tmp_path):
+    """The occupancy is that of the written (carved) shapes, not of the convex hypotheses."""
+
+    def hypothesis(box: trimesh.Trimesh, index: int) -> ShapeHypothesis:
+        return ShapeHypothesis(
+            0, index, np.asarray(box.vertices), np.asarray(box.faces), float(box.volume),
+            np.zeros(0), np.zeros((0, 3)),
+        )  # fmt: skip
+
+    carved = SMALL.vertices.copy(), SMALL.faces.copy()  # LARGE carved down to SMALL
+    posterior = ObjectPosterior(
+        0,
+        (hypothesis(LARGE, 0), hypothesis(SMALL, 1), hypothesis(LARGE, 2)),
+        np.array([0.5, 0.5, 0.0]),
+        0,
+        hypothesis(SMALL, -1),
+        "test",
+        output_meshes=(carved, None, None),
+    )
+    out = write_posterior_result(tmp_path / "r", [posterior], {0: WORLD_FROM_CAMERA}, method="t")
+    occupancy = load_occupancy(out)
+    assert _probability_at(occupancy.objects[0], (0.0125, 0.0075, 0.0075)) == pytest.approx(1.0)
+    assert _probability_at(occupancy.objects[0], (0.0325, 0.0075, 0.0075)) == 0.0
+
+
+@pytest.mark.parametrize(
+    "change, problem",
+    [
+        (lambda a: a.pop("format"), "format tag"),
+        (lambda a: a.update(pitch_m=np.array(-1.0)), "pitch_m"),
+        (lambda a: a.update(object_0_probability=np.full(1, 1.5, np.float32)), "outside"),
+        (lambda a: a.update(object_0_voxels=np.zeros((1, 2), np.int32)), "(N, 3)"),
+        (lambda a: a.pop("scene_probability"), "scene_"),
+    ],
+)
+def test_bad_occupancy_files_are_rejected_clearly(tmp_path, change, problem):
+    arrays = {
+        "format": np.array("ipr-occupancy/1"),
+        "pitch_m": np.array(PITCH),
+        "object_ids": np.array([0]),
+        "object_0_voxels": np.zeros((1, 3), np.int32),
+        "object_0_probability": np.ones(1, np.float32),
+        "scene_voxels": np.zeros((1, 3), np.int32),
+        "scene_probability": np.ones(1, np.float32),
+    }
+    assert load_occupancy(_save(tmp_path / "good.npz", arrays)).objects[0][1][0] == 1.0
+    change(arrays)
+    with pytest.raises(ResultError, match=problem.replace("(", r"\(").replace(")", r"\)")):
+        load_occupancy(_save(tmp_path / "bad.npz", arrays))
+    with pytest.raises(ResultError, match="missing"):
+        load_occupancy(tmp_path / "absent")
+
+
+def _save(path, arrays):
+    np.savez(path, **arrays)
+    return path
