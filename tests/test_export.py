@@ -389,8 +389,13 @@ def test_a_result_whose_mesh_is_missing_or_empty_is_refused(tmp_path, capsys):
 
 
 def test_a_shape_in_millimetres_is_refused(tmp_path):
+    # ipr never writes such a result (write_result refuses it); another tool might.
+    result = make_result(tmp_path / "result", [trimesh.creation.box(extents=(0.04, 0.03, 0.02))])
     box = trimesh.creation.box(extents=(40.0, 30.0, 20.0))  # mm written as m
-    result = make_result(tmp_path / "result", [box])
+    box.export(result / "objects" / "0" / "best.ply", file_type="ply")
+    with pytest.raises(ValueError, match="millimetres"):
+        make_result(tmp_path / "refused", [box])
+    assert not (tmp_path / "refused").exists()
     with pytest.raises(ResultError, match="millimetres"):
         export_result(result, tmp_path / "out", format="obj")
     assert not (tmp_path / "out").exists()

@@ -316,3 +316,17 @@ def test_extra_files_are_written_inside_the_result_and_checked(tmp_path):
         assert not (tmp_path / "bad").exists()
     with pytest.raises(ValueError, match="best probability"):
         write_result(tmp_path / "bad", "test", {0: WORLD_FROM_CAMERA}, [(box, [], 1.5)])
+
+
+def test_a_result_mesh_in_millimetres_is_refused_with_its_file(tmp_path):
+    import trimesh
+
+    small = trimesh.creation.box(extents=(0.04, 0.03, 0.02))
+    out = write_result(tmp_path / "r", "m", np.eye(4), [(small, [])])
+    trimesh.creation.box(extents=(40.0, 30.0, 20.0)).export(out / "objects/0/best.ply")
+    with pytest.raises(ResultError, match="millimetres") as error:
+        load_result(out)
+    assert "best.ply" in str(error.value)
+    with pytest.raises(ValueError, match="millimetres"):
+        write_result(tmp_path / "mm", "m", np.eye(4), [(small.apply_scale(1000.0), [])])
+    assert not (tmp_path / "mm").exists()

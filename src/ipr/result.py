@@ -140,6 +140,13 @@ def read_mesh(path: Path | str) -> Any:
         raise ResultError(path, "mesh file holds no triangles", "write a triangle mesh")
     if not np.all(np.isfinite(mesh.vertices)):
         raise ResultError(path, "mesh vertices contain NaN or inf", "write finite coordinates")
+    extent = float(np.max(mesh.extents))
+    if extent > voxels.MAX_MESH_EXTENT_M:
+        raise ResultError(
+            path,
+            f"mesh spans {extent:.4g} m, more than the {voxels.MAX_MESH_EXTENT_M:g} m an object may",
+            "write the mesh in metres (are its coordinates in millimetres?)",
+        )
     return mesh
 
 
@@ -688,6 +695,12 @@ def _check_mesh_for_writing(mesh: Any, what: str) -> None:
         raise ValueError(f"{what} has no faces")
     if not np.all(np.isfinite(mesh.vertices)):
         raise ValueError(f"{what} has NaN or inf vertices")
+    extent = float(np.max(mesh.extents)) if len(mesh.vertices) else 0.0
+    if extent > voxels.MAX_MESH_EXTENT_M:
+        raise ValueError(
+            f"{what} spans {extent:.4g} m, more than the {voxels.MAX_MESH_EXTENT_M:g} m an object "
+            "may (are its coordinates in millimetres? results are in metres)"
+        )
 
 
 def write_posterior_result(

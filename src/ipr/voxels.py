@@ -204,6 +204,11 @@ def transform_points(transform: np.ndarray | None, points: np.ndarray) -> np.nda
 # Occupancy
 
 
+#: The largest extent (m) of a mesh that is voxelised: an object in clutter is far smaller,
+#: and a mesh in millimetres read as metres (1000 times too large) would need terabytes.
+MAX_MESH_EXTENT_M = 10.0
+
+
 def occupied_voxels(
     mesh: Any,
     pitch_m: float = DEFAULT_PITCH_M,
@@ -251,6 +256,12 @@ def scanline_voxels(vertices: np.ndarray, faces: np.ndarray, pitch_m: float) -> 
         return EMPTY.copy()
     if not np.all(np.isfinite(vertices)):
         raise ValueError("mesh vertices contain NaN or inf")
+    extent = float(np.max(vertices.max(axis=0) - vertices.min(axis=0)))
+    if extent > MAX_MESH_EXTENT_M:
+        raise ValueError(
+            f"a mesh spans {extent:.4g} m, more than the {MAX_MESH_EXTENT_M:g} m an object may "
+            "(are its coordinates in millimetres? meshes are in metres)"
+        )
     # Grid units: voxel centre (n + 1/2) p sits at integer coordinate n.
     grid = vertices / pitch_m - 0.5
     if np.abs(grid).max() >= _OFFSET:
