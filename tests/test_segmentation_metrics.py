@@ -215,6 +215,7 @@ def test_lost_ids_say_what_happened_to_each_pair() -> None:
 # ground_truth_masks
 
 
+@pytest.mark.slow
 def test_ground_truth_masks_match_generator_counts(tmp_path: Path) -> None:
     from ipr.synth import SynthConfig, generate_scene
 
@@ -253,6 +254,7 @@ def test_ground_truth_masks_on_real_frames(shared_data: Path) -> None:
     assert (observed[labels > 0] > 0).mean() > 0.8  # the masks lie on measured surfaces
 
 
+@pytest.mark.slow
 def test_ground_truth_masks_hide_objects_behind_generated_walls(tmp_path: Path) -> None:
     from ipr.synth import SynthConfig, generate_scene
 

@@ -261,6 +261,7 @@ def test_noise_model_statistics():
 # Determinism, fallback, arguments
 
 
+@pytest.mark.slow
 def test_same_seed_gives_identical_files_and_another_seed_differs(suite, tmp_path):
     config = replace(SMALL, static_frames=2)
     again = generate_scene(tmp_path, kind="static", seed=5, arrangement="drawer", config=config)
@@ -274,6 +275,7 @@ def test_same_seed_gives_identical_files_and_another_seed_differs(suite, tmp_pat
         assert (other / name).read_bytes() != (original / name).read_bytes()
 
 
+@pytest.mark.slow
 def test_procedural_fallback_when_ycb_folder_is_missing(tmp_path):
     with pytest.warns(UserWarning, match="procedural"):
         path = generate_scene(
@@ -304,6 +306,7 @@ def test_procedural_fallback_when_ycb_folder_is_missing(tmp_path):
     assert _json(forced / "synth.json")["object_source"] == "procedural"
 
 
+@pytest.mark.slow
 def test_generate_scenes_seeds_arrangements_and_progress(tmp_path):
     calls = []
     paths = generate_scenes(
