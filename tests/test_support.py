@@ -1,6 +1,6 @@
 """The support is the plane the objects rest on, not the largest plane (``ipr.geometry.support``):
 a table seen with the floor around it, boxes packed in a bin whose floor is hidden, a plain
-table."""
+table; and the perception keeps the choice across frames."""
 
 from __future__ import annotations
 
@@ -157,3 +157,43 @@ def test_no_choice_without_candidates():
     dominant = fit_plane_ransac(grid.reshape(-1, 3)[usable], rng=np.random.default_rng(0))
     choice = choose_support(grid, usable, dominant, np.zeros(3), SupportChoiceConfig(candidates=0))
     assert choice.is_dominant
+
+
+def test_scene_and_perception_agree_on_the_table_and_keep_it_in_later_frames(tmp_path):
+    """Without camera poses, the loader builds the world on the table (not the floor); the
+    perception finds the same support in frame 0 and keeps it in frame 1."""
+    from ipr.perception.config import PerceptionConfig
+    from ipr.perception.planes import find_support_plane
+    from ipr.scene import Frame, load_scene, write_scene
+
+    depth = render(TABLE_SCENE, TABLE_CAMERA)
+    rgb = np.full((HEIGHT, WIDTH, 3), 128, np.uint8)
+    frames = [Frame(i, rgb, depth, K, TABLE_CAMERA) for i in range(2)]
+    scene = load_scene(write_scene(tmp_path / "s", frames, write_poses=False))
+    assert "stand on it" in scene.support_note
+    frame = scene.frames[0]
+    points = frame.points_world()
+    table = np.abs(points[..., 2]) < 0.005
+    assert table.sum() > 1000  # the table top is at world z = 0
+    config = PerceptionConfig()
+    usable = np.flatnonzero((frame.depth_m > 0).ravel())
+    flat = points.reshape(-1, 3)[usable]
+    first = find_support_plane(
+        flat,
+        config,
+        grid=points,
+        usable=usable,
+        viewpoint=frame.world_from_camera[:3, 3],
+    )
+    assert first.normal[2] > 0.999 and abs(first.offset) < 0.005
+    later = find_support_plane(
+        flat,
+        config,
+        grid=points,
+        usable=usable,
+        viewpoint=frame.world_from_camera[:3, 3],
+        previous=first,
+    )
+    assert later is first  # the largest plane (the floor) is not the earlier support
+    alone = find_support_plane(flat, config)  # no grid: the largest plane, as before
+    assert alone.offset > 0.4  # the floor, 0.5 m below the table
