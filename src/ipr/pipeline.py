@@ -21,7 +21,7 @@ import dataclasses
 import logging
 import math
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -316,15 +316,18 @@ def infer(
     samples: int | None = None,
     config: Config | None = None,
     overwrite: bool = False,
+    up_camera: Sequence[float] | None = None,
 ) -> Path:
     """Load a scene, run the pipeline and write the result directory (atomically), with
-    ``completion.png``: frame 0's RGB beside the completed objects seen from its camera."""
+    ``completion.png``: frame 0's RGB beside the completed objects seen from its camera.
+    ``up_camera``: the up direction in camera coordinates for a scene without camera poses
+    (``ipr.scene.load_scene``)."""
     out_dir = Path(out_dir)
     if out_dir.exists() and not overwrite:
         raise IprError(
             f"{out_dir}: already exists (fix: choose another folder or pass --overwrite)"
         )
-    scene = load_scene(scene_path)
+    scene = load_scene(scene_path, up_camera=up_camera)
     result = run_pipeline(
         scene,
         config,
