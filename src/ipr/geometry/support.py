@@ -201,7 +201,9 @@ def choose_support(
         distance = distance.reshape(shape)
         hull = _hull_mask(level.piece)
         # The extent's rim is left out: pixels mixed with what lies beyond the plane's edge.
-        extent = ndimage.binary_erosion(hull, structure=_EIGHT, iterations=config.rim_px) & valid
+        if config.rim_px > 0:  # (scipy erodes until nothing is left with 0 iterations)
+            hull = ndimage.binary_erosion(hull, structure=_EIGHT, iterations=config.rim_px)
+        extent = hull & valid
         below = extent & (distance < -drop)
         share = float(below.sum()) / max(int(extent.sum()), 1)
         around = _walls_around(level, walls, coarse, valid, heights - level_height[index], config)
@@ -385,6 +387,8 @@ def _walls_around(
     not see, may separate them) and reaches above the level. ``heights`` (h, w) are heights
     above the level (m). Each wall: its unit normal (towards the viewpoint), offset and piece."""
     if not level.piece.any():
+        return []
+    if config.touch_px <= 0:
         return []
     near = ndimage.binary_dilation(level.piece, structure=_EIGHT, iterations=config.touch_px)
     around = []
