@@ -206,7 +206,7 @@ def choose_support(
         extent = hull & valid
         below = extent & (distance < -drop)
         share = float(below.sum()) / max(int(extent.sum()), 1)
-        around = _walls_around(level, walls, coarse, valid, heights - level_height[index], config)
+        around = _walls_around(level, walls, hull, valid, heights - level_height[index], config)
         inside = below
         container_share = 0.0
         pair = _between(level, around, coarse)
@@ -377,24 +377,24 @@ def _hull_mask(mask: np.ndarray) -> np.ndarray:
 def _walls_around(
     level: _Candidate,
     walls: list[_Candidate],
-    coarse: np.ndarray,
+    extent: np.ndarray,
     valid: np.ndarray,
     heights: np.ndarray,
     config: SupportChoiceConfig,
 ) -> list[dict]:
-    """The walls that rise around ``level``: their largest piece lies within ``touch_px`` of the
-    level's largest piece in the image (a dark gap, such as a bin's floor that the sensor does
-    not see, may separate them) and reaches above the level. ``heights`` (h, w) are heights
-    above the level (m). Each wall: its unit normal (towards the viewpoint), offset and piece."""
-    if not level.piece.any():
-        return []
-    if config.touch_px <= 0:
+    """The walls that rise around ``level``: their pieces come within ``touch_px`` of the
+    level's pieces in the image (a dark gap, such as a bin's floor that the sensor does not see,
+    may separate them), lie mostly outside the level's ``extent`` (h, w; the convex hull of its
+    pieces: a container's walls bound it, while the faces of objects standing on a table lie
+    within the table's extent) and reach above the level. ``heights`` (h, w) are heights above
+    the level (m). Each wall: its unit normal (towards the viewpoint), offset and pieces."""
+    if not level.piece.any() or config.touch_px <= 0:
         return []
     near = ndimage.binary_dilation(level.piece, structure=_EIGHT, iterations=config.touch_px)
     around = []
     for wall in walls:
         piece = wall.piece
-        if not (piece & near).any():
+        if not (piece & near).any() or (piece & extent).sum() > 0.5 * piece.sum():
             continue
         wall_heights = heights[piece & valid]
         if wall_heights.size < 10 or np.percentile(wall_heights, 98.0) <= config.drop_m:
