@@ -265,9 +265,7 @@ def choose_support(
     if best == 0:
         return dataclasses.replace(keep, measures=measures)
     chosen = levels[rivals[best]]
-    normal, offset, inliers = _refit(
-        grid.reshape(-1, 3)[usable], chosen.normal, chosen.offset, config.threshold_m
-    )
+    normal, offset, inliers = _refit(grid, usable, chosen.normal, chosen.offset, config.threshold_m)
     return SupportChoice(
         normal,
         offset,
@@ -279,23 +277,42 @@ def choose_support(
     )
 
 
+def _usable_inliers(
+    grid: np.ndarray, usable: np.ndarray, normal: np.ndarray, offset: float, threshold_m: float
+) -> np.ndarray:
+    """(K,) indices into ``usable`` (sorted flat pixel indices) of the usable points of the
+    (H, W, 3) ``grid`` within ``threshold_m`` of the plane (normal, offset): one compiled pass
+    over the grid, without gathering the usable points."""
+    from ipr.geometry import kernels  # numba: only where it is needed (see ipr.geometry.planes)
+
+    flat = np.ascontiguousarray(grid.reshape(-1, 3), dtype=np.float64)
+    hits = kernels.plane_inliers(
+        flat, np.asarray(normal, dtype=np.float64), float(offset), threshold_m
+    )
+    position = np.minimum(np.searchsorted(usable, hits), max(len(usable) - 1, 0))
+    keep = usable[position] == hits if len(usable) else np.zeros(len(hits), dtype=bool)
+    return position[keep]
+
+
 def _refit(
-    points: np.ndarray, normal: np.ndarray, offset: float, threshold_m: float
+    grid: np.ndarray, usable: np.ndarray, normal: np.ndarray, offset: float, threshold_m: float
 ) -> tuple[np.ndarray, float, np.ndarray]:
     """A plane found on the coarse grid refitted by least squares to its inliers among the
-    frame's (N, 3) usable points (twice, as ``fit_plane_ransac`` refits): (unit normal, same
-    side as ``normal``; offset; inlier indices)."""
+    frame's usable points (twice, as ``fit_plane_ransac`` refits): (unit normal, on the side of
+    ``normal``; offset; inlier indices into ``usable``)."""
+    from ipr.geometry import kernels
+
+    flat = np.ascontiguousarray(grid.reshape(-1, 3), dtype=np.float64)
     for _ in range(2):
-        inliers = np.flatnonzero(np.abs(points @ normal + offset) < threshold_m)
+        inliers = usable[_usable_inliers(grid, usable, normal, offset, threshold_m)]
         if len(inliers) < 3:
             break
-        sample = points[inliers[:: max(1, len(inliers) // 20000)]]
-        centroid = sample.mean(axis=0)
-        _, vectors = np.linalg.eigh((sample - centroid).T @ (sample - centroid))
+        centroid, scatter = kernels.centred_scatter(flat, inliers[:: max(1, len(inliers) // 20000)])
+        _, vectors = np.linalg.eigh(scatter)
         refit = vectors[:, 0] if vectors[:, 0] @ normal >= 0 else -vectors[:, 0]
         normal, offset = refit, -float(refit @ centroid)
-    inliers = np.flatnonzero(np.abs(points @ normal + offset) < threshold_m)
-    return np.asarray(normal, dtype=np.float64), float(offset), inliers
+    normal = np.asarray(normal, dtype=np.float64)
+    return normal, float(offset), _usable_inliers(grid, usable, normal, offset, threshold_m)
 
 
 def _candidates(
@@ -452,8 +469,7 @@ def _below_tops(
     level = float(np.percentile(below, config.low_percentile)) if below.size else -config.drop_m
     measures["support_level_m"] = round(level, 4)
     offset = float(dominant.offset) - level
-    full = grid.reshape(-1, 3)[usable]
-    inliers = np.flatnonzero(np.abs(full @ up + offset) < config.threshold_m)
+    inliers = _usable_inliers(grid, usable, up, offset, config.threshold_m)
     return SupportChoice(
         up,
         offset,

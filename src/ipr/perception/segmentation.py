@@ -101,7 +101,7 @@ def segment_frame(
             f"{config.support.max_tilt_deg:g} deg of world z holding "
             f"{config.support.min_fraction:.0%} of the {usable.size} valid points); make the "
             "table visible, or check the camera poses (world z must point up), or give the "
-            "up direction (ipr --up X Y Z, in camera coordinates) for a scene without poses"
+            "up direction (--up X Y Z, in camera coordinates) for a scene without poses"
         )
     # Everything at or below the support is static. The wall search looks at an even subset
     # of the points above it (``walls.max_points``), so only those need normals here.
