@@ -351,3 +351,70 @@ def test_an_output_path_through_a_file_is_refused_before_the_run(scene_dir: Path
     assert main(["segment", str(scene_dir), "-o", str(blocker)]) == EXIT_INPUT_ERROR
     assert main(["segment", str(scene_dir), "-o", str(blocker / "out")]) == EXIT_INPUT_ERROR
     assert blocker.read_text() == "x"
+
+
+@pytest.mark.parametrize("command", ["segment", "infer", "check"])
+def test_up_option_is_documented(command: str, capsys):
+    with pytest.raises(SystemExit):
+        main([command, "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "--up X Y Z" in text and "up direction in camera coordinates" in text
+
+
+def test_gravity_that_cannot_be_determined_is_said_clearly(tmp_path: Path):
+    """No camera pose and no plane in frame 0: one line naming the frame and both fixes, a
+    non-zero exit and no output."""
+    from ipr.scene import Frame, write_scene
+
+    from .conftest import make_frames
+
+    frame = make_frames(1)[0]
+    noise = np.random.default_rng(0).uniform(0.4, 1.5, frame.depth_m.shape).astype(np.float32)
+    scene = write_scene(
+        tmp_path / "noise",
+        [Frame(0, frame.rgb, noise, frame.K, frame.world_from_camera)],
+        write_poses=False,
+    )
+    for command in (["segment", str(scene), "-o", str(tmp_path / "out")], ["check", str(scene)]):
+        completed = subprocess.run(
+            [sys.executable, "-m", "ipr", *command], capture_output=True, text=True
+        )
+        assert completed.returncode == EXIT_INPUT_ERROR
+        error = completed.stderr
+        assert "frame 0: cannot determine gravity" in error and "Traceback" not in error
+        assert "cam_R_w2c" in error and "--up X Y Z" in error
+        assert len(error.strip().splitlines()) == 1
+    assert not (tmp_path / "out").exists()
+
+
+def test_segment_and_check_take_the_up_direction(tmp_path: Path, capsys):
+    from ipr.scene import load_scene, write_scene
+
+    from .conftest import make_frames
+
+    frames = make_frames(1)
+    scene = write_scene(tmp_path / "s", frames, write_poses=False)
+    up = frames[0].world_from_camera[:3, :3].T @ np.array([0.0, 0.0, 1.0])
+    given = [f"{value:.3f}" for value in up]
+    assert main(["check", str(scene), "--up", *given]) == 0
+    assert "world frame from support_plane" in capsys.readouterr().out
+    assert main(["segment", str(scene), "-o", str(tmp_path / "seg"), "--up", *given]) == 0
+    summary = json.loads((tmp_path / "seg" / "segmentation.json").read_text())
+    assert summary["frames"][0]["planes"][0]["kind"] == "support"
+    assert np.allclose(load_scene(scene, up_camera=up).frames[0].world_from_camera[2, :3] @ up, 1)
+    # A wrong up: refused before any output, for every command that loads the scene.
+    down = [f"{-value:.3f}" for value in up]
+    for command in (
+        ["check", str(scene)],
+        ["segment", str(scene), "-o", str(tmp_path / "seg2")],
+        ["infer", str(scene), "-o", str(tmp_path / "result")],
+    ):
+        assert main([*command, "--up", *down]) == EXIT_INPUT_ERROR
+        assert "camera is below the support" in capsys.readouterr().err
+    assert not (tmp_path / "seg2").exists() and not (tmp_path / "result").exists()
+
+
+def test_up_is_refused_for_a_scene_with_camera_poses(scene_dir: Path, tmp_path: Path, capsys):
+    command = ["infer", str(scene_dir), "-o", str(tmp_path / "r"), "--up", "0", "0", "1"]
+    assert main(command) == EXIT_INPUT_ERROR
+    assert "camera poses, which fix gravity" in capsys.readouterr().err

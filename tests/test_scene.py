@@ -59,6 +59,51 @@ def test_world_frame_from_support_plane_when_no_poses(tmp_path: Path):
     assert np.allclose(camera_centre[:2], 0, atol=1e-6)  # origin below the camera
 
 
+def _true_up(frame) -> np.ndarray:
+    """World +z in the camera frame of ``frame`` (the up direction a user would give)."""
+    return frame.world_from_camera[:3, :3].T @ np.array([0.0, 0.0, 1.0])
+
+
+def test_a_given_up_direction_finds_the_table(tmp_path: Path):
+    frames = make_frames(1)
+    path = write_scene(tmp_path / "s", frames, write_poses=False)
+    up = _true_up(frames[0])
+    # A rough up (20 degrees off, any length) still finds the table, which then sets world z.
+    rough = 3.0 * (up + np.tan(np.radians(20.0)) * np.array([1.0, 0.0, 0.0]))
+    scene = load_scene(path, up_camera=rough.tolist())
+    frame = scene.frames[0]
+    assert scene.world_frame_source == "support_plane"
+    assert np.degrees(np.arccos(np.clip(_true_up(frame) @ up, -1, 1))) < 1.0
+    points = frame.points_world()[frame.depth_m > 0]
+    assert np.median(np.abs(points[:, 2])) < 0.003
+
+
+@pytest.mark.parametrize(
+    ("up", "message"),
+    [
+        ([0.0, 0.0, 0.0], "3 finite numbers"),
+        ([1.0, float("nan"), 0.0], "3 finite numbers"),
+        ("down", "the camera is below the support"),
+        ("sideways", "no plane within 45 degrees"),
+    ],
+)
+def test_a_wrong_up_direction_is_refused_clearly(tmp_path: Path, up, message: str):
+    frames = make_frames(1)
+    path = write_scene(tmp_path / "s", frames, write_poses=False)
+    true_up = _true_up(frames[0])
+    if up == "down":
+        up = (-true_up).tolist()
+    elif up == "sideways":  # along the table: only walls (none here) are perpendicular to it
+        up = np.cross(true_up, [0.0, 0.0, 1.0]).tolist()
+    error = _expect(path, "depth/000000.png", message, up_camera=up)
+    assert "--up" in error.fix
+
+
+def test_an_up_direction_for_a_scene_with_poses_is_refused(scene_dir: Path):
+    with pytest.raises(SceneError, match="camera poses, which fix gravity"):
+        load_scene(scene_dir, up_camera=[0.0, -1.0, 0.0])
+
+
 def test_actions_in_camera_frame_are_converted_to_world(scene_dir: Path):
     scene = load_scene(scene_dir)
     camera_from_world = invert_transform(scene.frames[0].world_from_camera)
@@ -112,9 +157,9 @@ def _edit_json(path: Path, edit) -> None:
     path.write_text(json.dumps(content))
 
 
-def _expect(scene_dir: Path, file_part: str, *message_parts: str) -> SceneError:
+def _expect(scene_dir: Path, file_part: str, *message_parts: str, up_camera=None) -> SceneError:
     with pytest.raises(SceneError) as caught:
-        load_scene(scene_dir)
+        load_scene(scene_dir, up_camera=up_camera)
     text = str(caught.value)
     assert file_part in text, text
     for part in message_parts:
@@ -296,8 +341,8 @@ def test_no_support_plane_without_poses(tmp_path: Path):
         for f in frames
     ]
     path = write_scene(tmp_path / "s", noisy, write_poses=False)
-    error = _expect(path, "depth/000000.png", "no support plane found")
-    assert "cam_R_w2c" in error.fix
+    error = _expect(path, "depth/000000.png", "frame 0", "cannot determine gravity")
+    assert "cam_R_w2c" in error.fix and "--up X Y Z" in error.fix
 
 
 def test_missing_camera_json(scene_dir: Path):

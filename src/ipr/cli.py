@@ -263,6 +263,7 @@ def _cmd_infer(args: argparse.Namespace) -> int:
         samples=args.samples,
         config=config,
         overwrite=args.overwrite,
+        up_camera=args.up,
     )
     result = load_result(out, load_meshes=False)
     shown = ("segmentation", "fusion", "hypotheses", "inference", "total")
@@ -287,7 +288,7 @@ def _cmd_segment(args: argparse.Namespace) -> int:
 
     check_output_location(Path(args.out), [Path(args.scene)], overwrite=args.overwrite)
     config = _config(args)
-    scene = load_scene(Path(args.scene))
+    scene = load_scene(Path(args.scene), up_camera=args.up)
     perception = perceive_scene(scene, config.perception if config else None)
     out = write_segmentation(
         scene,
@@ -312,12 +313,14 @@ def _cmd_segment(args: argparse.Namespace) -> int:
 def _cmd_check(args: argparse.Namespace) -> int:
     from ipr.scene import load_scene
 
-    scene = load_scene(Path(args.scene))
+    scene = load_scene(Path(args.scene), up_camera=args.up)
     height, width = scene.frames[0].shape
     print(f"{scene.path}: valid scene")
     print(
         f"  frames: {len(scene.frames)} ({width}x{height}), world frame from {scene.world_frame_source}"
     )
+    if scene.support_note:
+        print(f"  support: {scene.support_note}")
     print(f"  pushes: {len(scene.pushes)}")
     for number, push in enumerate(scene.pushes):
         print(
@@ -488,6 +491,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     infer.add_argument("--overwrite", action="store_true", help="replace OUT if it exists")
     _add_config_option(infer)
+    _add_up_option(infer)
     infer.set_defaults(handler=_cmd_infer)
 
     batch = commands.add_parser(
@@ -531,6 +535,7 @@ def build_parser() -> argparse.ArgumentParser:
     segment.add_argument("-o", "--out", required=True, metavar="OUT")
     segment.add_argument("--overwrite", action="store_true", help="replace OUT if it exists")
     _add_config_option(segment)
+    _add_up_option(segment)
     segment.set_defaults(handler=_cmd_segment)
 
     config = commands.add_parser(
@@ -545,8 +550,15 @@ def build_parser() -> argparse.ArgumentParser:
     _add_config_option(config)
     config.set_defaults(handler=_cmd_config)
 
-    check = commands.add_parser("check", help="validate a scene directory and summarise it")
+    check = commands.add_parser(
+        "check",
+        help="validate a scene directory and summarise it",
+        description="Validate a scene directory against the contract and summarise it: frames, "
+        "where the world frame comes from (camera poses, or the support found in frame 0 and "
+        "why it was chosen) and the pushes.",
+    )
     check.add_argument("scene", metavar="SCENE")
+    _add_up_option(check)
     check.set_defaults(handler=_cmd_check)
 
     suite = commands.add_parser(
@@ -628,6 +640,21 @@ def _add_config_option(parser: argparse.ArgumentParser) -> None:
         "--config",
         metavar="FILE",
         help="TOML file of settings over the defaults ('ipr config show' lists them all)",
+    )
+
+
+def _add_up_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--up",
+        nargs=3,
+        type=float,
+        metavar=("X", "Y", "Z"),
+        help="the up direction in camera coordinates (x right, y down, z forward), for a "
+        "scene without camera poses whose gravity the data cannot tell; e.g. 0 -1 0 for a "
+        "camera held level. The support is then the plane the objects rest on among the "
+        "planes within 45 degrees of perpendicular to it. Without it, gravity comes from the "
+        "planes of frame 0 (the support the objects rest on: not a floor seen beyond a table, "
+        "nor the tops of boxes packed in a bin)",
     )
 
 

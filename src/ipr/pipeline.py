@@ -29,7 +29,7 @@ import math
 import platform
 import sys
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
@@ -388,11 +388,14 @@ def infer(
     progress: ProgressCallback | None = None,
     config: Config | None = None,
     overwrite: bool = False,
+    up_camera: Sequence[float] | None = None,
 ) -> Path:
     """Load a scene, run the pipeline and write the result directory (atomically), with
-    ``completion.png``: frame 0's RGB beside the completed objects seen from its camera."""
+    ``completion.png``: frame 0's RGB beside the completed objects seen from its camera.
+    ``up_camera``: the up direction in camera coordinates for a scene without camera poses
+    (``ipr.scene.load_scene``)."""
     out_dir = check_output_location(out_dir, [scene_path], overwrite=overwrite)
-    scene = load_scene(scene_path)
+    scene = load_scene(scene_path, up_camera=up_camera)
     result = run_pipeline(
         scene,
         config,

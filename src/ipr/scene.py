@@ -10,6 +10,7 @@ evaluation and benchmarks call: inference never reads it.
 from __future__ import annotations
 
 import json
+import logging
 import math
 import re
 from collections.abc import Iterable, Sequence
@@ -23,7 +24,10 @@ from PIL import Image
 from ipr.atomic import staged_directory
 from ipr.camera import backproject, invert_transform, make_transform
 from ipr.errors import SceneError
-from ipr.geometry.planes import fit_plane_ransac
+from ipr.geometry.planes import Plane, fit_plane_ransac
+from ipr.geometry.support import SupportChoiceConfig, choose_support
+
+log = logging.getLogger(__name__)
 
 ACTIONS_FORMAT = "ipr-actions/1"
 FRAME_NAME = re.compile(r"^(\d{6})\.(png|jpg|jpeg)$")
@@ -32,6 +36,16 @@ FRAME_NAME = re.compile(r"^(\d{6})\.(png|jpg|jpeg)$")
 PLAUSIBLE_DEPTH_M = (0.1, 5.0)
 #: Tolerance on |direction| = 1 and on rotation orthonormality.
 UNIT_TOLERANCE = 1e-3
+#: With a given up direction, the support's normal is within this angle of it (deg): a rough
+#: up (a camera taken as level that looks down at the table) still finds the table, and walls
+#: (90 degrees) are out.
+UP_MAX_TILT_DEG = 45.0
+#: How to fix a scene whose gravity cannot be found from its data (error messages).
+GRAVITY_FIX = (
+    "give the camera pose (cam_R_w2c, cam_t_w2c) in scene_camera.json, or the up direction "
+    "in camera coordinates with --up X Y Z (load_scene(path, up_camera=...); 0 -1 0 for a "
+    "camera held level)"
+)
 
 
 @dataclass(frozen=True, eq=False)
@@ -102,7 +116,8 @@ class Scene:
     """A validated scene: frames in capture order and the robot's pushes, in the world frame.
 
     ``world_frame_source`` is ``"camera_poses"`` when the files give camera poses, or
-    ``"support_plane"`` when the world frame was built from the dominant plane of frame 0.
+    ``"support_plane"`` when the world frame was built from the support found in frame 0;
+    ``support_note`` then says which plane that was and why (``ipr.geometry.support``).
     """
 
     path: Path
@@ -110,6 +125,7 @@ class Scene:
     pushes: tuple[Push, ...] = ()
     pusher: Pusher | None = None
     world_frame_source: str = "camera_poses"
+    support_note: str = ""
 
     @property
     def is_dynamic(self) -> bool:
@@ -272,13 +288,18 @@ def _rotation(value: Any, path: Path, key: str) -> np.ndarray:
 # Loading
 
 
-def load_scene(path: Path | str, *, plane_seed: int = 0) -> Scene:
+def load_scene(
+    path: Path | str, *, plane_seed: int = 0, up_camera: Sequence[float] | None = None
+) -> Scene:
     """Read and validate a scene directory; raise SceneError naming the file and the fix.
 
     The world frame comes from the camera poses when every frame has one; otherwise the camera is
-    taken as static and the world frame is built from the dominant plane of frame 0 (z = plane
-    normal towards the camera, origin = the camera centre projected on the plane, x = the
-    camera's x axis projected on the plane).
+    taken as static and the world frame is built from the support found in frame 0
+    (``world_from_support_plane``: z = the support's normal towards the camera, origin = the
+    camera centre projected on it, x = the camera's x axis projected on it). ``up_camera``
+    (3 numbers, any length) is the up direction in camera coordinates, for scenes without camera
+    poses whose gravity the data cannot tell: the support is then the plane the objects rest on
+    among the planes within 45 degrees of perpendicular to it (``UP_MAX_TILT_DEG``).
     """
     root = Path(path)
     if not root.is_dir():
@@ -393,13 +414,25 @@ def load_scene(path: Path | str, *, plane_seed: int = 0) -> Scene:
                 )
         images.append((rgb, depth_m, mask))
 
+    note = ""
     if poses:
+        if up_camera is not None:
+            raise SceneError(
+                camera_path,
+                "an up direction was given but the scene gives camera poses, which fix gravity",
+                "leave out --up (up_camera) for scenes with cam_R_w2c/cam_t_w2c",
+            )
         source = "camera_poses"
         world_from_camera = poses
     else:
         source = "support_plane"
-        shared = world_from_support_plane(
-            images[0][1], intrinsics[ids[0]], seed=plane_seed, path=depth_files[ids[0]]
+        shared, note = world_from_support_plane(
+            images[0][1],
+            intrinsics[ids[0]],
+            seed=plane_seed,
+            path=depth_files[ids[0]],
+            up_camera=up_camera,
+            with_note=True,
         )
         world_from_camera = {index: shared for index in ids}
 
@@ -408,41 +441,104 @@ def load_scene(path: Path | str, *, plane_seed: int = 0) -> Scene:
         for index, (rgb, depth_m, mask) in zip(ids, images, strict=True)
     )
     pusher, pushes = _load_actions(root / "actions.json", frames, has_poses=bool(poses))
-    return Scene(root, frames, pushes, pusher, source)
+    return Scene(root, frames, pushes, pusher, source, note)
 
 
 def world_from_support_plane(
-    depth_m: np.ndarray, K: np.ndarray, *, seed: int = 0, path: Path | str = "depth"
-) -> np.ndarray:
-    """World-from-camera (4, 4) built from the dominant plane of one depth image (contract rule).
+    depth_m: np.ndarray,
+    K: np.ndarray,
+    *,
+    seed: int = 0,
+    path: Path | str = "depth",
+    up_camera: Sequence[float] | None = None,
+    with_note: bool = False,
+    choice: SupportChoiceConfig | None = None,
+) -> np.ndarray | tuple[np.ndarray, str]:
+    """World-from-camera (4, 4) built from the support of one depth image (contract rule).
 
-    z is the plane normal pointing towards the camera, the origin is the camera centre projected
-    on the plane, and x is the camera's x axis projected on the plane.
+    The support is the plane the objects rest on (``ipr.geometry.support.choose_support``): the
+    largest plane, unless it is the tops of packed objects (the support is then the lowest
+    level reached below them) or a floor seen beyond a table (the table). With ``up_camera``
+    (the up direction in camera coordinates), only planes within ``UP_MAX_TILT_DEG`` of
+    perpendicular to it are considered. z is the support's normal pointing towards the camera,
+    the origin is the camera centre projected on the support, and x is the camera's x axis
+    projected on it. With ``with_note``, returns (transform, a line saying which plane and why).
+
+    Raises:
+        SceneError: gravity cannot be determined (no plane holds a tenth of the points, or none
+            is perpendicular to ``up_camera``, or the camera is below it), naming the frame and
+            the fix.
     """
     points = backproject(depth_m, K)[depth_m > 0]
+    up = None if up_camera is None else _up_direction(up_camera, path)
     plane = fit_plane_ransac(
         points,
         threshold_m=0.01,
         iterations=1000,
         min_inliers=max(500, len(points) // 10),
         rng=np.random.default_rng(seed),
+        axis=up,
+        max_tilt_deg=UP_MAX_TILT_DEG if up is not None else 90.0,
     )
     if plane is None:
+        where = (
+            f"no plane within {UP_MAX_TILT_DEG:g} degrees of perpendicular to the given up direction"
+            if up is not None
+            else "no plane"
+        )
         raise SceneError(
             path,
-            "no support plane found in frame 0 and no camera poses given",
-            "add cam_R_w2c/cam_t_w2c to scene_camera.json, or make the table visible in frame 0",
+            f"frame 0: cannot determine gravity: {where} holds a tenth of the frame's points "
+            "and no camera pose is given",
+            GRAVITY_FIX
+            if up is None
+            else "check --up (the up direction in camera "
+            "coordinates, e.g. 0 -1 0 for a camera held level), or give the camera pose "
+            "(cam_R_w2c, cam_t_w2c) in scene_camera.json",
+        )
+    if up is not None and float(plane.normal @ up) < 0:
+        plane = Plane(-plane.normal, -plane.offset, plane.inliers)
+    if up is not None and plane.offset <= 0:
+        raise SceneError(
+            path,
+            "frame 0: the camera is below the support for the given up direction",
+            "check the sign of --up (the up direction in camera coordinates; 0 -1 0 for a "
+            "camera held level, looking down at the table)",
         )
     plane = plane.oriented_towards(np.zeros(3))
-    z_axis = plane.normal
-    origin = -plane.offset * z_axis  # camera centre (0) projected on the plane
+    grid = backproject(depth_m, K)
+    usable = np.flatnonzero((depth_m > 0).ravel())
+    chosen = choose_support(grid, usable, plane, np.zeros(3), choice or SupportChoiceConfig())
+    if not chosen.is_dominant:
+        log.info("%s: support: %s", path, chosen.reason)
+    z_axis = np.asarray(chosen.normal, dtype=np.float64)
+    origin = -chosen.offset * z_axis  # camera centre (0) projected on the plane
     x_axis = np.array([1.0, 0.0, 0.0]) - z_axis[0] * z_axis
     if np.linalg.norm(x_axis) < 1e-6:  # camera x axis along the normal: use its y axis instead
         x_axis = np.array([0.0, 1.0, 0.0]) - z_axis[1] * z_axis
     x_axis /= np.linalg.norm(x_axis)
     y_axis = np.cross(z_axis, x_axis)
     camera_from_world = make_transform(np.column_stack([x_axis, y_axis, z_axis]), origin)
-    return invert_transform(camera_from_world)
+    world_from_camera = invert_transform(camera_from_world)
+    if with_note:
+        return world_from_camera, chosen.reason
+    return world_from_camera
+
+
+def _up_direction(value: Sequence[float], path: Path | str) -> np.ndarray:
+    """A given up direction as a unit (3,) vector; SceneError when it is not 3 finite numbers
+    or is the zero vector."""
+    try:
+        up = np.asarray(value, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        up = np.zeros(0)
+    if up.size != 3 or not np.all(np.isfinite(up)) or np.linalg.norm(up) < 1e-9:
+        raise SceneError(
+            path,
+            f"the up direction must be 3 finite numbers, not all zero; got {value!r}",
+            "give the up direction in camera coordinates, e.g. --up 0 -1 0",
+        )
+    return up / np.linalg.norm(up)
 
 
 def _load_actions(

@@ -59,6 +59,10 @@ class PlanesConfig:
 class SupportConfig:
     """The support (table) plane (``planes.find_support_plane``) and what lies on it.
 
+    The support is the plane the objects rest on, not always the largest plane
+    (``ipr.geometry.support.choose_support``: the tops of packed boxes and a floor seen beyond
+    a table are not the support).
+
     Attributes:
         iterations: RANSAC hypotheses for the support plane (the authors use 1000).
         max_tilt_deg: the support's normal is within this angle (deg) of world +z, so that a
@@ -67,6 +71,13 @@ class SupportConfig:
             and the table's texture).
         min_points, min_fraction: the support needs at least this many inliers and this share
             of the frame's valid points, so that a small flat face is not taken for the table.
+        candidates: further planes (RANSAC with removal) examined in a scene's first frame to
+            tell whether the largest plane is the support (0: the largest plane always is, as
+            before; later frames keep the first frame's support when their largest plane is
+            not it: the support does not move).
+        see_through: share of the largest plane's extent (or of the space between the walls
+            around it) seen below it from which it is the tops of objects, not the support (a
+            table is opaque).
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -75,6 +86,8 @@ class SupportConfig:
         "clearance_m": _NON_NEGATIVE,
         "min_points": _COUNT,
         "min_fraction": _SHARE,
+        "candidates": _COUNT,
+        "see_through": _SHARE,
     }
 
     iterations: int = 1000
@@ -82,6 +95,8 @@ class SupportConfig:
     clearance_m: float = 0.01
     min_points: int = 200
     min_fraction: float = 0.1
+    candidates: int = 8
+    see_through: float = 0.01
 
     def __post_init__(self) -> None:
         check_fields(self)

@@ -10,7 +10,8 @@ from __future__ import annotations
 import numpy as np
 
 from ipr.geometry import kernels as geometry_kernels
-from ipr.geometry.planes import fit_plane_ransac
+from ipr.geometry.planes import Plane, fit_plane_ransac
+from ipr.geometry.support import SupportChoiceConfig, choose_support
 from ipr.perception import kernels
 from ipr.perception.config import PerceptionConfig
 from ipr.perception.types import KnownPlane
@@ -46,14 +47,31 @@ def find_known_planes(
 
 
 def find_support_plane(
-    points_world: np.ndarray, config: PerceptionConfig, rng: np.random.Generator | None = None
+    points_world: np.ndarray,
+    config: PerceptionConfig,
+    rng: np.random.Generator | None = None,
+    *,
+    grid: np.ndarray | None = None,
+    usable: np.ndarray | None = None,
+    viewpoint: np.ndarray | None = None,
+    previous: KnownPlane | None = None,
 ) -> KnownPlane | None:
     """The support (table) among (N, 3) world points (m, z up), or None.
 
-    The RANSAC plane (``planes.threshold_m``, ``support.iterations``, scored on
-    ``planes.sample_size`` points) with the most inliers among planes whose normal is within
-    ``support.max_tilt_deg`` of world +z; it needs ``support.min_points`` inliers and
+    First the largest plane: the RANSAC plane (``planes.threshold_m``, ``support.iterations``,
+    scored on ``planes.sample_size`` points) with the most inliers among planes whose normal is
+    within ``support.max_tilt_deg`` of world +z; it needs ``support.min_points`` inliers and
     ``support.min_fraction`` of the points. Its normal points up.
+
+    The support is the plane the objects rest on, which the largest plane is not always: given
+    the frame's organised points (``grid`` (H, W, 3) world, ``usable`` (N,) the flat pixel
+    indices of ``points_world``, ``viewpoint`` the camera centre (3,)), the choice of
+    ``ipr.geometry.support.choose_support`` (``support.candidates`` further planes) replaces it
+    when it is the tops of packed objects or a floor seen beyond a table. With ``previous`` (the
+    support of the scene's earlier frame), no choice is made again: the support does not move,
+    so the largest plane is kept when it is the earlier support (refitted to this frame), and
+    the earlier support otherwise. ``rng`` draws the same numbers whatever the choice (the
+    choice has its own generator), so that walls found after it do not depend on it.
     """
     points = np.asarray(points_world, dtype=np.float64)
     rng = np.random.default_rng(config.seed) if rng is None else rng
@@ -69,13 +87,54 @@ def find_support_plane(
         sample_size=config.planes.sample_size,
     )
     if plane is None:
-        return None
+        return previous
     up, offset = plane.normal, plane.offset
     if up[2] < 0:
         up, offset = -up, -offset
+    if previous is not None and not _same_plane(
+        up, offset, previous, points[plane.inliers[:: max(1, len(plane.inliers) // 2000)]]
+    ):
+        return previous
+    if previous is None and grid is not None and config.support.candidates > 0:
+        chosen = choose_support(
+            grid,
+            usable,
+            Plane(up, offset, plane.inliers),
+            np.asarray(viewpoint, dtype=np.float64),
+            SupportChoiceConfig(
+                candidates=config.support.candidates,
+                threshold_m=config.planes.threshold_m,
+                see_through=config.support.see_through,
+                min_fraction=config.support.min_fraction,
+                seed=config.seed,
+            ),
+        )
+        if not chosen.is_dominant:
+            normal, chosen_offset = np.asarray(chosen.normal, dtype=np.float64), chosen.offset
+            if normal[2] < 0:
+                normal, chosen_offset = -normal, -chosen_offset
+            return KnownPlane(
+                "support",
+                normal,
+                float(chosen_offset),
+                points[_subsample_indices(chosen.inliers, rng)],
+            )
     # The same random subset as _subsample(points[plane.inliers], rng), without first
     # gathering all of the inliers (most of the frame).
     return KnownPlane("support", up, offset, points[_subsample_indices(plane.inliers, rng)])
+
+
+def _same_plane(
+    normal: np.ndarray, offset: float, support: KnownPlane, inliers: np.ndarray
+) -> bool:
+    """Whether the plane (normal, offset) is ``support`` again: normals within the levels'
+    parallelism (``SupportChoiceConfig.level_tilt_deg``) and (M, 3) points of it (a subset of
+    its inliers) at a median distance from ``support`` within the choice's ``drop_m`` (noise
+    and a bent table)."""
+    settings = SupportChoiceConfig()
+    if float(normal @ support.normal) < np.cos(np.radians(settings.level_tilt_deg)):
+        return False
+    return bool(abs(float(np.median(support.signed_distance(inliers)))) < settings.drop_m)
 
 
 def static_geometry_mask(

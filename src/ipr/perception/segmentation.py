@@ -65,6 +65,9 @@ def segment_frame(
     a segment take its label (``fill_label_holes``). A frame without any depth reading gives an
     empty segmentation (all 0, no planes, no supervoxels).
 
+    The support is the plane the objects rest on (``planes.find_support_plane``), chosen in the
+    first frame; later frames keep it.
+
     Raises:
         SegmentationError: the frame has depth but no support plane (the support defines what
             "above the table" means, so the frame cannot be segmented; check the camera poses or
@@ -80,13 +83,25 @@ def segment_frame(
     robot = robot_pixels(frame, pushes, pusher, config, points_world=points)
     usable = np.flatnonzero((valid & ~robot).reshape(-1))
     usable_points = kernels.rows_at(flat_points, usable)
-    support = find_support_plane(usable_points, config, rng)
+    earlier = None
+    if previous is not None:
+        earlier = next((p for p in previous[1].planes if p.kind == "support"), None)
+    support = find_support_plane(
+        usable_points,
+        config,
+        rng,
+        grid=points,
+        usable=usable,
+        viewpoint=frame.world_from_camera[:3, 3],
+        previous=earlier,
+    )
     if support is None:
         raise SegmentationError(
             f"frame {frame.index}: no support plane found (no plane within "
             f"{config.support.max_tilt_deg:g} deg of world z holding "
             f"{config.support.min_fraction:.0%} of the {usable.size} valid points); make the "
-            "table visible, or check the camera poses (world z must point up)"
+            "table visible, or check the camera poses (world z must point up), or give the "
+            "up direction (--up X Y Z, in camera coordinates) for a scene without poses"
         )
     # Everything at or below the support is static. The wall search looks at an even subset
     # of the points above it (``walls.max_points``), so only those need normals here.
