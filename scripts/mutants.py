@@ -150,7 +150,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "gravity-only-compares-every-frame",
         "inference",
         "gravity-only variants also compare the frames after the first push",
-        "frames = observed.only(max(1, observed.frames.index(first_push)))",
+        "frames = observed.only(max(1, before))",
         "frames = observed",
         _t("inference_method", "inference"),
     ),

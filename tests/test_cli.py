@@ -353,7 +353,7 @@ def test_an_output_path_through_a_file_is_refused_before_the_run(scene_dir: Path
     assert blocker.read_text() == "x"
 
 
-@pytest.mark.parametrize("command", ["segment", "infer", "check"])
+@pytest.mark.parametrize("command", ["segment", "infer", "check", "batch"])
 def test_up_option_is_documented(command: str, capsys):
     with pytest.raises(SystemExit):
         main([command, "--help"])

@@ -45,6 +45,8 @@ class BatchOptions:
         samples: joint models sampled per scene (None: as the budget allows).
         config: the run's configuration (None: the defaults).
         evaluate: score each result against the scene's ground truth when it has some.
+        up_camera: the up direction in camera coordinates for scenes without camera poses
+            (``ipr.scene.load_scene``; None: from the data).
     """
 
     method: str = DEFAULT_METHOD
@@ -53,6 +55,7 @@ class BatchOptions:
     samples: int | None = None
     config: Config | None = None
     evaluate: bool = True
+    up_camera: tuple[float, float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -170,6 +173,7 @@ def run_scene(scene: Path, result_dir: Path, options: BatchOptions) -> SceneOutc
                 samples=options.samples,
                 config=options.config,
                 overwrite=result_dir.exists(),
+                up_camera=options.up_camera,
             )
             objects = _kept(result_dir)
             status, seconds = "done", time.perf_counter() - started

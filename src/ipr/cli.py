@@ -520,6 +520,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     batch.add_argument("--no-eval", action="store_true", help="do not score against ground truth")
     _add_config_option(batch)
+    _add_up_option(batch)
     batch.set_defaults(handler=_cmd_batch)
 
     segment = commands.add_parser(
@@ -617,6 +618,7 @@ def _cmd_batch(args: argparse.Namespace) -> int:
         samples=args.samples,
         config=_config(args),
         evaluate=not args.no_eval,
+        up_camera=tuple(args.up) if args.up else None,
     )
     with _progress() as progress:
         task = progress.add_task(f"{len(scenes)} scenes", total=len(scenes))
