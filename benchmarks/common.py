@@ -7,7 +7,7 @@ import os
 import platform
 import statistics
 import subprocess
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 
@@ -92,3 +92,15 @@ def development_scenes(
         generate_scenes(partial, kind=kind, seed=seed, count=count, config=config)
         partial.rename(folder)
     return sorted(p for p in folder.iterdir() if (p / "scene_camera.json").exists())
+
+
+@contextlib.contextmanager
+def one_thread() -> Iterator[None]:
+    """Limit BLAS/OpenMP thread pools to one thread (the one-core target), when possible."""
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover (the bench extra brings threadpoolctl)
+        yield
+        return
+    with threadpool_limits(limits=1):
+        yield

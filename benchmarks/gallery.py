@@ -20,11 +20,10 @@ of F >= 0.75 (``ipr.segmentation_metrics``).
 from __future__ import annotations
 
 import argparse
-import contextlib
 import sys
 import time
 import traceback
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -75,17 +74,6 @@ def scene_folders(root: Path) -> list[Path]:
     return sorted(path for path in root.iterdir() if (path / "scene_camera.json").is_file())
 
 
-@contextlib.contextmanager
-def _one_thread() -> Iterator[None]:
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover (the bench extra brings threadpoolctl)
-        yield
-        return
-    with threadpool_limits(limits=1):
-        yield
-
-
 def _shrunk(picture: Image.Image, width: int = WIDTH) -> Image.Image:
     if picture.width <= width:
         return picture
@@ -110,6 +98,7 @@ def _placeholder(text: str, size: tuple[int, int] = (WIDTH, 480)) -> Image.Image
 
 def gallery_frame(scene_path: Path, data_set: str, out_dir: Path) -> GalleryFrame:
     """Perceive frame 0 of a scene, write its overlay ``out_dir/<scene>.jpg``, return its row."""
+    from benchmarks.common import one_thread
     from ipr.perception import perceive_scene
     from ipr.perception.output import KNOWN_SUPPORT, known_plane_pixels, overlay_image
     from ipr.scene import load_scene
@@ -117,7 +106,7 @@ def gallery_frame(scene_path: Path, data_set: str, out_dir: Path) -> GalleryFram
     name = f"{scene_path.name}.jpg"
     try:
         scene = load_scene(scene_path)
-        with _one_thread():
+        with one_thread():
             perception = perceive_scene(scene, with_free_space=False)
     except Exception as exception:  # a failing scene is shown, not fatal
         error = "".join(traceback.format_exception_only(exception)).strip()

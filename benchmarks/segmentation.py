@@ -24,20 +24,19 @@ reruns it on every suite and writes the page).
 from __future__ import annotations
 
 import argparse
-import contextlib
 import inspect
 import math
 import sys
 import time
 import traceback
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from benchmarks.common import markdown_table, median
+from benchmarks.common import markdown_table, median, one_thread
 
 if TYPE_CHECKING:  # ipr is imported lazily (the GL backend is chosen first)
     from ipr.segmentation_metrics import LostId
@@ -114,18 +113,6 @@ def default_perceive(timing_runs: int = TIMING_RUNS) -> Perceive:
     return perceive
 
 
-@contextlib.contextmanager
-def _one_thread() -> Iterator[None]:
-    """Limit BLAS/OpenMP thread pools to one thread (the one-core target), when possible."""
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover (the bench extra brings threadpoolctl)
-        yield
-        return
-    with threadpool_limits(limits=1):
-        yield
-
-
 class _Renderers:
     """One ``ipr.rendering.Renderer`` per image size, closed together."""
 
@@ -159,7 +146,7 @@ def evaluate_scene(
     scene = load_scene(scene_path)
     error = None
     try:
-        with _one_thread():
+        with one_thread():
             labels, per_frame_s = perceive(scene)
         if len(labels) != len(scene.frames):
             raise ValueError(f"{len(labels)} label images for {len(scene.frames)} frames")
