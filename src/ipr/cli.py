@@ -459,7 +459,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     infer.add_argument("scene", metavar="SCENE")
     infer.add_argument("-o", "--out", required=True, metavar="OUT")
-    infer.add_argument("--method", default=DEFAULT_METHOD, choices=list(METHODS))
+    _add_run_options(infer)
     infer.add_argument(
         "--workers",
         type=_positive_int,
@@ -467,27 +467,10 @@ def build_parser() -> argparse.ArgumentParser:
         help="processes simulating samples (default: all cores; 1 = no pool)",
     )
     infer.add_argument(
-        "--samples",
-        type=_positive_int,
-        metavar="N",
-        help="sample exactly N joint models (reproducible with any --workers; default: as "
-        "many as the time budget allows)",
-    )
-    infer.add_argument(
-        "--seed", type=int, default=0, help="seed of every random choice (default 0)"
-    )
-    infer.add_argument(
         "--no-carving",
         action="store_true",
         help="write the convex hypotheses as inferred, without removing the space the camera "
         "saw empty (ipr.carving)",
-    )
-    infer.add_argument(
-        "--time-budget",
-        type=float,
-        metavar="SECONDS",
-        help="wall-clock budget of the whole run; the best answer so far is written when it "
-        "runs out (default: 1.75 s of inference per object after the hypotheses)",
     )
     infer.add_argument("--overwrite", action="store_true", help="replace OUT if it exists")
     _add_config_option(infer)
@@ -506,17 +489,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     batch.add_argument("scenes", nargs="+", metavar="SCENES")
     batch.add_argument("-o", "--out", required=True, metavar="OUT")
-    batch.add_argument("--method", default=DEFAULT_METHOD, choices=list(METHODS))
+    _add_run_options(batch)
     batch.add_argument(
         "--jobs",
         type=_positive_int,
         metavar="N",
         help="scenes run at once, one process each (default: all cores)",
-    )
-    batch.add_argument("--samples", type=_positive_int, metavar="N", help="as for ipr infer")
-    batch.add_argument("--seed", type=int, default=0, help="seed of every scene (default 0)")
-    batch.add_argument(
-        "--time-budget", type=float, metavar="SECONDS", help="budget per scene (as ipr infer)"
     )
     batch.add_argument("--no-eval", action="store_true", help="do not score against ground truth")
     _add_config_option(batch)
@@ -635,6 +613,28 @@ def _cmd_batch(args: argparse.Namespace) -> int:
         f"(summary: {Path(args.out) / 'summary.md'})"
     )
     return 1 if summary.failed else 0
+
+
+def _add_run_options(parser: argparse.ArgumentParser) -> None:
+    """The options of one scene's run, shared by ``ipr infer`` and ``ipr batch`` (per scene)."""
+    parser.add_argument("--method", default=DEFAULT_METHOD, choices=list(METHODS))
+    parser.add_argument(
+        "--samples",
+        type=_positive_int,
+        metavar="N",
+        help="sample exactly N joint models (reproducible with any --workers; default: as "
+        "many as the time budget allows)",
+    )
+    parser.add_argument(
+        "--seed", type=int, default=0, help="seed of every random choice (default 0)"
+    )
+    parser.add_argument(
+        "--time-budget",
+        type=float,
+        metavar="SECONDS",
+        help="wall-clock budget of the whole run; the best answer so far is written when it "
+        "runs out (default: 1.75 s of inference per object after the hypotheses)",
+    )
 
 
 def _add_config_option(parser: argparse.ArgumentParser) -> None:
