@@ -13,3 +13,36 @@ __version__ = "0.1.0"
 #: The distribution's name on the package index (``pip install ipr-shapes``); the import package
 #: and the command are ``ipr`` (docs/DESIGN_NOTES.md, "Distribution name").
 DISTRIBUTION = "ipr-shapes"
+
+#: The Python API's main names, imported on first use (``ipr.from_arrays``, ...) so that
+#: ``import ipr`` stays light: it loads neither numpy nor MuJoCo until one is used.
+_LAZY = {
+    "from_arrays": "ipr.arrays",
+    "load_scene": "ipr.scene",
+    "write_scene": "ipr.scene",
+    "Scene": "ipr.scene",
+    "Frame": "ipr.scene",
+    "Push": "ipr.scene",
+    "Pusher": "ipr.scene",
+    "Config": "ipr.config",
+    "run_pipeline": "ipr.pipeline",
+    "save_result": "ipr.pipeline",
+    "infer": "ipr.pipeline:infer_scene",
+    "load_result": "ipr.result",
+}
+
+
+def __getattr__(name: str):
+    """The lazily imported names of ``_LAZY`` (PEP 562)."""
+    if name not in _LAZY:
+        raise AttributeError(f"module 'ipr' has no attribute {name!r}")
+    import importlib
+
+    module_name, _, attribute = _LAZY[name].partition(":")
+    value = getattr(importlib.import_module(module_name), attribute or name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *_LAZY])

@@ -24,3 +24,17 @@ class SceneError(IprError):
 
 class ResultError(SceneError):
     """A result directory does not follow the result contract."""
+
+
+class ArrayInputError(SceneError, ValueError):
+    """Arrays given to ``ipr.from_arrays`` do not make a valid scene (the scene contract's rules,
+    applied in memory); ``path`` names the argument, such as ``depth[2]``."""
+
+    def __init__(self, where: str, problem: str, fix: str = "") -> None:
+        self.path = Path(where)
+        self.problem = problem
+        self.fix = fix
+        message = f"ipr.from_arrays: {where}: {problem}"
+        if fix:
+            message += f" (fix: {fix})"
+        Exception.__init__(self, message)

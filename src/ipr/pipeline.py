@@ -62,6 +62,25 @@ CONFIG_FILE = "config.toml"
 
 
 @dataclass(frozen=True, eq=False)
+class RunRecord:
+    """What a run was given, kept with its result so that ``save_result`` can write it and its
+    provenance (``result.json``'s ``provenance``, ``config.toml``).
+
+    Attributes:
+        scene: the scene the run perceived.
+        config: the configuration as given (None: the defaults).
+        seed, time_budget_s, workers, samples: the run's options as asked (None: the default).
+    """
+
+    scene: Scene
+    config: Config | None
+    seed: int
+    time_budget_s: float | None
+    workers: int | None
+    samples: int | None
+
+
+@dataclass(frozen=True, eq=False)
 class PipelineResult:
     """What a run produced.
 
@@ -71,6 +90,7 @@ class PipelineResult:
         perception: every frame's perception.
         timing: seconds per stage.
         summary: method-specific details (fused views, the sampling summary).
+        run: the scene and options it ran with (``save_result`` writes from them).
     """
 
     method: str
@@ -78,6 +98,7 @@ class PipelineResult:
     perception: Perception
     timing: StageTimings
     summary: RunSummary = field(default_factory=RunSummary)
+    run: RunRecord | None = None
 
     @property
     def timing_s(self) -> dict[str, float]:
@@ -298,6 +319,7 @@ def run_pipeline(
     ``progress``: an observer of the run's stages (``ipr.progress``; None: nothing reported).
     """
     chosen = _checked_arguments(method, time_budget_s, workers, samples)
+    record = RunRecord(scene, config, seed, time_budget_s, workers, samples)
     config = config or Config()
     if samples is not None:
         config = dataclasses.replace(
@@ -373,11 +395,11 @@ def run_pipeline(
         timing = dataclasses.replace(timing, carving=time.perf_counter() - carving_started)
         report(progress, "carving", 1, 1)
     timing = dataclasses.replace(timing, total=time.perf_counter() - budget.started)
-    return PipelineResult(chosen.name, posteriors, perception, timing, summary)
+    return PipelineResult(chosen.name, posteriors, perception, timing, summary, record)
 
 
 def infer(
-    scene_path: Path | str,
+    scene_path: Path | str | Scene,
     out_dir: Path | str,
     *,
     method: str = DEFAULT_METHOD,
@@ -390,12 +412,60 @@ def infer(
     overwrite: bool = False,
     up_camera: Sequence[float] | None = None,
 ) -> Path:
-    """Load a scene, run the pipeline and write the result directory (atomically), with
-    ``completion.png``: frame 0's RGB beside the completed objects seen from its camera.
-    ``up_camera``: the up direction in camera coordinates for a scene without camera poses
+    """Load a scene (or take a loaded one, e.g. from ``ipr.from_arrays``), run the pipeline and
+    write the result directory (``save_result``); the result's folder. ``up_camera``: the up
+    direction in camera coordinates for a scene folder without camera poses
     (``ipr.scene.load_scene``)."""
-    out_dir = check_output_location(out_dir, [scene_path], overwrite=overwrite)
-    scene = load_scene(scene_path, up_camera=up_camera)
+    out_dir = check_output_location(out_dir, _input_paths(scene_path), overwrite=overwrite)
+    result = infer_scene(
+        scene_path,
+        method=method,
+        seed=seed,
+        time_budget_s=time_budget_s,
+        workers=workers,
+        samples=samples,
+        progress=progress,
+        config=config,
+        up_camera=up_camera,
+    )
+    return save_result(result, out_dir, overwrite=overwrite)
+
+
+def _input_paths(scene: Scene | Path | str) -> list[Path | str]:
+    """The folders an output must not replace: the scene's, when it has one on disk (a scene
+    from arrays has none)."""
+    if isinstance(scene, Scene):
+        return [scene.path] if Path(scene.path).exists() else []
+    return [scene]
+
+
+def infer_scene(
+    scene: Scene | Path | str,
+    out_dir: Path | str | None = None,
+    *,
+    method: str = DEFAULT_METHOD,
+    seed: int = 0,
+    time_budget_s: float | None = None,
+    workers: int | None = None,
+    samples: int | None = None,
+    progress: ProgressCallback | None = None,
+    config: Config | None = None,
+    overwrite: bool = False,
+    up_camera: Sequence[float] | None = None,
+) -> PipelineResult:
+    """``ipr.infer``: the pipeline on a scene folder or a ``Scene`` (``load_scene``,
+    ``ipr.from_arrays``); writes the result directory too when ``out_dir`` is given (checked
+    before the run). The options are ``run_pipeline``'s; ``up_camera`` is ``load_scene``'s and
+    applies to a folder only."""
+    if out_dir is not None:
+        out_dir = check_output_location(out_dir, _input_paths(scene), overwrite=overwrite)
+    if not isinstance(scene, Scene):
+        scene = load_scene(scene, up_camera=up_camera)
+    elif up_camera is not None:
+        raise IprError(
+            "up_camera applies to a scene folder; a Scene already has its world frame "
+            "(fix: give up_camera to ipr.from_arrays or load_scene instead)"
+        )
     result = run_pipeline(
         scene,
         config,
@@ -406,14 +476,27 @@ def infer(
         samples=samples,
         progress=progress,
     )
+    if out_dir is not None:
+        save_result(result, out_dir, overwrite=overwrite)
+    return result
+
+
+def save_result(result: PipelineResult, out_dir: Path | str, *, overwrite: bool = False) -> Path:
+    """Write a run's result directory atomically (docs/FORMATS.md): ``result.json`` with its
+    provenance, the meshes, ``occupancy.npz``, ``config.toml`` and ``completion.png`` (frame 0's
+    RGB beside the completed objects seen from its camera); the folder."""
+    if result.run is None:
+        raise IprError("this result does not record its run (fix: make it with run_pipeline)")
+    run = result.run
+    scene = run.scene
     world_from_camera = {frame.index: frame.world_from_camera for frame in scene.frames}
     details = result.summary.to_dict()
     extra = {"inference": details} if details else {}
     # What produced it (module doc): the provenance, and the whole configuration beside it.
-    config = config or Config()
+    config = run.config or Config()
     extra["provenance"] = run_provenance(
-        scene, config, method=result.method, seed=seed,
-        time_budget_s=time_budget_s, workers=workers, samples=samples,
+        scene, config, method=result.method, seed=run.seed,
+        time_budget_s=run.time_budget_s, workers=run.workers, samples=run.samples,
     )  # fmt: skip
     return write_posterior_result(
         out_dir,
@@ -459,7 +542,8 @@ def run_provenance(
         },
         "config_digest": config_digest(config),
         "config_file": CONFIG_FILE,
-        "scene": str(Path(scene.path).resolve()),
+        # A scene from arrays (ipr.from_arrays) has a name, not a folder.
+        "scene": str(Path(scene.path).resolve() if Path(scene.path).exists() else scene.path),
         "frames": [int(frame.index) for frame in scene.frames],
         "software": {
             "python": platform.python_version(),
