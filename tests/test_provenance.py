@@ -71,11 +71,14 @@ def test_the_observer_hears_every_stage_in_order(scene_dir: Path):
     scene = load_scene(scene_dir)
     run_pipeline(scene, method="ipr+action+uniform", samples=2, workers=1, progress=events.append)
     stages = [e.stage for e in events if e.stage != "compiling"]
-    order = ["perception", "fusion", "hypotheses", "sampling", "carving"]
+    order = ["perception", "free_space", "fusion", "hypotheses", "sampling", "carving"]
     assert [s for s in order if s in stages] == sorted(set(stages), key=order.index)
     assert stages == sorted(stages, key=order.index)  # each stage's events together, in order
+    # Perception advances frame by frame: segmentation, then each frame's free space.
     perception = [(e.done, e.total) for e in events if e.stage == "perception"]
-    assert perception == [(0, 2), (2, 2)]
+    assert perception == [(0, 2), (1, 2), (2, 2)]
+    free_space = [(e.done, e.total) for e in events if e.stage == "free_space"]
+    assert free_space == [(0, 2), (1, 2), (2, 2)]
     hypotheses = [e for e in events if e.stage == "hypotheses"]
     assert hypotheses[0].done == 0 and hypotheses[-1].done == hypotheses[-1].total >= 1
     sampling = [e for e in events if e.stage == "sampling"]

@@ -63,6 +63,7 @@ def _time_left_column():
 COMPILING_NOTICE = "ipr: compiling the perception kernels once (about 30 s)..."
 _STAGE_LABELS = {
     "perception": "perception (frames)",
+    "free_space": "free space (frames)",
     "fusion": "fusion of later views",
     "hypotheses": "hypotheses (objects)",
     "sampling": "sampling (joint models)",
@@ -279,7 +280,7 @@ def _cmd_infer(args: argparse.Namespace) -> int:
     return 0
 
 
-@_with_progress("perception: segmenting and tracking the frames")
+@_with_progress()
 def _cmd_segment(args: argparse.Namespace) -> int:
     from ipr.atomic import check_output_location
     from ipr.perception import perceive_scene
@@ -289,7 +290,9 @@ def _cmd_segment(args: argparse.Namespace) -> int:
     check_output_location(Path(args.out), [Path(args.scene)], overwrite=args.overwrite)
     config = _config(args)
     scene = load_scene(Path(args.scene), up_camera=args.up)
-    perception = perceive_scene(scene, config.perception if config else None)
+    perception = perceive_scene(
+        scene, config.perception if config else None, progress=args.progress
+    )
     out = write_segmentation(
         scene,
         perception,

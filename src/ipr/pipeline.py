@@ -157,9 +157,10 @@ def _checked_arguments(
     return chosen
 
 
-def perceive(scene: Scene, config: Config) -> Perception:
-    """Every frame's perception, with frame 0's occluded pieces joined."""
-    perception = perceive_scene(scene, config.perception)
+def perceive(scene: Scene, config: Config, progress: ProgressCallback | None = None) -> Perception:
+    """Every frame's perception, with frame 0's occluded pieces joined; ``progress`` hears it
+    frame by frame (``perceive_scene``)."""
+    perception = perceive_scene(scene, config.perception, progress=progress)
     perception, _ = join_first_frame_pieces(scene, perception, config.perception.occluded_pieces)
     mark_kernel_cache_warm()
     return perception
@@ -328,9 +329,7 @@ def run_pipeline(
     budget = RunBudget.start(time_budget_s)
     if progress is not None and kernel_cache_cold():
         report(progress, "compiling", 0)
-    report(progress, "perception", 0, len(scene.frames))
-    perception = perceive(scene, config)
-    report(progress, "perception", len(scene.frames), len(scene.frames))
+    perception = perceive(scene, config, progress)
     perceived = time.perf_counter()
     if not perception.objects[0]:
         log.warning("%s: no object found in frame 0; the result is empty", scene.path)

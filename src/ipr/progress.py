@@ -7,7 +7,10 @@ events as progress bars on stderr when it is a terminal. Events arrive in the ca
 
 - ``compiling``: the numba kernels are about to be compiled (a cold cache, once after install
   or after their source changed: about 30 s); ``done`` 0, ``total`` None.
-- ``perception``: frames perceived (``done`` of ``total``).
+- ``perception``: frames segmented (``done`` of ``total``), reported as each frame is done;
+  tracking and facets follow the last frame.
+- ``free_space``: frames whose free-space voxel map is made (``done`` of ``total``; none when
+  no object was found).
 - ``fusion``: later views registered into frame 0 (0 of 1, then 1 of 1).
 - ``hypotheses``: objects whose hypotheses are generated (``done`` of ``total``).
 - ``sampling``: joint models simulated (``done``; ``total`` when the count is fixed, else None)

@@ -22,6 +22,7 @@ from ipr.perception.robot import robot_pixels
 from ipr.perception.segmentation import segment_frame
 from ipr.perception.tracking import split_merged_objects, track_segments
 from ipr.perception.types import FrameSegmentation, KnownPlane, PartialObject
+from ipr.progress import ProgressCallback, report
 from ipr.scene import Scene
 
 __all__ = ["Perception", "PerceptionConfig", "perceive_scene", "track_scene"]
@@ -58,11 +59,21 @@ class Perception:
 
 
 def perceive_scene(
-    scene: Scene, config: PerceptionConfig | None = None, *, with_free_space: bool = True
+    scene: Scene,
+    config: PerceptionConfig | None = None,
+    *,
+    with_free_space: bool = True,
+    progress: ProgressCallback | None = None,
 ) -> Perception:
-    """Segment, track and decompose every frame of a scene into partial objects with facets."""
+    """Segment, track and decompose every frame of a scene into partial objects with facets.
+
+    ``progress`` (``ipr.progress``) hears ``perception`` as each frame is segmented (most of
+    the time) and ``free_space`` as each frame's voxel map is made, frame by frame.
+    """
     config = config or PerceptionConfig()
+    count = len(scene.frames)
     segment_seconds, segmentations, points = [], [], []
+    report(progress, "perception", 0, count)
     for position, frame in enumerate(scene.frames):
         started = time.perf_counter()
         points.append(frame.points_world())
@@ -77,6 +88,7 @@ def perceive_scene(
             )
         )
         segment_seconds.append(time.perf_counter() - started)
+        report(progress, "perception", position + 1, count)
 
     started = time.perf_counter()
     labels = track_scene([s.labels for s in segmentations], scene, points, config)
@@ -94,6 +106,7 @@ def perceive_scene(
     free_seconds = [0.0] * len(scene.frames)
     grid = workspace_grid(objects, config) if with_free_space else None
     if grid is not None:
+        report(progress, "free_space", 0, count)
         for index, frame in enumerate(scene.frames):
             started = time.perf_counter()
             # The robot is not an obstacle to hypotheses, and space behind it is unknown.
@@ -107,6 +120,7 @@ def perceive_scene(
                 ignore_mask=ignore,
             )
             free_seconds[index] = time.perf_counter() - started
+            report(progress, "free_space", index + 1, count)
 
     tracking_share = tracking_seconds / max(len(scene.frames), 1)
     per_frame = [
