@@ -555,6 +555,56 @@ def build_parser() -> argparse.ArgumentParser:
     )
     suite.set_defaults(handler=_cmd_suite)
 
+    import_bag = commands.add_parser(
+        "import-bag",
+        help="convert a ROS 1 / ROS 2 bag into a scene folder",
+        description="Convert a ROS bag (ROS 2 folder, sqlite3 or mcap; ROS 1 .bag) into a "
+        "scene folder: each colour image with a registered depth image within --max-dt is a "
+        "frame; intrinsics from camera_info; with --world-frame, camera poses from /tf and "
+        "/tf_static; with --pusher-topic, pushes from the pusher centre's PoseStamped "
+        "(published during each straight stroke). Validated before writing; written "
+        "atomically. Details: docs/FORMATS.md, 'ROS bags'.",
+    )
+    import_bag.add_argument("bag", metavar="BAG")
+    import_bag.add_argument("-o", "--out", required=True, metavar="SCENE", help="scene folder")
+    import_bag.add_argument("--rgb-topic", default=BagOptionsDefaults.rgb_topic)
+    import_bag.add_argument("--depth-topic", default=BagOptionsDefaults.depth_topic)
+    import_bag.add_argument("--info-topic", default=BagOptionsDefaults.info_topic)
+    import_bag.add_argument(
+        "--world-frame",
+        metavar="FRAME",
+        help="z-up tf frame the camera poses are given in (default: none, a static camera "
+        "whose world frame comes from frame 0's support)",
+    )
+    import_bag.add_argument(
+        "--pusher-topic",
+        metavar="TOPIC",
+        help="geometry_msgs/PoseStamped of the pusher's centre during each push (needs "
+        "--world-frame)",
+    )
+    import_bag.add_argument(
+        "--max-dt",
+        type=float,
+        default=BagOptionsDefaults.max_dt_s,
+        metavar="SECONDS",
+        help="largest colour-depth stamp difference of a frame (default %(default)s s)",
+    )
+    import_bag.add_argument(
+        "--max-tf-dt",
+        type=float,
+        default=BagOptionsDefaults.max_tf_dt_s,
+        metavar="SECONDS",
+        help="largest gap between a frame and a dynamic tf transform (default %(default)s s)",
+    )
+    import_bag.add_argument(
+        "--pusher-radius", type=float, default=BagOptionsDefaults.pusher_radius_m, metavar="M"
+    )
+    import_bag.add_argument(
+        "--pusher-length", type=float, default=BagOptionsDefaults.pusher_length_m, metavar="M"
+    )
+    import_bag.add_argument("--overwrite", action="store_true", help="replace an existing SCENE")
+    import_bag.set_defaults(handler=_cmd_import_bag)
+
     export = commands.add_parser(
         "export",
         help="export a result for robot stacks (MJCF, URDF, SDF, OBJ, GLB)",
@@ -667,6 +717,38 @@ def _cmd_config(args: argparse.Namespace) -> int:
     from ipr.config import Config, config_to_toml
 
     print(config_to_toml(_config(args) or Config()), end="")
+    return 0
+
+
+class BagOptionsDefaults:
+    """``ipr import-bag``'s defaults, kept equal to ``ipr.bag.BagOptions``'s (a test checks)
+    without importing rosbags to build the parser."""
+
+    rgb_topic = "/camera/color/image_raw"
+    depth_topic = "/camera/aligned_depth_to_color/image_raw"
+    info_topic = "/camera/color/camera_info"
+    max_dt_s = 0.02
+    max_tf_dt_s = 0.1
+    pusher_radius_m = 0.01
+    pusher_length_m = 0.15
+
+
+def _cmd_import_bag(args: argparse.Namespace) -> int:
+    from ipr.bag import BagOptions, import_bag
+
+    options = BagOptions(
+        rgb_topic=args.rgb_topic,
+        depth_topic=args.depth_topic,
+        info_topic=args.info_topic,
+        world_frame=args.world_frame,
+        pusher_topic=args.pusher_topic,
+        max_dt_s=args.max_dt,
+        max_tf_dt_s=args.max_tf_dt,
+        pusher_radius_m=args.pusher_radius,
+        pusher_length_m=args.pusher_length,
+    )
+    out = import_bag(args.bag, args.out, options, overwrite=args.overwrite)
+    print(f"{out}: scene written from {args.bag} (check it with 'ipr check {out}')")
     return 0
 
 

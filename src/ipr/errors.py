@@ -38,3 +38,7 @@ class ArrayInputError(SceneError, ValueError):
         if fix:
             message += f" (fix: {fix})"
         Exception.__init__(self, message)
+
+
+class BagError(SceneError):
+    """A ROS bag cannot be made into a scene (``ipr import-bag``); ``path`` is the bag."""
