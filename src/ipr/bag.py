@@ -37,7 +37,7 @@ import numpy as np
 from ipr.arrays import from_arrays
 from ipr.atomic import check_output_location
 from ipr.camera import invert_transform, make_transform
-from ipr.errors import BagError, SceneError
+from ipr.errors import BagError
 from ipr.scene import Push, Pusher, write_scene
 
 log = logging.getLogger(__name__)
@@ -493,8 +493,6 @@ def import_bag(
             write_poses=bool(poses),
             overwrite=overwrite,
         )
-    except SceneError:
-        raise
     except OSError as error:
         raise BagError(
             out, f"cannot write the scene: {error}", "choose a writable folder"
