@@ -136,6 +136,17 @@ def _checked_arguments(
     return chosen
 
 
+#: Seeds are non-negative and fit in 63 bits (numpy's and the workers' seed sequences).
+MAX_SEED = 2**63 - 1
+
+
+def _checked_seed(seed: int) -> int:
+    """``seed``; IprError unless it is an integer in 0..MAX_SEED."""
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
+        raise IprError(f"--seed must be a whole number from 0 to 2^63 - 1, got {seed!r}")
+    return seed
+
+
 def perceive(scene: Scene, config: Config) -> Perception:
     """Every frame's perception, with frame 0's occluded pieces joined."""
     perception = perceive_scene(scene, config.perception)
@@ -298,6 +309,7 @@ def run_pipeline(
     ``progress``: an observer of the run's stages (``ipr.progress``; None: nothing reported).
     """
     chosen = _checked_arguments(method, time_budget_s, workers, samples)
+    _checked_seed(seed)
     config = config or Config()
     if samples is not None:
         config = dataclasses.replace(
@@ -389,13 +401,15 @@ def infer(
     config: Config | None = None,
     overwrite: bool = False,
     up_camera: Sequence[float] | None = None,
+    frames: Sequence[int] | None = None,
 ) -> Path:
     """Load a scene, run the pipeline and write the result directory (atomically), with
     ``completion.png``: frame 0's RGB beside the completed objects seen from its camera.
-    ``up_camera``: the up direction in camera coordinates for a scene without camera poses
-    (``ipr.scene.load_scene``)."""
+    ``up_camera``: the up direction in camera coordinates for a scene without camera poses;
+    ``frames``: the frame ids to use (None: all) (``ipr.scene.load_scene``)."""
     out_dir = check_output_location(out_dir, [scene_path], overwrite=overwrite)
-    scene = load_scene(scene_path, up_camera=up_camera)
+    _checked_seed(seed)
+    scene = load_scene(scene_path, up_camera=up_camera, frames=frames)
     result = run_pipeline(
         scene,
         config,
