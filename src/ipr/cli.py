@@ -320,7 +320,7 @@ def _cmd_infer(args: argparse.Namespace) -> int:
 @_with_progress("perception: segmenting and tracking the frames")
 def _cmd_segment(args: argparse.Namespace) -> int:
     from ipr.atomic import check_output_location
-    from ipr.perception import perceive_scene
+    from ipr.perception import check_objects_found, perceive_scene
     from ipr.perception.output import write_segmentation
     from ipr.scene import load_scene
 
@@ -328,6 +328,7 @@ def _cmd_segment(args: argparse.Namespace) -> int:
     config = _config(args)
     scene = load_scene(Path(args.scene), up_camera=args.up, frames=args.frames)
     perception = perceive_scene(scene, config.perception if config else None)
+    check_objects_found(scene, perception)
     out = write_segmentation(
         scene,
         perception,

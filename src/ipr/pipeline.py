@@ -46,7 +46,7 @@ from ipr.hypotheses import prepare_hypotheses
 from ipr.inference import InferenceOutcome, infer_shapes
 from ipr.likelihood import observed_frames
 from ipr.methods import DEFAULT_METHOD, Method, get_method
-from ipr.perception import Perception, perceive_scene
+from ipr.perception import Perception, check_objects_found, perceive_scene
 from ipr.perception.occlusion import join_first_frame_pieces
 from ipr.perception.types import PartialObject
 from ipr.products import ObjectPosterior, RunSummary, StageTimings
@@ -322,8 +322,13 @@ def run_pipeline(
     perception = perceive(scene, config)
     report(progress, "perception", len(scene.frames), len(scene.frames))
     perceived = time.perf_counter()
+    check_objects_found(scene, perception)
     if not perception.objects[0]:
-        log.warning("%s: no object found in frame 0; the result is empty", scene.path)
+        log.warning(
+            "%s: no object found in frame %d; the result is empty",
+            scene.path,
+            scene.frames[0].index,
+        )
     if chosen.actions and config.fusion.enabled:
         report(progress, "fusion", 0, 1)
     fused = fuse(scene, perception, chosen, config)

@@ -15,6 +15,7 @@ import logging
 import math
 import re
 import stat
+import warnings
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -407,8 +408,18 @@ def _id_summary(ids: Sequence[int]) -> str:
 def _open_image(path: Path, what: str, fix: str):
     """A PIL image of ``path`` with only its header read; SceneError when it cannot be read or
     is larger than ``MAX_IMAGE_SIDE_PX`` / ``MAX_IMAGE_PIXELS`` (checked before decoding)."""
+    too_large = SceneError(
+        path,
+        f"{what} claims more than {MAX_IMAGE_PIXELS // 2**20} Mpx; at most {MAX_IMAGE_SIDE_PX} "
+        f"pixels a side and {MAX_IMAGE_PIXELS // 2**20} Mpx are accepted",
+        "scale the images down (and cam_K with them)",
+    )
     try:
-        image = Image.open(path)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", Image.DecompressionBombWarning)
+            image = Image.open(path)
+    except (Image.DecompressionBombError, Image.DecompressionBombWarning):
+        raise too_large from None
     except Exception as error:  # PIL raises many types on corrupt files
         raise SceneError(path, f"cannot read {what}: {error}", fix) from None
     width, height = image.size
@@ -420,7 +431,7 @@ def _open_image(path: Path, what: str, fix: str):
         image.close()
         raise SceneError(
             path,
-            f"{what} is {width}x{height} pixels; at most {MAX_IMAGE_SIDE_PX} a side and "
+            f"{what} is {width}x{height} pixels; at most {MAX_IMAGE_SIDE_PX} pixels a side and "
             f"{MAX_IMAGE_PIXELS // 2**20} Mpx are accepted",
             "scale the images down (and cam_K with them)",
         )
