@@ -122,7 +122,7 @@ def test_failed_write_leaves_nothing(tmp_path, monkeypatch):
     [
         ("sum to", {"objects": [(_box(0.05), [(_box(0.05), 0.5), (_box(0.04), 0.3)])]}),
         ("not in \\[0, 1\\]", {"objects": [(_box(0.05), [(_box(0.05), 1.2), (_box(0.04), -0.2)])]}),
-        ("frame 0", {"world_from_camera": {1: WORLD_FROM_CAMERA}}),
+        ("the first frame", {"world_from_camera": {}}),
         ("not a rigid", {"world_from_camera": {0: 2 * np.eye(4)}}),
         ("no faces", {"objects": [((np.zeros((3, 3)), np.zeros((0, 3), int)), [])]}),
         ("NaN", {"objects": [((np.full((3, 3), np.nan), [[0, 1, 2]]), [])]}),
@@ -184,7 +184,8 @@ SCALED[3][3] = 1.0
         (_set_object("probability", "high"), "must be a number"),
         (_set_hypothesis_probabilities([0.5, 0.3]), "sum to 0.8, not 1"),
         (_set_hypothesis_probabilities([1.2, -0.2]), "outside \\[0, 1\\]"),
-        (_set_camera(np.eye(4).tolist(), key="1"), 'no frame "0"'),
+        (_set("world_from_camera", {}), "world_from_camera has no frame"),
+        (_set_camera(np.eye(4).tolist(), key="\u00b2"), "is not a frame id"),
         (_set_camera(SCALED), "not a rigid transform"),
         (_set_camera(np.eye(3).tolist()), "must be a 4x4 matrix"),
         (_set_camera([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 1, 1]]), "not a rigid"),

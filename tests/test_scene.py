@@ -174,15 +174,24 @@ def test_missing_scene_directory(tmp_path: Path):
 
 def test_missing_frame_image(scene_dir: Path):
     (scene_dir / "rgb" / "000001.png").unlink()
-    _expect(scene_dir, "rgb", "frames [0]")
+    _expect(scene_dir, "rgb", "no image of frames [1]")
 
 
-def test_non_consecutive_frames(scene_dir: Path):
+def test_sparse_frame_ids_keep_their_ids_and_pushes_name_them(scene_dir: Path):
     for folder in ("rgb", "depth"):
-        (scene_dir / folder / "000001.png").rename(scene_dir / folder / "000002.png")
-    _edit_json(scene_dir / "scene_camera.json", lambda c: c.update({"2": c.pop("1")}))
-    error = _expect(scene_dir, "scene_camera.json", "consecutive", "missing [1]")
-    assert "renumber" in error.fix
+        (scene_dir / folder / "000001.png").rename(scene_dir / folder / "000005.png")
+    _edit_json(scene_dir / "scene_camera.json", lambda c: c.update({"5": c.pop("1")}))
+    # The push still names frame 1, which is gone.
+    _expect(scene_dir, "actions.json", "after_frame 1 names a frame that does not exist", "0, 5")
+    _edit_json(scene_dir / "actions.json", lambda a: a["pushes"][0].update(after_frame=5))
+    scene = load_scene(scene_dir)
+    assert [frame.index for frame in scene.frames] == [0, 5]
+    assert (scene.pushes[0].before_frame, scene.pushes[0].after_frame) == (0, 5)
+    # Choosing frames: one frame only drops the push after it.
+    assert load_scene(scene_dir, frames=[0]).pushes == ()
+    _expect_chosen = pytest.raises(SceneError, match=r"chosen frames \[3\] are not in the scene")
+    with _expect_chosen:
+        load_scene(scene_dir, frames=[0, 3])
 
 
 def test_rgb_depth_size_mismatch(scene_dir: Path):

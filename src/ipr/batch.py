@@ -25,10 +25,11 @@ from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wai
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from ipr.atomic import check_output_location, write_json
+from ipr.atomic import check_output_location, write_json, write_text
 from ipr.config import Config
 from ipr.errors import IprError
 from ipr.methods import DEFAULT_METHOD, get_method
+from ipr.workers import quiet_worker
 
 SUMMARY_JSON = "summary.json"
 SUMMARY_MD = "summary.md"
@@ -217,9 +218,7 @@ def _summary_markdown(summary: BatchSummary) -> str:
 def _write_summary(summary: BatchSummary) -> None:
     out = Path(summary.out_dir)
     write_json(out / SUMMARY_JSON, asdict(summary))
-    staging = out / f".{SUMMARY_MD}.{os.getpid()}.tmp"
-    staging.write_text(_summary_markdown(summary), encoding="utf-8")
-    staging.replace(out / SUMMARY_MD)
+    write_text(out / SUMMARY_MD, _summary_markdown(summary))
 
 
 def run_batch(
@@ -259,7 +258,9 @@ def run_batch(
             finish(index, run_scene(scene, out / scene.name, options))
     else:
         context = multiprocessing.get_context("forkserver")
-        with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
+        with ProcessPoolExecutor(
+            max_workers=jobs, mp_context=context, initializer=quiet_worker
+        ) as pool:
             futures: dict[Future, int] = {
                 pool.submit(run_scene, scene, out / scene.name, options): index
                 for index, scene in enumerate(scenes)

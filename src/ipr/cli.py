@@ -12,6 +12,7 @@ non-zero exit status and no traceback (``-v`` shows logs, ``-vv`` also traceback
 from __future__ import annotations
 
 import argparse
+import errno
 import functools
 import logging
 import sys
@@ -25,6 +26,10 @@ from ipr.methods import DEFAULT_METHOD, METHODS
 log = logging.getLogger("ipr")
 
 EXIT_INPUT_ERROR = 2
+#: Errors of writing the output that are reported in one line, not as a traceback.
+_WRITE_ERRNOS = frozenset(
+    {errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM, errno.EFBIG}
+)
 
 
 def _progress(console=None):
@@ -220,6 +225,38 @@ def _cmd_ground_truth(args: argparse.Namespace) -> int:
     return 0
 
 
+def _seed(text: str) -> int:
+    """A ``--seed``: a whole number from 0 to 2^63 - 1."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if not 0 <= value < 2**63:
+        raise argparse.ArgumentTypeError(f"must be from 0 to 2^63 - 1, got {value}")
+    return value
+
+
+def _frame_selection(text: str) -> tuple[int, ...]:
+    """A ``--frames`` selection (``ipr.scene.parse_frame_selection``)."""
+    from ipr.scene import parse_frame_selection
+
+    try:
+        return parse_frame_selection(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error).removeprefix("--frames: ")) from None
+
+
+def _add_frames_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--frames",
+        type=_frame_selection,
+        metavar="IDS",
+        help="the frame ids to use (default: all), e.g. 0,5,10 or 0-20:5 (ids 0 to 20 in steps "
+        "of 5); the first is the reference frame. Both frames of every push between the "
+        "chosen frames must be chosen",
+    )
+
+
 def _positive_int(text: str) -> int:
     try:
         value = int(text)
@@ -265,6 +302,7 @@ def _cmd_infer(args: argparse.Namespace) -> int:
         config=config,
         overwrite=args.overwrite,
         up_camera=args.up,
+        frames=args.frames,
     )
     result = load_result(out, load_meshes=False)
     shown = ("segmentation", "fusion", "hypotheses", "inference", "total")
@@ -283,16 +321,17 @@ def _cmd_infer(args: argparse.Namespace) -> int:
 @_with_progress()
 def _cmd_segment(args: argparse.Namespace) -> int:
     from ipr.atomic import check_output_location
-    from ipr.perception import perceive_scene
+    from ipr.perception import check_objects_found, perceive_scene
     from ipr.perception.output import write_segmentation
     from ipr.scene import load_scene
 
     check_output_location(Path(args.out), [Path(args.scene)], overwrite=args.overwrite)
     config = _config(args)
-    scene = load_scene(Path(args.scene), up_camera=args.up)
+    scene = load_scene(Path(args.scene), up_camera=args.up, frames=args.frames)
     perception = perceive_scene(
         scene, config.perception if config else None, progress=args.progress
     )
+    check_objects_found(scene, perception)
     out = write_segmentation(
         scene,
         perception,
@@ -316,11 +355,14 @@ def _cmd_segment(args: argparse.Namespace) -> int:
 def _cmd_check(args: argparse.Namespace) -> int:
     from ipr.scene import load_scene
 
-    scene = load_scene(Path(args.scene), up_camera=args.up)
+    scene = load_scene(Path(args.scene), up_camera=args.up, frames=args.frames)
     height, width = scene.frames[0].shape
+    ids = [frame.index for frame in scene.frames]
+    shown = ", ".join(map(str, ids[:10])) + (", ..." if len(ids) > 10 else "")
     print(f"{scene.path}: valid scene")
     print(
-        f"  frames: {len(scene.frames)} ({width}x{height}), world frame from {scene.world_frame_source}"
+        f"  frames: {len(scene.frames)} (ids {shown}; {width}x{height}), world frame from "
+        f"{scene.world_frame_source}"
     )
     if scene.support_note:
         print(f"  support: {scene.support_note}")
@@ -414,7 +456,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     synth.add_argument("out_dir", metavar="OUT_DIR")
     synth.add_argument("--kind", choices=["static", "dynamic"], required=True)
-    synth.add_argument("--seed", type=int, default=0, help="base seed (default 0)")
+    synth.add_argument("--seed", type=_seed, default=0, help="base seed (default 0)")
     synth.add_argument("--count", type=int, default=1, help="number of scenes (default 1)")
     synth.add_argument("--models", metavar="DIR", help="YCB models folder (default: shared data)")
     synth.add_argument("--width", type=int, help="image width in pixels (default 640)")
@@ -478,6 +520,7 @@ def build_parser() -> argparse.ArgumentParser:
     infer.add_argument("--overwrite", action="store_true", help="replace OUT if it exists")
     _add_config_option(infer)
     _add_up_option(infer)
+    _add_frames_option(infer)
     infer.set_defaults(handler=_cmd_infer)
 
     batch = commands.add_parser(
@@ -518,6 +561,7 @@ def build_parser() -> argparse.ArgumentParser:
     segment.add_argument("--overwrite", action="store_true", help="replace OUT if it exists")
     _add_config_option(segment)
     _add_up_option(segment)
+    _add_frames_option(segment)
     segment.set_defaults(handler=_cmd_segment)
 
     config = commands.add_parser(
@@ -541,6 +585,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     check.add_argument("scene", metavar="SCENE")
     _add_up_option(check)
+    _add_frames_option(check)
     check.set_defaults(handler=_cmd_check)
 
     suite = commands.add_parser(
@@ -679,7 +724,7 @@ def _add_run_options(parser: argparse.ArgumentParser) -> None:
         "many as the time budget allows)",
     )
     parser.add_argument(
-        "--seed", type=int, default=0, help="seed of every random choice (default 0)"
+        "--seed", type=_seed, default=0, help="seed of every random choice (default 0)"
     )
     parser.add_argument(
         "--time-budget",
@@ -766,12 +811,26 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"ipr {args.command}: error: {error}", file=sys.stderr)
         return EXIT_INPUT_ERROR
+    except OSError as error:
+        # The output could not be written (disk full, read-only, permissions): nothing half
+        # written is left (ipr.atomic), so say it in one line.
+        if args.verbose >= 2 or error.errno not in _WRITE_ERRNOS:
+            raise
+        where = f"{error.filename}: " if error.filename else ""
+        print(
+            f"ipr {args.command}: error: {where}cannot write: {error.strerror} "
+            "(fix: free space or choose a writable output folder)",
+            file=sys.stderr,
+        )
+        return EXIT_INPUT_ERROR
     except KeyboardInterrupt:
         print("ipr: interrupted", file=sys.stderr)
         return 130
 
 
 def _configure_logging(verbosity: int) -> None:
+    """Log records (warnings included) to stderr, so that stdout holds only the results."""
+    from rich.console import Console
     from rich.logging import RichHandler
 
     level = logging.WARNING if verbosity == 0 else logging.INFO if verbosity == 1 else logging.DEBUG
@@ -779,7 +838,7 @@ def _configure_logging(verbosity: int) -> None:
         level=level,
         format="%(message)s",
         datefmt="[%X]",
-        handlers=[RichHandler(show_path=False, rich_tracebacks=True)],
+        handlers=[RichHandler(show_path=False, rich_tracebacks=True, console=Console(stderr=True))],
     )
 
 

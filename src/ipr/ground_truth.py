@@ -34,22 +34,23 @@ VISIBILITY_TOLERANCE_M = 0.015
 
 
 def frame0_ground_truth(
-    scene_path: Path | str, models_dir: Path | str | None = None
+    scene_path: Path | str, models_dir: Path | str | None = None, frame: int = 0
 ) -> tuple[list[ObjectPose], list[Any], Path]:
     """Frame-0 ground-truth poses (camera from model, m), the model mesh of each (trimesh,
     metres, model frame; one shared object per obj_id) and the models folder used.
 
-    ``models_dir`` defaults to the contract's ``<scene>/../models``.
+    ``models_dir`` defaults to the contract's ``<scene>/../models``; ``frame`` is the id of the
+    reference frame (the first frame of the result, 0 in the project's own scenes).
     """
     scene_path = Path(scene_path)
     ground_truth = load_ground_truth(scene_path)
-    if 0 not in ground_truth:
+    if frame not in ground_truth:
         raise SceneError(
             scene_path / "scene_gt.json",
-            "has no frame 0",
-            'give the frame-0 object poses under key "0"',
+            f"has no frame {frame} (the result's first frame)",
+            f'give the frame-{frame} object poses under key "{frame}"',
         )
-    poses = ground_truth[0]
+    poses = ground_truth[frame]
     folder = Path(models_dir) if models_dir is not None else default_models_dir(scene_path)
     cache: dict[int, Any] = {}
     for pose in poses:
@@ -84,7 +85,7 @@ def rendered_visible_pixel_counts(
 
 
 def visible_pixel_counts(
-    scene: Scene | Path | str, poses: list[ObjectPose], models: list[Any]
+    scene: Scene | Path | str, poses: list[ObjectPose], models: list[Any], frame: int = 0
 ) -> tuple[np.ndarray, str]:
     """Frame-0 visible pixels of each ground-truth object and where they come from.
 
@@ -95,16 +96,17 @@ def visible_pixel_counts(
     path = scene.path if isinstance(scene, Scene) else Path(scene)
     counts = load_visible_pixel_counts(path)
     if counts is not None:
-        if 0 not in counts or len(counts[0]) != len(poses):
+        if frame not in counts or len(counts[frame]) != len(poses):
             raise SceneError(
                 path / "scene_gt_info.json",
-                "frame 0 must list one entry per object of scene_gt.json",
+                f"frame {frame} must list one entry per object of scene_gt.json",
                 "regenerate scene_gt_info.json from scene_gt.json",
             )
-        return np.asarray(counts[0], dtype=np.int64), "scene_gt_info"
-    loaded = scene if isinstance(scene, Scene) else load_scene(path)
+        return np.asarray(counts[frame], dtype=np.int64), "scene_gt_info"
+    loaded = scene if isinstance(scene, Scene) else load_scene(path, frames=[frame])
+    (reference,) = [f for f in loaded.frames if f.index == frame] or [loaded.frames[0]]
     counts_rendered = rendered_visible_pixel_counts(
-        loaded.frames[0], [pose.camera_from_model for pose in poses], models
+        reference, [pose.camera_from_model for pose in poses], models
     )
     return counts_rendered, "rendered"
 
@@ -155,7 +157,7 @@ def write_ground_truth_result(
     return write_result(
         out_dir,
         GROUND_TRUTH_METHOD,
-        {0: world_from_camera},
+        {scene.frames[0].index: world_from_camera},
         objects,
         {"total": 0.0},
         extra,

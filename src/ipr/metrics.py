@@ -156,11 +156,12 @@ def evaluate(
         raise ValueError(f"voxel_size_m must be positive, got {voxel_size_m}")
     scene_path = Path(scene_path)
     result = result_path if isinstance(result_path, Result) else load_result(result_path)
-    poses, models, _ = frame0_ground_truth(scene_path, models_dir)
-    counts, source = visible_pixel_counts(scene_path, poses, models)
+    reference = min(result.world_from_camera)  # the result's first frame: 0 in our scenes
+    poses, models, _ = frame0_ground_truth(scene_path, models_dir, reference)
+    counts, source = visible_pixel_counts(scene_path, poses, models, reference)
     visible = counts >= min_visible_px
 
-    world_from_camera = result.world_from_camera[0]
+    world_from_camera = result.world_from_camera[reference]
     gt_keys: dict[int, np.ndarray] = {}
     for index, (pose, model) in enumerate(zip(poses, models, strict=True)):
         if visible[index]:

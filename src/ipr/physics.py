@@ -74,6 +74,9 @@ class PhysicsConfig:
         stability_s: simulated time of a stability test (Algorithm 2's exploration step, s):
             long enough for an unsupported shape to fall ~0.4 m or start toppling visibly.
         push_stop_intrusion_m: the pusher stops when it sinks deeper than this into an object.
+        push_max_s: longest simulated push (s): a slower push is replayed at distance /
+            push_max_s, so that any push costs a bounded number of steps (the pusher is
+            position-controlled and the objects quasi-static at either speed).
         flung_m: an object moving further than this (m) means the simulation exploded.
         support_half_extent_m: half side of the support box (m).
         wall_min_thickness_m: thinnest wall slab (m); thinner slabs let objects tunnel.
@@ -91,6 +94,7 @@ class PhysicsConfig:
         "settle_angular_rad_s": Interval(0, None),
         "stability_s": Interval(0, None, closed="neither"),
         "push_stop_intrusion_m": Interval(0, None),
+        "push_max_s": Interval(0, 600, closed="right"),
         "flung_m": Interval(0, None, closed="neither"),
         "support_half_extent_m": Interval(0, None, closed="neither"),
         "wall_min_thickness_m": Interval(0, None),
@@ -107,6 +111,7 @@ class PhysicsConfig:
     settle_angular_rad_s: float = 0.05
     stability_s: float = 0.3
     push_stop_intrusion_m: float = 0.01
+    push_max_s: float = 20.0
     flung_m: float = 0.5
     support_half_extent_m: float = 2.0
     wall_min_thickness_m: float = 0.01
@@ -270,10 +275,11 @@ class World:
         start = np.asarray(push.start_m, float)
         direction = np.asarray(push.direction, float)
         data.mocap_pos[self.pusher_mocap] = start
-        steps = max(1, int(np.ceil(push.distance_m / push.speed_m_s / config.timestep_s)))
+        speed = max(push.speed_m_s, push.distance_m / config.push_max_s)
+        steps = max(1, int(np.ceil(push.distance_m / speed / config.timestep_s)))
         travelled = 0.0
         for step in range(1, steps + 1):
-            travelled = min(step * config.timestep_s * push.speed_m_s, push.distance_m)
+            travelled = min(step * config.timestep_s * speed, push.distance_m)
             data.mocap_pos[self.pusher_mocap] = start + direction * travelled
             mujoco.mj_step(self.model, data)
             if step % 25 == 0 and not self._check():

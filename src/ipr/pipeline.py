@@ -46,7 +46,7 @@ from ipr.hypotheses import prepare_hypotheses
 from ipr.inference import InferenceOutcome, infer_shapes
 from ipr.likelihood import observed_frames
 from ipr.methods import DEFAULT_METHOD, Method, get_method
-from ipr.perception import Perception, perceive_scene
+from ipr.perception import Perception, check_objects_found, perceive_scene
 from ipr.perception.occlusion import join_first_frame_pieces
 from ipr.perception.types import PartialObject
 from ipr.products import ObjectPosterior, RunSummary, StageTimings
@@ -155,6 +155,17 @@ def _checked_arguments(
     if samples is not None and samples < 1:
         raise IprError(f"--samples must be at least 1, got {samples}")
     return chosen
+
+
+#: Seeds are non-negative and fit in 63 bits (numpy's and the workers' seed sequences).
+MAX_SEED = 2**63 - 1
+
+
+def _checked_seed(seed: int) -> int:
+    """``seed``; IprError unless it is an integer in 0..MAX_SEED."""
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
+        raise IprError(f"--seed must be a whole number from 0 to 2^63 - 1, got {seed!r}")
+    return seed
 
 
 def perceive(scene: Scene, config: Config, progress: ProgressCallback | None = None) -> Perception:
@@ -320,6 +331,7 @@ def run_pipeline(
     ``progress``: an observer of the run's stages (``ipr.progress``; None: nothing reported).
     """
     chosen = _checked_arguments(method, time_budget_s, workers, samples)
+    _checked_seed(seed)
     record = RunRecord(scene, config, seed, time_budget_s, workers, samples)
     config = config or Config()
     if samples is not None:
@@ -331,8 +343,13 @@ def run_pipeline(
         report(progress, "compiling", 0)
     perception = perceive(scene, config, progress)
     perceived = time.perf_counter()
+    check_objects_found(scene, perception)
     if not perception.objects[0]:
-        log.warning("%s: no object found in frame 0; the result is empty", scene.path)
+        log.warning(
+            "%s: no object found in frame %d; the result is empty",
+            scene.path,
+            scene.frames[0].index,
+        )
     if chosen.actions and config.fusion.enabled:
         report(progress, "fusion", 0, 1)
     fused = fuse(scene, perception, chosen, config)
@@ -410,11 +427,12 @@ def infer(
     config: Config | None = None,
     overwrite: bool = False,
     up_camera: Sequence[float] | None = None,
+    frames: Sequence[int] | None = None,
 ) -> Path:
     """Load a scene (or take a loaded one, e.g. from ``ipr.from_arrays``), run the pipeline and
     write the result directory (``save_result``); the result's folder. ``up_camera``: the up
     direction in camera coordinates for a scene folder without camera poses
-    (``ipr.scene.load_scene``)."""
+    (``ipr.scene.load_scene``); ``frames``: the frame ids to use (None: all)."""
     out_dir = check_output_location(out_dir, _input_paths(scene_path), overwrite=overwrite)
     result = infer_scene(
         scene_path,
@@ -426,6 +444,7 @@ def infer(
         progress=progress,
         config=config,
         up_camera=up_camera,
+        frames=frames,
     )
     return save_result(result, out_dir, overwrite=overwrite)
 
@@ -451,19 +470,21 @@ def infer_scene(
     config: Config | None = None,
     overwrite: bool = False,
     up_camera: Sequence[float] | None = None,
+    frames: Sequence[int] | None = None,
 ) -> PipelineResult:
     """``ipr.infer``: the pipeline on a scene folder or a ``Scene`` (``load_scene``,
     ``ipr.from_arrays``); writes the result directory too when ``out_dir`` is given (checked
     before the run). The options are ``run_pipeline``'s; ``up_camera`` is ``load_scene``'s and
-    applies to a folder only."""
+    applies to a folder only, and so does ``frames`` (the frame ids to use; None: all)."""
+    _checked_seed(seed)
     if out_dir is not None:
         out_dir = check_output_location(out_dir, _input_paths(scene), overwrite=overwrite)
     if not isinstance(scene, Scene):
-        scene = load_scene(scene, up_camera=up_camera)
-    elif up_camera is not None:
+        scene = load_scene(scene, up_camera=up_camera, frames=frames)
+    elif up_camera is not None or frames is not None:
         raise IprError(
-            "up_camera applies to a scene folder; a Scene already has its world frame "
-            "(fix: give up_camera to ipr.from_arrays or load_scene instead)"
+            "up_camera and frames apply to a scene folder; a Scene already has its world frame "
+            "and frames (fix: give them to ipr.from_arrays or load_scene instead)"
         )
     result = run_pipeline(
         scene,

@@ -147,6 +147,14 @@ def read_mesh(path: Path | str) -> Any:
             f"mesh spans {extent:.4g} m, more than the {voxels.MAX_MESH_EXTENT_M:g} m an object may",
             "write the mesh in metres (are its coordinates in millimetres?)",
         )
+    distance = float(np.abs(mesh.vertices).max())
+    if distance > voxels.MAX_DISTANCE_M:
+        raise ResultError(
+            path,
+            f"mesh lies {distance:.4g} m from the world origin, more than the "
+            f"{voxels.MAX_DISTANCE_M:g} m a scene may span",
+            "write the mesh in metres in the result's world frame",
+        )
     return mesh
 
 
@@ -299,18 +307,18 @@ def load_result(path: Path | str, *, load_meshes: bool = True) -> Result:
         )
     world_from_camera: dict[int, np.ndarray] = {}
     for key, matrix in cameras.items():
-        if not str(key).isdigit():
+        if not (str(key).isascii() and str(key).isdigit() and len(str(key)) <= 6):
             raise ResultError(
                 json_path,
                 f"world_from_camera key {key!r} is not a frame id",
                 'use frame ids such as "0"',
             )
         world_from_camera[int(key)] = check_rigid(matrix, json_path, f"world_from_camera[{key!r}]")
-    if 0 not in world_from_camera:
+    if not world_from_camera:
         raise ResultError(
             json_path,
-            'world_from_camera has no frame "0"',
-            "record the world-from-camera transform of frame 0",
+            "world_from_camera has no frame",
+            "record the world-from-camera transform of the first frame (frame 0)",
         )
 
     timing_raw = raw.get("timing_s", {})
@@ -603,8 +611,8 @@ def write_result(
             cameras[str(int(key))] = check_rigid(matrix, target, f"world_from_camera[{key}]")
         except ResultError as error:
             raise ValueError(error.problem) from None
-    if "0" not in cameras:
-        raise ValueError("world_from_camera must contain frame 0")
+    if not cameras:
+        raise ValueError("world_from_camera must contain the first frame")
     if not isinstance(method, str) or not method:
         raise ValueError("method must be a non-empty string")
     timing = {str(name): float(value) for name, value in (timing_s or {}).items()}

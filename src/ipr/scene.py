@@ -9,10 +9,13 @@ evaluation and benchmarks call: inference never reads it.
 
 from __future__ import annotations
 
+import errno
 import json
 import logging
 import math
 import re
+import stat
+import warnings
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,6 +24,7 @@ from typing import Any
 import numpy as np
 from PIL import Image
 
+from ipr import voxels
 from ipr.atomic import staged_directory
 from ipr.camera import backproject, invert_transform, make_transform
 from ipr.errors import SceneError
@@ -36,6 +40,33 @@ FRAME_NAME = re.compile(r"^(\d{6})\.(png|jpg|jpeg)$")
 PLAUSIBLE_DEPTH_M = (0.1, 5.0)
 #: Tolerance on |direction| = 1 and on rotation orthonormality.
 UNIT_TOLERANCE = 1e-3
+#: Plausible ``depth_scale`` (mm per depth unit): 1.0 for millimetre PNGs, 0.1 for 0.1 mm; far
+#: outside it the depths underflow or overflow.
+PLAUSIBLE_DEPTH_SCALE = (1e-3, 100.0)
+#: Largest image accepted (pixels a side, pixels in all), checked from the file header before
+#: decoding: bigger images are refused instead of exhausting memory.
+MAX_IMAGE_SIDE_PX = 8192
+MAX_IMAGE_PIXELS = 4096 * 4096
+#: Focal lengths (px) relative to the image width: about 2 to 157 degrees of field of view.
+PLAUSIBLE_FOCAL_PER_WIDTH = (0.2, 30.0)
+#: The principal point lies within the image grown by this share of its size on every side.
+PRINCIPAL_POINT_MARGIN = 0.5
+#: Largest distance (m) of a camera or ground-truth object from the origin (``ipr.voxels``):
+#: a table-top scene is far smaller; beyond it the numbers are in the wrong unit or corrupt.
+MAX_DISTANCE_M = voxels.MAX_DISTANCE_M
+#: A camera pose must leave at least this share of the frame's depth points below the camera
+#: (world z): the support (at least a tenth of the points) is below a camera that sees it.
+MIN_SHARE_BELOW_CAMERA = 0.1
+#: Plausible pushes: speed (m/s) and distance (m) of the pusher's centre; the replay time of
+#: a slower push is capped by ``PhysicsConfig.push_max_s``.
+PLAUSIBLE_PUSH_SPEED_M_S = (1e-3, 1.0)
+PLAUSIBLE_PUSH_DISTANCE_M = (1e-4, 1.0)
+#: Largest JSON file read (bytes): scene files of thousands of frames are a few megabytes.
+MAX_JSON_BYTES = 64 * 1024 * 1024
+#: Deepest nesting of numbers in a JSON value (cam_K may be a list of 3 lists).
+_MAX_NUMBER_DEPTH = 3
+#: Frame ids are written as six digits in file names.
+MAX_FRAME_ID = 999_999
 #: With a given up direction, the support's normal is within this angle of it (deg): a rough
 #: up (a camera taken as level that looks down at the table) still finds the table, and walls
 #: (90 degrees) are out.
@@ -146,34 +177,111 @@ class ObjectPose:
 # Reading helpers
 
 
+def file_kind(path: Path) -> str | None:
+    """None when ``path`` is a regular file (through symlinks), else what it is instead:
+    "missing", "a folder", "a named pipe (FIFO)", "a symlink loop", ... (for error messages;
+    nothing is opened, so a FIFO cannot block)."""
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        return "a broken symlink" if path.is_symlink() else "missing"
+    except OSError as error:
+        if error.errno == errno.ELOOP:
+            return "a symlink loop"
+        if error.errno == errno.ENOTDIR:
+            return "missing"
+        return f"unreadable ({error.strerror})"
+    if stat.S_ISREG(mode):
+        return None
+    if stat.S_ISDIR(mode):
+        return "a folder"
+    if stat.S_ISFIFO(mode):
+        return "a named pipe (FIFO)"
+    if stat.S_ISSOCK(mode):
+        return "a socket"
+    return "a device"
+
+
+def require_file(path: Path, what: str, fix: str = "") -> None:
+    """SceneError unless ``path`` is a regular file, saying what it is instead."""
+    kind = file_kind(path)
+    if kind == "missing":
+        raise SceneError(path, f"{what} is missing", fix or f"create {path.name}")
+    if kind is not None:
+        raise SceneError(
+            path, f"{what} is {kind}, not a regular file", f"replace it with the {what} file"
+        )
+
+
 def read_json(path: Path, what: str) -> Any:
-    """Parse a JSON file, rejecting NaN/Infinity literals; SceneError on any problem."""
-    if not path.is_file():
-        raise SceneError(path, f"{what} is missing", f"create {path.name} as the contract says")
+    """Parse a JSON file, rejecting NaN/Infinity literals; SceneError on any problem (missing
+    or not a regular file, larger than ``MAX_JSON_BYTES``, nested too deeply, not UTF-8)."""
+    require_file(path, what, f"create {path.name} as the contract says")
 
     def reject_constant(name: str) -> Any:
         raise SceneError(path, f"{what} contains {name}", "write finite numbers only")
 
     try:
-        return json.loads(path.read_text(encoding="utf-8"), parse_constant=reject_constant)
+        if path.stat().st_size > MAX_JSON_BYTES:
+            raise SceneError(
+                path,
+                f"{what} is larger than {MAX_JSON_BYTES // 2**20} MiB",
+                "check that this is the right file",
+            )
+        text = path.read_text(encoding="utf-8")
+        return json.loads(text, parse_constant=reject_constant)
     except json.JSONDecodeError as error:
         raise SceneError(
             path,
             f"{what} is not valid JSON: {error.msg} at line {error.lineno} column {error.colno}",
             "correct the JSON syntax",
         ) from None
+    except RecursionError:
+        raise SceneError(path, f"{what} is nested too deeply", "write plain JSON") from None
     except UnicodeDecodeError:
         raise SceneError(path, f"{what} is not UTF-8 text", "save it as UTF-8 JSON") from None
+    except OSError as error:
+        raise SceneError(path, f"{what} cannot be read: {error.strerror}") from None
+
+
+def is_number(value: Any) -> bool:
+    """True for a JSON number: an int or float, not a bool (a Python int subclass) or string;
+    numpy's integer and float scalars count too (``ipr.from_arrays``; JSON never gives them)."""
+    return isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool)
+
+
+def _flat_numbers(value: Any) -> list | None:
+    """The numbers of a number or of (nested, at most ``_MAX_NUMBER_DEPTH``) lists of numbers,
+    flattened; None when anything else (a string, a bool, null, an object) is in it."""
+    flat: list = []
+    stack = [(value, 0)]
+    while stack:
+        item, depth = stack.pop()
+        if is_number(item):
+            flat.append(item)
+        elif isinstance(item, np.ndarray) and item.dtype.kind in "iuf":
+            flat.extend(item.ravel().tolist())  # from ipr.from_arrays; JSON gives lists
+        elif isinstance(item, list | tuple) and depth < _MAX_NUMBER_DEPTH:
+            stack.extend((element, depth + 1) for element in reversed(item))
+        else:
+            return None
+    return flat
 
 
 def _number_array(value: Any, count: int, path: Path, key: str) -> np.ndarray:
     """A finite float64 array of ``count`` numbers (nested lists are flattened)."""
-    try:
-        array = np.asarray(value, dtype=np.float64).reshape(-1)
-    except (TypeError, ValueError):
+    flat = _flat_numbers(value)
+    if flat is None:
+        shown = repr(value) if len(repr(value)) < 80 else repr(value)[:77] + "..."
         raise SceneError(
-            path, f"'{key}' must be a list of {count} numbers, got {value!r}"
-        ) from None
+            path,
+            f"'{key}' must be a list of {count} numbers, got {shown}",
+            "write numbers without quotes (no strings, true/false or null)",
+        )
+    try:
+        array = np.asarray(flat, dtype=np.float64).reshape(-1)
+    except OverflowError:
+        raise SceneError(path, f"'{key}' holds a number too large") from None
     if array.size != count:
         raise SceneError(path, f"'{key}' must hold {count} numbers, got {array.size}")
     if not np.all(np.isfinite(array)):
@@ -182,11 +290,15 @@ def _number_array(value: Any, count: int, path: Path, key: str) -> np.ndarray:
 
 
 def _positive_number(value: Any, path: Path, key: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float):
+    if not is_number(value):
         raise SceneError(path, f"'{key}' must be a number, got {value!r}")
-    if not math.isfinite(value) or value <= 0:
+    try:
+        number = float(value)
+    except OverflowError:
+        number = math.inf
+    if not math.isfinite(number) or number <= 0:
         raise SceneError(path, f"'{key}' must be positive and finite, got {value}")
-    return float(value)
+    return number
 
 
 def _unit_vector(value: Any, path: Path, key: str) -> np.ndarray:
@@ -202,61 +314,165 @@ def _unit_vector(value: Any, path: Path, key: str) -> np.ndarray:
 
 
 def _frame_files(folder: Path, allowed: tuple[str, ...]) -> dict[int, Path]:
-    """Frame id -> file in ``folder`` (``NNNNNN.ext``); other files are ignored."""
+    """Frame id -> file in ``folder`` (``NNNNNN.ext``); other files are ignored. A frame's
+    entry that is not a regular file (a folder, a FIFO, a broken link) is refused here, before
+    anything opens it."""
     files: dict[int, Path] = {}
     if not folder.is_dir():
         return files
-    for entry in folder.iterdir():
+    for entry in sorted(folder.iterdir()):
         match = FRAME_NAME.match(entry.name)
         if match and match.group(2) in allowed:
             index = int(match.group(1))
             if index in files:
                 raise SceneError(
                     entry,
-                    f"frame {index} has two files in {folder.name}/",
+                    f"frame {index} has two files in {folder.name}/ ({files[index].name} and "
+                    f"{entry.name})",
                     "keep one file per frame",
+                )
+            kind = file_kind(entry)
+            if kind is not None:
+                raise SceneError(
+                    entry,
+                    f"frame {index}'s image is {kind}, not a regular file",
+                    "replace it with the image file",
                 )
             files[index] = entry
     return files
 
 
-def _check_consecutive(ids: Iterable[int], path: Path, what: str) -> list[int]:
-    ordered = sorted(ids)
-    if not ordered:
-        raise SceneError(path, f"{what}: no frames", "add frame 0")
-    expected = list(range(len(ordered)))
-    if ordered != expected:
-        missing = sorted(set(range(ordered[-1] + 1)) - set(ordered))
+def frame_ids(keys: Iterable[str], path: Path) -> dict[int, str]:
+    """Frame id -> its key, from the keys of a BOP file (``scene_camera.json``): decimal
+    integers 0..999999 in any order; two keys naming one id ("0" and "00") are refused."""
+    ids: dict[int, str] = {}
+    for key in keys:
+        if not re.fullmatch(r"[0-9]{1,6}", key):
+            raise SceneError(
+                path,
+                f"key {key!r} is not a frame id",
+                f'use frame ids 0..{MAX_FRAME_ID} written as decimal integers, such as "0"',
+            )
+        index = int(key)
+        if index in ids:
+            raise SceneError(
+                path,
+                f'keys "{ids[index]}" and "{key}" both name frame {index} (rgb/{index:06d}.png)',
+                "keep one entry per frame",
+            )
+        ids[index] = key
+    if not ids:
+        raise SceneError(path, "no frames", 'add an entry per frame, such as "0"')
+    return ids
+
+
+def parse_frame_selection(text: str) -> tuple[int, ...]:
+    """Frame ids of a ``--frames`` selection: comma-separated ids and inclusive ranges
+    ``A-B`` or ``A-B:STEP`` (``0,5,10``, ``0-20:5``, ``3-``... not allowed). ValueError on a
+    malformed selection."""
+    chosen: set[int] = set()
+    for part in text.split(","):
+        part = part.strip()
+        match = re.fullmatch(r"([0-9]{1,6})(?:-([0-9]{1,6})(?::([0-9]{1,6}))?)?", part)
+        if not match:
+            raise ValueError(
+                f"--frames: {part!r} is not a frame id or range (use e.g. 0,5,10 or 0-20:5)"
+            )
+        first = int(match.group(1))
+        last = int(match.group(2)) if match.group(2) else first
+        step = int(match.group(3)) if match.group(3) else 1
+        if last < first or step < 1:
+            raise ValueError(f"--frames: {part!r} is an empty range (use A-B with A <= B)")
+        chosen.update(range(first, last + 1, step))
+    return tuple(sorted(chosen))
+
+
+def _check_selection(ids: list[int], selection: Sequence[int] | None, path: Path) -> list[int]:
+    """The frame ids to read: ``selection`` (each must exist) or every id, in id order."""
+    if selection is None:
+        return ids
+    wanted = sorted(set(int(index) for index in selection))
+    missing = sorted(set(wanted) - set(ids))
+    if not wanted or missing:
         raise SceneError(
             path,
-            f"{what}: frame ids must be consecutive from 0; missing {missing[:10]}",
-            "renumber the frames 0, 1, 2, ... in capture order",
+            f"the chosen frames {missing[:10] or wanted} are not in the scene "
+            f"(its frames: {_id_summary(ids)})",
+            "choose frames the scene has (--frames)",
         )
-    return ordered
+    return wanted
+
+
+def _id_summary(ids: Sequence[int]) -> str:
+    shown = ", ".join(str(index) for index in ids[:8])
+    return shown + (f", ... ({len(ids)} frames)" if len(ids) > 8 else "")
+
+
+def _open_image(path: Path, what: str, fix: str):
+    """A PIL image of ``path`` with only its header read; SceneError when it cannot be read or
+    is larger than ``MAX_IMAGE_SIDE_PX`` / ``MAX_IMAGE_PIXELS`` (checked before decoding)."""
+    too_large = SceneError(
+        path,
+        f"{what} claims more than {MAX_IMAGE_PIXELS // 2**20} Mpx; at most {MAX_IMAGE_SIDE_PX} "
+        f"pixels a side and {MAX_IMAGE_PIXELS // 2**20} Mpx are accepted",
+        "scale the images down (and cam_K with them)",
+    )
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", Image.DecompressionBombWarning)
+            image = Image.open(path)
+    except (Image.DecompressionBombError, Image.DecompressionBombWarning):
+        raise too_large from None
+    except Exception as error:  # PIL raises many types on corrupt files
+        raise SceneError(path, f"cannot read {what}: {error}", fix) from None
+    width, height = image.size
+    if (
+        max(width, height) > MAX_IMAGE_SIDE_PX
+        or width * height > MAX_IMAGE_PIXELS
+        or min(width, height) < 1
+    ):
+        image.close()
+        raise SceneError(
+            path,
+            f"{what} is {width}x{height} pixels; at most {MAX_IMAGE_SIDE_PX} pixels a side and "
+            f"{MAX_IMAGE_PIXELS // 2**20} Mpx are accepted",
+            "scale the images down (and cam_K with them)",
+        )
+    return image
+
+
+def image_size(path: Path) -> tuple[int, int]:
+    """(width, height) of an image from its header (size limits checked)."""
+    with _open_image(path, "image", "write a valid PNG/JPEG") as image:
+        return image.size
+
+
+def _decode(image, path: Path, what: str, fix: str) -> np.ndarray:
+    try:
+        image.load()
+        return np.asarray(image)
+    except Exception as error:  # truncated or corrupt data: PIL raises many types
+        raise SceneError(path, f"cannot read {what}: {error}", fix) from None
 
 
 def _read_rgb(path: Path) -> np.ndarray:
-    try:
-        with Image.open(path) as image:
-            image.load()
-            if image.mode not in ("RGB", "RGBA", "L", "P"):
-                raise SceneError(path, f"RGB image has mode {image.mode}", "save 8-bit RGB")
-            return np.asarray(image.convert("RGB"), dtype=np.uint8)
-    except (OSError, SyntaxError) as error:
-        raise SceneError(path, f"cannot read image: {error}", "write a valid PNG/JPEG") from None
+    fix = "write a valid PNG/JPEG"
+    with _open_image(path, "RGB image", fix) as image:
+        if image.mode not in ("RGB", "RGBA", "L", "P"):
+            raise SceneError(path, f"RGB image has mode {image.mode}", "save 8-bit RGB")
+        _decode(image, path, "RGB image", fix)
+        return np.asarray(image.convert("RGB"), dtype=np.uint8)
 
 
 def _read_depth_units(path: Path) -> np.ndarray:
-    try:
-        with Image.open(path) as image:
-            image.load()
-            array = np.asarray(image)
-    except (OSError, SyntaxError) as error:
-        raise SceneError(path, f"cannot read depth image: {error}", "write a 16-bit PNG") from None
-    if array.ndim != 2 or array.dtype not in (np.uint16, np.int32) or image.mode == "L":
+    fix = "write a 16-bit PNG"
+    with _open_image(path, "depth image", fix) as image:
+        array = _decode(image, path, "depth image", fix)
+        mode = image.mode
+    if array.ndim != 2 or array.dtype not in (np.uint16, np.int32) or mode == "L":
         raise SceneError(
             path,
-            f"depth must be a single-channel 16-bit PNG, got mode {image.mode} dtype {array.dtype}",
+            f"depth must be a single-channel 16-bit PNG, got mode {mode} dtype {array.dtype}",
             "save depth as uint16 PNG with depth in mm = value x depth_scale",
         )
     if array.dtype == np.int32:  # PIL opens some 16-bit PNGs as 32-bit integers
@@ -267,11 +483,9 @@ def _read_depth_units(path: Path) -> np.ndarray:
 
 
 def _read_mask(path: Path) -> np.ndarray:
-    try:
-        with Image.open(path) as image:
-            return np.asarray(image.convert("L")) > 0
-    except (OSError, SyntaxError) as error:
-        raise SceneError(path, f"cannot read mask: {error}", "write a PNG mask") from None
+    with _open_image(path, "mask", "write a PNG mask") as image:
+        _decode(image, path, "mask", "write a PNG mask")
+        return np.asarray(image.convert("L")) > 0
 
 
 def _rotation(value: Any, path: Path, key: str) -> np.ndarray:
@@ -289,7 +503,11 @@ def _rotation(value: Any, path: Path, key: str) -> np.ndarray:
 
 
 def load_scene(
-    path: Path | str, *, plane_seed: int = 0, up_camera: Sequence[float] | None = None
+    path: Path | str,
+    *,
+    plane_seed: int = 0,
+    up_camera: Sequence[float] | None = None,
+    frames: Sequence[int] | None = None,
 ) -> Scene:
     """Read and validate a scene directory; raise SceneError naming the file and the fix.
 
@@ -300,6 +518,11 @@ def load_scene(
     (3 numbers, any length) is the up direction in camera coordinates, for scenes without camera
     poses whose gravity the data cannot tell: the support is then the plane the objects rest on
     among the planes within 45 degrees of perpendicular to it (``UP_MAX_TILT_DEG``).
+
+    Frame ids are any non-negative integers (BOP scenes may be sparse or start at 1); frames
+    are in id order and keep their ids. ``frames`` chooses the ids to read (None: all); the
+    first chosen frame is the reference ("frame 0" of the contract). Pushes name frames by id
+    (``_load_actions``).
     """
     root = Path(path)
     if not root.is_dir():
@@ -310,11 +533,9 @@ def load_scene(
     cameras = read_json(camera_path, "scene_camera.json")
     if not isinstance(cameras, dict) or not cameras:
         raise SceneError(camera_path, 'must map frame ids "0", "1", ... to camera entries')
-    try:
-        camera_ids = {int(key): value for key, value in cameras.items()}
-    except ValueError:
-        raise SceneError(camera_path, 'keys must be frame ids such as "0"') from None
-    ids = _check_consecutive(camera_ids, camera_path, "scene_camera.json")
+    keys = frame_ids(cameras, camera_path)
+    camera_ids = {index: cameras[key] for index, key in keys.items()}
+    all_ids = sorted(camera_ids)
 
     rgb_files = _frame_files(root / "rgb", ("png", "jpg", "jpeg"))
     depth_files = _frame_files(root / "depth", ("png",))
@@ -323,17 +544,24 @@ def load_scene(
             raise SceneError(
                 root / folder, f"{folder}/ folder is missing", "add one image per frame"
             )
-        _check_consecutive(files, root / folder, f"{folder}/")
-        if sorted(files) != ids:
+        if sorted(files) != all_ids:
+            missing = sorted(set(all_ids) - set(files))
+            extra = sorted(set(files) - set(all_ids))
+            problem = (
+                f"has no image of frames {missing[:10]} listed in scene_camera.json"
+                if missing
+                else f"has frames {extra[:10]} that scene_camera.json does not list"
+            )
             raise SceneError(
                 root / folder,
-                f"{folder}/ has frames {sorted(files)[:10]} but scene_camera.json has {ids[:10]}",
+                f"{folder}/ {problem}",
                 "give one image per frame listed in scene_camera.json",
             )
+    ids = _check_selection(all_ids, frames, camera_path)
     mask_files = _frame_files(root / "mask_robot", ("png",))
 
     intrinsics, scales, poses = {}, {}, {}
-    for index in ids:
+    for index in all_ids:
         entry = camera_ids[index]
         where = f"frame {index}"
         if not isinstance(entry, dict):
@@ -362,20 +590,38 @@ def load_scene(
                 f"{where}: 'depth_scale' is missing",
                 "add mm per depth unit (1.0 for millimetre PNGs)",
             )
-        scales[index] = _positive_number(entry["depth_scale"], camera_path, f"{where} depth_scale")
+        scale = _positive_number(entry["depth_scale"], camera_path, f"{where} depth_scale")
+        if not PLAUSIBLE_DEPTH_SCALE[0] <= scale <= PLAUSIBLE_DEPTH_SCALE[1]:
+            raise SceneError(
+                camera_path,
+                f"{where}: depth_scale {scale:g} mm per depth unit is implausible (expected "
+                f"{PLAUSIBLE_DEPTH_SCALE[0]:g}-{PLAUSIBLE_DEPTH_SCALE[1]:g})",
+                "set depth_scale to the millimetres per depth unit (1.0 for mm, 0.1 for 0.1 mm)",
+            )
+        scales[index] = scale
         has_r, has_t = "cam_R_w2c" in entry, "cam_t_w2c" in entry
         if has_r != has_t:
             raise SceneError(camera_path, f"{where}: give both cam_R_w2c and cam_t_w2c or neither")
         if has_r:
             rotation = _rotation(entry["cam_R_w2c"], camera_path, f"{where} cam_R_w2c")
             translation = _number_array(entry["cam_t_w2c"], 3, camera_path, f"{where} cam_t_w2c")
-            poses[index] = invert_transform(make_transform(rotation, translation / 1000.0))
-    if poses and len(poses) != len(ids):
+            pose = invert_transform(make_transform(rotation, translation / 1000.0))
+            if np.linalg.norm(pose[:3, 3]) > MAX_DISTANCE_M:
+                raise SceneError(
+                    camera_path,
+                    f"{where}: the camera is {np.linalg.norm(pose[:3, 3]):.3g} m from the world "
+                    f"origin (more than {MAX_DISTANCE_M:g} m)",
+                    "give cam_t_w2c in millimetres",
+                )
+            poses[index] = pose
+    if poses and len(poses) != len(all_ids):
         raise SceneError(
             camera_path,
             "camera poses are given for some frames but not all",
             "give cam_R_w2c and cam_t_w2c for every frame or for none",
         )
+    for index in ids:
+        _check_intrinsics(intrinsics[index], image_size(rgb_files[index]), camera_path, index)
 
     images = []
     for index in ids:
@@ -388,7 +634,7 @@ def load_scene(
                 "rgb and depth of a frame must have the same size (register depth to colour)",
             )
         depth_m = units.astype(np.float32) * np.float32(scales[index] / 1000.0)
-        valid = depth_m[depth_m > 0]
+        valid = depth_m[units > 0]
         if valid.size == 0:
             raise SceneError(
                 depth_files[index],
@@ -412,6 +658,8 @@ def load_scene(
                     f"mask is {mask.shape[1]}x{mask.shape[0]}, image is {units.shape[1]}x{units.shape[0]}",
                     "masks must have the size of the frame's images",
                 )
+        if index in poses:
+            _check_gravity(depth_m, intrinsics[index], poses[index], camera_path, index)
         images.append((rgb, depth_m, mask))
 
     note = ""
@@ -434,14 +682,72 @@ def load_scene(
             up_camera=up_camera,
             with_note=True,
         )
-        world_from_camera = {index: shared for index in ids}
+        world_from_camera = {index: shared for index in all_ids}
 
-    frames = tuple(
+    chosen = tuple(
         Frame(index, rgb, depth_m, intrinsics[index], world_from_camera[index], mask)
         for index, (rgb, depth_m, mask) in zip(ids, images, strict=True)
     )
-    pusher, pushes = _load_actions(root / "actions.json", frames, has_poses=bool(poses))
-    return Scene(root, frames, pushes, pusher, source, note)
+    pusher, pushes = _load_actions(
+        root / "actions.json", world_from_camera, ids, has_poses=bool(poses)
+    )
+    return Scene(root, chosen, pushes, pusher, source, note)
+
+
+def _check_intrinsics(K: np.ndarray, size: tuple[int, int], path: Path, index: int) -> None:
+    """SceneError unless ``K`` is plausible for a ``size`` (width, height) image: focal lengths
+    within ``PLAUSIBLE_FOCAL_PER_WIDTH`` of the width and of each other's order, principal
+    point within the image grown by ``PRINCIPAL_POINT_MARGIN``, skew below the focal length."""
+    width, height = size
+    fx, fy, cx, cy, skew = K[0, 0], K[1, 1], K[0, 2], K[1, 2], K[0, 1]
+    low, high = PLAUSIBLE_FOCAL_PER_WIDTH
+    fix = "give cam_K in pixels of this image: [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]"
+    for name, focal in (("fx", fx), ("fy", fy)):
+        if not low * width <= focal <= high * width:
+            raise SceneError(
+                path,
+                f"frame {index}: cam_K {name} = {focal:.4g} px is implausible for a "
+                f"{width} px wide image (expected {low:g}-{high:g} x the width)",
+                fix,
+            )
+    if not 0.5 <= fx / fy <= 2.0 or abs(skew) > 0.1 * fx:
+        raise SceneError(
+            path, f"frame {index}: cam_K fx/fy or skew is implausible (pixels far from square)", fix
+        )
+    margin = PRINCIPAL_POINT_MARGIN
+    if not (-margin * width <= cx <= (1 + margin) * width) or not (
+        -margin * height <= cy <= (1 + margin) * height
+    ):
+        raise SceneError(
+            path,
+            f"frame {index}: cam_K principal point ({cx:.4g}, {cy:.4g}) px lies far outside "
+            f"the {width}x{height} image",
+            fix,
+        )
+
+
+def _check_gravity(
+    depth_m: np.ndarray, K: np.ndarray, world_from_camera: np.ndarray, path: Path, index: int
+) -> None:
+    """SceneError when a camera pose puts almost everything the camera sees above it: world z
+    then does not point up (``MIN_SHARE_BELOW_CAMERA``), e.g. an identity or a camera-to-world
+    rotation given as cam_R_w2c. Checked on every 4th pixel (cheap)."""
+    sub = depth_m[::4, ::4]
+    rows, cols = np.nonzero(sub > 0)
+    if rows.size == 0:
+        return
+    u, v = cols * 4.0, rows * 4.0
+    z = sub[rows, cols].astype(np.float64)
+    rays = np.stack([(u - K[0, 2]) / K[0, 0] * z, (v - K[1, 2]) / K[1, 1] * z, z])
+    height_above_camera = world_from_camera[2, :3] @ rays  # world z of point minus camera's
+    share = float(np.mean(height_above_camera < 0))
+    if share < MIN_SHARE_BELOW_CAMERA:
+        raise SceneError(
+            path,
+            f"frame {index}: with its cam_R_w2c only {100 * share:.0f} % of what the camera sees "
+            "lies below it, so world z does not point up (gravity is -z)",
+            "give cam_R_w2c as the world-to-camera rotation of a world with z up",
+        )
 
 
 def world_from_support_plane(
@@ -542,10 +848,23 @@ def _up_direction(value: Sequence[float], path: Path | str) -> np.ndarray:
 
 
 def _load_actions(
-    path: Path, frames: Sequence[Frame], *, has_poses: bool
+    path: Path,
+    world_from_camera: dict[int, np.ndarray],
+    chosen: Sequence[int],
+    *,
+    has_poses: bool,
 ) -> tuple[Pusher | None, tuple[Push, ...]]:
-    if not path.exists():
+    """The pusher and the pushes of ``actions.json`` in the world frame.
+
+    ``before_frame``/``after_frame`` are frame ids (keys of ``scene_camera.json``). Of the
+    ``chosen`` frames' pushes, those with both frames chosen are kept; those outside the chosen
+    span are dropped; a push within the span with a frame not chosen is refused (the chosen
+    frames would show its effect without it). Speeds and distances must be plausible
+    (``PLAUSIBLE_PUSH_SPEED_M_S``, ``PLAUSIBLE_PUSH_DISTANCE_M``).
+    """
+    if not path.exists() and not path.is_symlink():
         return None, ()
+    all_ids = sorted(world_from_camera)
     actions = read_json(path, "actions.json")
     if not isinstance(actions, dict):
         raise SceneError(path, "actions.json must be a JSON object")
@@ -562,14 +881,14 @@ def _load_actions(
             )
         world_from_actions = np.eye(4)
     else:
-        match = re.fullmatch(r"camera:(\d+)", str(frame_name))
-        if not match or int(match.group(1)) >= len(frames):
+        match = re.fullmatch(r"camera:([0-9]{1,6})", str(frame_name))
+        if not match or int(match.group(1)) not in world_from_camera:
             raise SceneError(
                 path,
                 f"unknown frame {frame_name!r}",
                 'use "world" or "camera:<id>" with an existing frame id',
             )
-        world_from_actions = frames[int(match.group(1))].world_from_camera
+        world_from_actions = world_from_camera[int(match.group(1))]
 
     rotation, translation = world_from_actions[:3, :3], world_from_actions[:3, 3]
     pusher_spec = actions.get("pusher", {})
@@ -605,22 +924,46 @@ def _load_actions(
                 raise SceneError(path, f"{where}: '{key}' is missing")
         before, after = spec["before_frame"], spec["after_frame"]
         for key, value in (("before_frame", before), ("after_frame", after)):
-            if (
-                isinstance(value, bool)
-                or not isinstance(value, int)
-                or not 0 <= value < len(frames)
-            ):
+            if not isinstance(value, int) or isinstance(value, bool) or value not in all_ids:
                 raise SceneError(
                     path,
                     f"{where}: {key} {value!r} names a frame that does not exist",
-                    f"use frame ids 0..{len(frames) - 1}",
+                    f"use frame ids of scene_camera.json ({_id_summary(all_ids)})",
                 )
         if after <= before:
             raise SceneError(path, f"{where}: after_frame must come after before_frame")
         start = _number_array(spec["start_m"], 3, path, f"{where} start_m")
+        if np.linalg.norm(start) > MAX_DISTANCE_M:
+            raise SceneError(
+                path,
+                f"{where}: start_m is {np.linalg.norm(start):.3g} m from the origin",
+                "give start_m in metres",
+            )
         direction = _unit_vector(spec["direction"], path, f"{where} direction")
         distance = _positive_number(spec["distance_m"], path, f"{where} distance_m")
         speed = _positive_number(spec["speed_m_s"], path, f"{where} speed_m_s")
+        for name, value, (low, high), unit in (
+            ("distance_m", distance, PLAUSIBLE_PUSH_DISTANCE_M, "m"),
+            ("speed_m_s", speed, PLAUSIBLE_PUSH_SPEED_M_S, "m/s"),
+        ):
+            if not low <= value <= high:
+                raise SceneError(
+                    path,
+                    f"{where}: {name} {value:.3g} {unit} is implausible for a robot push "
+                    f"(expected {low:g}-{high:g} {unit})",
+                    f"give {name} in {unit}",
+                )
+        inside = before in chosen and after in chosen
+        if not inside and before < chosen[-1] and after > chosen[0]:
+            raise SceneError(
+                path,
+                f"{where} (frame {before} -> {after}) happens between the chosen frames "
+                f"but frame {before if before not in chosen else after} is not chosen",
+                "choose both frames of every push between the chosen frames (--frames), or "
+                "only frames before the first push",
+            )
+        if not inside:
+            continue
         pushes.append(
             Push(
                 before, after, rotation @ start + translation, rotation @ direction, distance, speed
@@ -648,7 +991,7 @@ def load_ground_truth(path: Path | str) -> dict[int, list[ObjectPose]]:
         raise SceneError(gt_path, "must map frame ids to lists of objects")
     result: dict[int, list[ObjectPose]] = {}
     for key, objects in raw.items():
-        if not str(key).isdigit() or not isinstance(objects, list):
+        if not re.fullmatch(r"[0-9]{1,6}", str(key)) or not isinstance(objects, list):
             raise SceneError(gt_path, f"entry {key!r} must be a frame id mapping to a list")
         poses = []
         for item in objects:
@@ -656,11 +999,27 @@ def load_ground_truth(path: Path | str) -> dict[int, list[ObjectPose]]:
                 raise SceneError(
                     gt_path, f"frame {key}: each object needs obj_id, cam_R_m2c, cam_t_m2c"
                 )
+            obj_id = item["obj_id"]
+            if (
+                not isinstance(obj_id, int)
+                or isinstance(obj_id, bool)
+                or not 0 <= obj_id <= 999_999
+            ):
+                raise SceneError(
+                    gt_path,
+                    f"frame {key}: obj_id {obj_id!r} is not an object id",
+                    "give obj_id as a whole number 0..999999 (the model obj_NNNNNN.ply)",
+                )
             rotation = _rotation(item.get("cam_R_m2c"), gt_path, f"frame {key} cam_R_m2c")
             translation = _number_array(item.get("cam_t_m2c"), 3, gt_path, f"frame {key} cam_t_m2c")
-            poses.append(
-                ObjectPose(int(item["obj_id"]), make_transform(rotation, translation / 1000))
-            )
+            if np.linalg.norm(translation) > MAX_DISTANCE_M * 1000:
+                raise SceneError(
+                    gt_path,
+                    f"frame {key}: object {obj_id} is {np.linalg.norm(translation) / 1000:.3g} m "
+                    f"from the camera (more than {MAX_DISTANCE_M:g} m)",
+                    "give cam_t_m2c in millimetres",
+                )
+            poses.append(ObjectPose(obj_id, make_transform(rotation, translation / 1000)))
         result[int(key)] = poses
     return result
 
@@ -671,12 +1030,26 @@ def load_visible_pixel_counts(path: Path | str) -> dict[int, list[int]] | None:
     if not info_path.exists():
         return None
     raw = read_json(info_path, "scene_gt_info.json")
-    try:
-        return {
-            int(key): [int(item["px_count_visib"]) for item in items] for key, items in raw.items()
-        }
-    except (AttributeError, KeyError, TypeError, ValueError):
-        raise SceneError(info_path, "each object entry needs an integer px_count_visib") from None
+    problem = SceneError(
+        info_path,
+        "each object entry needs px_count_visib, a whole number of pixels "
+        f"0..{MAX_IMAGE_PIXELS}, under a frame id",
+        "regenerate scene_gt_info.json (BOP toolkit)",
+    )
+    if not isinstance(raw, dict):
+        raise problem
+    counts: dict[int, list[int]] = {}
+    for key, items in raw.items():
+        if not re.fullmatch(r"[0-9]{1,6}", key) or not isinstance(items, list):
+            raise problem
+        row = []
+        for item in items:
+            value = item.get("px_count_visib") if isinstance(item, dict) else None
+            if not is_number(value) or not 0 <= value <= MAX_IMAGE_PIXELS or value != int(value):
+                raise problem
+            row.append(int(value))
+        counts[int(key)] = row
+    return counts
 
 
 def default_models_dir(scene_path: Path | str) -> Path:

@@ -207,6 +207,9 @@ def transform_points(transform: np.ndarray | None, points: np.ndarray) -> np.nda
 #: The largest extent (m) of a mesh that is voxelised: an object in clutter is far smaller,
 #: and a mesh in millimetres read as metres (1000 times too large) would need terabytes.
 MAX_MESH_EXTENT_M = 10.0
+#: The farthest (m) a voxelised mesh may lie from the world origin (``ipr.scene`` refuses
+#: cameras and ground truth farther away): table-top scenes span a few metres.
+MAX_DISTANCE_M = 100.0
 
 
 def occupied_voxels(

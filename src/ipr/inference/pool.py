@@ -11,6 +11,7 @@ from collections.abc import Callable, Iterable
 
 from ipr.inference.problem import InferenceProblem, SampleResult
 from ipr.inference.sampler import Sampler, _Deadline
+from ipr.workers import quiet_worker
 
 logger = logging.getLogger(__name__)
 
@@ -23,6 +24,7 @@ _GRACE_S = 10.0
 
 def _init_worker(problem: InferenceProblem) -> None:
     global _WORKER
+    quiet_worker()
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     _WORKER = Sampler(problem)
 

@@ -274,3 +274,43 @@ def workspace_grid(
     minimum = np.array([low[0] - margin, low[1] - margin, low[2] - 0.05])
     maximum = np.array([high[0] + margin, high[1] + margin, high[2] + margin])
     return VoxelGrid.around(minimum, maximum, config.free_space.voxel_m)
+
+
+#: With no object found, at most this share of the first frame's depth points may lie off the
+#: support and walls (``check_objects_found``); more means the support choice went wrong.
+UNEXPLAINED_SHARE = 0.2
+#: A point within this distance (m) of a found plane lies on it.
+_ON_PLANE_M = 0.02
+
+
+def check_objects_found(scene: Scene, perception: Perception) -> None:
+    """Refuse a first frame in which no object was found although much of it lies off the
+    support and walls (more than ``UNEXPLAINED_SHARE`` of its depth points): the support choice
+    (gravity) went wrong, and an empty result would hide it. An empty table passes.
+
+    Raises:
+        SceneError: naming the frame and the fixes (--up, or camera poses).
+    """
+    from ipr.errors import SceneError
+    from ipr.scene import GRAVITY_FIX
+
+    if perception.objects[0]:
+        return
+    frame = scene.frames[0]
+    points = frame.points_world()[frame.depth_m > 0]
+    if len(points) == 0:
+        return
+    on_plane = np.zeros(len(points), dtype=bool)
+    for plane in perception.planes[0]:
+        on_plane |= np.abs(plane.signed_distance(points)) < _ON_PLANE_M
+    share = 1.0 - float(on_plane.mean())
+    if share > UNEXPLAINED_SHARE:
+        raise SceneError(
+            scene.path,
+            f"frame {frame.index}: no object found although {100 * share:.0f} % of its depth "
+            "points lie off the support and walls found: the support (gravity) was likely "
+            "chosen wrongly",
+            GRAVITY_FIX
+            if scene.world_frame_source != "camera_poses"
+            else "check the camera poses (cam_R_w2c, cam_t_w2c: world z must point up)",
+        )
