@@ -509,8 +509,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="segment and track the objects of a scene, with facets",
         description="Remove the support, walls and robot; segment each frame into objects "
         "(supervoxels, convexity graph, spectral clustering); track ids across "
-        "frames; split objects into facets. Writes OUT/labels/NNNNNN.png (uint16, "
-        "0 = background, k = object k in every frame), OUT/facets/NNNNNN.png, "
+        "frames; split objects into facets. Writes OUT/labels/NNNNNN.png (the ids as "
+        "pixel values, 0 = background, k = object k in every frame; an 8-bit palette PNG that "
+        "viewers show in the overlay's colours), OUT/facets/NNNNNN.png, "
         "OUT/overlay/NNNNNN.png and OUT/segmentation.json.",
     )
     segment.add_argument("scene", metavar="SCENE")
