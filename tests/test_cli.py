@@ -299,6 +299,7 @@ def test_infer_default_method_writes_the_full_result_and_is_reproducible(tmp_pat
             assert obj.load_mesh().is_watertight
         with Image.open(out / "completion.png") as picture:
             assert picture.size == (640, 240)  # the input beside the completed objects
+        assert (out / "report.html").is_file() and (out / "labels" / "000000.png").is_file()
         runs.append([o.load_mesh().volume for o in result.objects])
     assert np.allclose(runs[0], runs[1])  # same seed and samples, any number of workers
 

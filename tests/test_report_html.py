@@ -283,7 +283,9 @@ def test_report_of_a_real_run_renders_in_headless_chromium(tmp_path: Path):
     assert "data-ipr-errors" not in dom.stdout
     canvas = re.search(r'<canvas id="view"[^>]*data-rect="([^"]+)"', dom.stdout)
     assert canvas, "the 3-D view did not record where it was drawn"
-    left, top, width, height = (round(v) for v in json.loads(canvas.group(1).replace("&quot;", '"')))
+    left, top, width, height = (
+        round(v) for v in json.loads(canvas.group(1).replace("&quot;", '"'))
+    )
     shot = tmp_path / "report.png"
     run = _browse(browser, page, f"--screenshot={shot}")
     console = [

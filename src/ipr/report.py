@@ -18,6 +18,7 @@ from ipr.perception.output import palette
 from ipr.products import ObjectPosterior
 from ipr.scene import Frame
 
+
 def _shading(depth_m: np.ndarray, K: np.ndarray) -> np.ndarray:
     """(H, W) in [0.35, 1]: how directly each rendered surface faces the camera."""
     height, width = depth_m.shape
