@@ -225,13 +225,17 @@ def _surface(mesh: Any) -> tuple[np.ndarray, np.ndarray, float]:
 
 
 def _volume(path: Path) -> float | None:
+    """The enclosed volume (m^3) of a hypothesis mesh (closed, as ipr writes them: the signed
+    tetrahedra sum, without trimesh's slower mass properties); None if unreadable."""
     from ipr.result import read_mesh
 
     try:
         mesh = read_mesh(path)
     except ResultError:
         return None
-    return abs(float(mesh.volume)) if mesh.is_watertight else None
+    corners = np.asarray(mesh.vertices, np.float64)[np.asarray(mesh.faces)]
+    signed = np.einsum("ij,ij->i", corners[:, 0], np.cross(corners[:, 1], corners[:, 2]))
+    return abs(float(signed.sum())) / 6.0
 
 
 def _pushes_in_result_world(scene: Scene, result: Result):
