@@ -223,6 +223,22 @@ def test_a_result_without_labels_still_gets_a_page(scene_dir: Path, tmp_path: Pa
     assert data["objects"][0]["points_count"] == 0 and data["objects"][0]["vertices"]
 
 
+def test_a_result_of_another_writer_needs_its_scene_named(scene_dir: Path, tmp_path: Path, capsys):
+    """No provenance (or one of another shape): ``ipr report`` asks for --scene in one line;
+    further keys of unexpected shapes are left out of the page, not a crash."""
+    box = _box(*BOX)
+    odd = {"provenance": "by hand", "objects_summary": [{"object_id": "x"}], "inference": [1]}
+    frames = {frame.index: frame.world_from_camera for frame in load_scene(scene_dir).frames}
+    result = write_result(tmp_path / "other", "by-hand", frames, [(box, [])], extra=odd)
+    assert main(["report", str(result)]) == EXIT_INPUT_ERROR
+    error = capsys.readouterr().err.strip()
+    assert "names no scene" in error and "--scene" in error and len(error.splitlines()) == 1
+    assert main(["report", str(result), "--scene", str(scene_dir)]) == 0
+    data = _page_data(result / REPORT_FILE)
+    assert data["provenance"] == {} and data["inference"] == {} and data["config_toml"] is None
+    assert data["objects"][0]["id"] == 0 and data["objects"][0]["inference"] is None
+
+
 # --------------------------------------------------------------------------------------------
 # In a browser (slow)
 
@@ -306,3 +322,7 @@ def test_report_of_a_real_run_renders_in_headless_chromium(tmp_path: Path):
         near = np.abs(view.astype(int) - colour).max(axis=2) < 40
         shaded = np.abs(view.astype(int) - (0.8 * colour).astype(int)).max(axis=2) < 40
         assert (near | shaded).sum() > 20, object_id
+    # Without WebGL the page says so instead of failing silently; the rest is still shown.
+    bare = _browse(browser, page, "--dump-dom", "--disable-webgl").stdout
+    assert 'data-ipr-status="no-webgl"' in bare and "offers no WebGL" in bare
+    assert bare.count("<figure") == len(result.world_from_camera)

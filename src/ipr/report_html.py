@@ -239,9 +239,9 @@ def _volume(path: Path) -> float | None:
 
 
 def _pushes_in_result_world(scene: Scene, result: Result):
-    """Per push: (before frame, start, end), in the result's world frame (module doc)."""
-    scene_pose = {frame.index: frame.world_from_camera for frame in scene.frames}
-    moved = result.world_from_camera[0] @ np.linalg.inv(scene_pose[0])
+    """Per push: (frame before, frame after, start (3,), end (3,)), the pusher centre's path
+    in the result's world frame (module doc)."""
+    moved = result.world_from_camera[0] @ np.linalg.inv(scene.frames[0].world_from_camera)
     out = []
     for push in scene.pushes:
         start = moved[:3, :3] @ push.start_m + moved[:3, 3]
@@ -290,10 +290,12 @@ def report_data(result: Result, scene: Scene) -> tuple[dict, ReportTiming]:
         if labels is not None
         else {}
     )  # fmt: skip
+    # result.json's further keys as ipr writes them; another writer's are shown only if alike.
+    listed = result.extra.get("objects_summary")
     summary = {
-        int(entry.get("object_id", -1)): entry
-        for entry in result.extra.get("objects_summary", [])
-        if isinstance(entry, dict)
+        entry["object_id"]: entry
+        for entry in (listed if isinstance(listed, list) else [])
+        if isinstance(entry, dict) and isinstance(entry.get("object_id"), int)
     }
     objects = []
     for obj in result.objects:
@@ -327,8 +329,11 @@ def report_data(result: Result, scene: Scene) -> tuple[dict, ReportTiming]:
         )
     surfaces_s = time.perf_counter() - surfaces_started
     camera = result.world_from_camera[0][:3, 3]
-    provenance = result.extra.get("provenance") or {}
-    config_path = result.path / str(provenance.get("config_file", "config.toml"))
+    provenance = result.extra.get("provenance")
+    provenance = provenance if isinstance(provenance, dict) else {}
+    inference = result.extra.get("inference")
+    # Only a file of the result's own folder is read (its name, not a path elsewhere).
+    config_path = result.path / Path(str(provenance.get("config_file", "config.toml"))).name
     data = {
         "method": result.method,
         "scene": str(provenance.get("scene", scene.path)),
@@ -344,7 +349,7 @@ def report_data(result: Result, scene: Scene) -> tuple[dict, ReportTiming]:
         "camera": camera.tolist(),
         "timing_s": result.timing_s,
         "provenance": provenance,
-        "inference": result.extra.get("inference") or {},
+        "inference": inference if isinstance(inference, dict) else {},
         "config_toml": config_path.read_text(encoding="utf-8") if config_path.is_file() else None,
     }
     total = time.perf_counter() - started
@@ -389,8 +394,9 @@ def scene_of_result(result: Result, scene_path: Path | str | None = None, up_cam
     """The scene a result was made from: ``scene_path``, else the one its provenance names;
     IprError (one line, with the fix) when there is none or it is gone."""
     if scene_path is None:
-        named = (result.extra.get("provenance") or {}).get("scene")
-        if not named:
+        provenance = result.extra.get("provenance")
+        named = provenance.get("scene") if isinstance(provenance, dict) else None
+        if not isinstance(named, str) or not named:
             raise IprError(
                 f"{result.path / 'result.json'}: names no scene (no provenance) "
                 "(fix: pass the scene with --scene SCENE)"
