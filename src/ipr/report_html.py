@@ -526,8 +526,10 @@ _JS = r"""
   // ---- header
   const sceneName = D.scene.split(/[\\/]/).filter(Boolean).pop() || D.scene;
   document.getElementById("title").textContent = "ipr result: " + sceneName;
-  document.getElementById("subtitle").textContent = D.method + " \u2022 " + D.objects.length +
-    " objects \u2022 " + D.frames_total + " frames \u2022 " + D.pushes.length + " pushes" +
+  const count = (n, word) => n + " " + word + (n === 1 ? "" : (word.endsWith("sh") ? "es" : "s"));
+  document.getElementById("subtitle").textContent = D.method + " \u2022 " +
+    count(D.objects.length, "object") + " \u2022 " + count(D.frames_total, "frame") + " \u2022 " +
+    count(D.pushes.length, "push") +
     (D.created ? " \u2022 " + D.created : "") + " \u2022 scene " + D.scene;
 
   // ---- objects table
@@ -728,7 +730,7 @@ _JS = r"""
   const toCamera = [0, 1, 2].map((k) => D.camera[k] - centre[k]);
   const seen = {yaw: Math.atan2(toCamera[1], toCamera[0]),
     pitch: Math.max(-1.4, Math.min(1.4, Math.asin(toCamera[2] / (Math.hypot(...toCamera) || 1)))),
-    distance: 2.6 * radius, target: centre.slice()};
+    distance: 2.2 * radius, target: centre.slice()};
   const home = Object.assign({}, seen, {yaw: seen.yaw + Math.PI / 3, pitch: Math.min(seen.pitch, 0.6),
     target: centre.slice()});
   const copy = (v) => Object.assign({}, v, {target: v.target.slice()});
