@@ -118,13 +118,11 @@ def test_segment_writes_labels_facets_and_overlays(tmp_path: Path, capsys):
     assert frames >= 2
     ids_per_frame = []
     for index in range(frames):
-        labels = np.asarray(Image.open(out / "labels" / f"{index:06d}.png"))
+        with Image.open(out / "labels" / f"{index:06d}.png") as picture:
+            assert picture.mode == "P"  # ids as pixel values, colours in a viewer (label_png)
+            labels = np.asarray(picture)
         facets = np.asarray(Image.open(out / "facets" / f"{index:06d}.png"))
-        assert (
-            labels.dtype == np.uint16
-            and labels.shape == (240, 320)
-            and facets.shape == labels.shape
-        )
+        assert labels.shape == (240, 320) and facets.shape == labels.shape
         assert Image.open(out / "overlay" / f"{index:06d}.png").size == (320, 240)
         ids = set(np.unique(labels)) - {0}
         assert ids == {obj["id"] for obj in summary["frames"][index]["objects"]}
@@ -301,6 +299,7 @@ def test_infer_default_method_writes_the_full_result_and_is_reproducible(tmp_pat
             assert obj.load_mesh().is_watertight
         with Image.open(out / "completion.png") as picture:
             assert picture.size == (640, 240)  # the input beside the completed objects
+        assert (out / "report.html").is_file() and (out / "labels" / "000000.png").is_file()
         runs.append([o.load_mesh().volume for o in result.objects])
     assert np.allclose(runs[0], runs[1])  # same seed and samples, any number of workers
 

@@ -3,7 +3,11 @@ taken as the table), what lies below it and walls, in their colours, under the o
 
 from __future__ import annotations
 
+import io
+
 import numpy as np
+import pytest
+from PIL import Image
 
 from ipr.perception.output import (
     KNOWN_BELOW,
@@ -11,7 +15,9 @@ from ipr.perception.output import (
     KNOWN_NONE,
     KNOWN_SUPPORT,
     known_plane_pixels,
+    label_png,
     overlay_image,
+    palette,
 )
 from ipr.perception.types import KnownPlane
 from tests.conftest import make_frames
@@ -47,3 +53,22 @@ def test_overlay_paints_known_planes_under_the_objects() -> None:
     assert np.abs(image[7, 7] - expected).max() > 20  # the object keeps its own tint
     plain = np.asarray(overlay_image(rgb, labels, np.zeros_like(labels))).astype(int)
     assert np.abs(plain[15, 25] - 0.45 * 200).max() <= 1  # without ``known``: dimmed only
+
+
+def test_label_images_keep_the_ids_and_show_them_in_colour() -> None:
+    """``label_png``: the ids read back exactly, and a viewer shows each id in its overlay
+    colour (an 8-bit palette), not the near black of small ids in a grey image."""
+    labels = np.zeros((12, 16), dtype=np.int64)
+    labels[2:6, 3:9], labels[7:11, 1:5] = 3, 250
+    with Image.open(io.BytesIO(label_png(labels))) as picture:
+        assert picture.mode == "P"
+        assert np.array_equal(np.asarray(picture), labels)
+        shown = np.asarray(picture.convert("RGB"))
+    assert (shown[labels == 0] == 0).all()
+    assert np.array_equal(shown[3, 4], palette([3])[0])
+    assert np.array_equal(shown[8, 2], palette([250])[0])
+    many = np.arange(12 * 16).reshape(12, 16) * 300  # ids above 255: 16-bit grey, still exact
+    with Image.open(io.BytesIO(label_png(many))) as picture:
+        assert np.array_equal(np.asarray(picture), many)
+    with pytest.raises(ValueError, match="0..65535"):
+        label_png(-labels)

@@ -315,6 +315,21 @@ def _cmd_infer(args: argparse.Namespace) -> int:
     if details.get("fallback"):
         print(f"note: {details['fallback']}")
     print(f"picture: {out / 'completion.png'}")
+    print(f"report: {out / 'report.html'}")
+    return 0
+
+
+def _cmd_report(args: argparse.Namespace) -> int:
+    from ipr.report_html import write_report
+
+    out = write_report(
+        Path(args.result),
+        Path(args.out) if args.out else None,
+        scene=Path(args.scene) if args.scene else None,
+        up_camera=args.up,
+        overwrite=args.overwrite,
+    )
+    print(out)
     return 0
 
 
@@ -500,7 +515,10 @@ def build_parser() -> argparse.ArgumentParser:
         "MuJoCo for sampled joint shapes and weighs them by how well the simulated depth "
         "images match the observed ones (the paper's full IPR). Methods: "
         + "; ".join(f"{m.name}: {m.description}" for m in METHODS.values())
-        + ". Also writes completion.png: the input beside the completed objects.",
+        + ". Also writes completion.png (the input beside the completed objects), labels/ "
+        "(each frame's segmentation with the result's object ids) and report.html (a "
+        "self-contained page: frames, pushes, segmentation, a 3-D view of the completed "
+        "scene, hypotheses, timings, settings).",
     )
     infer.add_argument("scene", metavar="SCENE")
     infer.add_argument("-o", "--out", required=True, metavar="OUT")
@@ -522,6 +540,26 @@ def build_parser() -> argparse.ArgumentParser:
     _add_up_option(infer)
     _add_frames_option(infer)
     infer.set_defaults(handler=_cmd_infer)
+
+    report = commands.add_parser(
+        "report",
+        help="(re)make a result's report.html",
+        description="Write the self-contained page of a result (what 'ipr infer' writes as "
+        "RESULT/report.html): the input frames with the pushes, the segmentation with the "
+        "result's object ids, an interactive 3-D view of the completed scene (observed points "
+        "solid, inferred shapes translucent), each object's top hypotheses, the timings and "
+        "the settings. Reads the frames from the scene the result names (or --scene).",
+    )
+    report.add_argument("result", metavar="RESULT")
+    report.add_argument(
+        "-o", "--out", metavar="FILE", help="where to write it (default RESULT/report.html)"
+    )
+    report.add_argument(
+        "--scene", metavar="SCENE", help="the scene (default: the one result.json names)"
+    )
+    report.add_argument("--overwrite", action="store_true", help="replace FILE if it exists")
+    _add_up_option(report)
+    report.set_defaults(handler=_cmd_report)
 
     batch = commands.add_parser(
         "batch",
@@ -552,8 +590,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="segment and track the objects of a scene, with facets",
         description="Remove the support, walls and robot; segment each frame into objects "
         "(supervoxels, convexity graph, spectral clustering); track ids across "
-        "frames; split objects into facets. Writes OUT/labels/NNNNNN.png (uint16, "
-        "0 = background, k = object k in every frame), OUT/facets/NNNNNN.png, "
+        "frames; split objects into facets. Writes OUT/labels/NNNNNN.png (the ids as "
+        "pixel values, 0 = background, k = object k in every frame; an 8-bit palette PNG that "
+        "viewers show in the overlay's colours), OUT/facets/NNNNNN.png, "
         "OUT/overlay/NNNNNN.png and OUT/segmentation.json.",
     )
     segment.add_argument("scene", metavar="SCENE")

@@ -52,6 +52,7 @@ from ipr.perception.types import PartialObject
 from ipr.products import ObjectPosterior, RunSummary, StageTimings
 from ipr.progress import ProgressCallback, report
 from ipr.report import completion_png
+from ipr.report_html import result_label_files, result_labels, write_report_into
 from ipr.result import write_posterior_result
 from ipr.scene import Scene, load_scene
 
@@ -224,7 +225,7 @@ class FusedObjects:
         objects: the partial objects hypotheses are made for.
         object_spaces: per object id, the seen-free space through its registered motion.
         motions: per object id, its registered later-frame motions (for carving).
-        fused_views: per result object (its position), the later frames fused into it; None
+        fused_views: per result object id, the later frames fused into it; None
             when the method does not fuse.
     """
 
@@ -246,10 +247,10 @@ def fuse(scene: Scene, perception: Perception, method: Method, config: Config) -
         object_spaces = tracked_free_spaces(
             fused, perception.free_space, scene.pushes, scene.pusher, config.fusion
         )
-    # Keyed like the result's objects (their position), listing the later frames fused.
+    # Keyed by the result's object ids (the perception's), listing the later frames fused.
     fused_views = {
-        str(position): fused.fused_frames[obj.id]
-        for position, obj in enumerate(fused.objects)
+        str(obj.id): fused.fused_frames[obj.id]
+        for obj in fused.objects
         if obj.id in fused.fused_frames
     }
     return FusedObjects(fused.objects, object_spaces, fused.motions, fused_views)
@@ -503,8 +504,10 @@ def infer_scene(
 
 def save_result(result: PipelineResult, out_dir: Path | str, *, overwrite: bool = False) -> Path:
     """Write a run's result directory atomically (docs/FORMATS.md): ``result.json`` with its
-    provenance, the meshes, ``occupancy.npz``, ``config.toml`` and ``completion.png`` (frame 0's
-    RGB beside the completed objects seen from its camera); the folder."""
+    provenance, the meshes, ``occupancy.npz``, ``config.toml``, ``completion.png`` (frame 0's
+    RGB beside the completed objects seen from its camera), ``labels/`` (each frame's
+    segmentation with the result's object ids) and ``report.html`` (``ipr.report_html``: the
+    page to check the result in a browser); the folder."""
     if result.run is None:
         raise IprError("this result does not record its run (fix: make it with run_pipeline)")
     run = result.run
@@ -518,6 +521,13 @@ def save_result(result: PipelineResult, out_dir: Path | str, *, overwrite: bool 
         scene, config, method=result.method, seed=run.seed,
         time_budget_s=run.time_budget_s, workers=run.workers, samples=run.samples,
     )  # fmt: skip
+    # The segmentation with the result's ids, and report.html made from the written result
+    # before it is renamed into place (one atomic step with the rest).
+    labels = result_labels(
+        result.perception.labels,
+        result.perception.objects[0] if result.perception.objects else (),
+        [posterior.object_id for posterior in result.posteriors],
+    )
     return write_posterior_result(
         out_dir,
         result.posteriors,
@@ -528,8 +538,10 @@ def save_result(result: PipelineResult, out_dir: Path | str, *, overwrite: bool 
         extra_files={
             "completion.png": completion_png(scene.frames[0], result.posteriors),
             CONFIG_FILE: config_to_toml(config).encode(),
+            **result_label_files(labels, scene.frames),
         },
         overwrite=overwrite,
+        finish=lambda staging: write_report_into(staging, scene),
     )
 
 

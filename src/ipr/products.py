@@ -265,7 +265,7 @@ class RunSummary:
     """Method-specific details of a run (``result.json``'s ``inference`` key).
 
     Attributes:
-        fused_views: per result object (its position, as a string), the later frames whose
+        fused_views: per result object id (as a string), the later frames whose
             views were registered into it; None when the method does not fuse views.
         sampling: the physics-based method's sampling summary (None for the Collision
             Checker, or when there was no object).

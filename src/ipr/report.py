@@ -3,6 +3,8 @@
 ``completion_image`` renders every object's output shape from frame 0's camera (``ipr.rendering``)
 over a dimmed grey copy of the input, each object in its own colour, shaded by the rendered
 surface's slant so that the hidden, completed parts read as solids; the input RGB is on the left.
+An object's colour is its id's (``ipr.perception.output.palette``), as in the segmentation
+overlays and ``report.html``.
 """
 
 from __future__ import annotations
@@ -12,18 +14,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from ipr.perception.output import palette
 from ipr.products import ObjectPosterior
 from ipr.scene import Frame
-
-#: Distinct colours (RGB, 0-255) for objects, cycled.
-PALETTE = np.array(
-    [
-        [230, 25, 75], [60, 180, 75], [0, 130, 200], [245, 130, 48], [145, 30, 180],
-        [70, 240, 240], [240, 50, 230], [210, 245, 60], [250, 190, 190], [0, 128, 128],
-        [170, 110, 40], [128, 0, 0], [255, 225, 25], [0, 0, 128],
-    ],
-    dtype=np.float64,
-)  # fmt: skip
 
 
 def _shading(depth_m: np.ndarray, K: np.ndarray) -> np.ndarray:
@@ -59,7 +52,8 @@ def completion_image(frame: Frame, posteriors: Sequence[ObjectPosterior]) -> np.
         )
         shade = _shading(depth, np.asarray(frame.K, float))
         drawn = index >= 0
-        colour = PALETTE[np.maximum(index, 0) % len(PALETTE)]
+        colours = palette(np.array([p.object_id for p in posteriors])).astype(np.float64)
+        colour = colours[np.maximum(index, 0)]
         right[drawn] = colour[drawn] * shade[drawn, None]
     return np.concatenate([rgb, np.clip(right, 0, 255).astype(np.uint8)], axis=1)
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -576,6 +576,8 @@ def write_result(
     extra_files: Mapping[str, bytes] | None = None,
     overwrite: bool = False,
     occupancy: Occupancy | None = None,
+    ids: Sequence[int] | None = None,
+    finish: Callable[[Path], None] | None = None,
 ) -> Path:
     """Write a result directory atomically (staged beside ``out_dir``, then renamed into place).
 
@@ -598,7 +600,12 @@ def write_result(
 
     Writes ``result.json``, ``objects/<k>/best.ply`` (+ ``hyp_NNN.ply``) as binary PLY and
     ``occupancy.npz`` (``posterior_occupancy`` of the hypotheses; ``occupancy`` gives it
-    precomputed, e.g. from cached voxels of the same shapes).
+    precomputed, e.g. from cached voxels of the same shapes, keyed by the objects' ids).
+    ``ids``: the objects' ids (distinct integers, e.g. the perception's, so that the result's
+    ids are those of the segmentation; default 0, 1, ...); object k's files go to
+    ``objects/<id>/``. ``finish``: called with the staging folder once everything else is
+    written, to add files made from the written result (``report.html``), so that they are
+    part of the same atomic step.
     Raises ValueError on invalid inputs and ResultError if ``out_dir`` exists without
     ``overwrite``. Returns ``out_dir``.
     """
@@ -631,8 +638,11 @@ def write_result(
         if relative.parts[0] in ("objects", RESULT_FILE, OCCUPANCY_FILE):
             raise ValueError(f"extra file name {name!r} collides with the result's own files")
         files[relative] = bytes(content)
+    ids = list(range(len(objects))) if ids is None else [int(i) for i in ids]
+    if len(ids) != len(objects) or len(set(ids)) != len(ids):
+        raise ValueError(f"ids must be {len(objects)} distinct integers, one per object")
     prepared = []
-    for k, entry in enumerate(objects):
+    for k, entry in zip(ids, objects, strict=True):
         best, hypotheses = entry[0], entry[1]
         stated = float(entry[2]) if len(entry) > 2 else None
         if stated is not None and not (math.isfinite(stated) and 0.0 <= stated <= 1.0):
@@ -654,9 +664,12 @@ def write_result(
         raise ResultError(target, "already exists", "choose another folder or allow overwriting")
     if occupancy is None:
         occupancy = posterior_occupancy(
-            {k: hyps if hyps else [(best, 1.0)] for k, (best, hyps, _) in enumerate(prepared)}
+            {
+                k: hyps if hyps else [(best, 1.0)]
+                for k, (best, hyps, _) in zip(ids, prepared, strict=True)
+            }
         )
-    elif sorted(occupancy.objects) != list(range(len(prepared))):
+    elif sorted(occupancy.objects) != sorted(ids):
         raise ValueError("occupancy must list exactly the objects written, by their ids")
     with staged_directory(target) as staging:
         np.savez_compressed(staging / OCCUPANCY_FILE, **_occupancy_arrays(occupancy))
@@ -664,7 +677,7 @@ def write_result(
         for relative, content in files.items():
             (staging / relative).parent.mkdir(parents=True, exist_ok=True)
             (staging / relative).write_bytes(content)
-        for k, (best_mesh, hyps, stated) in enumerate(prepared):
+        for k, (best_mesh, hyps, stated) in zip(ids, prepared, strict=True):
             folder = staging / "objects" / str(k)
             folder.mkdir(parents=True)
             best_mesh.export(folder / "best.ply", file_type="ply")
@@ -695,6 +708,8 @@ def write_result(
         }
         text = json.dumps(document, indent=1, allow_nan=False)
         (staging / RESULT_FILE).write_text(text + "\n", encoding="utf-8")
+        if finish is not None:
+            finish(staging)
     return target
 
 
@@ -721,14 +736,17 @@ def write_posterior_result(
     extra: Mapping | None = None,
     extra_files: Mapping[str, bytes] | None = None,
     overwrite: bool = False,
+    finish: Callable[[Path], None] | None = None,
 ) -> Path:
     """Write a result directory (``ipr.result.write_result``) from per-object posteriors: per
     object its output shape as ``best.ply`` and its hypotheses with non-zero probability
-    (renormalised against rounding) as weighted hypotheses.
+    (renormalised against rounding) as weighted hypotheses. Each object's id in the result is
+    its posterior's ``object_id`` (the perception's id: the ids ``ipr segment`` shows).
 
     ``world_from_camera``: frame id -> (4, 4) OpenCV camera-to-world (frame 0 required).
     ``extra["objects_summary"]`` records each object's id, inference mode and volumes;
-    ``extra`` adds further keys and ``extra_files`` further files (name -> bytes).
+    ``extra`` adds further keys and ``extra_files`` further files (name -> bytes);
+    ``finish`` as for ``write_result``.
     """
     objects, summary = [], []
     for posterior in posteriors:
@@ -761,4 +779,6 @@ def write_posterior_result(
         {"objects_summary": summary, **dict(extra or {})},
         extra_files=extra_files,
         overwrite=overwrite,
+        ids=[posterior.object_id for posterior in posteriors],
+        finish=finish,
     )

@@ -2,12 +2,17 @@
 
 Layout of OUT (written to a temporary folder, then renamed into place):
 
-    labels/NNNNNN.png    uint16; 0 = background or support, k >= 1 = object k (same k in every frame)
-    facets/NNNNNN.png    uint16; 0 = none, f >= 1 = facet f of that frame
+    labels/NNNNNN.png    0 = background or support, k >= 1 = object k (same k in every frame)
+    facets/NNNNNN.png    0 = none, f >= 1 = facet f of that frame
     overlay/NNNNNN.png   RGB with objects tinted by id, facet borders and id labels; the known
                          planes' pixels in flat colours (``known_plane_pixels``): the support
                          blue, what lies below it dark blue, walls ochre
     segmentation.json    per frame: objects (id, pixels, facets, border), planes; timings
+
+Label images (``label_png``) hold the ids themselves as pixel values, in an 8-bit palette PNG
+whose palette is ``palette``'s colour per id (0 black) when every id is below 256 (the PASCAL
+VOC convention: PIL and imageio read the ids, a picture viewer shows the colours, not the near
+black that small ids are in a grey image), else in a 16-bit grey PNG.
 """
 
 from __future__ import annotations
@@ -52,6 +57,31 @@ def palette(ids: np.ndarray) -> np.ndarray:
     ]
     rgb = np.stack([np.choose(sector, [t[c] for t in table]) for c in range(3)], axis=-1)
     return (55 + 200 * rgb).astype(np.uint8)
+
+
+def label_png(labels: np.ndarray) -> bytes:
+    """A label image (H, W) of non-negative integer ids as PNG bytes (module doc): 8-bit with
+    ``palette``'s colours when the largest id is below 256, else 16-bit grey; either way
+    ``np.asarray(PIL.Image.open(...))`` gives the ids back. ValueError for negative ids or ids
+    above 65535."""
+    import io
+
+    labels = np.asarray(labels)
+    if labels.ndim != 2 or labels.dtype.kind not in "iub":
+        raise ValueError(f"labels must be a 2-D integer image, got {labels.dtype} {labels.shape}")
+    largest = int(labels.max()) if labels.size else 0
+    if (labels.size and int(labels.min()) < 0) or largest > 65535:
+        raise ValueError("label ids must be in 0..65535")
+    buffer = io.BytesIO()
+    if largest < 256:
+        image = Image.fromarray(labels.astype(np.uint8))  # "L"; putpalette makes it "P"
+        colours = palette(np.arange(256))
+        colours[0] = 0
+        image.putpalette(colours.reshape(-1).tolist())
+    else:
+        image = Image.fromarray(labels.astype(np.uint16))
+    image.save(buffer, format="PNG")
+    return buffer.getvalue()
 
 
 def known_plane_pixels(
@@ -146,8 +176,8 @@ def write_segmentation(
             strict=True,
         ):
             name = f"{frame.index:06d}.png"
-            Image.fromarray(labels.astype(np.uint16)).save(staging / "labels" / name)
-            Image.fromarray(facet_labels.astype(np.uint16)).save(staging / "facets" / name)
+            (staging / "labels" / name).write_bytes(label_png(labels))
+            (staging / "facets" / name).write_bytes(label_png(facet_labels))
             known = known_plane_pixels(frame, planes, config)
             overlay = overlay_image(frame.rgb, labels, facet_labels, known)
             overlay.save(staging / "overlay" / name)
