@@ -3,8 +3,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -19,8 +21,8 @@ import pytest
 
 from ipr.batch import (
     SceneOutcome,
-    _Runner,
     _run_all,
+    _Runner,
     run_scene_detached,
     write_result_files,
 )
@@ -169,15 +171,12 @@ def ray_head() -> Iterator[str]:
         yield f"127.0.0.1:{port}"
     finally:
         head.send_signal(signal.SIGTERM)  # ray start --block stops what it started
-        try:
+        with contextlib.suppress(subprocess.TimeoutExpired):
             head.wait(timeout=60)
-        except subprocess.TimeoutExpired:
-            pass
-        try:
+        with contextlib.suppress(ProcessLookupError):
             os.killpg(head.pid, signal.SIGKILL)  # anything of this head's group left over
-        except ProcessLookupError:
-            pass
         log.close()
+        shutil.rmtree(temp, ignore_errors=True)
 
 
 def _ray_installed() -> bool:
@@ -208,7 +207,9 @@ def _without_clocks(value):
 
 
 def _files(folder: Path) -> dict[str, bytes]:
-    return {p.relative_to(folder).as_posix(): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
+    return {
+        p.relative_to(folder).as_posix(): p.read_bytes() for p in folder.rglob("*") if p.is_file()
+    }
 
 
 @pytest.mark.slow
@@ -260,5 +261,7 @@ def test_a_batch_on_a_ray_cluster_matches_the_local_pool(ray_head: str, tmp_path
     assert "0 run, 2 kept, 0 failed" in completed.stdout
     summary = json.loads((on_ray / "summary.json").read_text())
     assert {o["status"] for o in summary["outcomes"]} == {"kept"}
-    assert [o["object_iou"] for o in summary["outcomes"]] == [status[n]["object_iou"] for n in names]
+    assert [o["object_iou"] for o in summary["outcomes"]] == [
+        status[n]["object_iou"] for n in names
+    ]
     assert (on_ray / names[0] / "result.json").stat().st_mtime_ns == stamp
