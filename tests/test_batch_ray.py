@@ -138,9 +138,9 @@ LOOPBACK_ENV = {"RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER": "0"}
 
 
 @pytest.fixture(scope="module")
-def ray_head() -> Iterator[str]:
+def ray_head() -> Iterator[tuple[str, str]]:
     """A Ray head on 127.0.0.1 with 2 CPUs, started for these tests and stopped after them;
-    yields its address (HOST:PORT)."""
+    yields its addresses (HOST:PORT, and ray://HOST:PORT of its Ray Client server)."""
     if not _ray_installed():
         if os.environ.get("CI") == "true":
             pytest.fail(f"CI must run the Ray test: Ray is not installed ({RAY_INSTALL})")
@@ -168,7 +168,7 @@ def ray_head() -> Iterator[str]:
             if head.poll() is not None or time.monotonic() > deadline:
                 pytest.fail(f"the Ray head did not start: {(temp / 'head.log').read_text()}")
             time.sleep(0.5)
-        yield f"127.0.0.1:{port}"
+        yield f"127.0.0.1:{port}", f"ray://127.0.0.1:{client_port}"
     finally:
         head.send_signal(signal.SIGTERM)  # ray start --block stops what it started
         with contextlib.suppress(subprocess.TimeoutExpired):
@@ -213,7 +213,9 @@ def _files(folder: Path) -> dict[str, bytes]:
 
 
 @pytest.mark.slow
-def test_a_batch_on_a_ray_cluster_matches_the_local_pool(ray_head: str, tmp_path: Path):
+def test_a_batch_on_a_ray_cluster_matches_the_local_pool(ray_head: tuple[str, str], tmp_path: Path):
+    """Through Ray Client first (ray://), then through the head's address (the rerun)."""
+    head, client = ray_head
     scenes = tmp_path / "scenes"
     synth = ["synth", str(scenes), "--kind", "static", "--seed", "5", "--count", "2"]
     assert main([*synth, "--width", "320", "--height", "240"]) == 0
@@ -223,9 +225,9 @@ def test_a_batch_on_a_ray_cluster_matches_the_local_pool(ray_head: str, tmp_path
     names = ["static_000000", "static_000001"]
     common = ["--method", "collision-checker", "--seed", "3"]
     on_ray = tmp_path / "on-ray"
-    run = ["batch", str(scenes), "-o", str(on_ray), *common, "--ray", ray_head]
+    run = ["batch", str(scenes), "-o", str(on_ray), *common, "--ray"]
 
-    completed = _ipr(*run)
+    completed = _ipr(*run, client)
     assert completed.returncode == 1, completed.stderr  # one scene failed, the others ran
     assert "2 run, 0 kept, 1 failed" in completed.stdout
     summary = json.loads((on_ray / "summary.json").read_text())
@@ -256,7 +258,7 @@ def test_a_batch_on_a_ray_cluster_matches_the_local_pool(ray_head: str, tmp_path
     # Rerun on the cluster: the finished results are kept (scored here), the fixed scene runs.
     broken.rename(tmp_path / "set-aside")
     stamp = (on_ray / names[0] / "result.json").stat().st_mtime_ns
-    completed = _ipr(*run)
+    completed = _ipr(*run, head)
     assert completed.returncode == 0, completed.stderr
     assert "0 run, 2 kept, 0 failed" in completed.stdout
     summary = json.loads((on_ray / "summary.json").read_text())

@@ -141,7 +141,9 @@ def connect(text: str, timeout_s: float = CONNECT_TIMEOUT_S) -> Iterator[ModuleT
                     log_to_driver=False,
                     runtime_env={"py_modules": [package]},
                 )
-            except (ConnectionError, RuntimeError, ValueError, TimeoutError) as error:
+            except IprError:
+                raise
+            except Exception as error:  # noqa: BLE001 - Ray raises many kinds; each is one line
                 first = (str(error).strip().splitlines() or [type(error).__name__])[0]
                 raise IprError(
                     f"--ray {address.text}: cannot connect to the Ray cluster: {first} (fix: start "
