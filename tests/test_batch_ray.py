@@ -62,9 +62,14 @@ def test_an_unreachable_head_is_refused_quickly():
 
 
 def test_a_connection_that_hangs_is_cut_at_its_deadline():
+    """Also through a retry loop that catches Exception, as Ray's connection attempts do."""
     started = time.monotonic()
     with pytest.raises(IprError, match="too slow"), _deadline(0.3, "too slow"):
-        time.sleep(5)
+        while time.monotonic() - started < 5:
+            try:
+                time.sleep(0.1)
+            except Exception:  # noqa: BLE001, S112 - the retry loop the deadline must get through
+                continue
     assert time.monotonic() - started < 2
 
 

@@ -29,7 +29,7 @@ RAY_INSTALL = "pip install 'ipr-shapes[ray]'"
 #: Seconds to wait for the head's port to accept a TCP connection.
 REACH_TIMEOUT_S = 10.0
 #: Seconds ``ray.init`` may take once the port answers (Ray itself retries for minutes).
-CONNECT_TIMEOUT_S = 90.0
+CONNECT_TIMEOUT_S = 60.0
 
 _ADDRESS = re.compile(
     r"^(?P<client>ray://)?(?P<host>[A-Za-z0-9](?:[A-Za-z0-9.\-]*[A-Za-z0-9])?|\[[0-9A-Fa-f:.]+\])"
@@ -96,21 +96,29 @@ def check_reachable(address: RayAddress, timeout_s: float = REACH_TIMEOUT_S) -> 
         ) from None
 
 
+class _Expired(BaseException):
+    """A deadline passed: a BaseException, so that the retry loops it interrupts (Ray's catch
+    Exception and try again) let it through."""
+
+
 @contextlib.contextmanager
 def _deadline(seconds: float, message: str) -> Iterator[None]:
     """Raise IprError(message) if the block runs longer than ``seconds`` (main thread only:
-    elsewhere the block runs unbounded)."""
+    elsewhere the block runs unbounded). A block waiting in compiled code is interrupted when
+    that call returns to Python (Ray's connection attempts: at most 40 s each)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
 
     def expire(signum, frame):
-        raise IprError(message)
+        raise _Expired
 
     previous = signal.signal(signal.SIGALRM, expire)
     signal.setitimer(signal.ITIMER_REAL, seconds)
     try:
         yield
+    except _Expired:
+        raise IprError(message) from None
     finally:
         signal.setitimer(signal.ITIMER_REAL, 0)
         signal.signal(signal.SIGALRM, previous)
