@@ -6,6 +6,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 IPR    := $(VENV)/bin/ipr
 STAMP  := $(VENV)/.installed
+RAY_STAMP := $(VENV)/.installed-ray
 DEMO_OUT ?= out/demo
 
 .PHONY: setup demo test test-slow mutants bench gallery lint format clean
@@ -24,6 +25,11 @@ $(STAMP): requirements.lock pyproject.toml scripts/setup_system.sh
 	$(PY) -c 'import sys, ipr.gl; sys.exit(ipr.gl.main())'
 	touch $(STAMP)
 
+# Ray for `ipr batch --ray` (the "ray" extra), pinned apart so that `make test` does not need it.
+$(RAY_STAMP): $(STAMP) requirements-ray.lock
+	$(PY) -m pip install --quiet -r requirements-ray.lock
+	touch $(RAY_STAMP)
+
 demo: $(STAMP)
 	$(PY) -m ipr.demo $(DEMO_OUT)
 
@@ -31,7 +37,8 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(PY) -m pytest -q -m "not slow" tests
 
-test-slow: $(STAMP)
+# The slow tests include a Ray cluster on this machine: Ray is installed first.
+test-slow: $(STAMP) $(RAY_STAMP)
 	$(PY) -m pytest -q -m slow tests
 
 bench: $(STAMP)

@@ -27,15 +27,44 @@ def _names(requirements: list[str]) -> list[str]:
     return [canonicalize_name(Requirement(text).name) for text in requirements]
 
 
-def _lock() -> dict[str, str]:
-    """Canonical name -> pinned version of requirements.lock."""
+#: Extras pinned in a lock of their own (requirements-<extra>.lock, over requirements.lock), kept
+#: out of requirements.lock so that ``make test`` does not install them.
+SEPARATE_LOCKS = ("ray",)
+
+
+def _lock(name: str = "requirements.lock") -> dict[str, str]:
+    """Canonical name -> pinned version of a lock file (its own lines; ``-r`` includes skipped)."""
     pins = {}
-    for line in (ROOT / "requirements.lock").read_text(encoding="utf-8").splitlines():
+    for line in (ROOT / name).read_text(encoding="utf-8").splitlines():
         line = line.split("#", 1)[0].strip()
-        if line:
-            name, version = line.split("==")
-            pins[canonicalize_name(name)] = version
+        if line and not line.startswith("-r"):
+            name_, version = line.split("==")
+            pins[canonicalize_name(name_)] = version
     return pins
+
+
+def _closure(roots: list[Requirement]) -> set[str]:
+    """Canonical names of ``roots`` and everything they require (installed metadata)."""
+    needed, seen = set(), set()
+    queue = [(canonicalize_name(r.name), tuple(sorted(r.extras))) for r in roots]
+    while queue:
+        name, extras = queue.pop()
+        if (name, extras) in seen:
+            continue
+        seen.add((name, extras))
+        needed.add(name)
+        try:
+            requires = metadata.requires(name) or []
+        except metadata.PackageNotFoundError:
+            continue
+        for text in requires:
+            requirement = Requirement(text)
+            markers = [{"extra": extra} for extra in ("", *extras)]
+            if requirement.marker is None or any(requirement.marker.evaluate(m) for m in markers):
+                queue.append(
+                    (canonicalize_name(requirement.name), tuple(sorted(requirement.extras)))
+                )
+    return needed
 
 
 def _imported(module: str, folder: str) -> bool:
@@ -78,26 +107,39 @@ def test_every_declared_dependency_is_imported(group: str, folder: str):
 def test_the_lock_pins_the_declared_dependencies_and_only_what_they_need():
     project = PYPROJECT["project"]
     declared = _names(project["dependencies"])
-    for extra in project["optional-dependencies"].values():
-        declared += _names(extra)
+    for extra, requirements in project["optional-dependencies"].items():
+        if extra not in SEPARATE_LOCKS:
+            declared += _names(requirements)
     pins = _lock()
     assert set(declared) <= set(pins), f"not pinned: {sorted(set(declared) - set(pins))}"
     # Everything pinned is declared or required by something pinned (installed metadata).
-    needed, queue = set(), list(declared)
-    while queue:
-        name = queue.pop()
-        if name in needed:
-            continue
-        needed.add(name)
-        try:
-            requires = metadata.requires(name) or []
-        except metadata.PackageNotFoundError:
-            continue
-        for text in requires:
-            requirement = Requirement(text)
-            if requirement.marker is None or requirement.marker.evaluate({"extra": ""}):
-                queue.append(canonicalize_name(requirement.name))
+    needed = _closure([Requirement(name) for name in declared])
     assert set(pins) <= needed, f"pinned but nothing needs them: {sorted(set(pins) - needed)}"
+
+
+@pytest.mark.parametrize("extra", SEPARATE_LOCKS)
+def test_a_separately_locked_extra_pins_what_it_adds_and_only_that(extra: str):
+    """requirements-<extra>.lock includes requirements.lock and pins the extra's packages (and,
+    where they are installed, what they need) that requirements.lock does not."""
+    lock = ROOT / f"requirements-{extra}.lock"
+    assert "-r requirements.lock" in lock.read_text(encoding="utf-8").splitlines()
+    roots = [Requirement(t) for t in PYPROJECT["project"]["optional-dependencies"][extra]]
+    pins, base = _lock(lock.name), _lock()
+    assert not set(pins) & set(base), f"pinned twice: {sorted(set(pins) & set(base))}"
+    assert {canonicalize_name(r.name) for r in roots} <= set(pins)
+    for root in roots:
+        assert pins[canonicalize_name(root.name)] in root.specifier
+    if all(_installed(r.name) for r in roots):
+        needed = _closure(roots) - set(base)
+        assert set(pins) == needed, f"lock {sorted(set(pins))} != needed {sorted(needed)}"
+
+
+def _installed(name: str) -> bool:
+    try:
+        metadata.version(name)
+    except metadata.PackageNotFoundError:
+        return False
+    return True
 
 
 _UNREACHABLE = re.compile(
@@ -107,15 +149,18 @@ _UNREACHABLE = re.compile(
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize(
+    "lock", ["requirements.lock", *(f"requirements-{e}.lock" for e in SEPARATE_LOCKS)]
+)
 @pytest.mark.parametrize("python", SUPPORTED)
-def test_the_lock_resolves_for_every_supported_python(python: str, tmp_path: Path):
-    """pip resolves requirements.lock for ``python`` from binary wheels alone, and the set it
-    would install is exactly the lock (no pin missing, none conflicting)."""
+def test_the_lock_resolves_for_every_supported_python(python: str, lock: str, tmp_path: Path):
+    """pip resolves each lock for ``python`` from binary wheels alone, and the set it would
+    install is exactly the lock (no pin missing, none conflicting)."""
     report = tmp_path / "report.json"
     completed = subprocess.run(
         [sys.executable, "-m", "pip", "install", "--dry-run", "--ignore-installed", "--quiet",
          "--only-binary=:all:", "--python-version", python, "--report", str(report),
-         "-r", str(ROOT / "requirements.lock")],
+         "-r", str(ROOT / lock)],
         capture_output=True, text=True, timeout=900,
     )  # fmt: skip
     if completed.returncode != 0 and _UNREACHABLE.search(completed.stderr):
@@ -125,7 +170,8 @@ def test_the_lock_resolves_for_every_supported_python(python: str, tmp_path: Pat
         canonicalize_name(item["metadata"]["name"]): item["metadata"]["version"]
         for item in json.loads(report.read_text())["install"]
     }
-    assert installed == _lock()
+    expected = _lock() if lock == "requirements.lock" else {**_lock(), **_lock(lock)}
+    assert installed == expected
 
 
 def test_licence_and_citation_match_the_package():

@@ -14,6 +14,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import glob
 import math
 import multiprocessing
@@ -22,7 +23,7 @@ import time
 import traceback
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 from ipr.atomic import check_output_location, write_json, write_text
@@ -221,60 +222,192 @@ def _write_summary(summary: BatchSummary) -> None:
     write_text(out / SUMMARY_MD, _summary_markdown(summary))
 
 
+def _one_line(error: BaseException) -> str:
+    text = " ".join(str(error).split()) or type(error).__name__
+    return text if len(text) <= 300 else text[:297] + "..."
+
+
+def run_scene_detached(scene: str, options: BatchOptions) -> tuple[SceneOutcome, dict[str, bytes]]:
+    """Run one scene on a machine that does not share the batch's output folder (a Ray worker):
+    into a temporary folder here, returned as its files (path relative to the result folder ->
+    bytes) for the caller to write. The scene must be readable here at the same path. Never
+    raises; the outcome's ``result`` is the temporary folder (gone on return)."""
+    import socket
+    import tempfile
+
+    folder = Path(scene)
+    if not folder.is_dir():
+        outcome = SceneOutcome(str(folder), "", "failed", error=(
+            f"{folder}: not found on the cluster node {socket.gethostname()} (fix: put the "
+            "scenes on a filesystem every node mounts at the same path)"))  # fmt: skip
+        return outcome, {}
+    with tempfile.TemporaryDirectory(prefix="ipr-batch-") as temporary:
+        result_dir = Path(temporary) / folder.name
+        outcome = run_scene(folder, result_dir, options)
+        files = {}
+        if outcome.status != "failed":
+            files = {
+                path.relative_to(result_dir).as_posix(): path.read_bytes()
+                for path in sorted(result_dir.rglob("*"))
+                if path.is_file()
+            }
+    return outcome, files
+
+
+def write_result_files(files: dict[str, bytes], result_dir: Path) -> None:
+    """Write a detached run's files as ``result_dir`` in one atomic step (replacing what is
+    there); IprError if a path would leave the folder."""
+    from ipr.atomic import staged_directory
+
+    with staged_directory(result_dir) as staging:
+        for name, content in files.items():
+            relative = Path(name)
+            if relative.is_absolute() or ".." in relative.parts or not relative.parts:
+                raise IprError(f"{result_dir}: a result file path {name!r} leaves the folder")
+            target = staging / relative
+            target.parent.mkdir(parents=True, exist_ok=True)
+            target.write_bytes(content)
+
+
+@dataclass(frozen=True)
+class _Runner:
+    """Where scenes run: ``submit(scene, result_dir)`` starts one and returns a future;
+    ``settle(value, scene, result_dir)`` turns the future's value into the scene's outcome
+    (writing what must be written here); ``window`` caps the scenes in flight (None: all)."""
+
+    submit: Callable[[Path, Path], Future]
+    settle: Callable[[object, Path, Path], SceneOutcome]
+    window: int | None = None
+
+
+def _run_all(
+    scenes: Sequence[Path],
+    out: Path,
+    runner: _Runner,
+    finish: Callable[[int, SceneOutcome], None],
+    indices: Iterable[int],
+    idle: Callable[[], None] | None = None,
+) -> None:
+    """Run the scenes at ``indices`` through ``runner``, calling ``finish`` as each ends; a
+    scene whose worker is lost (a crash, a lost node) is a failed outcome, not an exception.
+    ``idle`` runs once, after the first submissions (work for this process meanwhile)."""
+    queue = list(indices)
+    futures: dict[Future, int] = {}
+    window = runner.window or max(1, len(queue))
+
+    def top_up() -> None:
+        while queue and len(futures) < window:
+            index = queue.pop(0)
+            scene = scenes[index]
+            futures[runner.submit(scene, out / scene.name)] = index
+
+    top_up()
+    if idle is not None:
+        idle()
+    while futures:
+        finished, _ = wait(set(futures), return_when=FIRST_COMPLETED)
+        for future in sorted(finished, key=futures.get):
+            index = futures.pop(future)
+            scene = scenes[index]
+            try:
+                outcome = runner.settle(future.result(), scene, out / scene.name)
+            except Exception as error:  # noqa: BLE001 - a worker died or a node was lost
+                outcome = SceneOutcome(str(scene), str(out / scene.name), "failed",
+                                       error=f"worker died: {_one_line(error)}")  # fmt: skip
+            finish(index, outcome)
+        top_up()
+
+
+def _settle_local(value: object, scene: Path, result_dir: Path) -> SceneOutcome:
+    assert isinstance(value, SceneOutcome)
+    return value
+
+
+def _settle_detached(value: object, scene: Path, result_dir: Path) -> SceneOutcome:
+    """Write a detached run's result folder here (atomically) and point its outcome at it."""
+    outcome, files = value  # type: ignore[misc]
+    outcome = replace(outcome, scene=str(scene), result=str(result_dir))
+    if outcome.status == "failed":
+        return outcome
+    try:
+        write_result_files(files, result_dir)
+    except (IprError, OSError) as error:
+        return replace(outcome, status="failed", objects=None, object_iou=None, scene_iou=None,
+                       error=f"result not written: {_one_line(error)}")  # fmt: skip
+    return outcome
+
+
 def run_batch(
     scenes: Sequence[Path],
     out_dir: Path | str,
     options: BatchOptions | None = None,
     *,
     jobs: int | None = None,
+    ray_address: str | None = None,
     on_outcome: Callable[[SceneOutcome], None] | None = None,
 ) -> BatchSummary:
-    """Run every scene into ``out_dir/<scene name>`` with ``jobs`` processes (default: the
-    cores this process may use; 1: in this process), keeping valid results already there.
+    """Run every scene into ``out_dir/<scene name>``, keeping valid results already there: with
+    ``jobs`` local processes (default: the cores this process may use; 1: in this process), or
+    on the Ray cluster at ``ray_address`` (``ipr.cluster``; ``jobs``: at most that many scenes
+    at once, default all).
+
+    On Ray every worker runs its scene into a folder of its own and returns the files, which
+    this process writes atomically, so the output folder need not be shared; the scenes must be
+    readable on every node at the same path. Kept results are scored here.
 
     ``on_outcome`` is called with each scene's outcome as it finishes (progress). The summary
-    files are rewritten after every scene. Raises IprError before any work when the output
-    folder would overlap a scene."""
+    files are rewritten after every scene. Raises IprError before any work (nothing written)
+    when the output folder would overlap a scene, or the Ray cluster cannot be used."""
     options = options or BatchOptions()
     get_method(options.method)
     out = Path(out_dir)
     scenes = [Path(s) for s in scenes]
     for scene in scenes:  # OUT, and every result folder, must stay clear of every scene
         check_output_location(out, [scene], overwrite=True)
-    out.mkdir(parents=True, exist_ok=True)
-    if jobs is None:
-        jobs = max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1)
-    outcomes: dict[int, SceneOutcome] = {}
+    with contextlib.ExitStack() as stack:
+        ray = None
+        if ray_address is not None:
+            from ipr.cluster import connect
 
-    def finish(index: int, outcome: SceneOutcome) -> None:
-        outcomes[index] = outcome
-        done = tuple(outcomes[i] for i in sorted(outcomes))
-        _write_summary(BatchSummary(str(out), options.method, done))
-        if on_outcome is not None:
-            on_outcome(outcome)
+            ray = stack.enter_context(connect(ray_address))
+        out.mkdir(parents=True, exist_ok=True)
+        if jobs is None and ray is None:
+            jobs = max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1)
+        outcomes: dict[int, SceneOutcome] = {}
 
-    if jobs <= 1 or len(scenes) <= 1:
-        for index, scene in enumerate(scenes):
-            finish(index, run_scene(scene, out / scene.name, options))
-    else:
-        context = multiprocessing.get_context("forkserver")
-        with ProcessPoolExecutor(
-            max_workers=jobs, mp_context=context, initializer=quiet_worker
-        ) as pool:
-            futures: dict[Future, int] = {
-                pool.submit(run_scene, scene, out / scene.name, options): index
-                for index, scene in enumerate(scenes)
-            }
-            pending = set(futures)
-            while pending:
-                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
-                for future in finished:
-                    index = futures[future]
-                    try:
-                        outcome = future.result()
-                    except Exception as error:  # noqa: BLE001 - a worker died
-                        scene = scenes[index]
-                        outcome = SceneOutcome(str(scene), str(out / scene.name), "failed",
-                                               error=f"worker died: {error}")  # fmt: skip
-                    finish(index, outcome)
+        def finish(index: int, outcome: SceneOutcome) -> None:
+            outcomes[index] = outcome
+            done = tuple(outcomes[i] for i in sorted(outcomes))
+            _write_summary(BatchSummary(str(out), options.method, done))
+            if on_outcome is not None:
+                on_outcome(outcome)
+
+        if ray is not None:
+            remote = ray.remote(num_cpus=1, max_retries=1)(run_scene_detached)
+            kept = [i for i, scene in enumerate(scenes) if _kept(out / scene.name) is not None]
+
+            def score_kept() -> None:  # here, while the cluster runs the others
+                for index in kept:
+                    finish(index, run_scene(scenes[index], out / scenes[index].name, options))
+
+            runner = _Runner(
+                submit=lambda scene, _: remote.remote(str(scene.absolute()), options).future(),
+                settle=_settle_detached,
+                window=jobs,
+            )
+            rest = [i for i in range(len(scenes)) if i not in set(kept)]
+            _run_all(scenes, out, runner, finish, rest, idle=score_kept)
+        elif jobs <= 1 or len(scenes) <= 1:
+            for index, scene in enumerate(scenes):
+                finish(index, run_scene(scene, out / scene.name, options))
+        else:
+            context = multiprocessing.get_context("forkserver")
+            pool = stack.enter_context(
+                ProcessPoolExecutor(max_workers=jobs, mp_context=context, initializer=quiet_worker)
+            )
+            runner = _Runner(
+                submit=lambda scene, result_dir: pool.submit(run_scene, scene, result_dir, options),
+                settle=_settle_local,
+            )
+            _run_all(scenes, out, runner, finish, range(len(scenes)))
     return BatchSummary(str(out), options.method, tuple(outcomes[i] for i in sorted(outcomes)))

@@ -578,7 +578,16 @@ def build_parser() -> argparse.ArgumentParser:
         "--jobs",
         type=_positive_int,
         metavar="N",
-        help="scenes run at once, one process each (default: all cores)",
+        help="scenes run at once, one process each (default: all cores; with --ray: at most "
+        "N scenes at once on the cluster, default as many as it has CPUs)",
+    )
+    batch.add_argument(
+        "--ray",
+        metavar="ADDRESS",
+        help="run the scenes on an existing Ray cluster: 'auto' (the one started on this "
+        "machine), HOST:PORT of its head or ray://HOST:10001 (Ray Client). Needs "
+        "pip install 'ipr-shapes[ray]' on every node and the scenes at the same path on every "
+        "node; the results are written here",
     )
     batch.add_argument("--no-eval", action="store_true", help="do not score against ground truth")
     _add_config_option(batch)
@@ -725,6 +734,11 @@ def build_parser() -> argparse.ArgumentParser:
 def _cmd_batch(args: argparse.Namespace) -> int:
     from ipr.batch import BatchOptions, find_scenes, run_batch
 
+    if args.ray is not None:  # a bad address or a missing Ray: said before any work
+        from ipr.cluster import import_ray, parse_address
+
+        parse_address(args.ray)
+        import_ray()
     scenes = find_scenes(args.scenes)
     options = BatchOptions(
         method=args.method,
@@ -743,7 +757,14 @@ def _cmd_batch(args: argparse.Namespace) -> int:
             if outcome.status == "failed":
                 progress.console.print(f"{outcome.scene}: failed: {outcome.error}")
 
-        summary = run_batch(scenes, Path(args.out), options, jobs=args.jobs, on_outcome=advance)
+        summary = run_batch(
+            scenes,
+            Path(args.out),
+            options,
+            jobs=args.jobs,
+            ray_address=args.ray,
+            on_outcome=advance,
+        )
     counts = {s: sum(o.status == s for o in summary.outcomes) for s in ("done", "kept", "failed")}
     print(
         f"{args.out}: {counts['done']} run, {counts['kept']} kept, {counts['failed']} failed "
