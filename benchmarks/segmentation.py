@@ -399,6 +399,11 @@ def main(argv: list[str] | None = None) -> int:
         default=TIMING_RUNS,
         help=f"perception runs per scene whose per-frame median is the time (default {TIMING_RUNS})",
     )
+    parser.add_argument(
+        "--config",
+        type=Path,
+        help="TOML settings over the defaults (its [perception] sections; one timing run)",
+    )
     args = parser.parse_args(argv)
     from ipr.suites import REAL, SUITES, suite_scenes
 
@@ -407,7 +412,13 @@ def main(argv: list[str] | None = None) -> int:
     if unknown:
         parser.error(f"unknown suite {unknown[0]!r}; choose from {', '.join(SUITES)}")
     suites = {name: suite_scenes(name) for name in names}
-    print(run(suites, default_perceive(args.timing_runs)))
+    if args.config is not None:
+        from benchmarks.dev_perception import configured_perceive
+
+        perceive = configured_perceive(args.config)
+    else:
+        perceive = default_perceive(args.timing_runs)
+    print(run(suites, perceive))
     return 0
 
 

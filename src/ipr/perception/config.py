@@ -2,7 +2,7 @@
 
 ``PerceptionConfig`` holds a frozen group per step of perception, in the order they run:
 ``planes`` (RANSAC shared by the support and the walls), ``support``, ``walls``, ``robot``,
-``supervoxels``, ``segmentation``, ``containers``, ``temporal``, ``tracking``, ``denoise``,
+``supervoxels``, ``segmentation``, ``containers``, ``seams``, ``temporal``, ``tracking``, ``denoise``,
 ``facets``, ``free_space`` and ``occluded_pieces``, plus the ``seed`` of every random choice.
 Change one value with ``dataclasses.replace``::
 
@@ -422,6 +422,56 @@ class ContainersConfig:
 
 
 @dataclass(frozen=True)
+class SeamsConfig:
+    """Cutting segments along straight colour seams where the geometry is silent
+    (``ipr.perception.seams``): packed boxes of one height whose coplanar tops the convexity
+    graph cannot tell apart.
+
+    Off by default: on the generated scenes it also cuts a few multi-coloured boxes along a
+    printed border, which a single view cannot tell from a seam between two boxes
+    (docs/experiments/2026-11-26-colour-seams.md). Turn it on for packed boxes (bin picking).
+
+    Attributes:
+        enabled: cut segments along seams (False: labels as the graph gives them).
+        edge_factor: an edge pixel's colour gradient exceeds this many times the median
+            gradient of the frame's segment pixels (a noise scale of the camera and lighting).
+        coverage: share of a seam's pixels that lie on (within a pixel of) an edge pixel.
+        min_length_m: shortest seam (m, between its ends in 3D).
+        min_width_m: narrowest piece a cut may leave (m, twice the largest inscribed radius).
+        min_area_m2: smallest piece a cut may leave (m^2, its pixels' footprints at their
+            depth facing the camera).
+        max_normal_deg: the surfaces on both sides of a seam differ by at most this (deg):
+            a colour edge along a crease is an object's own edge, not a seam.
+        max_step_m: and they are offset along their normal by at most this (m).
+        max_cuts: most cuts per segment (bounds the time on a textured segment).
+    """
+
+    CHECKS: ClassVar[Checks] = {
+        "edge_factor": _POSITIVE,
+        "coverage": _SHARE,
+        "min_length_m": _NON_NEGATIVE,
+        "min_width_m": _NON_NEGATIVE,
+        "min_area_m2": _NON_NEGATIVE,
+        "max_normal_deg": _ANGLE,
+        "max_step_m": _NON_NEGATIVE,
+        "max_cuts": _COUNT,
+    }
+
+    enabled: bool = False
+    edge_factor: float = 4.0
+    coverage: float = 0.75
+    min_length_m: float = 0.04
+    min_width_m: float = 0.02
+    min_area_m2: float = 0.016**2
+    max_normal_deg: float = 15.0
+    max_step_m: float = 0.005
+    max_cuts: int = 32
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+@dataclass(frozen=True)
 class TemporalConfig:
     """Segmenting frames after the first with the previous frame's help
     (``ipr.perception.temporal``): objects that did not move keep their grouping.
@@ -753,6 +803,7 @@ class PerceptionConfig:
         supervoxels: pixel normals and supervoxels.
         segmentation: the supervoxel graph, its clustering and the segments kept.
         containers: joining an open container's inside to the container.
+        seams: cutting segments along straight colour seams (packed boxes; off by default).
         temporal: segmenting later frames with the previous frame's help.
         tracking: matching of segments across frames.
         denoise: the plane-fitted depth of partial objects' points.
@@ -772,6 +823,7 @@ class PerceptionConfig:
     supervoxels: SupervoxelsConfig = field(default_factory=SupervoxelsConfig)
     segmentation: SegmentationConfig = field(default_factory=SegmentationConfig)
     containers: ContainersConfig = field(default_factory=ContainersConfig)
+    seams: SeamsConfig = field(default_factory=SeamsConfig)
     temporal: TemporalConfig = field(default_factory=TemporalConfig)
     tracking: TrackingConfig = field(default_factory=TrackingConfig)
     denoise: DenoiseConfig = field(default_factory=DenoiseConfig)

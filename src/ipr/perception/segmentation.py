@@ -30,7 +30,12 @@ from ipr.perception.config import PerceptionConfig
 from ipr.perception.containers import join_container_insides
 from ipr.perception.planes import find_support_plane, find_walls, static_geometry_mask
 from ipr.perception.robot import robot_pixels
-from ipr.perception.supervoxels import compute_supervoxels, organised_normals_at
+from ipr.perception.seams import cut_colour_seams
+from ipr.perception.supervoxels import (
+    compute_supervoxels,
+    organised_normals,
+    organised_normals_at,
+)
 from ipr.perception.temporal import (
     SupervoxelChange,
     compare_frames,
@@ -171,7 +176,38 @@ def segment_frame(
         support,
         config,
     )
+    if config.seams.enabled:
+        labels, segment_of_supervoxel = _cut_seams(labels, supervoxels, frame, points, config)
     return FrameSegmentation(frame.index, labels, supervoxels, segment_of_supervoxel, planes)
+
+
+def _cut_seams(
+    labels: np.ndarray,
+    supervoxels: Supervoxels,
+    frame: Frame,
+    points: np.ndarray,
+    config: PerceptionConfig,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Labels cut along colour seams (``ipr.perception.seams``), renumbered 1..k by decreasing
+    size, and each supervoxel's segment (the one holding most of its pixels)."""
+    normals = organised_normals(frame.depth_m, frame.K, config)
+    normals = normals @ frame.world_from_camera[:3, :3].T.astype(np.float32)
+    cut = cut_colour_seams(labels, frame.rgb, points, normals, frame.depth_m, frame.K, config)
+    sizes = np.bincount(cut.ravel())
+    sizes[0] = 0
+    alive = np.flatnonzero(sizes)
+    new_id = np.zeros(len(sizes), dtype=np.int32)
+    new_id[alive[np.argsort(-sizes[alive], kind="stable")]] = np.arange(1, len(alive) + 1)
+    cut = new_id[cut]
+    segment_of_supervoxel = np.zeros(supervoxels.count, dtype=np.int32)
+    owned = (supervoxels.labels >= 0) & (cut > 0)
+    if owned.any():
+        pairs = supervoxels.labels[owned].astype(np.int64) * (len(alive) + 1) + cut[owned]
+        counts = np.bincount(pairs, minlength=supervoxels.count * (len(alive) + 1))
+        counts = counts.reshape(supervoxels.count, len(alive) + 1)
+        has = counts.sum(axis=1) > 0
+        segment_of_supervoxel[has] = np.argmax(counts[has], axis=1)
+    return cut, segment_of_supervoxel
 
 
 def drop_support_residue(

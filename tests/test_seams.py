@@ -1,0 +1,110 @@
+"""Cutting segments along straight colour seams (``ipr.perception.seams``, opt-in).
+
+Two boxes of one height touching side by side have coplanar tops: the convexity graph sees one
+surface. Painted like real packed boxes (a thin dark gap between them), the seam setting cuts
+them apart, and leaves alone a box's own edge (a crease), a stripe that ends inside a face, and
+everything when it is off.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from ipr.perception.config import PerceptionConfig, SeamsConfig
+from ipr.perception.segmentation import segment_frame
+from ipr.scene import Frame
+from tests.test_segmentation import box, camera, render, segment_of_point
+
+ON = replace(PerceptionConfig(), seams=SeamsConfig(enabled=True))
+TOP = 0.06  # the boxes' height (m)
+
+
+def painted(frame: Frame, dark) -> Frame:
+    """``frame`` with a light, slightly noisy image and the pixels whose world point satisfies
+    ``dark(points)`` (an (N, 3) -> (N,) bool) painted dark."""
+    points = frame.points_world().reshape(-1, 3)
+    rng = np.random.default_rng(1)
+    rgb = (200 + rng.integers(-3, 4, (points.shape[0], 3))).astype(np.uint8)
+    rgb[(frame.depth_m.reshape(-1) > 0) & dark(points)] = (40, 40, 40)
+    return Frame(frame.index, rgb.reshape(*frame.depth_m.shape, 3), frame.depth_m, frame.K,
+                 frame.world_from_camera)  # fmt: skip
+
+
+def two_boxes(dark) -> Frame:
+    """Two 10 cm boxes, 6 cm high, touching along y = 0."""
+    boxes = [box(0.0, -0.05, (0.1, 0.1, TOP)), box(0.0, 0.05, (0.1, 0.1, TOP))]
+    return painted(render(camera(), boxes, noise_m=0.0005), dark)
+
+
+def gap_between(points: np.ndarray) -> np.ndarray:
+    """The thin gap between the two tops (4 mm wide, along y = 0)."""
+    return (np.abs(points[:, 1]) < 0.002) & (points[:, 2] > TOP - 0.004)
+
+
+def centres(labels: np.ndarray, frame: Frame) -> tuple[int, int]:
+    return (
+        segment_of_point(frame, labels, [0.0, -0.05, TOP]),
+        segment_of_point(frame, labels, [0.0, 0.05, TOP]),
+    )
+
+
+def test_touching_boxes_of_one_height_merge_without_seams():
+    frame = two_boxes(gap_between)
+    a, b = centres(segment_frame(frame).labels, frame)
+    assert a > 0 and a == b
+
+
+def test_a_seam_between_coplanar_tops_cuts_the_boxes_apart():
+    frame = two_boxes(gap_between)
+    result = segment_frame(frame, config=ON)
+    a, b = centres(result.labels, frame)
+    assert a > 0 and b > 0 and a != b
+    # Each box is one piece: its top's corners are in its own segment.
+    assert segment_of_point(frame, result.labels, [0.04, -0.09, TOP]) == a
+    assert segment_of_point(frame, result.labels, [-0.04, 0.09, TOP]) == b
+    # Labels are 1..k by decreasing size, and every supervoxel's segment is one of them.
+    ids = np.unique(result.labels[result.labels > 0])
+    assert ids.tolist() == list(range(1, len(ids) + 1))
+    sizes = [int((result.labels == i).sum()) for i in ids]
+    assert sizes == sorted(sizes, reverse=True)
+    assert set(np.unique(result.segment_of_supervoxel)) <= set(ids.tolist()) | {0}
+
+
+def test_a_colour_edge_along_a_crease_is_the_objects_own():
+    # One box whose top is light and sides dark: the colour edge runs along its convex edges.
+    frame = painted(
+        render(camera(), [box(0.0, 0.0, (0.1, 0.2, TOP))], noise_m=0.0005),
+        lambda points: points[:, 2] < TOP - 0.003,
+    )
+    labels = segment_frame(frame, config=ON).labels
+    assert segment_of_point(frame, labels, [0.0, -0.08, TOP]) == segment_of_point(
+        frame, labels, [0.0, 0.08, TOP]
+    )
+    assert len(np.unique(labels[labels > 0])) == 1
+
+
+def test_a_stripe_that_ends_inside_the_face_does_not_cut():
+    # The gap painted only half way across: a line that does not reach the outline.
+    frame = two_boxes(lambda points: gap_between(points) & (points[:, 0] > 0.0))
+    a, b = centres(segment_frame(frame, config=ON).labels, frame)
+    assert a > 0 and a == b
+
+
+def test_a_short_seam_is_not_a_seam():
+    # Cutting needs min_length_m of seam: 10 cm boxes are too short for 15 cm.
+    config = replace(ON, seams=replace(ON.seams, min_length_m=0.15))
+    frame = two_boxes(gap_between)
+    a, b = centres(segment_frame(frame, config=config).labels, frame)
+    assert a > 0 and a == b
+
+
+@pytest.mark.parametrize(
+    "field, value",
+    [("coverage", 1.5), ("edge_factor", 0.0), ("max_cuts", -1), ("max_normal_deg", 200.0)],
+)
+def test_seam_settings_are_checked(field, value):
+    with pytest.raises(ValueError, match=field):
+        SeamsConfig(**{field: value})
