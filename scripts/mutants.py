@@ -294,7 +294,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "exploded-stability-test-not-split",
         "inference",
         "a stability test that explodes is not redone candidate by candidate",
-        "if world.exploded and len(candidates) > 1:",
+        "if world.exploded and len(simulate) > 1:",
         "if False:",
         _t("inference_method", "inference"),
         survives="no test scene makes a stability test explode: MuJoCo stayed stable with every "
