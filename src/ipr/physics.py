@@ -53,6 +53,9 @@ from ipr.scene import Push, Pusher
 HIDDEN_GROUP = 3
 #: Where the pusher waits between pushes (m, world).
 PUSHER_PARK_M = np.array([0.0, 0.0, 50.0])
+#: A push into a world at rest is simulated from where the pusher comes this close to a
+#: shape (m); the steps before are skipped (``World.push``).
+APPROACH_MARGIN_M = 0.005
 
 
 @dataclass(frozen=True)
@@ -155,6 +158,7 @@ class World:
     pusher_mocap: int = -1
     origins: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     exploded: bool = False
+    at_rest: bool = False
     initial_com: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     shape_geoms: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     contacts: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), dtype=np.int32))
@@ -168,6 +172,7 @@ class World:
         mujoco.mj_resetData(self.model, self.data)
         mujoco.mj_forward(self.model, self.data)
         self.exploded = False
+        self.at_rest = False
 
     def set_colliding(self, k: int, on: bool) -> None:
         """Switch shape k's collisions on (as compiled) or off (it then touches nothing): a
@@ -296,6 +301,7 @@ class World:
 
     def step(self, seconds: float) -> bool:
         """Integrate ``seconds``; False (and ``exploded``) when the simulation exploded."""
+        self.at_rest = False
         steps = max(1, int(round(seconds / self.config.timestep_s)))
         check_every = max(1, int(round(0.05 / self.config.timestep_s)))
         for start in range(0, steps, check_every):
@@ -312,19 +318,53 @@ class World:
         check_every = max(1, int(round(0.05 / config.timestep_s)))
         steps = int(np.ceil(max_s / config.timestep_s))
         dofs = self.model.nv
+        self.at_rest = False
         for _ in range(0, steps, check_every):
             mujoco.mj_step(self.model, self.data, nstep=check_every)
             if not self._check():
                 return False
             if dofs == 0:
+                self.at_rest = True
                 return True
             velocity = self.data.qvel.reshape(-1, 6)
             if (
                 np.linalg.norm(velocity[:, :3], axis=1).max() < config.settle_linear_m_s
                 and np.linalg.norm(velocity[:, 3:], axis=1).max() < config.settle_angular_rad_s
             ):
+                self.at_rest = True
                 return True
         return False
+
+    def _steps_before_contact(self, start: np.ndarray, direction: np.ndarray, steps: int,
+                              step_m: float) -> int:  # fmt: skip
+        """How many of a push's ``steps`` (``step_m`` apart along ``direction`` from
+        ``start``) the pusher makes before it comes within ``APPROACH_MARGIN_M`` of a shape
+        (all of them when it never does), in a world at rest (0 otherwise): until the pusher
+        arrives, stepping a world at rest changes nothing, so those steps are skipped (the
+        early stop of ``settle``, before a push). Marches along the path by each exact
+        pusher-shape distance (``mujoco.mj_geomDistance``), which the pusher cannot cover
+        without touching."""
+        if not self.at_rest or self.pusher_mocap < 0:
+            return 0
+        model, data = self.model, self.data
+        geoms = [int(self.shape_geoms[k]) for k in np.flatnonzero(self.body_ids >= 0)]
+        length = steps * step_m
+        reach = 0.5  # m: farther than any push travels
+        travelled = 0.0
+        while travelled < length:
+            data.mocap_pos[self.pusher_mocap] = start + direction * travelled
+            mujoco.mj_kinematics(model, data)
+            gap = min(
+                (mujoco.mj_geomDistance(model, data, self.pusher_geom, g, reach, None)
+                 for g in geoms),
+                default=reach,
+            )  # fmt: skip
+            if gap <= APPROACH_MARGIN_M:
+                break
+            travelled += gap - APPROACH_MARGIN_M / 2
+        data.mocap_pos[self.pusher_mocap] = start
+        mujoco.mj_kinematics(model, data)
+        return min(steps, int(travelled // step_m))
 
     def push(self, push: Push) -> float:
         """Replay one push (module doc) and let the objects settle; return the distance (m)
@@ -337,8 +377,12 @@ class World:
         direction = np.asarray(push.direction, float)
         data.mocap_pos[self.pusher_mocap] = start
         steps = max(1, int(np.ceil(push.distance_m / push.speed_m_s / config.timestep_s)))
-        travelled = 0.0
-        for step in range(1, steps + 1):
+        step_m = config.timestep_s * push.speed_m_s
+        skipped = self._steps_before_contact(start, direction, steps, step_m)
+        travelled = min(skipped * step_m, push.distance_m)
+        if skipped < steps:
+            self.at_rest = False
+        for step in range(skipped + 1, steps + 1):
             travelled = min(step * config.timestep_s * push.speed_m_s, push.distance_m)
             data.mocap_pos[self.pusher_mocap] = start + direction * travelled
             mujoco.mj_step(self.model, data)

@@ -30,11 +30,10 @@ class InferenceConfig:
             as one that stays put.
         neighbour_margin_m: objects whose candidate envelopes are this close interact in
             stability tests.
-        budget_per_object_s: default inference budget (s) per object when no time budget is
-            given (hypotheses and perception come on top, so that a default run stays within
-            the target of 3 s per object on two cores).
+        budget_per_object_s: default sampling budget (s) per object when no time budget is
+            given (perception, fusion, hypotheses and the Collision Checker come on top).
         max_samples: stop after this many samples (None: only the budget stops).
-        workers: processes evaluating samples (None: all cores; 1: in this process).
+        workers: threads evaluating samples (None: all cores; 1: only the calling thread).
         size_prior_exponent: the size prior's exponent (module doc).
         max_exhaustive_objects: largest scene ``exhaustive`` accepts.
         max_exhaustive_models: largest number of joint models ``exhaustive`` accepts.
