@@ -102,6 +102,10 @@ class Sampler:
                     for h in problem.candidates[i]
                 ]
                 world = build_world(bodies, problem.planes, problem.config.physics)
+                # The switched-off shapes stay in the static bodies' collision tree; without
+                # it (the same contacts) a step costs what it does in a world of the context
+                # alone (docs/experiments/2026-11-26-sampling-throughput.md).
+                world.model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_MIDPHASE
                 compiled = self._compiled[i] = _ObjectWorld(world, options, first)
         world = compiled.world
         own = dataclasses.replace(world, model=copy.copy(world.model))
