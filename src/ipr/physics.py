@@ -350,9 +350,9 @@ class World:
         geoms = [int(self.shape_geoms[k]) for k in np.flatnonzero(self.body_ids >= 0)]
         length = steps * step_m
         reach = 0.5  # m: farther than any push travels
-        travelled = 0.0
-        while travelled < length:
-            data.mocap_pos[self.pusher_mocap] = start + direction * travelled
+        clear = 0.0
+        while clear < length:
+            data.mocap_pos[self.pusher_mocap] = start + direction * clear
             mujoco.mj_kinematics(model, data)
             gap = min(
                 (mujoco.mj_geomDistance(model, data, self.pusher_geom, g, reach, None)
@@ -361,10 +361,10 @@ class World:
             )  # fmt: skip
             if gap <= APPROACH_MARGIN_M:
                 break
-            travelled += gap - APPROACH_MARGIN_M / 2
+            clear += gap - APPROACH_MARGIN_M / 2
         data.mocap_pos[self.pusher_mocap] = start
         mujoco.mj_kinematics(model, data)
-        return min(steps, int(travelled // step_m))
+        return min(steps, int(clear // step_m))
 
     def push(self, push: Push) -> float:
         """Replay one push (module doc) and let the objects settle; return the distance (m)
