@@ -283,6 +283,22 @@ MUTANTS: tuple[Mutant, ...] = (
         _t("inference_method", "inference"),
     ),
     Mutant(
+        "reused-world-keeps-every-neighbour-shape",
+        "inference",
+        "the reused stability-test world switches on every shape a neighbour can take",
+        "world.set_colliding(body, chosen[k] == j)",
+        "world.set_colliding(body, True)",
+        _t("inference_method"),
+    ),
+    Mutant(
+        "screening-ignores-other-shapes",
+        "physics",
+        "a candidate touching another shape is screened as if it stood on the support alone",
+        "if np.all(low <= box[1]) and np.all(box[0] <= high):",
+        "if False:",
+        _t("physics", "inference_method"),
+    ),
+    Mutant(
         "no-neighbours",
         "inference",
         "no object is another's neighbour: stability tests stand every candidate alone",
@@ -294,7 +310,7 @@ MUTANTS: tuple[Mutant, ...] = (
         "exploded-stability-test-not-split",
         "inference",
         "a stability test that explodes is not redone candidate by candidate",
-        "if world.exploded and len(candidates) > 1:",
+        "if world.exploded and len(simulate) > 1:",
         "if False:",
         _t("inference_method", "inference"),
         survives="no test scene makes a stability test explode: MuJoCo stayed stable with every "

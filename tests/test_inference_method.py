@@ -585,3 +585,60 @@ def test_a_sideways_shove_counts_as_displacement_but_not_as_drop(pair):
         ratios[measure] = shoved / clear
     assert ratios["drop"] > 0.97
     assert ratios["displacement"] < 0.8
+
+
+@pytest.mark.parametrize("screen", [False, True])
+def test_stability_tests_in_the_reused_world_match_a_world_compiled_per_context(
+    stack_observed, screen
+):
+    # Each object's world is compiled once and its neighbours' shapes switched per context
+    # (screening on or off): the distances are those of a world of that context alone.
+    prepared = _prepared({1: [TOP_THIN, TOP_THICK], 2: [BOTTOM_MID, BOTTOM_DEEP]}, STACK_MINIMA)
+    config = dataclasses.replace(STEEP, screen_resting=screen)
+    problem = _problem(prepared, stack_observed, "ipr+uniform", config=config)
+    physics = problem.config.physics
+
+    def fresh(i, placed):
+        context = [
+            problem.candidates[k][placed[k]] if k in placed else problem.minima[k]
+            for k in problem.neighbours[i]
+        ]
+        bodies = [Body(s.vertices, s.faces, dynamic=False) for s in context]
+        bodies += [Body(h.vertices, h.faces, candidate=True) for h in problem.candidates[i]]
+        world = build_world(bodies, problem.planes, physics)
+        world.settle(physics.stability_s)
+        return world.drops()[len(context) :]
+
+    sampler = Sampler(problem)
+    try:
+        contexts = [(0, {}), (0, {1: 0}), (0, {1: 1}), (1, {}), (1, {0: 1}), (0, {1: 0})]
+        for i, placed in contexts:
+            reused = sampler._distances(i, placed, math.inf)
+            assert reused == pytest.approx(fresh(i, placed), abs=5e-4), (i, placed)
+        # Three contexts of object 0, two of object 1 (one simulated again from the cache).
+        assert len(sampler.cache) == 5
+        # The bottom's shapes stand on the support but touch the top: never screened.
+        assert sampler.screened == 0
+    finally:
+        sampler.close()
+
+
+def test_only_candidates_clear_of_other_shapes_are_screened(pair):
+    # On its own, every shape of object 1 stands on the support 1 cm or more from object 2's
+    # seen front: all screened. Beside object 1's longest shape, object 2's near shape
+    # overlaps it (simulated) and its far shape stands 1 cm away (screened). A screened
+    # candidate's distance is what the simulation gives.
+    prepared, observed = pair
+    problems = [
+        _problem(prepared, observed, "ipr+uniform", config=InferenceConfig(screen_resting=on))
+        for on in (True, False)
+    ]
+    samplers = [Sampler(problem) for problem in problems]
+    try:
+        for i, placed, count in ((0, {}, 3), (1, {0: 2}, 4)):
+            screened, simulated = (s._distances(i, placed, math.inf) for s in samplers)
+            assert samplers[0].screened == count and samplers[1].screened == 0
+            assert screened == pytest.approx(simulated, abs=5e-4)
+    finally:
+        for sampler in samplers:
+            sampler.close()

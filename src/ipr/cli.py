@@ -527,7 +527,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--workers",
         type=_positive_int,
         metavar="N",
-        help="processes simulating samples (default: all cores; 1 = no pool)",
+        help="threads simulating samples (default: all cores)",
     )
     infer.add_argument(
         "--no-carving",

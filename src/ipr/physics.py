@@ -53,6 +53,9 @@ from ipr.scene import Push, Pusher
 HIDDEN_GROUP = 3
 #: Where the pusher waits between pushes (m, world).
 PUSHER_PARK_M = np.array([0.0, 0.0, 50.0])
+#: A push into a world at rest is simulated from where the pusher comes this close to a
+#: shape (m); the steps before are skipped (``World.push``).
+APPROACH_MARGIN_M = 0.005
 
 
 @dataclass(frozen=True)
@@ -129,12 +132,15 @@ class Body:
         faces: (F, 3) triangles (only used for rendering).
         dynamic: False welds the shape to the world (context of a stability test).
         candidate: a free body that does not collide with other candidates (stability tests).
+        switchable: a dynamic body compiled so that ``World.hold`` can take it out of the
+            simulation (a stability test's candidate frozen once at rest or screened out).
     """
 
     vertices: np.ndarray
     faces: np.ndarray
     dynamic: bool = True
     candidate: bool = False
+    switchable: bool = False
 
 
 @dataclass(eq=False)
@@ -157,7 +163,72 @@ class World:
     pusher_mocap: int = -1
     origins: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     exploded: bool = False
+    at_rest: bool = False
     initial_com: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    shape_geoms: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    contacts: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), dtype=np.int32))
+
+    # ----------------------------------------------------------------------------------------
+    # Reuse: one compiled world for many stability tests
+
+    def reset(self) -> None:
+        """Back to the compiled frame-0 state (poses, zero velocities, no warm start), not
+        exploded; the switches (``set_colliding``, ``hold``) stay as they are."""
+        mujoco.mj_resetData(self.model, self.data)
+        mujoco.mj_forward(self.model, self.data)
+        self.exploded = False
+        self.at_rest = False
+
+    def set_colliding(self, k: int, on: bool) -> None:
+        """Switch shape k's collisions on (as compiled) or off (it then touches nothing): a
+        static shape switched off is absent, so one compiled world serves many contexts."""
+        geom = self.shape_geoms[k]
+        contype, conaffinity = self.contacts[k] if on else (0, 0)
+        self.model.geom_contype[geom] = contype
+        self.model.geom_conaffinity[geom] = conaffinity
+
+    def hold(self, k: int, held: bool = True) -> None:
+        """Take ``switchable`` body k out of the simulation where it is (no collisions, gravity
+        compensated, at rest) or put it back (``held`` False). A held body moves no further
+        and costs the others nothing but its idle degrees of freedom."""
+        body = self.body_ids[k]
+        if body < 0 or not self.bodies[k].switchable:
+            raise ValueError(f"shape {k} is not a switchable dynamic body")
+        self.set_colliding(k, not held)
+        self.model.body_gravcomp[body] = 1.0 if held else 0.0
+        if held:
+            start = self.model.body_dofadr[body]
+            self.data.qvel[start : start + 6] = 0.0
+
+    def settle_each(self, shapes: Sequence[int], max_s: float) -> np.ndarray:
+        """Step until each of ``shapes`` (switchable dynamic bodies) is slower than the settle
+        thresholds, holding each (``hold``) as soon as it is, checked every 50 ms as in
+        ``settle``, or until ``max_s`` passed; a body's distances are then measured where it
+        came to rest. Returns (len(shapes),) bool: which came to rest (False for all when the
+        world exploded). Why: one shape still moving no longer keeps every other one
+        simulated (and its contacts solved) to the end of the test."""
+        config = self.config
+        check_every = max(1, int(round(0.05 / config.timestep_s)))
+        steps = int(np.ceil(max_s / config.timestep_s))
+        shapes = list(shapes)
+        moving = list(range(len(shapes)))
+        rested = np.zeros(len(shapes), dtype=bool)
+        dofs = self.model.body_dofadr[self.body_ids[shapes]] if shapes else np.zeros(0, int)
+        for _ in range(0, steps, check_every):
+            if not moving:
+                break
+            mujoco.mj_step(self.model, self.data, nstep=check_every)
+            if not self._check():
+                return np.zeros(len(shapes), dtype=bool)
+            velocity = self.data.qvel[dofs[moving, None] + np.arange(6)]
+            still = (np.linalg.norm(velocity[:, :3], axis=1) < config.settle_linear_m_s) & (
+                np.linalg.norm(velocity[:, 3:], axis=1) < config.settle_angular_rad_s
+            )
+            for position in np.flatnonzero(still):
+                rested[moving[position]] = True
+                self.hold(shapes[moving[position]])
+            moving = [m for m, s in zip(moving, still, strict=True) if not s]
+        return rested
 
     # ----------------------------------------------------------------------------------------
     # State
@@ -235,6 +306,7 @@ class World:
 
     def step(self, seconds: float) -> bool:
         """Integrate ``seconds``; False (and ``exploded``) when the simulation exploded."""
+        self.at_rest = False
         steps = max(1, int(round(seconds / self.config.timestep_s)))
         check_every = max(1, int(round(0.05 / self.config.timestep_s)))
         for start in range(0, steps, check_every):
@@ -251,19 +323,53 @@ class World:
         check_every = max(1, int(round(0.05 / config.timestep_s)))
         steps = int(np.ceil(max_s / config.timestep_s))
         dofs = self.model.nv
+        self.at_rest = False
         for _ in range(0, steps, check_every):
             mujoco.mj_step(self.model, self.data, nstep=check_every)
             if not self._check():
                 return False
             if dofs == 0:
+                self.at_rest = True
                 return True
             velocity = self.data.qvel.reshape(-1, 6)
             if (
                 np.linalg.norm(velocity[:, :3], axis=1).max() < config.settle_linear_m_s
                 and np.linalg.norm(velocity[:, 3:], axis=1).max() < config.settle_angular_rad_s
             ):
+                self.at_rest = True
                 return True
         return False
+
+    def _steps_before_contact(self, start: np.ndarray, direction: np.ndarray, steps: int,
+                              step_m: float) -> int:  # fmt: skip
+        """How many of a push's ``steps`` (``step_m`` apart along ``direction`` from
+        ``start``) the pusher makes before it comes within ``APPROACH_MARGIN_M`` of a shape
+        (all of them when it never does), in a world at rest (0 otherwise): until the pusher
+        arrives, stepping a world at rest changes nothing, so those steps are skipped (the
+        early stop of ``settle``, before a push). Marches along the path by each exact
+        pusher-shape distance (``mujoco.mj_geomDistance``), which the pusher cannot cover
+        without touching."""
+        if not self.at_rest or self.pusher_mocap < 0:
+            return 0
+        model, data = self.model, self.data
+        geoms = [int(self.shape_geoms[k]) for k in np.flatnonzero(self.body_ids >= 0)]
+        length = steps * step_m
+        reach = 0.5  # m: farther than any push travels
+        clear = 0.0
+        while clear < length:
+            data.mocap_pos[self.pusher_mocap] = start + direction * clear
+            mujoco.mj_kinematics(model, data)
+            gap = min(
+                (mujoco.mj_geomDistance(model, data, self.pusher_geom, g, reach, None)
+                 for g in geoms),
+                default=reach,
+            )  # fmt: skip
+            if gap <= APPROACH_MARGIN_M:
+                break
+            clear += gap - APPROACH_MARGIN_M / 2
+        data.mocap_pos[self.pusher_mocap] = start
+        mujoco.mj_kinematics(model, data)
+        return min(steps, int(clear // step_m))
 
     def push(self, push: Push) -> float:
         """Replay one push (module doc) and let the objects settle; return the distance (m)
@@ -277,8 +383,12 @@ class World:
         data.mocap_pos[self.pusher_mocap] = start
         speed = max(push.speed_m_s, push.distance_m / config.push_max_s)
         steps = max(1, int(np.ceil(push.distance_m / speed / config.timestep_s)))
-        travelled = 0.0
-        for step in range(1, steps + 1):
+        step_m = config.timestep_s * speed
+        skipped = self._steps_before_contact(start, direction, steps, step_m)
+        travelled = min(skipped * step_m, push.distance_m)
+        if skipped < steps:
+            self.at_rest = False
+        for step in range(skipped + 1, steps + 1):
             travelled = min(step * config.timestep_s * speed, push.distance_m)
             data.mocap_pos[self.pusher_mocap] = start + direction * travelled
             mujoco.mj_step(self.model, data)
@@ -436,6 +546,10 @@ def build_world(
         if body.dynamic:
             parent = world_body.add_body(name=f"body_{k}", pos=origin.tolist())
             parent.add_freejoint()
+            if body.switchable:
+                # Gravity compensation is only computed in models compiled with some; set to 0
+                # (the body falls) right after compiling, to 1 by ``World.hold``.
+                parent.gravcomp = 1.0
             pos = [0.0, 0.0, 0.0]
         else:
             parent, pos = world_body, origin.tolist()
@@ -469,6 +583,7 @@ def build_world(
         add_pinhole_camera(spec, camera, names[-1])
 
     model = spec.compile()
+    model.body_gravcomp[:] = 0.0
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
     body_ids = np.full(len(bodies), -1, dtype=np.int64)
@@ -485,6 +600,10 @@ def build_world(
     initial_com = np.zeros((len(bodies), 3))
     dynamic = body_ids >= 0
     initial_com[dynamic] = data.xipos[body_ids[dynamic]]
+    shape_geoms = np.array([model.geom(f"shape_{k}").id for k in range(len(bodies))], np.int64)
+    contacts = np.stack(
+        [model.geom_contype[shape_geoms], model.geom_conaffinity[shape_geoms]], axis=1
+    ).astype(np.int32)
     return World(
         model,
         data,
@@ -497,7 +616,82 @@ def build_world(
         pusher_mocap,
         origins,
         initial_com=initial_com,
+        shape_geoms=shape_geoms,
+        contacts=contacts.reshape(-1, 2),
     )
+
+
+def convex_centroid(vertices: np.ndarray) -> np.ndarray | None:
+    """(3,) centre of mass (m) of the uniform solid convex hull of (V, 3) ``vertices``, as
+    MuJoCo's convex mesh inertia has it; None for a flat or degenerate hull."""
+    vertices = np.asarray(vertices, float).reshape(-1, 3)
+    try:
+        hull = ConvexHull(vertices)
+    except (QhullError, ValueError):
+        return None
+    inside = vertices[hull.vertices].mean(axis=0)
+    triangles = vertices[hull.simplices]  # (F, 3, 3)
+    volumes = np.abs(
+        np.einsum("ij,ij->i", triangles[:, 0] - inside, np.cross(triangles[:, 1] - inside,
+                                                                  triangles[:, 2] - inside))
+    ) / 6.0  # fmt: skip
+    total = volumes.sum()
+    if total <= 0:
+        return None
+    centres = (triangles.sum(axis=1) + inside) / 4.0
+    return (volumes[:, None] * centres).sum(axis=0) / total
+
+
+def resting_drop(
+    vertices: np.ndarray,
+    centroid: np.ndarray,
+    support: KnownPlane,
+    obstacles: Sequence[np.ndarray],
+    *,
+    gap_m: float,
+    margin_m: float,
+) -> float | None:
+    """What a stability test would measure of a convex shape that clearly rests on the support
+    alone, without simulating it (None when the case is not clear: simulate it).
+
+    Clear: its lowest vertex within ``gap_m`` of the support plane (above or below), no
+    obstacle's axis-aligned box (2, 3) within ``margin_m`` of its own, and its ``centroid``
+    (3,) over the outline of its vertices within 1 mm of its lowest, ``margin_m`` inside it.
+    Such a shape drops by its gap onto the support and stands: its drop is the gap (0 when it
+    starts sunk in). Why: most candidates are extended down to the support they nearly touch
+    (``ipr.hypotheses``), and a simulation of a shape that just stands costs as much as one
+    that falls. ``vertices`` (V, 3) world (m)."""
+    vertices = np.asarray(vertices, float).reshape(-1, 3)
+    heights = support.signed_distance(vertices)
+    lowest = float(heights.min())
+    if abs(lowest) > gap_m:
+        return None
+    low, high = vertices.min(axis=0) - margin_m, vertices.max(axis=0) + margin_m
+    for box in obstacles:
+        if np.all(low <= box[1]) and np.all(box[0] <= high):
+            return None
+    axes = _frame_axes(np.asarray(support.normal, float))[:, :2]
+    footprint = vertices[heights <= lowest + 1e-3] @ axes
+    try:
+        outline = ConvexHull(footprint)
+    except (QhullError, ValueError):
+        return None  # an edge or a point: it may tip
+    inside = -float(np.max(outline.equations @ np.append(np.asarray(centroid) @ axes, 1.0)))
+    if inside < margin_m:
+        return None
+    return max(lowest, 0.0)
+
+
+def wall_boxes(planes: Sequence[KnownPlane], config: PhysicsConfig) -> list[np.ndarray]:
+    """(2, 3) axis-aligned boxes (m, world) of the walls' slabs as ``build_world`` makes them."""
+    boxes = []
+    for plane in planes:
+        if plane.kind != "wall":
+            continue
+        slab = _wall_slab(plane, config.wall_min_thickness_m)
+        if slab is not None:
+            boxes.append(np.stack([slab.min(axis=0), slab.max(axis=0)]))
+    return boxes
 
 
 def decimated_camera(

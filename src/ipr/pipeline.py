@@ -14,9 +14,9 @@ what produced the result, with the whole configuration as ``config.toml`` beside
 
 Time budget: ``time_budget_s`` covers the whole run; hypotheses get their share of what is left
 after perception and fusion (a per-object timeout), and inference the rest. Without one,
-hypotheses have no wall-clock limit (so they do not depend on the machine's load) and inference
-gets ``config.inference.budget_per_object_s`` per object, less what fusion took per object (at
-most half of it).
+hypotheses have no wall-clock limit (so they do not depend on the machine's load) and sampling
+gets ``config.inference.budget_per_object_s`` per object of its own: fusion, hypotheses and the
+Collision Checker's starting point come before it and take none of it.
 """
 
 from __future__ import annotations
@@ -129,16 +129,6 @@ class RunBudget:
     def remaining_s(self, now: float) -> float | None:
         """Seconds left at ``now`` (at least 1 ms; None without a deadline)."""
         return None if self.deadline is None else max(self.deadline - now, 1e-3)
-
-    def inference_per_object_s(
-        self, default_s: float, fusion_s: float, objects: int, fixed_samples: bool
-    ) -> float:
-        """Default inference seconds per object: ``default_s`` less fusion's time per object
-        (at most half of it), so that a default run costs what it did without fusion. Only
-        without a deadline or a fixed sample count, and only when fusion took any time."""
-        if not objects or fusion_s <= 0 or self.deadline is not None or fixed_samples:
-            return default_s
-        return default_s - min(fusion_s / objects, default_s / 2)
 
 
 def _checked_arguments(
@@ -325,9 +315,7 @@ def run_pipeline(
 
     ``samples`` fixes the number of joint models the physics-based methods sample (then only
     ``time_budget_s``, if given, can stop them earlier): the same seed and samples give the
-    same result with any number of ``workers``. More than one worker (the default on a
-    multi-core machine) starts a process pool: as with any Python multiprocessing, a script
-    calling this must guard its entry point with ``if __name__ == "__main__":``.
+    same result with any number of ``workers`` (sampling threads of this process).
 
     ``progress``: an observer of the run's stages (``ipr.progress``; None: nothing reported).
     """
@@ -357,17 +345,6 @@ def run_pipeline(
     if chosen.actions and config.fusion.enabled:
         report(progress, "fusion", 1, 1)
     fused_at = time.perf_counter()
-    per_object = budget.inference_per_object_s(
-        config.inference.budget_per_object_s,
-        fused_at - perceived,
-        len(fused.objects),
-        bool(config.inference.max_samples),
-    )
-    if per_object != config.inference.budget_per_object_s:
-        config = dataclasses.replace(
-            config,
-            inference=dataclasses.replace(config.inference, budget_per_object_s=per_object),
-        )
     remaining = budget.remaining_s(fused_at)
     rng = np.random.default_rng(seed)
     summary = RunSummary(fused_views=fused.fused_views)

@@ -19,6 +19,11 @@ of some jointly feasible model) are candidates. Then, repeated until the time bu
      envelopes come within ``neighbour_margin_m`` of i's). The result is cached under (i, the
      neighbours' current shapes), so the same partial scene is never simulated twice; the first
      stage is shared by every sample.
+   - Throughput (docs/experiments/2026-11-26-sampling-throughput.md): each object's test world
+     is compiled once, with every shape its neighbours can take switched on or off per
+     context; a candidate is held where it is once at rest; a candidate that clearly stands on
+     the support alone, clear of every other shape, is settled without simulation
+     (``InferenceConfig.screen_resting``); samples run in threads sharing the caches.
 2. **Simulation of the full model** under gravity (settling) and, for the ``+action`` variants,
    the recorded pushes; the depth images rendered from each frame's camera give the likelihood
    (``ipr.likelihood``, Eq. 2). A simulation that explodes or flings an object scores 0.
@@ -52,7 +57,7 @@ at most ``max_exhaustive_objects`` objects and ``max_exhaustive_models`` models)
 posterior the sampler estimates, to validate it.
 
 Modules: ``config`` (settings), ``problem`` (what a sampler solves), ``sampler`` (tree sampling
-and likelihood), ``pool`` (worker processes and deadlines), ``estimators`` (samples to
+and likelihood), ``pool`` (sampling threads and deadlines), ``estimators`` (samples to
 marginals), ``exhaustive`` (the exact posterior), ``infer`` (``infer_shapes``).
 """
 

@@ -30,11 +30,10 @@ class InferenceConfig:
             as one that stays put.
         neighbour_margin_m: objects whose candidate envelopes are this close interact in
             stability tests.
-        budget_per_object_s: default inference budget (s) per object when no time budget is
-            given (hypotheses and perception come on top, so that a default run stays within
-            the target of 3 s per object on two cores).
+        budget_per_object_s: default sampling budget (s) per object when no time budget is
+            given (perception, fusion, hypotheses and the Collision Checker come on top).
         max_samples: stop after this many samples (None: only the budget stops).
-        workers: processes evaluating samples (None: all cores; 1: in this process).
+        workers: threads evaluating samples (None: all cores; 1: only the calling thread).
         size_prior_exponent: the size prior's exponent (module doc).
         max_exhaustive_objects: largest scene ``exhaustive`` accepts.
         max_exhaustive_models: largest number of joint models ``exhaustive`` accepts.
@@ -48,6 +47,12 @@ class InferenceConfig:
             centre of mass fell) or "displacement" (how far its vertices moved, on average).
         max_factor_table: largest table (entries) of the exact elimination of "hypothesis"
             weighting; larger components combine their objects' factors independently.
+        screen_resting: settle the stability tests of candidates that clearly stand on the
+            support alone without simulating them (``ipr.physics.resting_drop``).
+        screen_gap_m: a screened candidate's lowest vertex is at most this far from the
+            support (m), above or below.
+        screen_margin_m: a screened candidate's centre of mass is this far inside its
+            footprint, and no other shape or wall comes this close to its box (m).
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -62,6 +67,8 @@ class InferenceConfig:
         "weighting": Options(*WEIGHTINGS),
         "stability_measure": Options(*STABILITY_MEASURES),
         "max_factor_table": Interval(1, None),
+        "screen_gap_m": Interval(0, None),
+        "screen_margin_m": Interval(0, None),
     }
 
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)
@@ -77,6 +84,9 @@ class InferenceConfig:
     weighting: Weighting = "hypothesis"
     stability_measure: StabilityMeasure = "drop"
     max_factor_table: float = 1e6
+    screen_resting: bool = True
+    screen_gap_m: float = 0.002
+    screen_margin_m: float = 0.005
 
     def __post_init__(self) -> None:
         check_fields(self)

@@ -74,7 +74,7 @@ def infer_shapes(
         collision_checker_config: settings of the Collision Checker (fallback answer).
         seed: seed of the samples.
         deadline: ``time.perf_counter()`` time to stop at (None: ``budget_per_object_s`` per
-            object from now, unless ``config.max_samples`` is set).
+            object from the end of the Collision Checker, unless ``config.max_samples`` is set).
         workers: overrides ``config.workers``.
         progress: observer of the samples drawn and the time left (``ipr.progress``, stage
             ``sampling``).
@@ -96,7 +96,9 @@ def infer_shapes(
     if n == 0:
         return InferenceOutcome(method, [], [], None, {**timing, "sampling": 0.0}, None)
     if deadline is None:
-        deadline = math.inf if config.max_samples else started + config.budget_per_object_s * n
+        # The sampling budget is sampling's own: the Collision Checker's answer (the starting
+        # point) does not take from it.
+        deadline = math.inf if config.max_samples else checked + config.budget_per_object_s * n
     frames = observed
     if not variant.actions:
         first_push = min((p.after_frame for p in pushes), default=None)

@@ -4,15 +4,28 @@ and their likelihood (full simulation under gravity and the pushes, rendered dep
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import math
+import threading
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass
 
+import mujoco
 import numpy as np
 
 from ipr.inference.problem import InferenceProblem, SampleResult
 from ipr.likelihood import depth_error_norms, log_likelihood
-from ipr.physics import Body, build_world
+from ipr.physics import (
+    Body,
+    World,
+    build_world,
+    convex_centroid,
+    resting_drop,
+    support_of,
+    wall_boxes,
+)
 from ipr.products import ShapeHypothesis
 
 
@@ -20,10 +33,23 @@ class _Deadline(Exception):
     """The time budget ran out in the middle of a sample."""
 
 
+@dataclass(frozen=True, eq=False)
+class _ObjectWorld:
+    """Object i's compiled stability-test world: ``options[(k, j)]`` the static shape of
+    neighbour k's candidate j (-1: its minimum shape), ``first`` the first of i's candidates
+    (one switchable body each, in order)."""
+
+    world: World
+    options: dict[tuple[int, int], int]
+    first: int
+
+
 class Sampler:
     """Tree sampling and likelihood evaluation of one problem, with its stability cache.
 
-    One per process: it owns an offscreen renderer (created on first use).
+    Shared by the threads that sample one problem (``ipr.inference.pool``): the stability
+    cache and the evaluated models are shared; each thread has its own renderer and its own
+    copies of the compiled stability-test worlds (created on first use).
     """
 
     def __init__(self, problem: InferenceProblem) -> None:
@@ -33,17 +59,97 @@ class Sampler:
         # rendering are deterministic, so a model drawn again costs only its tree sampling.
         self.evaluated: dict[tuple[int, ...], np.ndarray | None] = {}
         self.stability_tests = 0
-        self._renderer = None
+        self.screened = 0
+        self._lock = threading.Lock()
+        self._compiled: dict[int, _ObjectWorld] = {}
+        self._centroids: dict[tuple[int, int], np.ndarray | None] = {}
+        self._walls = wall_boxes(problem.planes, problem.config.physics)
+        # Per thread: its copies of the stability-test worlds, its renderer, its test count.
+        self._local = threading.local()
+        self._renderers: list = []
 
     # ----------------------------------------------------------------------------------------
     # Exploration probabilities
 
+    def _thread_state(self):
+        local = self._local
+        if not hasattr(local, "worlds"):
+            local.worlds = {}
+            local.tests = 0
+            local.renderer = None
+        return local
+
+    def _object_world(self, i: int) -> _ObjectWorld:
+        """Object i's stability-test world for this thread (module doc, step 1): compiled once
+        per sampler with every shape its neighbours can take (each candidate and the minimum)
+        as static geometry switched on and off per context, and its candidates as switchable
+        transparent bodies; each thread simulates its own copy of the compiled model."""
+        local = self._thread_state()
+        if i in local.worlds:
+            return local.worlds[i]
+        with self._lock:
+            compiled = self._compiled.get(i)
+            if compiled is None:
+                problem = self.problem
+                options, bodies = {}, []
+                for k in problem.neighbours[i]:
+                    for j, shape in (*enumerate(problem.candidates[k]), (-1, problem.minima[k])):
+                        options[(k, j)] = len(bodies)
+                        bodies.append(Body(shape.vertices, shape.faces, dynamic=False))
+                first = len(bodies)
+                bodies += [
+                    Body(h.vertices, h.faces, candidate=True, switchable=True)
+                    for h in problem.candidates[i]
+                ]
+                world = build_world(bodies, problem.planes, problem.config.physics)
+                # The switched-off shapes stay in the static bodies' collision tree; without
+                # it (the same contacts) a step costs what it does in a world of the context
+                # alone (docs/experiments/2026-11-26-sampling-throughput.md).
+                world.model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_MIDPHASE
+                compiled = self._compiled[i] = _ObjectWorld(world, options, first)
+        world = compiled.world
+        own = dataclasses.replace(world, model=copy.copy(world.model))
+        own.data = mujoco.MjData(own.model)
+        local.worlds[i] = _ObjectWorld(own, compiled.options, compiled.first)
+        return local.worlds[i]
+
+    def _centroid(self, i: int, j: int) -> np.ndarray | None:
+        key = (i, j)
+        if key not in self._centroids:
+            self._centroids[key] = convex_centroid(self.problem.candidates[i][j].vertices)
+        return self._centroids[key]
+
+    def _screen(self, i: int, context: tuple[tuple[int, int], ...]) -> np.ndarray:
+        """(m_i,) the stability-test distance of each candidate of i that clearly stands on
+        the support alone (``ipr.physics.resting_drop``), NaN for the others (simulated)."""
+        problem = self.problem
+        candidates = problem.candidates[i]
+        distances = np.full(len(candidates), np.nan)
+        support = support_of(problem.planes)
+        config = problem.config
+        if not config.screen_resting or support is None:
+            return distances
+        obstacles = [
+            (problem.candidates[k][j] if j >= 0 else problem.minima[k]).bounds for k, j in context
+        ] + self._walls
+        for j, h in enumerate(candidates):
+            centroid = self._centroid(i, j)
+            if centroid is None:
+                continue
+            drop = resting_drop(
+                h.vertices, centroid, support, obstacles,
+                gap_m=config.screen_gap_m, margin_m=config.screen_margin_m,
+            )  # fmt: skip
+            if drop is not None:
+                distances[j] = drop
+        return distances
+
     def _distances(self, i: int, placed: dict[int, int], deadline: float) -> np.ndarray:
         """(m_i,) how far each candidate of i falls among its neighbours (cached).
 
-        A world per context: compiling it costs about as much as keeping one world per object
-        with every neighbour shape and switching them on and off, whose extra geoms slow every
-        step (docs/DESIGN_NOTES.md, "Stability tests per object")."""
+        Candidates that clearly stand on the support are screened (``_screen``); the others
+        are simulated together in object i's compiled world with the context switched in
+        (``_object_world``), each held as soon as it is at rest (``World.settle_each``)."""
         problem = self.problem
         context = tuple((k, placed.get(k, -1)) for k in problem.neighbours[i])
         key = (i, context)
@@ -52,24 +158,40 @@ class Sampler:
             return cached
         if time.perf_counter() > deadline:
             raise _Deadline
-        bodies = [
-            Body(shape.vertices, shape.faces, dynamic=False)
-            for shape in (
-                problem.candidates[k][j] if j >= 0 else problem.minima[k] for k, j in context
-            )
-        ]
         candidates = problem.candidates[i]
-        bodies += [Body(h.vertices, h.faces, candidate=True) for h in candidates]
-        world = build_world(bodies, problem.planes, problem.config.physics)
-        world.settle(problem.config.physics.stability_s)
-        self.stability_tests += 1
-        if world.exploded and len(candidates) > 1:
-            # One unstable candidate spoils a shared simulation: test them one by one.
-            distances = np.concatenate(
-                [self._single_distance(bodies[: len(context)], h) for h in candidates]
-            )
-        else:
-            distances = self._measure(world)[len(context) :]
+        distances = self._screen(i, context)
+        simulate = np.flatnonzero(np.isnan(distances))
+        with self._lock:
+            self.screened += len(candidates) - len(simulate)
+        if len(simulate):
+            state = self._thread_state()
+            object_world = self._object_world(i)
+            world = object_world.world
+            chosen = dict(context)
+            for (k, j), body in object_world.options.items():
+                world.set_colliding(body, chosen[k] == j)
+            shapes = object_world.first + np.arange(len(candidates))
+            for j, body in enumerate(shapes):
+                world.hold(body, j not in simulate)
+            world.reset()
+            world.settle_each(shapes[simulate], problem.config.physics.stability_s)
+            state.tests += 1
+            with self._lock:
+                self.stability_tests += 1
+            if world.exploded and len(simulate) > 1:
+                # One unstable candidate spoils a shared simulation: test them one by one.
+                context_bodies = [
+                    Body(shape.vertices, shape.faces, dynamic=False)
+                    for shape in (
+                        problem.candidates[k][j] if j >= 0 else problem.minima[k]
+                        for k, j in context
+                    )
+                ]
+                distances[simulate] = np.concatenate(
+                    [self._single_distance(context_bodies, candidates[j]) for j in simulate]
+                )
+            else:
+                distances[simulate] = self._measure(world)[shapes[simulate]]
         self.cache[key] = distances
         return distances
 
@@ -78,7 +200,9 @@ class Sampler:
             [*context, Body(h.vertices, h.faces)], self.problem.planes, self.problem.config.physics
         )
         world.settle(self.problem.config.physics.stability_s)
-        self.stability_tests += 1
+        self._thread_state().tests += 1
+        with self._lock:
+            self.stability_tests += 1
         return self._measure(world)[-1:]
 
     def _measure(self, world) -> np.ndarray:
@@ -130,16 +254,20 @@ class Sampler:
     # Likelihood
 
     def _renderer_for(self, width: int, height: int):
+        """This thread's renderer (a GL context belongs to the thread that made it)."""
         from ipr.rendering import Renderer
 
-        if self._renderer is None or (self._renderer.width, self._renderer.height) != (
-            width,
-            height,
-        ):
-            if self._renderer is not None:
-                self._renderer.close()
-            self._renderer = Renderer(width, height)
-        return self._renderer
+        local = self._thread_state()
+        renderer = local.renderer
+        if renderer is None or (renderer.width, renderer.height) != (width, height):
+            if renderer is not None:
+                renderer.close()
+                with self._lock:
+                    self._renderers.remove(renderer)
+            renderer = local.renderer = Renderer(width, height)
+            with self._lock:
+                self._renderers.append(renderer)
+        return renderer
 
     def depth_norms(self, choice: Sequence[int], deadline: float = math.inf) -> np.ndarray | None:
         """(T, n) depth error norms of the joint model ``choice`` per compared frame and object
@@ -205,7 +333,7 @@ class Sampler:
     def sample(self, index: int, deadline: float = math.inf) -> SampleResult:
         """Tree-sample joint model number ``index`` and score it."""
         started = time.perf_counter()
-        tests = self.stability_tests
+        tests = self._thread_state().tests
         rng = np.random.default_rng([self.problem.seed, index])
         choice, object_log_proposal = self.tree_sample(rng, deadline)
         norms = self._norms_of(choice, deadline)
@@ -216,7 +344,7 @@ class Sampler:
             self.log_likelihood_of(norms),
             self.log_prior(choice),
             time.perf_counter() - started,
-            self.stability_tests - tests,
+            self._thread_state().tests - tests,
             norms,
             object_log_proposal,
         )
@@ -230,7 +358,21 @@ class Sampler:
             time.perf_counter() - started, 0, norms, (0.0,) * len(choice),
         )  # fmt: skip
 
+    def release(self) -> None:
+        """Close this thread's renderer and drop its worlds (a sampling thread's last call:
+        a GL context is closed by the thread that made it)."""
+        local = self._thread_state()
+        if local.renderer is not None:
+            with self._lock:
+                self._renderers.remove(local.renderer)
+            local.renderer.close()
+        local.renderer = None
+        local.worlds = {}
+
     def close(self) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        """Close this thread's renderer and any left by threads that did not ``release``."""
+        self.release()
+        with self._lock:
+            renderers, self._renderers = self._renderers, []
+        for renderer in renderers:
+            renderer.close()
