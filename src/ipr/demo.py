@@ -59,6 +59,7 @@ def run_demo(out_dir: Path) -> int:
         "objects/<k>/best.ply are the completed shapes, world frame, metres)"
     )
     print(f"  picture: {result_path / 'completion.png'} (input beside the completed objects)")
+    print(f"  report:  {result_path / 'report.html'} (frames, pushes, segmentation, a 3-D view)")
     print(format_table(evaluate(scene_path, result_path)))
     print("ipr demo: the Collision Checker baseline (no physics), for comparison ...")
     baseline = infer(
