@@ -64,3 +64,78 @@ def test_a_batch_runs_scores_resumes_and_reports_failures(tmp_path: Path, jobs: 
     assert {o["status"] for o in summary["outcomes"]} == {"kept"}
     assert (out / "static_000000" / "result.json").stat().st_mtime_ns == stamp
     assert "0 run, 2 kept, 0 failed" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_killing_a_batch_ends_its_workers_without_tracebacks(tmp_path: Path):
+    """SIGKILL of `ipr batch --jobs 2` mid-run: its pool workers end with it, silently (no
+    BrokenPipe or EOFError traceback on the shared stderr), and leave no process behind."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    scenes = tmp_path / "scenes"
+    synth = ["synth", str(scenes), "--kind", "static", "--seed", "5", "--count", "2"]
+    assert main([*synth, "--width", "320", "--height", "240"]) == 0
+    command = [sys.executable, "-m", "ipr", "batch", str(scenes), "-o", str(tmp_path / "out"),
+               "--jobs", "2", "--time-budget", "60"]  # fmt: skip
+    errors = tmp_path / "stderr.txt"
+    with errors.open("wb") as stderr:
+        parent = subprocess.Popen(
+            command, stdout=subprocess.DEVNULL, stderr=stderr, start_new_session=True
+        )
+    deadline = time.monotonic() + 120
+    # Wait until both pool workers run (the parent's children started by multiprocessing),
+    # give them a moment inside their scenes, then kill the parent.
+    while time.monotonic() < deadline and parent.poll() is None:
+        if len(_pool_workers(parent.pid)) >= 2:
+            time.sleep(3.0)
+            break
+        time.sleep(0.2)
+    assert parent.poll() is None, "the batch ended before it could be killed"
+    group = os.getpgid(parent.pid)
+    parent.send_signal(signal.SIGKILL)
+    parent.wait(timeout=10)
+    # Every process of the batch (workers, the resource tracker) ends within seconds.
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline:
+        try:
+            os.killpg(group, 0)
+        except ProcessLookupError:
+            break
+        time.sleep(0.2)
+    else:
+        os.killpg(group, signal.SIGKILL)
+        pytest.fail("processes of the killed batch were still running 30 s later")
+    text = errors.read_text(errors="replace")
+    assert "Traceback" not in text and "BrokenPipe" not in text, text
+
+
+def _pool_workers(pid: int) -> list[int]:
+    """The pids of the multiprocessing processes (pool workers, a fork server; not the resource
+    tracker) among the descendants of process ``pid``."""
+    parent_of, command_of = {}, {}
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+            command_of[int(entry.name)] = (entry / "cmdline").read_bytes()
+        except OSError:
+            continue
+        parent_of[int(entry.name)] = int(fields[1])
+
+    def descends(child: int) -> bool:
+        while child in parent_of and child > 1:
+            child = parent_of[child]
+            if child == pid:
+                return True
+        return False
+
+    return [
+        child
+        for child, command in command_of.items()
+        if (b"spawn_main" in command or b"forkserver" in command) and descends(child)
+    ]

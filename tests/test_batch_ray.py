@@ -257,6 +257,9 @@ def test_a_batch_on_a_ray_cluster_matches_the_local_pool(ray_head: tuple[str, st
             if file == "result.json":
                 ray_json, local_json = (json.loads(f[file]) for f in (ray_files, local_files))
                 assert _without_clocks(ray_json) == _without_clocks(local_json)
+            elif file == "report.html":  # shows result.json's timings: only its presence
+                assert ray_files[file].startswith(b"<!DOCTYPE html>")
+                assert local_files[file].startswith(b"<!DOCTYPE html>")
             else:
                 assert ray_files[file] == local_files[file], file
 

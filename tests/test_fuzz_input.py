@@ -206,10 +206,11 @@ def _fuzz_check(base_scene: Path, mutations) -> None:
     scene = work / "scene"
     shutil.copytree(base_scene, scene, symlinks=True)
     for mutation in mutations:
-        with contextlib.suppress(FileNotFoundError, NotADirectoryError, IsADirectoryError,
-                                 json.JSONDecodeError, UnicodeDecodeError, ZeroDivisionError,
-                                 IndexError, KeyError, TypeError):  # fmt: skip
-            _apply(scene, mutation)  # an earlier mutation may have removed or broken the file
+        # An earlier mutation may have removed or broken the file (or made its folder a
+        # symlink loop: OSError ELOOP).
+        with contextlib.suppress(OSError, json.JSONDecodeError, UnicodeDecodeError,
+                                 ZeroDivisionError, IndexError, KeyError, TypeError):  # fmt: skip
+            _apply(scene, mutation)
     before = _listing(work)
     code, stderr = _run(["check", str(scene)])
     _check_outcome(code, stderr)
@@ -268,9 +269,8 @@ def _fuzz_result(base_result: tuple[Path, Path], mutations) -> None:
     result = work / "result"
     shutil.copytree(base, result, symlinks=True)
     for mutation in mutations:
-        with contextlib.suppress(FileNotFoundError, NotADirectoryError, IsADirectoryError,
-                                 json.JSONDecodeError, UnicodeDecodeError, ZeroDivisionError,
-                                 IndexError, KeyError, TypeError):  # fmt: skip
+        with contextlib.suppress(OSError, json.JSONDecodeError, UnicodeDecodeError,
+                                 ZeroDivisionError, IndexError, KeyError, TypeError):  # fmt: skip
             _apply(result, mutation)
     before = _listing(work)
     code, stderr = _run(["eval", str(scene), str(result), "--json", str(work / "m.json")])

@@ -401,7 +401,9 @@ def run_batch(
             for index, scene in enumerate(scenes):
                 finish(index, run_scene(scene, out / scene.name, options))
         else:
-            context = multiprocessing.get_context("forkserver")
+            # "spawn": each worker is this process's own child, so the kernel ends it when this
+            # process dies (``quiet_worker``); a forkserver's children outlive a killed parent.
+            context = multiprocessing.get_context("spawn")
             pool = stack.enter_context(
                 ProcessPoolExecutor(max_workers=jobs, mp_context=context, initializer=quiet_worker)
             )

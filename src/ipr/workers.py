@@ -4,8 +4,9 @@ A killed parent (SIGKILL, an out-of-memory kill, a closed terminal) leaves its p
 writing results to, or reading tasks from, a pipe nobody holds: each would print a
 BrokenPipeError or EOFError traceback. ``quiet_worker`` (a pool initializer's first call) makes
 such a worker end silently instead: writing to the broken pipe ends it (SIGPIPE's default
-action), and on Linux it is told to end when the process that started it (the forkserver,
-which ends with the parent) ends.
+action), and on Linux it is told to end when the process that started it ends. That is the
+parent only for "spawn" (or "fork") workers: a forkserver's workers, and the fork server itself,
+outlived a killed parent (``tests/test_batch.py``), so the batch pool spawns its workers.
 """
 
 from __future__ import annotations
