@@ -21,12 +21,13 @@ objects stand for the original's segments merged into primitives):
    box's 5 mm voxels minus those the free-space map saw empty (the solid occupies no space
    seen empty), as a closed voxel-face mesh.
 3. Physical reasoning. All boxes are dropped together on the support and walls in MuJoCo
-   (``ipr.physics``) for ``physics.stability_s``; a box whose vertices move more than
-   ``stable_m`` on average is unstable. As the original groups an unstable primitive with
-   the primitives it is attached to, each unstable object is welded to its touching
-   neighbours (boxes within ``touch_m``) into one rigid body and the test repeated; groups
-   that stand are kept (recorded, their shapes unchanged: the perception's segmentation is
-   the output's), the rest are reported as unstable.
+   (``ipr.physics``) for ``physics.stability_s``; a box whose centre of mass falls more than
+   ``stable_m`` is unstable (it released potential energy, the original's measure). As the
+   original groups an unstable primitive with the primitives it is attached to, each
+   unstable object is welded to its touching neighbours (boxes within ``touch_m``) into one
+   rigid body and the test repeated; groups that stand are kept (recorded, their shapes
+   unchanged: the perception's segmentation is the output's), the rest are reported as
+   unstable.
 
 Left out of the original: its own segmentation and primitive fitting (planes and cylinders
 from convexly connected segments; here the perception's objects and boxes only), the
@@ -73,7 +74,7 @@ class ZhengConfig:
         extent_cap_ratio: hidden extent along a horizontal axis is at most this times the
             longest visible horizontal side of the object.
         min_extent_m: the thinnest box side (m), for objects seen as a flat patch.
-        stable_m: mean vertex displacement (m) in the stability test that counts as unstable.
+        stable_m: fall of the centre of mass (m) in the stability test that counts as unstable.
         touch_m: boxes closer than this (m) are attached (grouping of unstable objects).
         physics: the simulation of the stability test.
     """
@@ -312,15 +313,17 @@ def _unstable(
     config: ZhengConfig,
     groups: Sequence[Sequence[int]] = (),
 ) -> np.ndarray:
-    """(n,) bool: shapes whose vertices move more than ``stable_m`` on average when all are
-    dropped together for ``physics.stability_s``; shapes of one of ``groups`` are welded."""
+    """(n,) bool: shapes whose centre of mass falls more than ``stable_m`` when all are dropped
+    together for ``physics.stability_s`` (a fall or a topple releases potential energy, the
+    original's measure; the sideways shove that resolves two boxes' overlap does not); shapes
+    of one of ``groups`` are welded."""
     group_of = {k: number for number, members in enumerate(groups) for k in members}
     bodies = [
         Body(h.vertices, h.faces, rigid_group=group_of.get(k, -1)) for k, h in enumerate(hypotheses)
     ]
     world = build_world(bodies, planes, config.physics)
     world.step(config.physics.stability_s)
-    return world.displacements() > config.stable_m
+    return world.drops() > config.stable_m
 
 
 def _touching(hypotheses: Sequence[ShapeHypothesis], k: int, touch_m: float) -> list[int]:
