@@ -33,6 +33,7 @@ from pathlib import Path
 from benchmarks import inference_render as render
 from benchmarks.inference_run import run_comparison, run_scene
 from benchmarks.inference_score import score_comparison, score_run
+from ipr.methods import get_method
 
 
 def _status(row: dict) -> str:
@@ -81,11 +82,12 @@ class Runs:
     def rows(
         self, suite: str, method: str, budget: float | None = None, limit: int | None = None
     ) -> list[dict]:
-        """Rows of the first ``limit`` scenes (all: None) of ``suite``; the Collision Checker
-        ignores the budget; the default budget reuses the default runs."""
+        """Rows of the first ``limit`` scenes (all: None) of ``suite``; the methods without
+        physics sampling (the Collision Checker, Zheng et al. 2013) ignore the budget; the
+        default budget reuses the default runs."""
         scenes = list(self.suites.get(suite, []))
         limit = None if limit is None or limit >= len(scenes) else limit
-        if method == "collision-checker" or budget == self.default_budget:
+        if not get_method(method).physics or budget == self.default_budget:
             budget = None
         for (s, m, b, n), rows in self._rows.items():  # a longer run of the same settings
             if (s, m, b) == (suite, method, budget) and (n is None or (limit and n >= limit)):

@@ -8,7 +8,7 @@ views registered into frame 0 for the methods that use the pushes, ``ipr.fusion`
 Constraints(X), ``ipr.hypotheses.constraints``), ``collision_checker`` (the marginals of the
 uniform posterior, ``ipr.collision_checker``), ``inference`` (physics, likelihood and tree
 sampling, ``ipr.inference``), ``carving`` (output shapes carved by the space the camera saw
-empty, ``ipr.carving``).
+empty, ``ipr.carving``), ``zheng2013`` (the Zheng et al. 2013 baseline, ``ipr.baselines``).
 
 TOML: a file gives only the fields it changes, as nested tables named like the sections
 (``[inference.likelihood]`` ``alpha_per_m = 8.0``); every other field keeps its default. Unknown
@@ -31,6 +31,7 @@ from typing import Any
 
 import tomli_w
 
+from ipr.baselines import ZhengConfig
 from ipr.carving import CarvingConfig
 from ipr.collision_checker import CollisionCheckerConfig
 from ipr.errors import IprError
@@ -51,6 +52,7 @@ class Config:
     collision_checker: CollisionCheckerConfig = field(default_factory=CollisionCheckerConfig)
     inference: InferenceConfig = field(default_factory=InferenceConfig)
     carving: CarvingConfig = field(default_factory=CarvingConfig)
+    zheng2013: ZhengConfig = field(default_factory=ZhengConfig)
 
 
 # --------------------------------------------------------------------------------------------

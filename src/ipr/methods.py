@@ -1,7 +1,8 @@
 """The inference methods: one registry that the CLI, the pipeline, the benchmarks and the docs
 read (a light module: listing the methods loads neither MuJoCo nor numba).
 
-A method is the paper's Collision Checker (no physics) or one of its IPR variants: whether the
+A method is the paper's Collision Checker (no physics), its Zheng et al. 2013 baseline
+(``ipr.baselines``; not built on the hypotheses), or one of its IPR variants: whether the
 recorded pushes are replayed (and the later frames' views used), and the shape prior. The
 exhaustive search scores every jointly feasible joint model, to validate the sampler.
 """
@@ -50,6 +51,14 @@ METHODS: dict[str, Method] = {
             description="no physics: uniform over jointly feasible shapes (the paper's baseline)",
         ),
         Method(
+            "zheng2013",
+            physics=False,
+            actions=False,
+            prior="uniform",
+            description="Zheng et al. 2013: Manhattan boxes grown into unseen space, stability "
+            "grouping (the paper's first baseline)",
+        ),
+        Method(
             "ipr+uniform",
             physics=True,
             actions=False,
@@ -89,6 +98,8 @@ METHODS: dict[str, Method] = {
 }
 #: The physics-based methods (``ipr.inference``).
 PHYSICS_METHODS = tuple(name for name, method in METHODS.items() if method.physics)
+#: Methods that are other authors' baselines, not built on ipr's hypotheses (``ipr.baselines``).
+BASELINE_METHODS = ("zheng2013",)
 #: The full method: gravity and the recorded pushes, uniform prior.
 DEFAULT_METHOD = "ipr+action+uniform"
 

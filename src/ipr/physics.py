@@ -134,6 +134,8 @@ class Body:
         candidate: a free body that does not collide with other candidates (stability tests).
         switchable: a dynamic body compiled so that ``World.hold`` can take it out of the
             simulation (a stability test's candidate frozen once at rest or screened out).
+        rigid_group: dynamic shapes with the same non-negative number are one rigid body
+            (welded together, as a stability test of a group of objects needs); -1: its own.
     """
 
     vertices: np.ndarray
@@ -141,6 +143,7 @@ class Body:
     dynamic: bool = True
     candidate: bool = False
     switchable: bool = False
+    rigid_group: int = -1
 
 
 @dataclass(eq=False)
@@ -532,6 +535,9 @@ def build_world(
         )
 
     origins = np.zeros((len(bodies), 3))
+    # A rigid group's shapes are geoms of the body made for its first shape (``Body``).
+    group_body: dict[int, tuple[Any, np.ndarray, int]] = {}
+    body_of_shape = list(range(len(bodies)))
     for k, body in enumerate(bodies):
         vertices = np.asarray(body.vertices, float).reshape(-1, 3)
         faces = np.asarray(body.faces, np.int64).reshape(-1, 3)
@@ -543,7 +549,11 @@ def build_world(
             userface=faces.astype(np.int32).ravel().tolist(),
         )
         mesh.inertia = mujoco.mjtMeshInertia.mjMESH_INERTIA_CONVEX
-        if body.dynamic:
+        if body.dynamic and body.rigid_group >= 0 and body.rigid_group in group_body:
+            parent, group_origin, body_of_shape[k] = group_body[body.rigid_group]
+            pos = (origin - group_origin).tolist()
+            origins[k] = group_origin  # poses map frame 0 to now about the body's origin
+        elif body.dynamic:
             parent = world_body.add_body(name=f"body_{k}", pos=origin.tolist())
             parent.add_freejoint()
             if body.switchable:
@@ -551,6 +561,8 @@ def build_world(
                 # (the body falls) right after compiling, to 1 by ``World.hold``.
                 parent.gravcomp = 1.0
             pos = [0.0, 0.0, 0.0]
+            if body.rigid_group >= 0:
+                group_body[body.rigid_group] = (parent, origin, k)
         else:
             parent, pos = world_body, origin.tolist()
         parent.add_geom(
@@ -593,7 +605,7 @@ def build_world(
             object_of_geom[geom] = -2
     for k, body in enumerate(bodies):
         if body.dynamic:
-            body_ids[k] = model.body(f"body_{k}").id
+            body_ids[k] = model.body(f"body_{body_of_shape[k]}").id
         object_of_geom[model.geom(f"shape_{k}").id] = k
     pusher_geom = model.geom("pusher").id if pusher is not None else -1
     pusher_mocap = int(model.body_mocapid[model.body("pusher").id]) if pusher is not None else -1
