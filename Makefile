@@ -7,6 +7,7 @@ PY     := $(VENV)/bin/python
 IPR    := $(VENV)/bin/ipr
 STAMP  := $(VENV)/.installed
 RAY_STAMP := $(VENV)/.installed-ray
+PYBULLET_STAMP := $(VENV)/.installed-pybullet
 DEMO_OUT ?= out/demo
 
 .PHONY: setup demo test test-slow mutants bench gallery lint format clean
@@ -30,6 +31,10 @@ $(RAY_STAMP): $(STAMP) requirements-ray.lock
 	$(PY) -m pip install --quiet -r requirements-ray.lock
 	touch $(RAY_STAMP)
 
+$(PYBULLET_STAMP): $(STAMP) requirements-pybullet.lock
+	$(PY) -m pip install --quiet -r requirements-pybullet.lock
+	touch $(PYBULLET_STAMP)
+
 demo: $(STAMP)
 	$(PY) -m ipr.demo $(DEMO_OUT)
 
@@ -38,7 +43,7 @@ test: $(STAMP)
 	$(PY) -m pytest -q -m "not slow" tests
 
 # The slow tests include a Ray cluster on this machine: Ray is installed first.
-test-slow: $(STAMP) $(RAY_STAMP)
+test-slow: $(STAMP) $(RAY_STAMP) $(PYBULLET_STAMP)
 	$(PY) -m pytest -q -m slow tests
 
 bench: $(STAMP)
