@@ -11,7 +11,8 @@ over the (object, frame) pairs that truly moved more than ``MOVED_M`` (median an
 The rungs (``RUNGS``):
 
 a. the generator's world (``ipr.synth.piles.PileWorld``) rebuilt from the scene's seed and
-   replayed from its own integration state at frame 0 (the ladder's zero: bit for bit);
+   replayed from its own integration state at frame 0 (the ladder's zero: the generator's
+   own simulation, which the scene files' poses match to micrometres);
 b. (a) with each object's start pose jittered by ``JITTER_M`` along a random direction and
    ``JITTER_RAD`` about a random axis (the chaos of the pushes themselves);
 c. the generator's world started from the scene files' true poses at rest;
@@ -51,8 +52,9 @@ MOVED_M = 0.005
 #: Rung (b): start-pose jitter, translation (m) and rotation (rad).
 JITTER_M = 1e-4
 JITTER_RAD = 1e-3
-#: Scenes of the ycb-dynamic suite the page's ladder replays (its first ones).
-LADDER_SCENES = 10
+#: Scenes of the ycb-dynamic suite the page's ladder replays (its first ones; None: all, about
+#: 15 s per scene on 2 shared cores).
+LADDER_SCENES: int | None = None
 #: A rebuilt pile farther than this (m, any object's origin) from frame 0's truth is refused
 #: (the files and their world frame agree with the generator to a few micrometres).
 REBUILD_TOLERANCE_M = 1e-4
@@ -127,7 +129,9 @@ def rebuild_generator_scene(path: Path) -> GeneratorScene:
     info = json.loads(info_path.read_text(encoding="utf-8"))
     if info.get("kind") != "dynamic":
         raise ValueError(f"{info_path}: kind {info.get('kind')!r}, the ladder needs pushes")
-    config = _synth_config(info["config"])
+    config = dataclasses.replace(
+        _synth_config(info["config"]), object_source=info.get("object_source", "auto")
+    )
     pool, _ = object_pool(None, config)
     arrangement = info["arrangement"]
     attempt = int(info["attempts"]) - 1
@@ -370,7 +374,7 @@ def section(scenes: Sequence[Path], suite: str = "ycb-dynamic") -> str:
     lines = [
         "## Replaying the pushes: how far the simulator is from the data",
         "",
-        f"The recorded pushes of the first {len(scenes)} {suite} scenes replayed in worlds "
+        f"The recorded pushes of {len(scenes)} {suite} scenes replayed in worlds "
         "that go step by step from the generator's own simulation (`ipr.synth`) to the world "
         "inference builds (`ipr.physics`), with the true shapes (`benchmarks.replay`). After "
         "each push, every object's simulated motion since frame 0 is compared with its true "
@@ -393,7 +397,7 @@ def section(scenes: Sequence[Path], suite: str = "ycb-dynamic") -> str:
 
 def run(suites: dict[str, list[Path]]) -> str:
     """The ``replay`` section of docs/BENCHMARKS.md: the ladder on the first
-    ``LADDER_SCENES`` ycb-dynamic scenes."""
+    ``LADDER_SCENES`` ycb-dynamic scenes (all: None)."""
     return section(list(suites.get("ycb-dynamic", []))[:LADDER_SCENES])
 
 
@@ -401,11 +405,9 @@ def main(argv: list[str] | None = None) -> int:
     """Print the ladder table for a few scenes; the page is not touched."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--scene", type=Path, action="append", help="scene folder (repeatable)")
-    parser.add_argument(
-        "--limit", type=int, default=LADDER_SCENES, help="the ycb-dynamic suite's first N scenes"
-    )
+    parser.add_argument("--limit", type=int, help="the ycb-dynamic suite's first N scenes")
     args = parser.parse_args(argv)
-    if args.limit < 1:
+    if args.limit is not None and args.limit < 1:
         parser.error("--limit must be at least 1")
     if args.scene:
         scenes = list(args.scene)
