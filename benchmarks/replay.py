@@ -411,6 +411,9 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--limit must be at least 1")
     if args.scene:
         scenes = list(args.scene)
+        for scene in scenes:
+            if not (scene / "synth.json").is_file():
+                parser.error(f"{scene}: not a scene written by `ipr synth` (no synth.json)")
     else:
         from ipr.suites import suite_scenes
 
