@@ -137,8 +137,9 @@ def score_comparison(record: dict) -> dict:
     """The sampler against exhaustive search on one scene (``inference_run.run_comparison``):
     {"scene", "status", "reason", "objects"} and, when both ran ("ok"), "same" (objects whose
     most probable hypothesis is the same), "margins" (per object, the exact posterior's
-    favourite over the runner-up), "exact_shares" (the exact probability of the sampler's
-    choice over the favourite's), "exhaustive_s" / "sampler_s" (sampling wall time),
+    favourite over the runner-up), "agreements" (per object, in the order of "margins":
+    whether the sampler's most probable hypothesis is the exact favourite), "exact_shares"
+    (the exact probability of the sampler's choice over the favourite's), "exhaustive_s" / "sampler_s" (sampling wall time),
     "models" (joint models exhaustive scored), "samples" and "fallback" (the sampler's)."""
     row = {
         "scene": Path(record["scene"]).name,
@@ -159,13 +160,15 @@ def score_comparison(record: dict) -> dict:
         return row
     exact = {p["object_id"]: np.asarray(p["probabilities"]) for p in exhaustive["posteriors"]}
     same = 0
-    margins, shares = [], []
+    margins, shares, agreements = [], [], []
     for posterior in sampler["posteriors"]:
         reference = exact.get(posterior["object_id"])
         probabilities = np.asarray(posterior["probabilities"])
         if reference is not None and len(reference) == len(probabilities):
             chosen = int(np.argmax(probabilities))
-            same += int(chosen == int(np.argmax(reference)))
+            agrees = chosen == int(np.argmax(reference))
+            same += int(agrees)
+            agreements.append(bool(agrees))
             ranked = np.sort(reference)[::-1]
             margins.append(float(ranked[0] - (ranked[1] if ranked.size > 1 else 0.0)))
             shares.append(float(reference[chosen] / ranked[0]))
@@ -173,6 +176,7 @@ def score_comparison(record: dict) -> dict:
         **row,
         "same": same,
         "margins": margins,
+        "agreements": agreements,
         "exact_shares": shares,
         "sampler_s": sampler["timing_s"].get("inference_sampling", math.nan),
         "samples": sampler["samples"],
@@ -214,6 +218,36 @@ def comparison_totals(rows: Sequence[dict]) -> dict:
         "exhaustive_s": exhaustive_s,
         "sampler_s": sampler_s,
         "ratio": sampler_s / exhaustive_s if exhaustive_s > 0 else math.nan,
+    }
+
+
+#: Sampler vs exhaustive: an object's exact posterior has a clear favourite when its most
+#: probable hypothesis leads the runner-up by more than this (probability); below it the
+#: favourite differs from its neighbours by noise and agreement is not measurable (issue 29).
+CLEAR_MARGIN = 0.1
+
+
+def clear_agreement(rows: Sequence[dict], min_margin: float = CLEAR_MARGIN) -> dict:
+    """Over the objects of the "ok" comparison rows whose exact margin exceeds
+    ``min_margin``: {"objects", "same" (the sampler's most probable hypothesis is the exact
+    favourite), "share" (nan when there is none), "scenes" (rows with at least one)}."""
+    objects = same = scenes = 0
+    for row in rows:
+        pairs = [
+            agrees
+            for margin, agrees in zip(
+                row.get("margins") or [], row.get("agreements") or [], strict=True
+            )
+            if margin > min_margin
+        ]
+        objects += len(pairs)
+        same += sum(pairs)
+        scenes += bool(pairs)
+    return {
+        "objects": objects,
+        "same": same,
+        "share": same / objects if objects else math.nan,
+        "scenes": scenes,
     }
 
 

@@ -18,13 +18,14 @@ import time
 from datetime import UTC, datetime
 from pathlib import Path
 
-from benchmarks import foundation, inference, segmentation
+from benchmarks import foundation, inference, replay, segmentation
 from benchmarks.common import machine_description
 
 SECTIONS = {
     "foundation": foundation.run,
     "segmentation": segmentation.run,
     "inference": inference.run,
+    "replay": replay.run,
 }
 OUTPUT = Path(__file__).resolve().parents[1] / "docs" / "BENCHMARKS.md"
 

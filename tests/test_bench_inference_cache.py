@@ -1,5 +1,6 @@
 """The inference benchmark's run cache (``benchmarks.inference_run``) and its comparison
-scores (``benchmarks.inference_score.score_comparison``), without running a method."""
+scores (``benchmarks.inference_score.score_comparison``, ``clear_agreement``), without
+running a method."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ from pathlib import Path
 
 import pytest
 from benchmarks import inference_run
-from benchmarks.inference_score import score_comparison
+from benchmarks.inference_score import clear_agreement, score_comparison
 
 
 @pytest.fixture
@@ -98,7 +99,37 @@ def test_the_comparison_counts_agreement_margins_and_exact_shares():
     row = score_comparison(record)
     assert row["scene"] == "scene-003" and row["objects"] == 2 and row["same"] == 1
     assert row["margins"] == pytest.approx([0.2, 0.8])
+    assert row["agreements"] == [False, True]
     assert row["exact_shares"] == pytest.approx([0.6, 1.0])
     assert (row["exhaustive_s"], row["sampler_s"], row["samples"]) == (10.0, 1.8, 40)
     skipped = score_comparison({"scene": "/x/s", "status": "skipped", "reason": "5 objects"})
     assert skipped == {"scene": "s", "status": "skipped", "reason": "5 objects", "objects": 0}
+
+
+def test_agreement_is_counted_only_on_objects_whose_exact_posterior_has_a_clear_favourite():
+    # Scene a: a clear favourite the sampler found (0.8 over 0.1), a clear one it missed (0.5
+    # over 0.3), and a near tie (0.34 over 0.33) it missed, which does not count.
+    a = score_comparison(
+        {
+            "scene": "/x/a",
+            "status": "ok",
+            "exhaustive": _posteriors([[0.8, 0.1, 0.1], [0.2, 0.5, 0.3], [0.34, 0.33, 0.33]], None),
+            "sampler": _posteriors([[0.9, 0.1, 0.0], [0.6, 0.2, 0.2], [0.0, 1.0, 0.0]], 30),
+        }
+    )
+    # Scene b: only near ties (margins 0.08 and 0.02): no measurable object.
+    b = score_comparison(
+        {
+            "scene": "/x/b",
+            "status": "ok",
+            "exhaustive": _posteriors([[0.54, 0.46], [0.51, 0.49]], None),
+            "sampler": _posteriors([[0.0, 1.0], [1.0, 0.0]], 12),
+        }
+    )
+    clear = clear_agreement([a, b])
+    assert (clear["objects"], clear["same"], clear["scenes"]) == (2, 1, 1)
+    assert clear["share"] == pytest.approx(0.5)
+    assert clear_agreement([a, b], min_margin=0.0)["objects"] == 5
+    assert clear_agreement([a, b], min_margin=0.0)["same"] == 2
+    empty = clear_agreement([b])
+    assert empty["objects"] == 0 and empty["share"] != empty["share"]  # nan: nothing to agree on
