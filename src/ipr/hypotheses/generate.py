@@ -71,6 +71,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import ClassVar
 
@@ -82,6 +83,7 @@ from scipy.spatial import ConvexHull, QhullError
 from ipr import voxels
 from ipr.checks import Checks, Interval, OrNone, Predicate, check_fields
 from ipr.geometry.convex import clip_halfspace, convex_mesh
+from ipr.hypotheses import structure
 from ipr.perception.free_space import FREE, SeenSpace
 from ipr.perception.occupancy import PlaneRegion, allowed_voxels, plane_regions, unary_report
 from ipr.perception.types import KnownPlane, PartialObject
@@ -195,6 +197,7 @@ class HypothesisConfig:
         "timeout_s": OrNone(Interval(0, None, closed="neither")),
         "seed": Interval(0, None, integer=True),
         "budget_share": Interval(0, 1, closed="neither"),
+        "structure_share": Interval(0, 1),
     }
 
     count: int = 32
@@ -221,6 +224,7 @@ class HypothesisConfig:
     timeout_s: float | None = None
     seed: int = 0
     budget_share: float = 0.6
+    structure_share: float = 0.5
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -805,6 +809,119 @@ def _evaluate(
     return keys, free, wall, free <= allowed and wall <= allowed
 
 
+_Maker = Callable[[np.ndarray, int], np.ndarray]
+
+
+def _structure_makers(obj: PartialObject, ctx: _Context) -> dict[str, _Maker]:
+    """The structure-aware generators (``ipr.hypotheses.structure``) that apply to an object,
+    fitted: name -> make(variates (6,), variant number) -> candidate points (K, 3)."""
+    config = ctx.config
+    settings = structure.StructureSettings(
+        rim_m=max(config.rim_width_m, ctx.pitch_m),
+        max_rays=max(config.max_rays // 2, 1),
+        quantile=config.ray_quantile,
+        pitch_m=ctx.pitch_m,
+    )
+    points = np.asarray(obj.points, float).reshape(-1, 3)
+    points = _even_subsample(points[np.all(np.isfinite(points), axis=1)], 2000)
+    towards = ctx.fallback_normal
+    step = config.ray_step_m or ctx.pitch_m
+
+    def reach(origins: np.ndarray, direction: np.ndarray) -> np.ndarray:
+        return _ray_limits(origins, -direction, ctx.space, ctx.regions, ctx.cap_m, step)
+
+    makers: dict[str, _Maker] = {}
+    support = next((r.plane for r in ctx.regions if r.is_support), None)
+    if support is not None and len(points) >= 8:
+        facets = [(np.asarray(f.normal, float), float(f.area_m2)) for f in obj.facets]
+        frame = structure.upright_frame(
+            points, facets, np.asarray(support.normal, float), float(support.offset), towards
+        )
+        local = frame.local(points)
+        room = structure.reaches(frame, local, points, reach, settings)
+        makers["symmetry"] = lambda t, k: structure.symmetry_points(
+            frame, local, t * room, ((0, 1), (0,), (1,))[k % 3]
+        )
+        makers["box"] = lambda t, k: structure.box_points(frame, local, t * room)
+        keep = _side_points(obj, points, frame.up)
+        fit = structure.fit_axis(local, keep, settings)
+        span = float(np.ptp(local[:, :2], axis=0).max())
+        if fit is not None and fit.residual <= settings.circle_residual and fit.radius_m <= span:
+            makers["revolution"] = lambda t, k: structure.revolution_points(
+                frame, local, fit, float(t[0]), settings
+            )
+            makers["cylinder"] = lambda t, k: structure.revolution_points(
+                frame, local, fit, float(t[0]), settings, constant=True
+            )
+    sphere = structure.fit_sphere(points)
+    if (
+        sphere is not None
+        and sphere.residual <= settings.sphere_residual
+        and sphere.radius <= float(np.ptp(points, axis=0).max())
+    ):
+        makers["sphere"] = lambda t, k: structure.sphere_points(
+            points, sphere, float(t[0]), settings, towards
+        )
+    return makers
+
+
+def _structure_plan(
+    makers: dict[str, _Maker],
+    count: int,
+    rng: np.random.Generator,
+    ctx: _Context,
+) -> list[tuple[str, Callable[[float], _Sample]]]:
+    """``count`` structure-aware candidates, the applicable generators taking turns: (generator,
+    make) pairs, ``make(scale)`` the candidate's points with its variates scaled by ``scale``
+    (halved per attempt, like Algorithm 1's). Variates are stratified per generator and
+    direction."""
+    towards, min_thickness = ctx.fallback_normal, ctx.config.min_thickness_m
+    order = [name for name in structure.STRUCTURE_GENERATORS if name in makers]
+    if not order or count <= 0:
+        return []
+    counts = dict.fromkeys(order, 0)
+    for slot in range(count):
+        counts[order[slot % len(order)]] += 1
+    plan = []
+    for name in order:
+        n = counts[name]
+        variates = (np.stack([rng.permutation(n) for _ in range(structure.DIRECTIONS)], axis=1)
+                    + rng.random((n, structure.DIRECTIONS))) / max(n, 1)  # fmt: skip
+        for k in range(n):
+
+            def make(scale: float, name=name, t=variates[k], k=k) -> _Sample:
+                cloud = makers[name](t * scale, k)
+                # At least D_min thick towards the camera, like the minimum shape: a face seen
+                # alone with no room behind it would otherwise give a sub-voxel sliver.
+                extent = float(np.ptp(cloud @ towards))
+                if extent < min_thickness:
+                    cloud = np.concatenate([cloud, cloud - (min_thickness - extent) * towards])
+                return _Sample(cloud, [], [], [], 0)
+
+            plan.append((name, make))
+    logger.debug("object %d: structure-aware candidates %s", ctx.object_id, counts)
+    return plan
+
+
+def _side_points(obj: PartialObject, points: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """(N,) bool over ``points``: those not on a near-horizontal observed facet (a lid seen
+    from above lies inside the circles of the sides); all when that leaves too few."""
+    flat = [f for f in obj.facets if abs(float(np.asarray(f.normal, float) @ up)) > 0.8]
+    if not flat:
+        return np.ones(len(points), dtype=bool)
+    keep = np.ones(len(points), dtype=bool)
+    for f in flat:
+        facet_points = np.asarray(f.points, float).reshape(-1, 3)
+        if len(facet_points) == 0:
+            continue
+        low = facet_points.min(axis=0) - 1e-9
+        high = facet_points.max(axis=0) + 1e-9
+        level = float(np.median(facet_points @ up))
+        inside = np.all((points >= low) & (points <= high), axis=1)
+        keep &= ~(inside & (np.abs(points @ up - level) < 0.005))
+    return keep if keep.sum() >= 8 else np.ones(len(points), dtype=bool)
+
+
 def generate_hypotheses(
     obj: PartialObject,
     space: SeenSpace | None,
@@ -831,10 +948,14 @@ def generate_hypotheses(
     started = time.perf_counter()
     ctx = _prepare(obj, space, planes, config)
     m = config.count
-    # Stratified variates of the observed facets: column j is a shuffled set of m strata.
-    strata = np.stack([rng.permutation(m) for _ in ctx.observed], axis=1)
-    observed_u = (strata + rng.random(strata.shape)) / m
-    slot_rngs = rng.spawn(m)
+    makers = _structure_makers(obj, ctx) if config.structure_share > 0 else {}
+    structured = int(round(config.structure_share * m)) if makers else 0
+    m1 = m - structured  # Algorithm 1 makes the rest
+    # Stratified variates of the observed facets: column j is a shuffled set of m1 strata.
+    strata = np.stack([rng.permutation(m1) for _ in ctx.observed], axis=1)
+    observed_u = (strata + rng.random(strata.shape)) / max(m1, 1)
+    slot_rngs = rng.spawn(m1)
+    plan = _structure_plan(makers, structured, rng.spawn(1)[0], ctx) if structured else []
     hypotheses = []
     timed_out = False
     for k in range(m):
@@ -855,7 +976,12 @@ def generate_hypotheses(
         attempts = 1 if timed_out else config.max_attempts
         best = None
         for attempt in range(attempts):
-            sample = _algorithm1(ctx, observed_u[k] * 0.5**attempt, slot_rngs[k], max_rounds)
+            if k < m1:
+                sample = _algorithm1(ctx, observed_u[k] * 0.5**attempt, slot_rngs[k], max_rounds)
+                generator = "algorithm1"
+            else:
+                generator, make = plan[k - m1]
+                sample = make(0.5**attempt)
             mesh = _finish(ctx, sample.points)
             keys, free, wall, feasible = _evaluate(ctx, mesh)
             candidate = (free + wall, attempt, sample, mesh, keys, free, wall, feasible)
@@ -868,10 +994,11 @@ def generate_hypotheses(
         _, attempt, sample, mesh, keys, free, wall, feasible = best
         if not feasible:
             logger.info(
-                "object %d hypothesis %d: no feasible sample in %d attempts (%d free, %d wall "
-                "voxels); kept as infeasible",
+                "object %d hypothesis %d (%s): no feasible sample in %d attempts (%d free, %d "
+                "wall voxels); kept as infeasible",
                 obj.id,
                 k,
+                generator,
                 attempts,
                 free,
                 wall,
@@ -896,6 +1023,7 @@ def generate_hypotheses(
                 forced_wall_voxels=ctx.forced_wall,
                 voxel_keys=keys,
                 voxel_pitch_m=ctx.pitch_m,
+                generator=generator,
             )
         )
     logger.debug(
@@ -952,4 +1080,5 @@ def minimum_shape(
         distances_m=np.array([thickness]),
         facet_normals=normal[None, :],
         facet_sources=("minimum",),
+        generator="minimum",
     )
