@@ -92,8 +92,11 @@ def test_no_hypothesis_enters_seen_free_space_beyond_tolerance(oblique, low):
                 CONFIG.unary.free_space_tolerance * keys.size,
                 CONFIG.unary.free_space_tolerance_voxels,
             )
-            assert h.feasible
-            assert free - h.forced_free_voxels <= allowed
+            # Algorithm 1 resamples until feasible; a structure-aware candidate whose family
+            # does not fit the object (a revolution of a box) may stay flagged infeasible.
+            assert h.feasible or h.generator != "algorithm1"
+            if h.feasible:
+                assert free - h.forced_free_voxels <= allowed
 
 
 def test_true_box_is_within_the_hypotheses(oblique, low):
@@ -311,7 +314,7 @@ def test_a_curved_facet_is_mirrored_about_its_tangent_plane():
     obj = PartialObject(
         1, 0, np.arange(len(points)), points, np.zeros((2000, 3), np.uint8), (facet,)
     )
-    config = HypothesisConfig(count=4, max_rounds=1)
+    config = HypothesisConfig(count=4, max_rounds=1, structure_share=0.0)
     hypotheses = generate_hypotheses(obj, None, (), config, np.random.default_rng(0))
     mean_y = points[:, 1].mean()
     assert mean_y < 0.005  # most points are on the flat front

@@ -812,9 +812,12 @@ def _evaluate(
 _Maker = Callable[[np.ndarray, int], np.ndarray]
 
 
-def _structure_makers(obj: PartialObject, ctx: _Context) -> dict[str, _Maker]:
+def _structure_makers(
+    obj: PartialObject, ctx: _Context
+) -> tuple[dict[str, _Maker], dict[str, int]]:
     """The structure-aware generators (``ipr.hypotheses.structure``) that apply to an object,
-    fitted: name -> make(variates (6,), variant number) -> candidate points (K, 3)."""
+    fitted: name -> make(variates (6,), variant number) -> candidate points (K, 3); and per
+    generator the frames its variants cycle through."""
     config = ctx.config
     settings = structure.StructureSettings(
         rim_m=max(config.rim_width_m, ctx.pitch_m),
@@ -822,8 +825,7 @@ def _structure_makers(obj: PartialObject, ctx: _Context) -> dict[str, _Maker]:
         quantile=config.ray_quantile,
         pitch_m=ctx.pitch_m,
     )
-    points = np.asarray(obj.points, float).reshape(-1, 3)
-    points = _even_subsample(points[np.all(np.isfinite(points), axis=1)], 2000)
+    points, point_normals = _point_normals(obj, 2000)
     towards = ctx.fallback_normal
     step = config.ray_step_m or ctx.pitch_m
 
@@ -832,26 +834,43 @@ def _structure_makers(obj: PartialObject, ctx: _Context) -> dict[str, _Maker]:
 
     makers: dict[str, _Maker] = {}
     support = next((r.plane for r in ctx.regions if r.is_support), None)
+    facets = [(np.asarray(f.normal, float), float(f.area_m2)) for f in obj.facets]
+    frames = []  # (frame, plane subsets)
+    upright = None
     if support is not None and len(points) >= 8:
-        facets = [(np.asarray(f.normal, float), float(f.area_m2)) for f in obj.facets]
-        frame = structure.upright_frame(
+        upright = structure.upright_frame(
             points, facets, np.asarray(support.normal, float), float(support.offset), towards
         )
-        local = frame.local(points)
-        room = structure.reaches(frame, local, points, reach, settings)
-        makers["symmetry"] = lambda t, k: structure.symmetry_points(
-            frame, local, t * room, ((0, 1), (0,), (1,))[k % 3]
-        )
-        makers["box"] = lambda t, k: structure.box_points(frame, local, t * room)
-        keep = _side_points(obj, points, frame.up)
-        fit = structure.fit_axis(local, keep, settings)
-        span = float(np.ptp(local[:, :2], axis=0).max())
-        if fit is not None and fit.residual <= settings.circle_residual and fit.radius_m <= span:
+        frames.append((upright, ((0, 1), (0,), (1,))))
+    own = structure.facet_frame(points, facets, towards) if len(points) >= 8 else None
+    if own is not None and not any(structure.same_frame(own, f) for f, _ in frames):
+        frames.append((own, ((0, 1, 2), (0, 1), (2,), (0,), (1,))))
+    fitted = []
+    for frame, subsets in frames:
+        room = structure.reaches(frame, frame.local(points), points, reach, settings)
+        # Extents and hulls only need the observed hull's vertices (reflections are affine).
+        fitted.append((frame, room, frame.local(ctx.base_points), subsets))
+    if fitted:
+
+        def symmetric(t: np.ndarray, k: int) -> np.ndarray:
+            frame, room, extreme, subsets = fitted[k % len(fitted)]
+            axes = subsets[(k // len(fitted)) % len(subsets)]
+            return structure.symmetry_points(frame, extreme, t * room, axes)
+
+        def box(t: np.ndarray, k: int) -> np.ndarray:
+            frame, room, extreme, _ = fitted[k % len(fitted)]
+            return structure.box_points(frame, extreme, t * room)
+
+        makers["symmetry"], makers["box"] = symmetric, box
+    if upright is not None:
+        found = structure.best_axis(upright, points, point_normals, towards, settings)
+        if found is not None:
+            axis, axis_local, fit = found
             makers["revolution"] = lambda t, k: structure.revolution_points(
-                frame, local, fit, float(t[0]), settings
+                axis, axis_local, ctx.base_points, fit, float(t[0]), settings
             )
             makers["cylinder"] = lambda t, k: structure.revolution_points(
-                frame, local, fit, float(t[0]), settings, constant=True
+                axis, axis_local, ctx.base_points, fit, float(t[0]), settings, constant=True
             )
     sphere = structure.fit_sphere(points)
     if (
@@ -860,21 +879,21 @@ def _structure_makers(obj: PartialObject, ctx: _Context) -> dict[str, _Maker]:
         and sphere.radius <= float(np.ptp(points, axis=0).max())
     ):
         makers["sphere"] = lambda t, k: structure.sphere_points(
-            points, sphere, float(t[0]), settings, towards
+            ctx.base_points, points, sphere, float(t[0]), settings, towards
         )
-    return makers
+    return makers, {"symmetry": len(fitted), "box": len(fitted)}
 
 
 def _structure_plan(
     makers: dict[str, _Maker],
+    fits: dict[str, int],
     count: int,
     rng: np.random.Generator,
     ctx: _Context,
 ) -> list[tuple[str, Callable[[float], _Sample]]]:
     """``count`` structure-aware candidates, the applicable generators taking turns: (generator,
     make) pairs, ``make(scale)`` the candidate's points with its variates scaled by ``scale``
-    (halved per attempt, like Algorithm 1's). Variates are stratified per generator and
-    direction."""
+    (1, then 0 for the second attempt). Variates: ``structure.variates``."""
     towards, min_thickness = ctx.fallback_normal, ctx.config.min_thickness_m
     order = [name for name in structure.STRUCTURE_GENERATORS if name in makers]
     if not order or count <= 0:
@@ -885,8 +904,7 @@ def _structure_plan(
     plan = []
     for name in order:
         n = counts[name]
-        variates = (np.stack([rng.permutation(n) for _ in range(structure.DIRECTIONS)], axis=1)
-                    + rng.random((n, structure.DIRECTIONS))) / max(n, 1)  # fmt: skip
+        variates = structure.variates(name, n, rng, fits.get(name, 1))
         for k in range(n):
 
             def make(scale: float, name=name, t=variates[k], k=k) -> _Sample:
@@ -903,23 +921,19 @@ def _structure_plan(
     return plan
 
 
-def _side_points(obj: PartialObject, points: np.ndarray, up: np.ndarray) -> np.ndarray:
-    """(N,) bool over ``points``: those not on a near-horizontal observed facet (a lid seen
-    from above lies inside the circles of the sides); all when that leaves too few."""
-    flat = [f for f in obj.facets if abs(float(np.asarray(f.normal, float) @ up)) > 0.8]
-    if not flat:
-        return np.ones(len(points), dtype=bool)
-    keep = np.ones(len(points), dtype=bool)
-    for f in flat:
-        facet_points = np.asarray(f.points, float).reshape(-1, 3)
-        if len(facet_points) == 0:
-            continue
-        low = facet_points.min(axis=0) - 1e-9
-        high = facet_points.max(axis=0) + 1e-9
-        level = float(np.median(facet_points @ up))
-        inside = np.all((points >= low) & (points <= high), axis=1)
-        keep &= ~(inside & (np.abs(points @ up - level) < 0.005))
-    return keep if keep.sum() >= 8 else np.ones(len(points), dtype=bool)
+def _point_normals(obj: PartialObject, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """The finite observed points taken evenly, at most ``count`` (K, 3), and the normal of the
+    facet each belongs to (K, 3; zero for none)."""
+    points = np.asarray(obj.points, float).reshape(-1, 3)
+    index = np.flatnonzero(np.all(np.isfinite(points), axis=1))
+    if len(index) > count:
+        index = index[np.linspace(0, len(index) - 1, count).round().astype(np.int64)]
+    normals = np.zeros((len(index), 3))
+    if obj.facet_of_point is not None and obj.facets:
+        facet_normals = np.array([np.asarray(f.normal, float) for f in obj.facets])
+        owner = np.asarray(obj.facet_of_point)[index]
+        normals[owner >= 0] = facet_normals[owner[owner >= 0]]
+    return points[index], normals
 
 
 def generate_hypotheses(
@@ -948,14 +962,14 @@ def generate_hypotheses(
     started = time.perf_counter()
     ctx = _prepare(obj, space, planes, config)
     m = config.count
-    makers = _structure_makers(obj, ctx) if config.structure_share > 0 else {}
+    makers, fits = _structure_makers(obj, ctx) if config.structure_share > 0 else ({}, {})
     structured = int(round(config.structure_share * m)) if makers else 0
     m1 = m - structured  # Algorithm 1 makes the rest
     # Stratified variates of the observed facets: column j is a shuffled set of m1 strata.
     strata = np.stack([rng.permutation(m1) for _ in ctx.observed], axis=1)
     observed_u = (strata + rng.random(strata.shape)) / max(m1, 1)
     slot_rngs = rng.spawn(m1)
-    plan = _structure_plan(makers, structured, rng.spawn(1)[0], ctx) if structured else []
+    plan = _structure_plan(makers, fits, structured, rng.spawn(1)[0], ctx) if structured else []
     hypotheses = []
     timed_out = False
     for k in range(m):
@@ -974,6 +988,10 @@ def generate_hypotheses(
             )
         max_rounds = 1 if timed_out else config.max_rounds
         attempts = 1 if timed_out else config.max_attempts
+        if k >= m1:
+            # A structure-aware candidate's second attempt is its smallest (variates 0): a
+            # shape whose family does not fit fails there too, so more halving is wasted.
+            attempts = min(attempts, 2)
         best = None
         for attempt in range(attempts):
             if k < m1:
@@ -981,7 +999,7 @@ def generate_hypotheses(
                 generator = "algorithm1"
             else:
                 generator, make = plan[k - m1]
-                sample = make(0.5**attempt)
+                sample = make(0.0 if attempt else 1.0)
             mesh = _finish(ctx, sample.points)
             keys, free, wall, feasible = _evaluate(ctx, mesh)
             candidate = (free + wall, attempt, sample, mesh, keys, free, wall, feasible)
