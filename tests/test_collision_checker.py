@@ -80,7 +80,9 @@ def test_result_directory(scene, tmp_path):
         assert obj.probability == pytest.approx(posterior.probabilities.max(), abs=1e-6)
     # result.json names the generator of every written hypothesis, in their order.
     for entry, posterior in zip(result.extra["objects_summary"], posteriors, strict=True):
-        kept = [h for h, p in zip(posterior.hypotheses, posterior.probabilities) if p > 0]
+        kept = [
+            h for h, p in zip(posterior.hypotheses, posterior.probabilities, strict=True) if p > 0
+        ]
         assert entry["hypothesis_generators"] == [h.generator for h in kept]
         assert entry["best_generator"] == posterior.best_hypothesis.generator
         assert set(entry["hypothesis_generators"]) <= {
