@@ -76,9 +76,7 @@ from dataclasses import dataclass, field
 from typing import ClassVar
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
-from scipy.spatial import ConvexHull, QhullError
+from scipy.spatial import ConvexHull, HalfspaceIntersection, QhullError
 
 from ipr import voxels
 from ipr.checks import Checks, Interval, OrNone, Predicate, check_fields
@@ -636,8 +634,8 @@ def _hull_groups(
     rows = np.repeat(np.arange(count), 3)
     cols = hull.neighbors.ravel()
     same = label[rows] == label[cols]
-    graph = coo_matrix((np.ones(int(same.sum())), (rows[same], cols[same])), shape=(count, count))
-    parts, part = connected_components(graph, directed=False)
+    part = _components(rows[same], cols[same], count)
+    parts = int(part.max()) + 1 if count else 0
     part_area = np.bincount(part, weights=areas, minlength=parts)
     part_normal = np.stack(
         [np.bincount(part, weights=areas * normals[:, k], minlength=parts) for k in range(3)],
@@ -650,6 +648,21 @@ def _hull_groups(
         normal = part_normal[index] / (np.linalg.norm(part_normal[index]) + 1e-15)
         groups.append((normal, np.flatnonzero(part == index), float(part_area[index])))
     return groups
+
+
+def _components(rows: np.ndarray, cols: np.ndarray, count: int) -> np.ndarray:
+    """Connected components (count,) numbered 0, 1, ... of the graph with edges rows[i] -
+    cols[i] (both directions listed): each node takes the smallest label among its
+    neighbours' until none changes (a hull's facets are small graphs; this costs a few
+    vectorised passes where scipy's sparse graph set-up dominates)."""
+    label = np.arange(count)
+    while True:
+        previous = label.copy()
+        np.minimum.at(label, rows, label[cols])
+        label = label[label]  # pointer jumping: follow labels to their own labels
+        if np.array_equal(label, previous):
+            break
+    return np.unique(label, return_inverse=True)[1]
 
 
 def _hull_source(
@@ -778,7 +791,17 @@ def _finish(ctx: _Context, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, 
         if footprint is not None:
             extended = convex_mesh(np.concatenate([mesh[0], footprint]))
             mesh = extended if extended is not None else mesh
+    violated = []
     for cut in ctx.cuts:
+        if float((mesh[0] @ cut[:3]).min()) + cut[3] < -1e-12:
+            violated.append(cut)
+    if len(violated) >= 2:
+        # Several cuts at once: one half-space intersection and one hull instead of a hull per
+        # cut (the same polytope; the sequential cuts below remain the fallback).
+        cut_all = _cut_all(mesh, violated, ctx.base_points.mean(axis=0))
+        if cut_all is not None:
+            return cut_all
+    for cut in violated:
         vertices, faces, _ = mesh
         if float((vertices @ cut[:3]).min()) + cut[3] < -1e-12:
             clipped = convex_mesh(clip_halfspace(vertices, faces, cut[:3], float(cut[3])))
@@ -787,6 +810,34 @@ def _finish(ctx: _Context, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, 
                 continue
             mesh = clipped
     return mesh
+
+
+def _cut_all(
+    mesh: tuple[np.ndarray, np.ndarray, float], cuts: list[np.ndarray], interior: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """The convex mesh cut to every half-space n . x + offset >= 0 of ``cuts`` (4,) at once
+    (qhull's half-space intersection about ``interior``, a point strictly inside all of them:
+    the observed points' centroid); None when that point is not strictly inside or qhull
+    fails (the caller cuts one by one)."""
+    vertices, faces, _ = mesh
+    tri = vertices[faces]
+    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    lengths = np.linalg.norm(normals, axis=1)
+    keep = lengths > 1e-12
+    normals = normals[keep] / lengths[keep, None]
+    offsets = -np.einsum("ij,ij->i", normals, tri[keep, 0])
+    cut_array = np.asarray(cuts, float)
+    # Rows (a, b): a . x + b <= 0 inside; the hull's coplanar triangles give one plane each.
+    halfspaces = np.concatenate([np.column_stack([normals, offsets]), -cut_array])
+    halfspaces = np.unique(np.round(halfspaces, 9), axis=0)
+    if float((halfspaces[:, :3] @ interior + halfspaces[:, 3]).max()) >= -1e-7:
+        return None
+    try:
+        corners = HalfspaceIntersection(halfspaces, interior).intersections
+    except (QhullError, ValueError):
+        return None
+    # Planes meeting at one corner give copies of it a rounding apart: merge them (10 nm).
+    return convex_mesh(np.unique(np.round(corners, 8), axis=0))
 
 
 def _evaluate(
