@@ -59,6 +59,13 @@ Choices made here (the paper leaves them open):
   resampled with its observed facets' variates halved each attempt (pulling d towards D_min), at
   most ``max_attempts`` times; if every attempt fails, the one with the fewest offending voxels is
   kept with ``feasible=False`` (logged) for the constraint stage to reject.
+- Structure-aware candidates (``ipr.hypotheses.structure``; docs/DESIGN_NOTES.md,
+  "Structure-aware candidates beside Algorithm 1"): ``structure_share`` of the m hypotheses
+  (rounded) are made by the structure-aware generators that apply to the object, taking turns
+  (symmetry, revolution, box, cylinder, sphere); Algorithm 1 makes the rest, and all of them
+  when none applies. Each is labelled with its generator (``ShapeHypothesis.generator``), goes
+  through the same hull, support snap, cuts and unary checks, and has two attempts: its
+  variates, then the family's own fit with no hidden extension.
 - Work and time: an object costs at most ``count * max_attempts * max_rounds`` rounds of
   Algorithm 1, so by default there is no wall-clock limit and the output is a function of the
   inputs and the rng alone, on any machine and under any load (docs/DESIGN_NOTES.md, "No
@@ -166,6 +173,8 @@ class HypothesisConfig:
         seed: seed used when no rng is given (combined with the object id).
         budget_share: share of a run's time budget given to generation (when a budget is
             given), split over the objects as their ``timeout_s``; inference gets the rest.
+        structure_share: share of ``count`` made by the structure-aware generators (rounded;
+            0: Algorithm 1 alone, as in the paper); the total stays ``count``.
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -994,7 +1003,8 @@ def generate_hypotheses(
     config: HypothesisConfig | None = None,
     rng: np.random.Generator | None = None,
 ) -> tuple[ShapeHypothesis, ...]:
-    """``config.count`` complete-shape hypotheses of a partial object (Algorithm 1).
+    """``config.count`` complete-shape hypotheses of a partial object: Algorithm 1's first, then
+    the structure-aware candidates (``structure_share``; module doc).
 
     Args:
         obj: the observed part (points and facets, world frame, m).
@@ -1005,7 +1015,8 @@ def generate_hypotheses(
 
     Returns:
         m closed convex hypotheses, each containing every observed point, none below the
-        support; see the module doc for D_max, the no-room rule, resampling and the timeout.
+        support, each labelled with its generator; see the module doc for D_max, the no-room
+        rule, resampling and the timeout.
     """
     config = config or HypothesisConfig()
     if rng is None:
