@@ -211,8 +211,9 @@ def render(summaries: dict[str, dict]) -> str:
     return "\n".join(lines)
 
 
-def run(suites: dict[str, list[Path]], limit: int | None = None) -> str:
-    """The section for ``benchmarks.run``: every scene of the suites of ``SUITES``."""
+def run(suites: dict[str, list[Path]], limit: int | None = None, cache: Path | None = None) -> str:
+    """The section for ``benchmarks.run``: every scene of the suites of ``SUITES`` (frame-0
+    perception pickled in ``cache`` when given)."""
     summaries = {}
     for name in SUITES:
         scenes = list(suites.get(name, []))[:limit]
@@ -220,7 +221,7 @@ def run(suites: dict[str, list[Path]], limit: int | None = None) -> str:
             continue
         measured = []
         for number, path in enumerate(scenes, 1):
-            measured.append(measure_scene(Path(path)))
+            measured.append(measure_scene(Path(path), cache=cache))
             print(f"bench: hypotheses {name} {number}/{len(scenes)} {Path(path).name}", flush=True)
         summaries[name] = summarise(measured)
     return render(summaries)
