@@ -187,8 +187,10 @@ def render(summaries: dict[str, dict]) -> str:
         "the best object IoU of the candidates the Collision Checker keeps (jointly feasible, "
         "convex as inferred; oracle: chosen against the ground truth), beside the Collision "
         "Checker's own carved output. Frame 0 only, default configuration, seed 0, 5 mm "
-        "voxels; unmatched objects count 0. `wins`: objects whose best candidate that "
-        "generator made; `per object`: candidates it generated per object. `spread`: largest "
+        "voxels; unmatched objects count 0. Per generator, `oracle IoU` is its best kept "
+        "candidate's (0 for an object it kept none of: families that do not fit an object "
+        "make no candidate or infeasible ones), `wins` the objects whose best candidate it "
+        "made, `per object` the candidates it generated per object. `spread`: largest "
         "over smallest kept candidate volume, median over objects. Time: hypothesis "
         "generation and constraints per object, CPU (process) and wall seconds.",
         "",
