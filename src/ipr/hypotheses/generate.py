@@ -846,7 +846,20 @@ def _cut_all(
     except (QhullError, ValueError):
         return None
     # Planes meeting at one corner give copies of it a rounding apart: merge them (10 nm).
-    return convex_mesh(np.unique(np.round(corners, 8), axis=0))
+    result = convex_mesh(np.unique(np.round(corners, 8), axis=0))
+    if result is None:
+        return None
+    # Corners that stayed a hair apart can leave sliver faces whose planes other vertices
+    # cross by more than rounding: then the one-cut-at-a-time path decides.
+    vertices, faces, _ = result
+    tri = vertices[faces]
+    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    lengths = np.linalg.norm(normals, axis=1)
+    keep = lengths > 1e-15
+    normals = normals[keep] / lengths[keep, None]
+    excess = vertices @ normals.T - np.einsum("ij,ij->i", normals, tri[keep, 0])
+    scale = float(np.ptp(vertices, axis=0).max())
+    return result if float(excess.max()) <= 1e-9 * scale else None
 
 
 def _evaluate(
