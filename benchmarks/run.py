@@ -18,12 +18,13 @@ import time
 from datetime import UTC, datetime
 from pathlib import Path
 
-from benchmarks import foundation, inference, replay, segmentation
+from benchmarks import foundation, hypothesis_ceiling, inference, replay, segmentation
 from benchmarks.common import machine_description
 
 SECTIONS = {
     "foundation": foundation.run,
     "segmentation": segmentation.run,
+    "hypotheses": hypothesis_ceiling.run,
     "inference": inference.run,
     "replay": replay.run,
 }

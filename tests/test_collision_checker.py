@@ -78,6 +78,16 @@ def test_result_directory(scene, tmp_path):
         assert sum(h.probability for h in obj.hypotheses) == pytest.approx(1.0, abs=1e-6)
         assert len(obj.hypotheses) == np.count_nonzero(posterior.probabilities)
         assert obj.probability == pytest.approx(posterior.probabilities.max(), abs=1e-6)
+    # result.json names the generator of every written hypothesis, in their order.
+    for entry, posterior in zip(result.extra["objects_summary"], posteriors, strict=True):
+        kept = [
+            h for h, p in zip(posterior.hypotheses, posterior.probabilities, strict=True) if p > 0
+        ]
+        assert entry["hypothesis_generators"] == [h.generator for h in kept]
+        assert entry["best_generator"] == posterior.best_hypothesis.generator
+        assert set(entry["hypothesis_generators"]) <= {
+            "algorithm1", "symmetry", "revolution", "box", "cylinder", "sphere", "minimum"
+        }  # fmt: skip
 
 
 def test_minimum_shape_when_no_hypothesis_is_feasible(scene):

@@ -48,13 +48,17 @@ def iou(a: np.ndarray, b: np.ndarray) -> float:
     return common / (a.size + b.size - common)
 
 
-def assert_valid(h: ShapeHypothesis, points: np.ndarray) -> None:
-    """Closed, convex with outward faces, the right volume, containing every observed point."""
+def assert_valid(h: ShapeHypothesis, points: np.ndarray, convex_tolerance: float = 1e-9) -> None:
+    """Closed, convex with outward faces, the right volume, containing every observed point.
+
+    ``convex_tolerance``: how far (relative to the size) a vertex may be outside a face's
+    plane; qhull's triangles of a face with exactly coplanar points (a rendered cylinder's
+    lid) tilt by about 1e-9."""
     merged, faces = voxels.merge_vertices(h.vertices, h.faces)
     assert voxels.is_closed(merged, faces)
     planes = h.face_planes()
     scale = np.ptp(h.vertices, axis=0).max()
-    assert np.all(h.vertices @ planes[:, :3].T + planes[:, 3] <= 1e-9 * scale + 1e-12)
+    assert np.all(h.vertices @ planes[:, :3].T + planes[:, 3] <= convex_tolerance * scale + 1e-12)
     tri = h.vertices[h.faces]
     signed = np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])).sum() / 6
     assert signed == pytest.approx(h.volume_m3, rel=1e-6)
@@ -92,8 +96,11 @@ def test_no_hypothesis_enters_seen_free_space_beyond_tolerance(oblique, low):
                 CONFIG.unary.free_space_tolerance * keys.size,
                 CONFIG.unary.free_space_tolerance_voxels,
             )
-            assert h.feasible
-            assert free - h.forced_free_voxels <= allowed
+            # Algorithm 1 resamples until feasible; a structure-aware candidate whose family
+            # does not fit the object (a revolution of a box) may stay flagged infeasible.
+            assert h.feasible or h.generator != "algorithm1"
+            if h.feasible:
+                assert free - h.forced_free_voxels <= allowed
 
 
 def test_true_box_is_within_the_hypotheses(oblique, low):
@@ -157,8 +164,13 @@ def test_a_slow_machine_gets_the_same_hypotheses(oblique, monkeypatch):
         assert a.rounds == b.rounds and a.attempts == b.attempts
     limited = dataclasses.replace(config, timeout_s=1.0)
     hurried = generate_hypotheses(obj, space, (SUPPORT,), limited, np.random.default_rng(3))
-    assert all(h.rounds == 1 and h.attempts == 1 for h in hurried[1:])
-    assert any(h.rounds > 1 for h in reference[1:])
+    mirrored = [h.generator == "algorithm1" for h in reference]
+    assert sum(mirrored) >= 2
+    assert all(
+        h.rounds == 1 and h.attempts == 1 for h in hurried[1:] if h.generator == "algorithm1"
+    )
+    assert all(h.attempts == 1 for h in hurried[1:])
+    assert any(h.rounds > 1 for h in reference[1:] if h.generator == "algorithm1")
     with pytest.raises(ValueError, match="timeout_s"):
         dataclasses.replace(config, timeout_s=0.0)
 
@@ -202,6 +214,8 @@ def test_objects_cut_by_the_image_border_may_extend_further(low):
         obj.id, 0, obj.pixels, obj.points, obj.colours, obj.facets, obj.facet_of_point, True
     )
     cut = generate_hypotheses(border, None, (SUPPORT,), CONFIG, np.random.default_rng(0))
+    inside = [h for h in inside if h.generator == "algorithm1"]
+    cut = [h for h in cut if h.generator == "algorithm1"]
     assert max(h.distances_m[0] for h in inside) <= CONFIG.max_depth_m
     assert max(h.distances_m[0] for h in cut) > CONFIG.max_depth_m
 
@@ -304,7 +318,7 @@ def test_a_curved_facet_is_mirrored_about_its_tangent_plane():
     obj = PartialObject(
         1, 0, np.arange(len(points)), points, np.zeros((2000, 3), np.uint8), (facet,)
     )
-    config = HypothesisConfig(count=4, max_rounds=1)
+    config = HypothesisConfig(count=4, max_rounds=1, structure_share=0.0)
     hypotheses = generate_hypotheses(obj, None, (), config, np.random.default_rng(0))
     mean_y = points[:, 1].mean()
     assert mean_y < 0.005  # most points are on the flat front

@@ -161,3 +161,22 @@ def test_bad_occupancy_files_are_rejected_clearly(tmp_path, change, problem):
 def _save(path, arrays):
     np.savez(path, **arrays)
     return path
+
+
+def test_free_voxels_counted_from_keys_match_the_map_at_the_centres():
+    """unary_report looks keys up in a SpaceMap of the same pitch by their integer indices: the
+    same states as ``state_at`` at the voxel centres, grid edges and outside included."""
+    from ipr import voxels as vox
+    from ipr.perception.free_space import FREE, SpaceMap, VoxelGrid
+    from ipr.perception.occupancy import unary_report
+
+    rng = np.random.default_rng(0)
+    grid = VoxelGrid.around(np.array([-0.3, -0.2, -0.05]), np.array([0.25, 0.3, 0.3]), 0.005)
+    space = SpaceMap(grid, rng.integers(0, 3, grid.shape).astype(np.uint8))
+    keys = np.unique(vox.pack(rng.integers(-80, 80, (20000, 3))))
+    expected = np.count_nonzero(space.state_at(vox.centres(keys, 0.005)) == FREE)
+    report = unary_report(np.zeros((1, 3)), keys, 0.005, space, ())
+    assert report.free_voxels == expected
+    # Another pitch than the map's: looked up at the centres.
+    coarse = unary_report(np.zeros((1, 3)), keys, 0.01, space, ())
+    assert coarse.free_voxels == np.count_nonzero(space.state_at(vox.centres(keys, 0.01)) == FREE)

@@ -40,6 +40,10 @@ class ShapeHypothesis:
         voxel_keys: sorted ``ipr.voxels`` keys of its voxels at ``voxel_pitch_m`` (None when
             not voxelised, e.g. without a free-space map).
         voxel_pitch_m: pitch of ``voxel_keys`` (m).
+        generator: what made it (``ipr.hypotheses.generate.GENERATORS``): "algorithm1"
+            (mirrored facets), "symmetry" (reflective symmetry planes), "revolution"
+            (rotational symmetry about the support normal), "box", "cylinder", "sphere"
+            (primitives fitted to the observed points) or "minimum" (the minimum shape).
     """
 
     object_id: int
@@ -59,6 +63,7 @@ class ShapeHypothesis:
     forced_wall_voxels: int = 0
     voxel_keys: np.ndarray | None = None
     voxel_pitch_m: float = voxels.DEFAULT_PITCH_M
+    generator: str = "algorithm1"
 
     @property
     def bounds(self) -> np.ndarray:

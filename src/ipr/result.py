@@ -767,6 +767,8 @@ def write_posterior_result(
                 "carved": posterior.output_meshes is not None
                 and posterior.output_meshes[posterior.best] is not None,
                 "volumes_m3": volume_spread(posterior.hypotheses),
+                "best_generator": posterior.best_hypothesis.generator,
+                "hypothesis_generators": [posterior.hypotheses[k].generator for k in keep],
                 "generation_s": posterior.generation_s,
             }
         )

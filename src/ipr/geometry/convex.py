@@ -34,8 +34,12 @@ def _oriented_mesh(hull: ConvexHull) -> tuple[np.ndarray, np.ndarray, float]:
     normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     flip = np.einsum("ij,ij->i", normals, hull.equations[:, :3]) < 0
     simplices[flip] = simplices[flip][:, [0, 2, 1]]
-    used, inverse = np.unique(simplices, return_inverse=True)
-    return hull.points[used].copy(), inverse.reshape(-1, 3).astype(np.int64), float(hull.volume)
+    # Compact the vertices (the same order as np.unique's, without its sort).
+    used = np.zeros(len(hull.points), dtype=bool)
+    used[simplices] = True
+    number = np.cumsum(used) - 1
+    faces = number[simplices].astype(np.int64)
+    return hull.points[used].copy(), faces, float(hull.volume)
 
 
 def clip_halfspace(

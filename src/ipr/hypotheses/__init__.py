@@ -1,7 +1,10 @@
 """The hypotheses stage: complete shapes for each partial object and the constraints on them.
 
 - ``generate``: Algorithm 1 (paper Sec. IV-B): mirrored facets, convex hulls, the unary checks
-  at generation, and each object's minimum shape.
+  at generation, and each object's minimum shape; beside Algorithm 1's, a share of the count
+  (``HypothesisConfig.structure_share``) goes to structure-aware candidates.
+- ``structure``: the structure-aware families: symmetry planes, surfaces of revolution, boxes,
+  cylinders and spheres fitted to the observed points (issue 28).
 - ``constraints``: Constraints(X) (Sec. IV-C): unary feasibility and pairwise penetration.
 - ``prepare``: both together for all objects of frame 0, the ``PreparedHypotheses`` every
   inference method starts from.

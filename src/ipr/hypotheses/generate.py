@@ -59,6 +59,13 @@ Choices made here (the paper leaves them open):
   resampled with its observed facets' variates halved each attempt (pulling d towards D_min), at
   most ``max_attempts`` times; if every attempt fails, the one with the fewest offending voxels is
   kept with ``feasible=False`` (logged) for the constraint stage to reject.
+- Structure-aware candidates (``ipr.hypotheses.structure``; docs/DESIGN_NOTES.md,
+  "Structure-aware candidates beside Algorithm 1"): ``structure_share`` of the m hypotheses
+  (rounded) are made by the structure-aware generators that apply to the object, taking turns
+  (symmetry, revolution, box, cylinder, sphere); Algorithm 1 makes the rest, and all of them
+  when none applies. Each is labelled with its generator (``ShapeHypothesis.generator``), goes
+  through the same hull, support snap, cuts and unary checks, and has two attempts: its
+  variates, then the family's own fit with no hidden extension.
 - Work and time: an object costs at most ``count * max_attempts * max_rounds`` rounds of
   Algorithm 1, so by default there is no wall-clock limit and the output is a function of the
   inputs and the rng alone, on any machine and under any load (docs/DESIGN_NOTES.md, "No
@@ -71,17 +78,17 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import ClassVar
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
-from scipy.spatial import ConvexHull, QhullError
+from scipy.spatial import ConvexHull, HalfspaceIntersection, QhullError
 
 from ipr import voxels
 from ipr.checks import Checks, Interval, OrNone, Predicate, check_fields
 from ipr.geometry.convex import clip_halfspace, convex_mesh
+from ipr.hypotheses import structure
 from ipr.perception.free_space import FREE, SeenSpace
 from ipr.perception.occupancy import PlaneRegion, allowed_voxels, plane_regions, unary_report
 from ipr.perception.types import KnownPlane, PartialObject
@@ -166,6 +173,8 @@ class HypothesisConfig:
         seed: seed used when no rng is given (combined with the object id).
         budget_share: share of a run's time budget given to generation (when a budget is
             given), split over the objects as their ``timeout_s``; inference gets the rest.
+        structure_share: share of ``count`` made by the structure-aware generators (rounded;
+            0: Algorithm 1 alone, as in the paper); the total stays ``count``.
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -195,6 +204,7 @@ class HypothesisConfig:
         "timeout_s": OrNone(Interval(0, None, closed="neither")),
         "seed": Interval(0, None, integer=True),
         "budget_share": Interval(0, 1, closed="neither"),
+        "structure_share": Interval(0, 1),
     }
 
     count: int = 32
@@ -221,6 +231,7 @@ class HypothesisConfig:
     timeout_s: float | None = None
     seed: int = 0
     budget_share: float = 0.6
+    structure_share: float = 0.5
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -632,8 +643,8 @@ def _hull_groups(
     rows = np.repeat(np.arange(count), 3)
     cols = hull.neighbors.ravel()
     same = label[rows] == label[cols]
-    graph = coo_matrix((np.ones(int(same.sum())), (rows[same], cols[same])), shape=(count, count))
-    parts, part = connected_components(graph, directed=False)
+    part = _components(rows[same], cols[same], count)
+    parts = int(part.max()) + 1 if count else 0
     part_area = np.bincount(part, weights=areas, minlength=parts)
     part_normal = np.stack(
         [np.bincount(part, weights=areas * normals[:, k], minlength=parts) for k in range(3)],
@@ -646,6 +657,21 @@ def _hull_groups(
         normal = part_normal[index] / (np.linalg.norm(part_normal[index]) + 1e-15)
         groups.append((normal, np.flatnonzero(part == index), float(part_area[index])))
     return groups
+
+
+def _components(rows: np.ndarray, cols: np.ndarray, count: int) -> np.ndarray:
+    """Connected components (count,) numbered 0, 1, ... of the graph with edges rows[i] -
+    cols[i] (both directions listed): each node takes the smallest label among its
+    neighbours' until none changes (a hull's facets are small graphs; this costs a few
+    vectorised passes where scipy's sparse graph set-up dominates)."""
+    label = np.arange(count)
+    while True:
+        previous = label.copy()
+        np.minimum.at(label, rows, label[cols])
+        label = label[label]  # pointer jumping: follow labels to their own labels
+        if np.array_equal(label, previous):
+            break
+    return np.unique(label, return_inverse=True)[1]
 
 
 def _hull_source(
@@ -774,7 +800,17 @@ def _finish(ctx: _Context, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, 
         if footprint is not None:
             extended = convex_mesh(np.concatenate([mesh[0], footprint]))
             mesh = extended if extended is not None else mesh
+    violated = []
     for cut in ctx.cuts:
+        if float((mesh[0] @ cut[:3]).min()) + cut[3] < -1e-12:
+            violated.append(cut)
+    if len(violated) >= 2:
+        # Several cuts at once: one half-space intersection and one hull instead of a hull per
+        # cut (the same polytope; the sequential cuts below remain the fallback).
+        cut_all = _cut_all(mesh, violated, ctx.base_points.mean(axis=0))
+        if cut_all is not None:
+            return cut_all
+    for cut in violated:
         vertices, faces, _ = mesh
         if float((vertices @ cut[:3]).min()) + cut[3] < -1e-12:
             clipped = convex_mesh(clip_halfspace(vertices, faces, cut[:3], float(cut[3])))
@@ -783,6 +819,47 @@ def _finish(ctx: _Context, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, 
                 continue
             mesh = clipped
     return mesh
+
+
+def _cut_all(
+    mesh: tuple[np.ndarray, np.ndarray, float], cuts: list[np.ndarray], interior: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """The convex mesh cut to every half-space n . x + offset >= 0 of ``cuts`` (4,) at once
+    (qhull's half-space intersection about ``interior``, a point strictly inside all of them:
+    the observed points' centroid); None when that point is not strictly inside or qhull
+    fails (the caller cuts one by one)."""
+    vertices, faces, _ = mesh
+    tri = vertices[faces]
+    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    lengths = np.linalg.norm(normals, axis=1)
+    keep = lengths > 1e-12
+    normals = normals[keep] / lengths[keep, None]
+    offsets = -np.einsum("ij,ij->i", normals, tri[keep, 0])
+    cut_array = np.asarray(cuts, float)
+    # Rows (a, b): a . x + b <= 0 inside; the hull's coplanar triangles give one plane each.
+    halfspaces = np.concatenate([np.column_stack([normals, offsets]), -cut_array])
+    halfspaces = np.unique(np.round(halfspaces, 9), axis=0)
+    if float((halfspaces[:, :3] @ interior + halfspaces[:, 3]).max()) >= -1e-7:
+        return None
+    try:
+        corners = HalfspaceIntersection(halfspaces, interior).intersections
+    except (QhullError, ValueError):
+        return None
+    # Planes meeting at one corner give copies of it a rounding apart: merge them (10 nm).
+    result = convex_mesh(np.unique(np.round(corners, 8), axis=0))
+    if result is None:
+        return None
+    # Corners that stayed a hair apart can leave sliver faces whose planes other vertices
+    # cross by more than rounding: then the one-cut-at-a-time path decides.
+    vertices, faces, _ = result
+    tri = vertices[faces]
+    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    lengths = np.linalg.norm(normals, axis=1)
+    keep = lengths > 1e-15
+    normals = normals[keep] / lengths[keep, None]
+    excess = vertices @ normals.T - np.einsum("ij,ij->i", normals, tri[keep, 0])
+    scale = float(np.ptp(vertices, axis=0).max())
+    return result if float(excess.max()) <= 1e-9 * scale else None
 
 
 def _evaluate(
@@ -805,6 +882,133 @@ def _evaluate(
     return keys, free, wall, free <= allowed and wall <= allowed
 
 
+_Maker = Callable[[np.ndarray, int], np.ndarray]
+
+
+def _structure_makers(
+    obj: PartialObject, ctx: _Context
+) -> tuple[dict[str, _Maker], dict[str, int]]:
+    """The structure-aware generators (``ipr.hypotheses.structure``) that apply to an object,
+    fitted: name -> make(variates (6,), variant number) -> candidate points (K, 3); and per
+    generator the frames its variants cycle through."""
+    config = ctx.config
+    settings = structure.StructureSettings(
+        rim_m=max(config.rim_width_m, ctx.pitch_m),
+        max_rays=max(config.max_rays // 2, 1),
+        quantile=config.ray_quantile,
+        pitch_m=ctx.pitch_m,
+    )
+    points, point_normals = _point_normals(obj, 2000)
+    towards = ctx.fallback_normal
+    step = config.ray_step_m or ctx.pitch_m
+
+    def reach(origins: np.ndarray, direction: np.ndarray) -> np.ndarray:
+        return _ray_limits(origins, -direction, ctx.space, ctx.regions, ctx.cap_m, step)
+
+    makers: dict[str, _Maker] = {}
+    support = next((r.plane for r in ctx.regions if r.is_support), None)
+    facets = [(np.asarray(f.normal, float), float(f.area_m2)) for f in obj.facets]
+    frames = []  # (frame, plane subsets)
+    upright = None
+    if support is not None and len(points) >= 8:
+        upright = structure.upright_frame(
+            points, facets, np.asarray(support.normal, float), float(support.offset), towards
+        )
+        frames.append((upright, ((0, 1), (0,), (1,))))
+    own = structure.facet_frame(points, facets, towards) if len(points) >= 8 else None
+    if own is not None and not any(structure.same_frame(own, f) for f, _ in frames):
+        frames.append((own, ((0, 1, 2), (0, 1), (2,), (0,), (1,))))
+    fitted = []
+    for frame, subsets in frames:
+        room = structure.reaches(frame, frame.local(points), points, reach, settings)
+        # Extents and hulls only need the observed hull's vertices (reflections are affine).
+        fitted.append((frame, room, frame.local(ctx.base_points), subsets))
+    if fitted:
+
+        def symmetric(t: np.ndarray, k: int) -> np.ndarray:
+            frame, room, extreme, subsets = fitted[k % len(fitted)]
+            axes = subsets[(k // len(fitted)) % len(subsets)]
+            return structure.symmetry_points(frame, extreme, t * room, axes)
+
+        def box(t: np.ndarray, k: int) -> np.ndarray:
+            frame, room, extreme, _ = fitted[k % len(fitted)]
+            return structure.box_points(frame, extreme, t * room)
+
+        makers["symmetry"], makers["box"] = symmetric, box
+    if upright is not None:
+        found = structure.best_axis(upright, points, point_normals, towards, settings)
+        if found is not None:
+            axis, axis_local, fit = found
+            makers["revolution"] = lambda t, k: structure.revolution_points(
+                axis, axis_local, ctx.base_points, fit, float(t[0]), settings
+            )
+            makers["cylinder"] = lambda t, k: structure.revolution_points(
+                axis, axis_local, ctx.base_points, fit, float(t[0]), settings, constant=True
+            )
+    sphere = structure.fit_sphere(points)
+    if (
+        sphere is not None
+        and sphere.residual <= settings.sphere_residual
+        and sphere.radius <= float(np.ptp(points, axis=0).max())
+    ):
+        makers["sphere"] = lambda t, k: structure.sphere_points(
+            ctx.base_points, points, sphere, float(t[0]), settings, towards
+        )
+    return makers, {"symmetry": len(fitted), "box": len(fitted)}
+
+
+def _structure_plan(
+    makers: dict[str, _Maker],
+    fits: dict[str, int],
+    count: int,
+    rng: np.random.Generator,
+    ctx: _Context,
+) -> list[tuple[str, Callable[[float], _Sample]]]:
+    """``count`` structure-aware candidates, the applicable generators taking turns: (generator,
+    make) pairs, ``make(scale)`` the candidate's points with its variates scaled by ``scale``
+    (1, then 0 for the second attempt). Variates: ``structure.variates``."""
+    towards, min_thickness = ctx.fallback_normal, ctx.config.min_thickness_m
+    order = [name for name in structure.STRUCTURE_GENERATORS if name in makers]
+    if not order or count <= 0:
+        return []
+    counts = dict.fromkeys(order, 0)
+    for slot in range(count):
+        counts[order[slot % len(order)]] += 1
+    plan = []
+    for name in order:
+        n = counts[name]
+        variates = structure.variates(name, n, rng, fits.get(name, 1))
+        for k in range(n):
+
+            def make(scale: float, name=name, t=variates[k], k=k) -> _Sample:
+                cloud = makers[name](t * scale, k)
+                # At least D_min thick towards the camera, like the minimum shape: a face seen
+                # alone with no room behind it would otherwise give a sub-voxel sliver.
+                extent = float(np.ptp(cloud @ towards))
+                if extent < min_thickness:
+                    cloud = np.concatenate([cloud, cloud - (min_thickness - extent) * towards])
+                return _Sample(cloud, [], [], [], 0)
+
+            plan.append((name, make))
+    logger.debug("object %d: structure-aware candidates %s", ctx.object_id, counts)
+    return plan
+
+
+def _point_normals(obj: PartialObject, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """The finite observed points taken evenly, at most ``count`` (K, 3), and the normal of the
+    facet each belongs to (K, 3; zero for none)."""
+    points = np.asarray(obj.points, float).reshape(-1, 3)
+    index = np.flatnonzero(np.all(np.isfinite(points), axis=1))
+    if len(index) > count:
+        index = index[np.linspace(0, len(index) - 1, count).round().astype(np.int64)]
+    normals = np.zeros((len(index), 3))
+    if obj.facet_of_point is not None and obj.facets:
+        facet_normals = np.array([np.asarray(f.normal, float) for f in obj.facets])
+        owner = np.asarray(obj.facet_of_point)[index]
+        normals[owner >= 0] = facet_normals[owner[owner >= 0]]
+    return points[index], normals
+
+
 def generate_hypotheses(
     obj: PartialObject,
     space: SeenSpace | None,
@@ -812,7 +1016,8 @@ def generate_hypotheses(
     config: HypothesisConfig | None = None,
     rng: np.random.Generator | None = None,
 ) -> tuple[ShapeHypothesis, ...]:
-    """``config.count`` complete-shape hypotheses of a partial object (Algorithm 1).
+    """``config.count`` complete-shape hypotheses of a partial object: Algorithm 1's first, then
+    the structure-aware candidates (``structure_share``; module doc).
 
     Args:
         obj: the observed part (points and facets, world frame, m).
@@ -823,7 +1028,8 @@ def generate_hypotheses(
 
     Returns:
         m closed convex hypotheses, each containing every observed point, none below the
-        support; see the module doc for D_max, the no-room rule, resampling and the timeout.
+        support, each labelled with its generator; see the module doc for D_max, the no-room
+        rule, resampling and the timeout.
     """
     config = config or HypothesisConfig()
     if rng is None:
@@ -831,10 +1037,14 @@ def generate_hypotheses(
     started = time.perf_counter()
     ctx = _prepare(obj, space, planes, config)
     m = config.count
-    # Stratified variates of the observed facets: column j is a shuffled set of m strata.
-    strata = np.stack([rng.permutation(m) for _ in ctx.observed], axis=1)
-    observed_u = (strata + rng.random(strata.shape)) / m
-    slot_rngs = rng.spawn(m)
+    makers, fits = _structure_makers(obj, ctx) if config.structure_share > 0 else ({}, {})
+    structured = int(round(config.structure_share * m)) if makers else 0
+    m1 = m - structured  # Algorithm 1 makes the rest
+    # Stratified variates of the observed facets: column j is a shuffled set of m1 strata.
+    strata = np.stack([rng.permutation(m1) for _ in ctx.observed], axis=1)
+    observed_u = (strata + rng.random(strata.shape)) / max(m1, 1)
+    slot_rngs = rng.spawn(m1)
+    plan = _structure_plan(makers, fits, structured, rng.spawn(1)[0], ctx) if structured else []
     hypotheses = []
     timed_out = False
     for k in range(m):
@@ -853,9 +1063,18 @@ def generate_hypotheses(
             )
         max_rounds = 1 if timed_out else config.max_rounds
         attempts = 1 if timed_out else config.max_attempts
+        if k >= m1:
+            # A structure-aware candidate's second attempt is its smallest (variates 0): a
+            # shape whose family does not fit fails there too, so more halving is wasted.
+            attempts = min(attempts, 2)
         best = None
         for attempt in range(attempts):
-            sample = _algorithm1(ctx, observed_u[k] * 0.5**attempt, slot_rngs[k], max_rounds)
+            if k < m1:
+                sample = _algorithm1(ctx, observed_u[k] * 0.5**attempt, slot_rngs[k], max_rounds)
+                generator = "algorithm1"
+            else:
+                generator, make = plan[k - m1]
+                sample = make(0.0 if attempt else 1.0)
             mesh = _finish(ctx, sample.points)
             keys, free, wall, feasible = _evaluate(ctx, mesh)
             candidate = (free + wall, attempt, sample, mesh, keys, free, wall, feasible)
@@ -868,10 +1087,11 @@ def generate_hypotheses(
         _, attempt, sample, mesh, keys, free, wall, feasible = best
         if not feasible:
             logger.info(
-                "object %d hypothesis %d: no feasible sample in %d attempts (%d free, %d wall "
-                "voxels); kept as infeasible",
+                "object %d hypothesis %d (%s): no feasible sample in %d attempts (%d free, %d "
+                "wall voxels); kept as infeasible",
                 obj.id,
                 k,
+                generator,
                 attempts,
                 free,
                 wall,
@@ -896,6 +1116,7 @@ def generate_hypotheses(
                 forced_wall_voxels=ctx.forced_wall,
                 voxel_keys=keys,
                 voxel_pitch_m=ctx.pitch_m,
+                generator=generator,
             )
         )
     logger.debug(
@@ -952,4 +1173,5 @@ def minimum_shape(
         distances_m=np.array([thickness]),
         facet_normals=normal[None, :],
         facet_sources=("minimum",),
+        generator="minimum",
     )

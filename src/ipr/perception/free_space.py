@@ -65,7 +65,12 @@ class VoxelGrid:
     def indices_of(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Voxel indices (N, 3) of world points (N, 3) and a (N,) mask of points inside the grid."""
         indices = np.floor((points - self.origin) / self.voxel_size_m).astype(np.int64)
-        inside = np.all((indices >= 0) & (indices < np.asarray(self.shape)), axis=1)
+        shape = self.shape
+        inside = (
+            (indices[:, 0] >= 0) & (indices[:, 0] < shape[0])
+            & (indices[:, 1] >= 0) & (indices[:, 1] < shape[1])
+            & (indices[:, 2] >= 0) & (indices[:, 2] < shape[2])
+        )  # fmt: skip
         return indices, inside
 
 
@@ -90,7 +95,11 @@ class SpaceMap:
         """State (N,) of the voxels holding world points (N, 3); UNKNOWN outside the grid."""
         indices, inside = self.grid.indices_of(points)
         states = np.full(len(points), UNKNOWN, dtype=np.uint8)
-        states[inside] = self.state[tuple(indices[inside].T)]
+        kept = indices[inside]
+        nx, ny, nz = self.state.shape
+        # One flat gather (the grid is C-ordered): cheaper than a tuple of three index arrays.
+        flat = (kept[:, 0] * ny + kept[:, 1]) * nz + kept[:, 2]
+        states[inside] = self.state.reshape(-1)[flat]
         return states
 
 

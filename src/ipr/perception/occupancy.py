@@ -15,7 +15,7 @@ import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
 from ipr import voxels
-from ipr.perception.free_space import FREE, SeenSpace
+from ipr.perception.free_space import FREE, UNKNOWN, SeenSpace, SpaceMap
 from ipr.perception.types import KnownPlane
 
 logger = logging.getLogger(__name__)
@@ -114,15 +114,38 @@ def unary_report(
     free = walls = 0
     count = 0 if keys is None else int(keys.size)
     if keys is not None and keys.size:
-        centres = voxels.centres(keys, pitch_m)
+        walls_regions = [region for region in regions if not region.is_support]
         if space is not None:
-            free = int(np.count_nonzero(space.state_at(centres) == FREE))
-        wall_mask = np.zeros(len(centres), dtype=bool)
-        for region in regions:
-            if not region.is_support:
+            free = int(np.count_nonzero(_states(space, keys, pitch_m) == FREE))
+        if walls_regions:
+            centres = voxels.centres(keys, pitch_m)
+            wall_mask = np.zeros(len(centres), dtype=bool)
+            for region in walls_regions:
                 wall_mask |= region.in_wall(centres)
-        walls = int(np.count_nonzero(wall_mask))
+            walls = int(np.count_nonzero(wall_mask))
     return UnaryReport(count, free, walls, below)
+
+
+def _states(space: SeenSpace, keys: np.ndarray, pitch_m: float) -> np.ndarray:
+    """``space.state_at`` of the centres of voxel keys at ``pitch_m``; on a ``SpaceMap`` whose grid
+    has that pitch and sits on the same lattice (``VoxelGrid.around`` aligns it), the keys'
+    integer indices are looked up directly (the same voxels, no float division)."""
+    if isinstance(space, SpaceMap) and space.grid.voxel_size_m == pitch_m:
+        offset = np.round(np.asarray(space.grid.origin, float) / pitch_m)
+        if np.allclose(offset * pitch_m, space.grid.origin, rtol=0, atol=1e-9):
+            indices = voxels.unpack(keys) - offset.astype(np.int64)
+            shape = space.state.shape
+            inside = (
+                (indices[:, 0] >= 0) & (indices[:, 0] < shape[0])
+                & (indices[:, 1] >= 0) & (indices[:, 1] < shape[1])
+                & (indices[:, 2] >= 0) & (indices[:, 2] < shape[2])
+            )  # fmt: skip
+            states = np.full(len(keys), UNKNOWN, dtype=np.uint8)
+            kept = indices[inside]
+            flat = (kept[:, 0] * shape[1] + kept[:, 1]) * shape[2] + kept[:, 2]
+            states[inside] = space.state.reshape(-1)[flat]
+            return states
+    return space.state_at(voxels.centres(keys, pitch_m))
 
 
 def allowed_voxels(voxel_count: int, share: float, count: int) -> int:

@@ -1,0 +1,272 @@
+"""The ceiling of any choice among the hypotheses, per suite and per generator (issue 28).
+
+The ``hypotheses`` section of docs/BENCHMARKS.md (``python -m benchmarks.run --only
+hypotheses``), or on its own for a subset::
+
+    python -m benchmarks.hypothesis_ceiling --suite ycb-dynamic --limit 4 [--scene DIR ...]
+        [--perception-cache DIR] [--algorithm1-only]
+
+Per scene: frame 0 is perceived, the hypotheses are prepared (``prepare_hypotheses``, the
+default configuration, seed 0, as the Collision Checker's run draws them) and the Collision
+Checker's marginals taken from them (``uniform_posteriors``); the output of each object is then
+carved by frame 0's free space as ``ipr infer`` writes it (``ipr.carving``). Against the ground
+truth (benchmark code may read it; inference never does), each visible object (>= 100 pixels in
+frame 0) is matched to a prediction one-to-one by the Hungarian assignment on the Collision
+Checker's output IoU (5 mm voxels), and scores:
+
+- ``collision checker``: the IoU of the carved output (``ipr eval``'s object IoU);
+- ``oracle``: the best IoU of the object's candidates the Collision Checker kept (non-zero
+  probability: jointly feasible), convex as inferred: the ceiling of any choice among them;
+- per generator (``ShapeHypothesis.generator``), the best IoU of that generator's candidates,
+  and how often that generator holds the object's best candidate (ties go to the first);
+- the candidates' volume spread (largest / smallest kept candidate, median over objects).
+
+Unmatched visible objects count 0 everywhere. Timing: generation and constraints of the whole
+scene (``prepare_hypotheses``) per object, as process CPU time and as wall time; the machine is
+shared, so CPU time is the figure to compare.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import pickle
+import sys
+import time
+from collections import Counter
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks.common import markdown_table, median
+
+#: Suites of the section (bins-real has no full models of its objects).
+SUITES = ("ycb-static", "ycb-dynamic", "ycbv-real")
+MIN_VISIBLE_PX = 100
+
+
+def _iou(a: np.ndarray, b: np.ndarray) -> float:
+    from ipr import voxels
+
+    common = voxels.intersection_count(a, b)
+    union = a.size + b.size - common
+    return common / union if union else 0.0
+
+
+def _perceive(path: Path, cache: Path | None):
+    """Frame 0's objects, free space and planes (pickled in ``cache`` when given)."""
+    from ipr.config import Config
+    from ipr.perception import perceive_scene
+    from ipr.scene import load_scene
+
+    stored = cache / f"{path.parent.name}-{path.name}.pkl" if cache else None
+    if stored is not None and stored.exists():
+        return pickle.loads(stored.read_bytes())
+    scene = load_scene(path)
+    scene = dataclasses.replace(scene, frames=scene.frames[:1], pushes=())
+    perception = perceive_scene(scene, Config().perception)
+    out = (scene, perception.objects, perception.free_space[0], perception.planes[0])
+    if stored is not None:
+        stored.parent.mkdir(parents=True, exist_ok=True)
+        stored.write_bytes(pickle.dumps(out))
+    return out
+
+
+def measure_scene(path: Path, config=None, cache: Path | None = None) -> dict:
+    """One scene's rows: per visible ground-truth object its scores (module doc)."""
+    from scipy.optimize import linear_sum_assignment
+
+    from ipr import voxels
+    from ipr.carving import carve_posteriors, surface_views
+    from ipr.collision_checker import uniform_posteriors
+    from ipr.config import Config
+    from ipr.ground_truth import frame0_ground_truth, visible_pixel_counts
+    from ipr.hypotheses import prepare_hypotheses
+
+    config = config or Config()
+    scene, objects_per_frame, space, planes = _perceive(path, cache)
+    objects = objects_per_frame[0]
+    generation_rng, sampler_rng = np.random.default_rng(0).spawn(2)
+    cpu, wall = time.process_time(), time.perf_counter()
+    prepared = prepare_hypotheses(
+        objects, space, planes, config.hypotheses, config.constraints, rng=generation_rng
+    )
+    cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
+    posteriors = uniform_posteriors(prepared, config.collision_checker, rng=sampler_rng)
+    views = surface_views(scene.frames, objects_per_frame, None, config.carving)
+    carved = carve_posteriors(posteriors, views) if config.carving.enabled else posteriors
+
+    poses, models, _ = frame0_ground_truth(path)
+    counts, _ = visible_pixel_counts(path, poses, models)
+    world_from_camera = scene.frames[0].world_from_camera
+    pitch = voxels.DEFAULT_PITCH_M
+    truths = [
+        voxels.occupied_voxels(model, pitch, world_from_camera @ pose.camera_from_model)
+        for pose, model, count in zip(poses, models, counts, strict=True)
+        if count >= MIN_VISIBLE_PX
+    ]
+    outputs = [voxels.scanline_voxels(*p.output_mesh, pitch) for p in carved]
+    checker = np.array([[_iou(o, t) for t in truths] for o in outputs]).reshape(-1, len(truths))
+    matched: dict[int, int] = {}
+    if checker.size:
+        for row, column in zip(*linear_sum_assignment(-checker), strict=True):
+            if checker[row, column] > 0:
+                matched[int(column)] = int(row)
+    rows = []
+    for t, truth in enumerate(truths):
+        row = {"scene": path.name, "checker": 0.0, "oracle": 0.0, "generators": {}, "best": None}
+        if t in matched:
+            k = matched[t]
+            posterior = posteriors[k]
+            kept = [
+                h
+                for h, p in zip(posterior.hypotheses, posterior.probabilities, strict=True)
+                if p > 0
+            ]
+            ious = [_iou(h.keys(pitch), truth) for h in kept]
+            best = int(np.argmax(ious))
+            per_generator: dict[str, float] = {}
+            for h, iou in zip(kept, ious, strict=True):
+                per_generator[h.generator] = max(per_generator.get(h.generator, 0.0), iou)
+            volumes = [h.volume_m3 for h in kept]
+            row.update(
+                checker=checker[k, t],
+                oracle=ious[best],
+                generators=per_generator,
+                best=kept[best].generator,
+                spread=max(volumes) / max(min(volumes), 1e-12),
+                kept=len(kept),
+            )
+        rows.append(row)
+    return {
+        "scene": path.name,
+        "rows": rows,
+        "objects": len(objects),
+        "cpu_s": cpu,
+        "wall_s": wall,
+        "generated": Counter(h.generator for i in prepared.ids for h in prepared.generated[i]),
+    }
+
+
+def summarise(scenes: Sequence[dict]) -> dict:
+    """Suite figures from ``measure_scene`` outputs (module doc)."""
+    rows = [row for scene in scenes for row in scene["rows"]]
+    n = max(len(rows), 1)
+    generators = sorted({g for row in rows for g in row["generators"]})
+    wins = Counter(row["best"] for row in rows if row["best"])
+    objects = max(sum(s["objects"] for s in scenes), 1)
+    generated = Counter()
+    for scene in scenes:
+        generated.update(scene["generated"])
+    return {
+        "scenes": len(scenes),
+        "truths": len(rows),
+        "checker": sum(r["checker"] for r in rows) / n,
+        "oracle": sum(r["oracle"] for r in rows) / n,
+        "generators": {
+            g: {
+                "oracle": sum(r["generators"].get(g, 0.0) for r in rows) / n,
+                "wins": wins.get(g, 0),
+                "per_object": generated[g] / objects,
+            }
+            for g in generators
+        },
+        "spread": median([r["spread"] for r in rows if "spread" in r]),
+        "cpu_s_per_object": sum(s["cpu_s"] for s in scenes) / objects,
+        "wall_s_per_object": sum(s["wall_s"] for s in scenes) / objects,
+    }
+
+
+def render(summaries: dict[str, dict]) -> str:
+    """The section's markdown."""
+    lines = [
+        "## Hypothesis ceiling (`benchmarks.hypothesis_ceiling`)",
+        "",
+        "The best any choice among the candidates could do: per visible ground-truth object, "
+        "the best object IoU of the candidates the Collision Checker keeps (jointly feasible, "
+        "convex as inferred; oracle: chosen against the ground truth), beside the Collision "
+        "Checker's own carved output. Frame 0 only, default configuration, seed 0, 5 mm "
+        "voxels; unmatched objects count 0. Per generator, `oracle IoU` is its best kept "
+        "candidate's (0 for an object it kept none of: families that do not fit an object "
+        "make no candidate or infeasible ones), `wins` the objects whose best candidate it "
+        "made, `per object` the candidates it generated per object. `spread`: largest "
+        "over smallest kept candidate volume, median over objects. Time: hypothesis "
+        "generation and constraints per object, CPU (process) and wall seconds.",
+        "",
+    ]
+    header = ["suite", "scenes", "objects", "collision checker", "oracle", "volume spread",
+              "CPU s/object", "wall s/object"]  # fmt: skip
+    table = [
+        [name, s["scenes"], s["truths"], s["checker"], s["oracle"], f"{s['spread']:.1f}",
+         f"{s['cpu_s_per_object']:.2f}", f"{s['wall_s_per_object']:.2f}"]
+        for name, s in summaries.items()
+    ]  # fmt: skip
+    lines += [markdown_table(header, table), ""]
+    header = ["suite", "generator", "oracle IoU", "wins", "per object"]
+    table = [
+        [name, g, v["oracle"], f"{v['wins']}/{s['truths']}", f"{v['per_object']:.1f}"]
+        for name, s in summaries.items()
+        for g, v in s["generators"].items()
+    ]
+    lines += [markdown_table(header, table), ""]
+    return "\n".join(lines)
+
+
+def run(suites: dict[str, list[Path]], limit: int | None = None, cache: Path | None = None) -> str:
+    """The section for ``benchmarks.run``: every scene of the suites of ``SUITES`` (frame-0
+    perception pickled in ``cache`` when given)."""
+    summaries = {}
+    for name in SUITES:
+        scenes = list(suites.get(name, []))[:limit]
+        if not scenes:
+            continue
+        measured = []
+        for number, path in enumerate(scenes, 1):
+            measured.append(measure_scene(Path(path), cache=cache))
+            print(f"bench: hypotheses {name} {number}/{len(scenes)} {Path(path).name}", flush=True)
+        summaries[name] = summarise(measured)
+    return render(summaries)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--suite", action="append", default=[], choices=SUITES)
+    parser.add_argument("--scene", action="append", default=[], type=Path)
+    parser.add_argument("--limit", type=int, default=None)
+    parser.add_argument("--perception-cache", type=Path, default=None)
+    parser.add_argument(
+        "--algorithm1-only", action="store_true", help="no structure-aware candidates (before)"
+    )
+    args = parser.parse_args(argv)
+    from ipr.config import Config
+    from ipr.suites import suite_scenes
+
+    config = Config()
+    if args.algorithm1_only:
+        config = dataclasses.replace(
+            config, hypotheses=dataclasses.replace(config.hypotheses, structure_share=0.0)
+        )
+    groups = {name: suite_scenes(name)[: args.limit] for name in args.suite}
+    if args.scene:
+        groups["scenes"] = args.scene[: args.limit]
+    summaries = {}
+    for name, scenes in groups.items():
+        measured = []
+        for path in scenes:
+            measured.append(measure_scene(Path(path), config, args.perception_cache))
+            rows = measured[-1]["rows"]
+            print(
+                f"{name} {Path(path).name}: checker "
+                f"{np.mean([r['checker'] for r in rows]) if rows else 0:.3f} oracle "
+                f"{np.mean([r['oracle'] for r in rows]) if rows else 0:.3f} "
+                f"cpu/object {measured[-1]['cpu_s'] / max(measured[-1]['objects'], 1):.2f} s",
+                flush=True,
+            )
+        summaries[name] = summarise(measured)
+    print(render(summaries))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

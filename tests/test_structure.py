@@ -1,0 +1,207 @@
+"""Structure-aware candidates (ipr.hypotheses.structure): fits of generic families, and their
+candidates on rendered shapes (the box of box_scene, a cylinder standing or lying)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+import trimesh
+
+from ipr import voxels
+from ipr.camera import backproject
+from ipr.hypotheses import HypothesisConfig, generate_hypotheses, structure
+from ipr.perception.types import PartialObject
+
+from .box_scene import SUPPORT, K, box_mesh, partial_box, render_view
+from .test_hypotheses import assert_valid
+
+CONFIG = HypothesisConfig(count=8)
+SETTINGS = structure.StructureSettings()
+
+
+def iou(a: np.ndarray, b: np.ndarray) -> float:
+    common = voxels.intersection_count(a, b)
+    return common / (a.size + b.size - common)
+
+
+def best_by_generator(hypotheses, truth) -> dict[str, float]:
+    """Best IoU with ``truth`` per generator over the feasible hypotheses (0: none)."""
+    best: dict[str, float] = {}
+    for h in hypotheses:
+        score = iou(h.keys(), truth) if h.feasible else 0.0
+        best[h.generator] = max(best.get(h.generator, 0.0), score)
+    return best
+
+
+def arc_points(centre, radius, axis_index, length, arc_deg, facing, rng, noise=0.0005):
+    """Points on the side of a cylinder (world), the arc of ``arc_deg`` facing ``facing`` (2,)
+    in the plane across the axis (``axis_index``: 0 = x, 2 = z), with Gaussian noise (m)."""
+    facing = np.asarray(facing, float) / np.linalg.norm(facing)
+    middle = np.arctan2(facing[1], facing[0])
+    angles = middle + np.radians(rng.uniform(-arc_deg / 2, arc_deg / 2, 3000))
+    along = rng.uniform(0, length, 3000)
+    across = np.column_stack([np.cos(angles), np.sin(angles)]) * radius + centre
+    points = np.insert(across, axis_index, along, axis=1)
+    return points + rng.normal(0, noise, points.shape)
+
+
+def rendered(mesh, eye, target):
+    """A rendered mesh on the table: its partial object (no facets) and the view's space."""
+    view = render_view(eye, target=target, box=(np.asarray(mesh.vertices), np.asarray(mesh.faces)))
+    mask = (view.index == 0) & (view.depth > 0)
+    camera = backproject(view.depth, K)[mask]
+    points = camera @ view.world_from_camera[:3, :3].T + view.world_from_camera[:3, 3]
+    obj = PartialObject(1, 0, np.flatnonzero(mask.ravel()), points, np.zeros_like(points, np.uint8))
+    truth = voxels.occupied_voxels((np.asarray(mesh.vertices), np.asarray(mesh.faces)))
+    return obj, view.space(), truth
+
+
+def test_fit_axis_finds_a_cylinder_from_a_third_of_its_side():
+    rng = np.random.default_rng(0)
+    centre = np.array([0.012, -0.021])
+    points = arc_points(centre, 0.035, 2, 0.1, 120, (0.0, -1.0), rng)
+    fit = structure.fit_axis(points, np.ones(len(points), dtype=bool), SETTINGS)
+    assert fit is not None
+    assert np.linalg.norm(fit.centre - centre) < 0.002
+    assert fit.radius_m == pytest.approx(0.035, abs=0.002)
+    assert fit.residual < 0.05
+    # A flat face (normal -y) is a circle of any large radius: no axis fits it.
+    flat = np.column_stack([rng.uniform(-0.05, 0.05, 500), np.zeros(500), rng.uniform(0, 0.1, 500)])
+    flat += rng.normal(0, 0.0005, flat.shape)
+    towards = np.array([0, -1.0, 0])
+    upright = structure.upright_frame(flat, [], np.array([0, 0, 1.0]), 0.0, towards)
+    normals = np.tile(towards, (len(flat), 1))
+    assert structure.best_axis(upright, flat, normals, towards, SETTINGS) is None
+
+
+def test_the_axis_of_a_lying_cylinder_is_horizontal():
+    rng = np.random.default_rng(1)
+    # Axis along x at height 0.035 (resting on z = 0), seen from above and in front (-y).
+    points = arc_points(np.array([0.0, 0.035]), 0.035, 0, 0.12, 140, (-0.6, 0.8), rng)
+    towards = np.array([0.0, -0.6, 0.8])
+    upright = structure.upright_frame(points, [], np.array([0, 0, 1.0]), 0.0, towards)
+    found = structure.best_axis(upright, points, np.zeros_like(points), towards, SETTINGS)
+    assert found is not None
+    frame, _, fit = found
+    assert abs(frame.up[0]) > 0.95  # the axis is x, not the support normal
+    assert fit.radius_m == pytest.approx(0.035, abs=0.003)
+
+
+def test_a_lid_does_not_pull_the_circle_fit():
+    """A can seen from above: the lid's points (on a facet facing up) are left out of the fit
+    about the support normal, and the few stray ones inside the circles by the refit."""
+    rng = np.random.default_rng(2)
+    side = arc_points(np.zeros(2), 0.04, 2, 0.1, 150, (0.0, -1.0), rng)
+    radius, angle = 0.04 * np.sqrt(rng.uniform(0, 1, 2000)), rng.uniform(0, 2 * np.pi, 2000)
+    lid = np.column_stack([radius * np.cos(angle), radius * np.sin(angle), np.full(2000, 0.1)])
+    points = np.concatenate([side, lid])
+    normals = np.zeros_like(points)
+    normals[len(side) :] = [0.0, 0.0, 1.0]
+    towards = np.array([0.0, -0.6, 0.8])
+    upright = structure.upright_frame(points, [], np.array([0, 0, 1.0]), 0.0, towards)
+    found = structure.best_axis(upright, points, normals, towards, SETTINGS)
+    assert found is not None and found[0] is upright
+    assert np.linalg.norm(found[2].centre) < 0.003
+    # Stray inner points (5 %) are dropped by the outer refit.
+    stray = np.concatenate([side, lid[:150] - [0.0, 0.0, 0.05]])
+    fit = structure.fit_axis(stray, np.ones(len(stray), dtype=bool), SETTINGS)
+    assert fit is not None and np.linalg.norm(fit.centre) < 0.003
+
+
+def test_a_box_corner_is_no_surface_of_revolution():
+    rng = np.random.default_rng(5)
+    front = np.column_stack([rng.uniform(-0.05, 0.05, 800), np.full(800, -0.03)])
+    side = np.column_stack([np.full(500, 0.05), rng.uniform(-0.03, 0.03, 500)])
+    xy = np.concatenate([front, side])
+    points = np.column_stack([xy, rng.uniform(0.0, 0.04, len(xy))])
+    points += rng.normal(0, 0.0005, points.shape)
+    assert structure.fit_axis(points, np.ones(len(points), dtype=bool), SETTINGS) is None
+
+
+def test_sphere_fit_of_a_cap():
+    rng = np.random.default_rng(3)
+    direction = rng.normal(size=(4000, 3))
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    cap = direction[direction @ np.array([0.0, -0.6, 0.8]) > 0.3]
+    centre = np.array([0.1, 0.05, 0.03])
+    fit = structure.fit_sphere(centre + 0.03 * cap + rng.normal(0, 0.0003, cap.shape))
+    assert fit is not None
+    assert np.linalg.norm(fit.centre - centre) < 0.002
+    assert fit.radius == pytest.approx(0.03, abs=0.002)
+    assert fit.residual < 0.05
+
+
+def test_a_leaning_box_gets_its_own_frame():
+    tilt = np.radians(20)
+    top = np.array([np.sin(tilt), 0.0, np.cos(tilt)])
+    side = np.array([np.cos(tilt), 0.0, -np.sin(tilt)])
+    facets = [(top, 0.005), (side, 0.002)]
+    frame = structure.facet_frame(np.zeros((10, 3)), facets, np.array([0.0, -1.0, 0.0]))
+    assert frame is not None
+    assert np.allclose(frame.up, top) and abs(frame.a @ side) > 0.999
+    upright = structure.upright_frame(
+        np.random.default_rng(0).normal(size=(50, 3)), facets, np.array([0, 0, 1.0]), 0.0,
+        np.array([0.0, -1.0, 0.0]),
+    )  # fmt: skip
+    assert not structure.same_frame(frame, upright)
+    assert structure.same_frame(upright, upright)
+
+
+def test_variates_start_with_the_fit_and_skew_small():
+    rng = np.random.default_rng(4)
+    box = structure.variates("box", 9, rng, fits=2)
+    assert np.all(box[:2] == 0.0)
+    assert np.all((box[2:] >= 0) & (box[2:] <= 1))
+    assert np.median(box[2:]) < 0.4  # u^2 of stratified u: median about 0.25
+    revolution = structure.variates("revolution", 5, rng)
+    assert np.all(revolution[0] == 0.5)
+    # Stratified: each direction's drawn variates fall one per stratum.
+    strata = np.sort(np.floor(revolution[1:] * 4), axis=0)
+    assert np.all(strata == np.arange(4)[:, None])
+
+
+@pytest.mark.parametrize("eye", [(0.0, -0.45, 0.4), (0.3, -0.3, 0.2)])
+def test_a_standing_cylinder_is_completed_by_its_revolution(eye):
+    """Algorithm 1 mirrors the curved side's facets; the revolution about the support normal
+    gets the whole can."""
+    mesh = trimesh.creation.cylinder(radius=0.035, height=0.1, sections=64)
+    mesh.apply_translation([0.0, 0.0, 0.05])
+    obj, space, truth = rendered(mesh, eye, (0.0, 0.0, 0.05))
+    hypotheses = generate_hypotheses(obj, space, (SUPPORT,), CONFIG, np.random.default_rng(0))
+    for h in hypotheses:
+        assert_valid(h, obj.points, convex_tolerance=1e-8)
+    best = best_by_generator(hypotheses, truth)
+    assert best["revolution"] >= 0.9 and best["cylinder"] >= 0.9
+    assert best["revolution"] > best["algorithm1"] + 0.05
+
+
+def test_a_box_seen_at_a_corner_is_completed_by_its_symmetry_and_box():
+    view = render_view((0.3, -0.3, 0.3))
+    obj, space = partial_box(view), view.space()
+    hypotheses = generate_hypotheses(obj, space, (SUPPORT,), CONFIG, np.random.default_rng(0))
+    best = best_by_generator(hypotheses, voxels.occupied_voxels(box_mesh()))
+    assert best["symmetry"] >= 0.9 and best["box"] >= 0.9
+
+
+def test_the_count_is_a_budget_shared_by_the_generators(monkeypatch):
+    view = render_view((0.3, -0.3, 0.3))
+    obj, space = partial_box(view), view.space()
+    hypotheses = generate_hypotheses(obj, space, (SUPPORT,), CONFIG, np.random.default_rng(0))
+    generators = [h.generator for h in hypotheses]
+    assert len(hypotheses) == CONFIG.count
+    assert generators.count("algorithm1") == CONFIG.count // 2
+    assert generators[: CONFIG.count // 2] == ["algorithm1"] * (CONFIG.count // 2)
+    assert {"symmetry", "box"} <= set(generators)
+    alone = dataclasses.replace(CONFIG, structure_share=0.0)
+    only = generate_hypotheses(obj, space, (SUPPORT,), alone, np.random.default_rng(0))
+    assert {h.generator for h in only} == {"algorithm1"}
+    # Without a support only the object's own frame (from its faces) is left: no revolution
+    # about the support normal; without faces either (and no sphere), Algorithm 1 makes all.
+    unsupported = generate_hypotheses(obj, None, (), CONFIG, np.random.default_rng(0))
+    assert {h.generator for h in unsupported} <= {"algorithm1", "symmetry", "box", "sphere"}
+    bare = dataclasses.replace(obj, facets=(), facet_of_point=None)
+    monkeypatch.setattr(structure, "fit_sphere", lambda points: None)
+    nothing = generate_hypotheses(bare, None, (), CONFIG, np.random.default_rng(0))
+    assert {h.generator for h in nothing} == {"algorithm1"}
