@@ -30,6 +30,7 @@ def test_each_command_has_help(command: str, capsys):
     assert "usage: ipr" in capsys.readouterr().out
 
 
+@pytest.mark.slow  # an end-to-end run of several seconds
 def test_synth_then_eval_scores_ground_truth_perfectly(tmp_path: Path, capsys):
     out = tmp_path / "scenes"
     assert (
@@ -304,6 +305,7 @@ def test_infer_default_method_writes_the_full_result_and_is_reproducible(tmp_pat
     assert np.allclose(runs[0], runs[1])  # same seed and samples, any number of workers
 
 
+@pytest.mark.slow  # an end-to-end run of several seconds
 def test_infer_with_a_budget_too_small_for_one_sample_falls_back_and_says_so(
     tmp_path: Path, capsys
 ):
