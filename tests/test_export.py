@@ -572,3 +572,43 @@ def test_sdf_loads_in_libsdformat(exports, tmp_path):
     for row, item in zip(rows[1:], manifest["objects"], strict=True):
         assert float(row[1]) == pytest.approx(item["mass_kg"], rel=1e-5)
         assert int(row[2]) == len(item["collision"])
+
+
+def test_exported_objects_wear_their_ids_colours(result_dir):
+    """Each object's colour in the MJCF, URDF, SDF and GLB is its id's in the overlays and
+    report.html (``ipr.perception.output.palette``), not its position's."""
+    import dataclasses
+    import xml.etree.ElementTree as ET
+
+    from ipr.export.formats import glb_scene, sdf_world, urdf_document
+    from ipr.export.mjcf import mjcf_document
+    from ipr.perception.output import palette
+
+    scene = build_scene(result_dir)
+    # Result ids are the segmentation's (1, 4, 9, ...): give the objects ids unlike positions.
+    renamed = [
+        dataclasses.replace(body, id=7 + 5 * n, name=f"object_{7 + 5 * n}")
+        for n, body in enumerate(scene.objects)
+    ]
+    scene = dataclasses.replace(scene, objects=tuple(renamed))
+    expected = {body.name: palette(np.array([body.id]))[0] / 255.0 for body in renamed}
+
+    def rgba(text: str) -> np.ndarray:
+        return np.array([float(v) for v in text.split()])[:3]
+
+    mjcf = ET.fromstring(mjcf_document(scene.objects, scene.support_z_m, ExportConfig())[0])
+    for body in renamed:
+        geom = mjcf.find(f".//geom[@name='{body.name}_visual']")
+        assert np.allclose(rgba(geom.get("rgba")), expected[body.name], atol=1e-6)
+        urdf = ET.fromstring(urdf_document(body))
+        assert np.allclose(rgba(urdf.find(".//color").get("rgba")), expected[body.name])
+    sdf = ET.fromstring(sdf_world(scene, ExportConfig()))
+    for model in sdf.iter("model"):
+        if model.get("name") in expected:
+            diffuse = model.find(".//material/diffuse").text
+            assert np.allclose(rgba(diffuse), expected[model.get("name")], atol=1e-6)
+    glb = glb_scene(scene)
+    for name, geometry in glb.geometry.items():
+        body = next(b for b in renamed if name.startswith(b.name))
+        colours = geometry.visual.face_colors[:, :3] / 255.0
+        assert np.allclose(colours, expected[body.name], atol=0.5 / 255.0)

@@ -104,13 +104,13 @@ def _inertia_elements(parent: ET.Element, body: ObjectBody, sdf: bool) -> None:
         )
 
 
-def urdf_document(body: ObjectBody, index: int = 0) -> str:
+def urdf_document(body: ObjectBody) -> str:
     """The URDF text of one object: a single link named like it (module doc)."""
     robot = ET.Element("robot", name=body.name)
     mujoco = ET.SubElement(robot, "mujoco")
     ET.SubElement(mujoco, "compiler", discardvisual="false", fusestatic="false")
     material = ET.SubElement(robot, "material", name=f"{body.name}_colour")
-    ET.SubElement(material, "color", rgba=numbers(colour(index)))
+    ET.SubElement(material, "color", rgba=numbers(colour(body.id)))
     link = ET.SubElement(robot, "link", name=body.name)
     _inertia_elements(link, body, sdf=False)
     visual = ET.SubElement(link, "visual")
@@ -130,9 +130,9 @@ def urdf_document(body: ObjectBody, index: int = 0) -> str:
 def write_urdf(folder: Path, scene: SceneBodies, config: ExportConfig) -> list[str]:
     write_meshes(folder, scene)
     names = []
-    for index, body in enumerate(scene.objects):
+    for body in scene.objects:
         names.append(f"{body.name}.urdf")
-        (folder / names[-1]).write_text(urdf_document(body, index), encoding="utf-8")
+        (folder / names[-1]).write_text(urdf_document(body), encoding="utf-8")
     return names
 
 
@@ -143,7 +143,7 @@ def _sdf_friction(parent: ET.Element, config: ExportConfig) -> None:
     ET.SubElement(ode, "mu2").text = number(config.friction[0])
 
 
-def _sdf_model(body: ObjectBody, index: int, config: ExportConfig, pose: bool) -> ET.Element:
+def _sdf_model(body: ObjectBody, config: ExportConfig, pose: bool) -> ET.Element:
     model = ET.Element("model", name=body.name)
     if pose:
         ET.SubElement(model, "pose").text = numbers([*body.position_m, 0.0, 0.0, 0.0])
@@ -153,8 +153,8 @@ def _sdf_model(body: ObjectBody, index: int, config: ExportConfig, pose: bool) -
     mesh = ET.SubElement(ET.SubElement(visual, "geometry"), "mesh")
     ET.SubElement(mesh, "uri").text = f"{MESH_DIR}/{surface_file(body)}"
     material = ET.SubElement(visual, "material")
-    ET.SubElement(material, "ambient").text = numbers(colour(index))
-    ET.SubElement(material, "diffuse").text = numbers(colour(index))
+    ET.SubElement(material, "ambient").text = numbers(colour(body.id))
+    ET.SubElement(material, "diffuse").text = numbers(colour(body.id))
     for n, name in enumerate(collision_files(body)):
         collision = ET.SubElement(link, "collision", name=f"collision_{n}")
         mesh = ET.SubElement(ET.SubElement(collision, "geometry"), "mesh")
@@ -182,16 +182,16 @@ def sdf_world(scene: SceneBodies, config: ExportConfig) -> str:
         ET.SubElement(plane, "size").text = "2 2"
         if kind == "collision":
             _sdf_friction(element, config)
-    for index, body in enumerate(scene.objects):
-        world.append(_sdf_model(body, index, config, pose=True))
+    for body in scene.objects:
+        world.append(_sdf_model(body, config, pose=True))
     ET.indent(root)
     return '<?xml version="1.0"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
 
 
-def sdf_model(body: ObjectBody, index: int, config: ExportConfig) -> str:
+def sdf_model(body: ObjectBody, config: ExportConfig) -> str:
     """The SDF 1.7 model of one object, its frame at the model's origin."""
     root = ET.Element("sdf", version="1.7")
-    root.append(_sdf_model(body, index, config, pose=False))
+    root.append(_sdf_model(body, config, pose=False))
     ET.indent(root)
     return '<?xml version="1.0"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
 
@@ -200,9 +200,9 @@ def write_sdf(folder: Path, scene: SceneBodies, config: ExportConfig) -> list[st
     write_meshes(folder, scene)
     (folder / "scene.sdf").write_text(sdf_world(scene, config), encoding="utf-8")
     names = ["scene.sdf"]
-    for index, body in enumerate(scene.objects):
+    for body in scene.objects:
         names.append(f"{body.name}.sdf")
-        (folder / names[-1]).write_text(sdf_model(body, index, config), encoding="utf-8")
+        (folder / names[-1]).write_text(sdf_model(body, config), encoding="utf-8")
     return names
 
 
@@ -216,9 +216,9 @@ def glb_scene(scene: SceneBodies) -> Any:
     import trimesh
 
     result = trimesh.Scene()
-    for index, body in enumerate(scene.objects):
+    for body in scene.objects:
         mesh = body.surface.copy()
-        rgba = (np.array(colour(index)) * 255).astype(np.uint8)
+        rgba = np.round(np.array(colour(body.id)) * 255).astype(np.uint8)
         mesh.visual = trimesh.visual.ColorVisuals(
             mesh, face_colors=np.tile(rgba, (len(mesh.faces), 1))
         )

@@ -18,20 +18,10 @@ from typing import Any
 import numpy as np
 
 from ipr.export.model import ExportConfig, ObjectBody
+from ipr.perception.output import palette
 
 #: Folder of the mesh files, relative to the exported model files.
 MESH_DIR = "meshes"
-#: Object colours (RGBA), in turn.
-PALETTE = (
-    (0.90, 0.45, 0.20, 1.0),
-    (0.25, 0.55, 0.85, 1.0),
-    (0.35, 0.70, 0.35, 1.0),
-    (0.85, 0.75, 0.25, 1.0),
-    (0.60, 0.40, 0.75, 1.0),
-    (0.85, 0.35, 0.50, 1.0),
-    (0.30, 0.75, 0.75, 1.0),
-    (0.55, 0.55, 0.55, 1.0),
-)
 
 
 def number(value: float) -> str:
@@ -44,8 +34,11 @@ def numbers(values: Any) -> str:
     return " ".join(number(v) for v in np.asarray(values, dtype=np.float64).ravel())
 
 
-def colour(index: int) -> tuple[float, float, float, float]:
-    return PALETTE[index % len(PALETTE)]
+def colour(object_id: int) -> tuple[float, float, float, float]:
+    """RGBA in [0, 1] of an object: its id's colour in the overlays, completion.png and
+    report.html (``ipr.perception.output.palette``)."""
+    red, green, blue = (float(c) / 255.0 for c in palette(np.array([object_id]))[0])
+    return (red, green, blue, 1.0)
 
 
 def surface_file(body: ObjectBody) -> str:
@@ -146,7 +139,7 @@ def mjcf_document(
         friction=numbers(config.friction),
         rgba="0.8 0.8 0.78 1",
     )
-    for index, body in enumerate(objects):
+    for body in objects:
         element = ET.SubElement(world, "body", name=body.name, pos=numbers(body.position_m))
         ET.SubElement(element, "freejoint", name=body.name)
         ET.SubElement(
@@ -164,7 +157,7 @@ def mjcf_document(
                 {"class": "visual"},
                 name=f"{body.name}_visual",
                 mesh=body.name,
-                rgba=numbers(colour(index)),
+                rgba=numbers(colour(body.id)),
             )
         for n in range(len(body.collision)):
             ET.SubElement(
