@@ -139,3 +139,19 @@ def _pool_workers(pid: int) -> list[int]:
         for child, command in command_of.items()
         if (b"spawn_main" in command or b"forkserver" in command) and descends(child)
     ]
+
+
+@pytest.mark.slow
+def test_a_batch_uses_the_chosen_frames_of_every_scene(tmp_path: Path):
+    scenes = tmp_path / "scenes"
+    synth = ["synth", str(scenes), "--kind", "dynamic", "--seed", "3", "--count", "1"]
+    assert main([*synth, "--width", "320", "--height", "240"]) == 0
+    out = tmp_path / "out"
+    run = ["batch", str(scenes), "-o", str(out), "--method", "collision-checker", "--jobs", "1"]
+    assert main([*run, "--frames", "0", "--no-eval"]) == 0
+    (result,) = [p for p in out.iterdir() if p.is_dir() and not p.name.startswith(".")]
+    provenance = json.loads((result / "result.json").read_text())["provenance"]
+    assert provenance["frames"] == [0]
+    with pytest.raises(SystemExit) as refused:  # a bad selection is refused before any work
+        main([*run, "--frames", "0-x", "--no-eval"])
+    assert refused.value.code == EXIT_INPUT_ERROR

@@ -49,6 +49,8 @@ class BatchOptions:
         evaluate: score each result against the scene's ground truth when it has some.
         up_camera: the up direction in camera coordinates for scenes without camera poses
             (``ipr.scene.load_scene``; None: from the data).
+        frames: the frame ids every scene uses (``ipr.scene.load_scene``; None: all), e.g.
+            the first few of BOP scenes with hundreds of frames.
     """
 
     method: str = DEFAULT_METHOD
@@ -58,6 +60,7 @@ class BatchOptions:
     config: Config | None = None
     evaluate: bool = True
     up_camera: tuple[float, float, float] | None = None
+    frames: tuple[int, ...] | None = None
 
 
 @dataclass(frozen=True)
@@ -176,6 +179,7 @@ def run_scene(scene: Path, result_dir: Path, options: BatchOptions) -> SceneOutc
                 config=options.config,
                 overwrite=result_dir.exists(),
                 up_camera=options.up_camera,
+                frames=options.frames,
             )
             objects = _kept(result_dir)
             status, seconds = "done", time.perf_counter() - started

@@ -592,6 +592,7 @@ def build_parser() -> argparse.ArgumentParser:
     batch.add_argument("--no-eval", action="store_true", help="do not score against ground truth")
     _add_config_option(batch)
     _add_up_option(batch)
+    _add_frames_option(batch)
     batch.set_defaults(handler=_cmd_batch)
 
     segment = commands.add_parser(
@@ -748,6 +749,7 @@ def _cmd_batch(args: argparse.Namespace) -> int:
         config=_config(args),
         evaluate=not args.no_eval,
         up_camera=tuple(args.up) if args.up else None,
+        frames=args.frames,
     )
     with _progress() as progress:
         task = progress.add_task(f"{len(scenes)} scenes", total=len(scenes))
