@@ -200,17 +200,23 @@ def base_scene(tmp_path_factory) -> Path:
     return write_scene(folder, make_frames(2), pushes=[push], pusher=Pusher())
 
 
-def _fuzz_check(base_scene: Path, mutations) -> None:
-    work = base_scene.parent / "work"
-    shutil.rmtree(work, ignore_errors=True)
-    scene = work / "scene"
-    shutil.copytree(base_scene, scene, symlinks=True)
+def _mutated_copy(base: Path, target: Path, mutations) -> Path:
+    """``target``: a fresh copy of the folder ``base`` (its parent emptied first) with the
+    ``mutations`` applied in turn."""
+    shutil.rmtree(target.parent, ignore_errors=True)
+    shutil.copytree(base, target, symlinks=True)
     for mutation in mutations:
         # An earlier mutation may have removed or broken the file (or made its folder a
         # symlink loop: OSError ELOOP).
         with contextlib.suppress(OSError, json.JSONDecodeError, UnicodeDecodeError,
                                  ZeroDivisionError, IndexError, KeyError, TypeError):  # fmt: skip
-            _apply(scene, mutation)
+            _apply(target, mutation)
+    return target
+
+
+def _fuzz_check(base_scene: Path, mutations) -> None:
+    work = base_scene.parent / "work"
+    scene = _mutated_copy(base_scene, work / "scene", mutations)
     before = _listing(work)
     code, stderr = _run(["check", str(scene)])
     _check_outcome(code, stderr)
@@ -265,13 +271,7 @@ def base_result(tmp_path_factory) -> tuple[Path, Path]:
 def _fuzz_result(base_result: tuple[Path, Path], mutations) -> None:
     scene, base = base_result
     work = base.parent / "work"
-    shutil.rmtree(work, ignore_errors=True)
-    result = work / "result"
-    shutil.copytree(base, result, symlinks=True)
-    for mutation in mutations:
-        with contextlib.suppress(OSError, json.JSONDecodeError, UnicodeDecodeError,
-                                 ZeroDivisionError, IndexError, KeyError, TypeError):  # fmt: skip
-            _apply(result, mutation)
+    result = _mutated_copy(base, work / "result", mutations)
     before = _listing(work)
     code, stderr = _run(["eval", str(scene), str(result), "--json", str(work / "m.json")])
     _check_outcome(code, stderr)
