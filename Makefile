@@ -4,7 +4,7 @@
 PYTHON ?= $(firstword $(foreach v,3.11 3.12 3.13,$(shell command -v python$(v) 2>/dev/null)) python3.11)
 VENV   := .venv
 PY     := $(VENV)/bin/python
-IPR    := $(VENV)/bin/ipr
+IPR    := $(VENV)/bin/ipr-shapes
 STAMP  := $(VENV)/.installed
 RAY_STAMP := $(VENV)/.installed-ray
 PYBULLET_STAMP := $(VENV)/.installed-pybullet
@@ -23,10 +23,10 @@ $(STAMP): requirements.lock pyproject.toml scripts/setup_system.sh
 # The distribution was called "ipr" before it became "ipr-shapes": drop the old record.
 	$(PY) -m pip uninstall --quiet --yes ipr >/dev/null 2>&1 || true
 	$(PY) -m pip install --quiet --no-deps -e .
-	$(PY) -c 'import sys, ipr.gl; sys.exit(ipr.gl.main())'
+	$(PY) -c 'import sys, ipr_shapes.gl; sys.exit(ipr_shapes.gl.main())'
 	touch $(STAMP)
 
-# Ray for `ipr batch --ray` (the "ray" extra), pinned apart so that `make test` does not need it.
+# Ray for `ipr-shapes batch --ray` (the "ray" extra), pinned apart so that `make test` does not need it.
 $(RAY_STAMP): $(STAMP) requirements-ray.lock
 	$(PY) -m pip install --quiet -r requirements-ray.lock
 	touch $(RAY_STAMP)
@@ -36,7 +36,7 @@ $(PYBULLET_STAMP): $(STAMP) requirements-pybullet.lock
 	touch $(PYBULLET_STAMP)
 
 demo: $(STAMP)
-	$(PY) -m ipr.demo $(DEMO_OUT)
+	$(PY) -m ipr_shapes.demo $(DEMO_OUT)
 
 # The default tests (under 3 minutes on 2 cores); .ci/run also runs the slow ones (test-slow).
 test: $(STAMP)

@@ -16,7 +16,7 @@ def machine_description() -> str:
     import mujoco
     import numpy
 
-    from ipr.gl import select_gl_backend  # the backend the benchmarks render with
+    from ipr_shapes.gl import select_gl_backend  # the backend the benchmarks render with
 
     cpu = platform.processor() or "unknown CPU"
     try:
@@ -78,7 +78,7 @@ def development_scenes(
     bowl, the mug and four cups, each twice, ``CONTAINER_OBJECTS``): generated on first use into
     a temporary folder renamed when complete, so an interrupted run leaves no half-written set
     to be reused."""
-    from ipr.synth import SynthConfig, generate_scenes
+    from ipr_shapes.synth import SynthConfig, generate_scenes
 
     name = f"{kind}-containers-{seed}-{count}" if containers else f"{kind}-{seed}-{count}"
     folder = Path(root) / name

@@ -3,14 +3,14 @@ docs/experiments/2026-11-24-view-fusion.md and the later and pusher free-space f
 
 Usage: ``python -m benchmarks.dev_fusion [--seed 9100] [--count 10]``.
 
-Generates (or reuses) development dynamic scenes with ``ipr synth`` seeds from ``--seed`` (never
+Generates (or reuses) development dynamic scenes with ``ipr-shapes synth`` seeds from ``--seed`` (never
 the benchmark suites), and scores the Collision Checker's answer on frame 0's partial objects
 with and without the later views fused into them, each with frame 0's free space alone and with
-the later frames' free space through each object's registered motion (``ipr.fusion``), and
+the later frames' free space through each object's registered motion (``ipr_shapes.fusion``), and
 with the pusher's volumes too (``FusionConfig.pusher_free_space``), against
 the ground truth of the visible objects (benchmark code may read it; inference never does).
 Prints the mean object IoU per scene and over all visible objects (unmatched objects count 0,
-as in ``ipr eval``'s object space), how many objects a view was fused into or have a later free
+as in ``ipr-shapes eval``'s object space), how many objects a view was fused into or have a later free
 space, and the time fusion took.
 """
 
@@ -28,7 +28,7 @@ def _matched_iou(posteriors: list, truths: list[np.ndarray]) -> float:
     """Sum over the one-to-one best matches of the best hypotheses' IoU with the truths."""
     from scipy.optimize import linear_sum_assignment
 
-    from ipr import voxels
+    from ipr_shapes import voxels
 
     if not posteriors or not truths:
         return 0.0
@@ -44,12 +44,12 @@ def _matched_iou(posteriors: list, truths: list[np.ndarray]) -> float:
 
 def measure_scene(path: Path) -> dict:
     """Summed matched IoU without and with fusion, visible truths, fused objects, seconds."""
-    from ipr import voxels
-    from ipr.collision_checker import collision_checker
-    from ipr.fusion import FusionConfig, fuse_views, tracked_free_spaces
-    from ipr.ground_truth import frame0_ground_truth, visible_pixel_counts
-    from ipr.perception import perceive_scene
-    from ipr.scene import load_scene
+    from ipr_shapes import voxels
+    from ipr_shapes.collision_checker import collision_checker
+    from ipr_shapes.fusion import FusionConfig, fuse_views, tracked_free_spaces
+    from ipr_shapes.ground_truth import frame0_ground_truth, visible_pixel_counts
+    from ipr_shapes.perception import perceive_scene
+    from ipr_shapes.scene import load_scene
 
     scene = load_scene(path)
     perception = perceive_scene(scene)

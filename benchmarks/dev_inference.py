@@ -3,7 +3,7 @@ figures in docs/experiments/2026-11-21-likelihood-and-weighting.md and the files
 
 Usage: ``python -m benchmarks.dev_inference [--seed 9100] [--count 10] [--samples 40]``.
 
-Generates (or reuses) development dynamic scenes with ``ipr synth`` seeds from 9100 (never the
+Generates (or reuses) development dynamic scenes with ``ipr-shapes synth`` seeds from 9100 (never the
 benchmark suites), samples ``--samples`` joint models per scene with the full method in one
 process, and scores, against each object's matched ground truth (benchmark code may read it;
 inference never does):
@@ -15,8 +15,8 @@ inference never does):
 - the best of each object's candidates (oracle) and of the candidates the sampler visited.
 
 Figures are mean object IoU over the visible ground-truth objects (unmatched objects count 0),
-the convention of ``ipr eval``'s object space, of the convex candidates as inferred: what the
-result writes is then carved by the space the camera saw empty (``ipr.carving``), which this
+the convention of ``ipr-shapes eval``'s object space, of the convex candidates as inferred: what the
+result writes is then carved by the space the camera saw empty (``ipr_shapes.carving``), which this
 script leaves out so that it measures the choice among candidates alone.
 """
 
@@ -32,7 +32,7 @@ ALPHAS = (0.05, 0.2, 0.5, 2.0, 10.0)
 
 
 def _iou(a: np.ndarray, b: np.ndarray) -> float:
-    from ipr import voxels
+    from ipr_shapes import voxels
 
     common = voxels.intersection_count(a, b)
     union = a.size + b.size - common
@@ -43,15 +43,15 @@ def measure_scene(path: Path, samples: int) -> dict:
     """Samples of one scene and the IoU of every candidate of every matched object."""
     from scipy.optimize import linear_sum_assignment
 
-    from ipr import voxels
-    from ipr.collision_checker import uniform_posteriors
-    from ipr.ground_truth import frame0_ground_truth, visible_pixel_counts
-    from ipr.hypotheses import prepare_hypotheses
-    from ipr.inference import InferenceConfig, build_problem, run_samples
-    from ipr.likelihood import observed_frames
-    from ipr.methods import METHODS
-    from ipr.perception import perceive_scene
-    from ipr.scene import load_scene
+    from ipr_shapes import voxels
+    from ipr_shapes.collision_checker import uniform_posteriors
+    from ipr_shapes.ground_truth import frame0_ground_truth, visible_pixel_counts
+    from ipr_shapes.hypotheses import prepare_hypotheses
+    from ipr_shapes.inference import InferenceConfig, build_problem, run_samples
+    from ipr_shapes.likelihood import observed_frames
+    from ipr_shapes.methods import METHODS
+    from ipr_shapes.perception import perceive_scene
+    from ipr_shapes.scene import load_scene
 
     scene = load_scene(path)
     perception = perceive_scene(scene)
@@ -108,8 +108,8 @@ def estimate_iou(
     ``weighting`` (``InferenceConfig.weighting``) and ``prior`` ("uniform" or "size")."""
     import dataclasses
 
-    from ipr.factor_graph import posterior_medoid
-    from ipr.inference import marginals, size_log_prior
+    from ipr_shapes.factor_graph import posterior_medoid
+    from ipr_shapes.inference import marginals, size_log_prior
 
     problem = scene["problem"]
     if prior == "size":

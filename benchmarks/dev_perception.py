@@ -4,7 +4,7 @@ the figures in docs/experiments/).
 Usage: ``python -m benchmarks.dev_perception [--sets 8000:12 8100:24 ...] [--containers]
 [--tracker-only] [--lost] [--config FILE]``.
 
-Generates (or reuses) the development dynamic scenes of the design notes with ``ipr synth``
+Generates (or reuses) the development dynamic scenes of the design notes with ``ipr-shapes synth``
 (base seeds 8000 (12 scenes), 8100 (24), 8012 (38), 8150 (50), and the held-out check 8050
 (24); never the benchmark suites' seeds) under ``--scenes``, runs the perception on every scene
 and scores it with the segmentation benchmark's own code (``benchmarks.segmentation``'s
@@ -44,7 +44,7 @@ import numpy as np
 
 if TYPE_CHECKING:  # imported lazily at run time (the GL backend is chosen first)
     from benchmarks.segmentation import SceneSegmentation
-    from ipr.segmentation_metrics import LostId
+    from ipr_shapes.segmentation_metrics import LostId
 
 #: (base seed, scene count) of the development sets; the held-out check is scored apart.
 DEVELOPMENT_SETS = ((8000, 12), (8100, 24), (8012, 38), (8150, 50))
@@ -60,7 +60,7 @@ def tracker_only_perceive(cache: Path, overrides: dict[str, float] | None = None
     tracker's time shared out over the frames."""
     from dataclasses import replace
 
-    from ipr.perception import PerceptionConfig, perceive_scene, track_scene
+    from ipr_shapes.perception import PerceptionConfig, perceive_scene, track_scene
 
     cache.mkdir(parents=True, exist_ok=True)
     defaults = PerceptionConfig()
@@ -86,9 +86,9 @@ def tracker_only_perceive(cache: Path, overrides: dict[str, float] | None = None
 
 def configured_perceive(path: Path):
     """A ``benchmarks.segmentation.Perceive`` running the perception with the settings of a
-    TOML file (``ipr.config.read_config``; one timing run)."""
-    from ipr.config import read_config
-    from ipr.perception import perceive_scene
+    TOML file (``ipr_shapes.config.read_config``; one timing run)."""
+    from ipr_shapes.config import read_config
+    from ipr_shapes.perception import perceive_scene
 
     config = read_config(path).perception
 
@@ -132,7 +132,7 @@ def main(argv: list[str] | None = None) -> int:
         "--config",
         type=Path,
         metavar="FILE",
-        help="TOML settings over the defaults (its [perception] sections; 'ipr config show')",
+        help="TOML settings over the defaults (its [perception] sections; 'ipr-shapes config show')",
     )
     parser.add_argument("--scenes", type=Path, default=Path("/tmp/ipr-dev-perception"))
     parser.add_argument("--cache", type=Path, default=Path("/tmp/ipr-dev-perception/untracked"))

@@ -5,8 +5,8 @@ evidence the pushes can give about hidden shapes.
 Usage: ``python -m benchmarks.dev_push_replay [--seed 9100] [--count 10] [--friction 1.0]
 [--timestep 0.004]``.
 
-Generates (or reuses) development dynamic scenes with ``ipr synth`` seeds from ``--seed`` (never
-the benchmark suites). For each scene, builds ``ipr.physics``'s world from the ground-truth
+Generates (or reuses) development dynamic scenes with ``ipr-shapes synth`` seeds from ``--seed`` (never
+the benchmark suites). For each scene, builds ``ipr_shapes.physics``'s world from the ground-truth
 models' convex hulls at their true frame-0 poses (benchmark code may read the ground truth;
 inference never does), with the support the perception found, settles it, replays the
 recorded pushes and, after each push, compares every object's simulated motion with its true
@@ -29,9 +29,9 @@ def replay_errors(path: Path, friction: float, timestep_s: float) -> list[tuple[
     """(simulated-motion error, true motion) in metres per (object, later frame) of one scene."""
     import trimesh
 
-    from ipr.perception import perceive_scene
-    from ipr.physics import Body, PhysicsConfig, build_world
-    from ipr.scene import default_models_dir, load_ground_truth, load_model, load_scene
+    from ipr_shapes.perception import perceive_scene
+    from ipr_shapes.physics import Body, PhysicsConfig, build_world
+    from ipr_shapes.scene import default_models_dir, load_ground_truth, load_model, load_scene
 
     scene = load_scene(path)
     truth = load_ground_truth(path)

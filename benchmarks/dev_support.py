@@ -4,21 +4,21 @@ support is the plane the objects rest on"; docs/experiments/2026-11-26-support-c
 Usage: ``python -m benchmarks.dev_support [--sets bins ycbv uoislab] [--data DIR]
 [--overlays DIR] [--json FILE]``.
 
-Runs ``ipr``'s perception (``load_scene`` then ``perceive_scene``, as ``ipr segment`` does) on
+Runs ``ipr``'s perception (``load_scene`` then ``perceive_scene``, as ``ipr-shapes segment`` does) on
 the shared real sets and prints, per scene:
 
 - **bins** (``bins_real``: boxes packed in a bin, no camera pose): whether the chosen support
   lies under the boxes: the median over the ground-truth boxes of the median signed distance
   (m) of each box's model surface points (1000, fixed seed) to the frame-0 support, the lowest
   box's, and the share of boxes whose median is above the support; and the share of boxes
-  segmented with F >= 0.75 (``ipr.segmentation_metrics.segmentation_scores`` of the frame's
+  segmented with F >= 0.75 (``ipr_shapes.segmentation_metrics.segmentation_scores`` of the frame's
   labels against the ``mask_visib`` masks). Neat arrangements (000-018) and piles (020-028)
   are summed apart.
 - **ycbv** (``ycbv_real``): the share of (object, frame) rows with F >= 0.75 against the
   rendered ground-truth masks (``ground_truth_masks``), every frame.
 - **uoislab** (``real_unlabelled``: no labels): the support's height above the lowest and
   below the highest frame-0 points, for the overlays a person judges (``--overlays`` writes
-  ``ipr segment``'s outputs there, one folder per scene).
+  ``ipr-shapes segment``'s outputs there, one folder per scene).
 
 Every set also gives the median perception ms per frame (``timing_s["per_frame"]``, what
 ``segmentation.json`` records). Ground truth is read for scoring only.
@@ -55,13 +55,13 @@ def _support(perception) -> tuple[np.ndarray, float]:
 
 
 def _perceive(scene_path: Path, overlays: Path | None):
-    from ipr.perception import perceive_scene
-    from ipr.scene import load_scene
+    from ipr_shapes.perception import perceive_scene
+    from ipr_shapes.scene import load_scene
 
     scene = load_scene(scene_path)
     perception = perceive_scene(scene, with_free_space=False)
     if overlays is not None:
-        from ipr.perception.output import write_segmentation
+        from ipr_shapes.perception.output import write_segmentation
 
         write_segmentation(scene, perception, overlays / scene_path.name, overwrite=True)
     return scene, perception
@@ -72,8 +72,8 @@ def measure_bins(scene_path: Path, overlays: Path | None) -> dict:
     import trimesh
     from PIL import Image
 
-    from ipr.scene import default_models_dir, load_ground_truth, load_model
-    from ipr.segmentation_metrics import segmentation_scores
+    from ipr_shapes.scene import default_models_dir, load_ground_truth, load_model
+    from ipr_shapes.segmentation_metrics import segmentation_scores
 
     scene, perception = _perceive(scene_path, overlays)
     normal, offset = _support(perception)
@@ -108,7 +108,7 @@ def measure_bins(scene_path: Path, overlays: Path | None) -> dict:
 
 def measure_ycbv(scene_path: Path, overlays: Path | None) -> dict:
     """F >= 0.75 rows of every frame of one ycbv scene against the rendered masks."""
-    from ipr.segmentation_metrics import ground_truth_masks, segmentation_scores
+    from ipr_shapes.segmentation_metrics import ground_truth_masks, segmentation_scores
 
     scene, perception = _perceive(scene_path, overlays)
     rows = good = 0
@@ -146,18 +146,18 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.dev_support")
     parser.add_argument("--sets", nargs="+", choices=list(SETS), default=list(SETS))
     parser.add_argument("--data", type=Path, help="shared data folder (default: ipr's own)")
-    parser.add_argument("--overlays", type=Path, help="write ipr segment's outputs here")
+    parser.add_argument("--overlays", type=Path, help="write ipr-shapes segment's outputs here")
     parser.add_argument("--json", type=Path, help="also write every figure as JSON")
     args = parser.parse_args(argv)
 
-    import ipr
-    from ipr.data import shared_data_dir
+    import ipr_shapes
+    from ipr_shapes.data import shared_data_dir
 
     data = args.data or shared_data_dir()
     if data is None:
         print("shared data not found (pass --data)", file=sys.stderr)
         return 2
-    print(f"ipr from {Path(ipr.__file__).parent}")
+    print(f"ipr from {Path(ipr_shapes.__file__).parent}")
     measure = {"bins": measure_bins, "ycbv": measure_ycbv, "uoislab": measure_uoislab}
     results: dict[str, list[dict]] = {}
     for name in args.sets:

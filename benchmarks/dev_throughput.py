@@ -5,9 +5,9 @@ Usage::
 
     python -m benchmarks.dev_throughput SCENE [SCENE ...] [--samples 20] [--workers 1]
 
-Per scene: perception, fusion and hypotheses as ``ipr infer`` runs them (default configuration,
+Per scene: perception, fusion and hypotheses as ``ipr-shapes infer`` runs them (default configuration,
 ``ipr+action+uniform``), then ``--samples`` tree samples with their likelihoods in one run of
-``ipr.inference.run_samples``. Reported: CPU seconds of the sampling (``time.process_time``:
+``ipr_shapes.inference.run_samples``. Reported: CPU seconds of the sampling (``time.process_time``:
 the machine is shared, so wall time says little), the CPU seconds inside ``mujoco.mj_step``
 and the steps taken (MuJoCo's raw stepping rate is steps / stepping CPU; if sampling did
 nothing but step, it would reach steps per sample / that rate), world compilations, stability
@@ -31,17 +31,17 @@ def measure(path: Path, samples: int, workers: int) -> dict:
     import mujoco
     import numpy as np
 
-    import ipr.inference.pool as pool
-    import ipr.inference.sampler as sampler_module
-    import ipr.physics as physics
-    from ipr.collision_checker import uniform_posteriors
-    from ipr.config import Config
-    from ipr.hypotheses import prepare_hypotheses
-    from ipr.inference import build_problem
-    from ipr.likelihood import observed_frames
-    from ipr.methods import METHODS
-    from ipr.pipeline import fuse, perceive
-    from ipr.scene import load_scene
+    import ipr_shapes.inference.pool as pool
+    import ipr_shapes.inference.sampler as sampler_module
+    import ipr_shapes.physics as physics
+    from ipr_shapes.collision_checker import uniform_posteriors
+    from ipr_shapes.config import Config
+    from ipr_shapes.hypotheses import prepare_hypotheses
+    from ipr_shapes.inference import build_problem
+    from ipr_shapes.likelihood import observed_frames
+    from ipr_shapes.methods import METHODS
+    from ipr_shapes.pipeline import fuse, perceive
+    from ipr_shapes.scene import load_scene
 
     scene = load_scene(path)
     config = Config()

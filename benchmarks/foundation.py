@@ -3,7 +3,7 @@
 - Generation time per scene: fresh scenes generated one after another in one process (so the
   figure is a single-core time), medians per kind; suites themselves are generated in parallel.
 - Suite statistics: objects, visible objects, frames and pushes per scene.
-- Oracle: each scene's ground truth written as a result and scored with ``ipr eval``; a correct
+- Oracle: each scene's ground truth written as a result and scored with ``ipr-shapes eval``; a correct
   metrics implementation gives IoU 1 up to voxelisation ties, so anything below 0.99 is a bug.
 """
 
@@ -21,8 +21,8 @@ TIMING_SCENES_PER_KIND = 6
 
 def generation_timing(seed: int = 99) -> dict[str, list[float]]:
     """Seconds per scene for fresh static and dynamic scenes (all three arrangements)."""
-    from ipr.suites import ARRANGEMENTS
-    from ipr.synth import generate_scene
+    from ipr_shapes.suites import ARRANGEMENTS
+    from ipr_shapes.synth import generate_scene
 
     timings: dict[str, list[float]] = {"static": [], "dynamic": []}
     with tempfile.TemporaryDirectory() as folder:
@@ -42,7 +42,7 @@ def generation_timing(seed: int = 99) -> dict[str, list[float]]:
 
 def suite_statistics(scenes: list[Path]) -> dict[str, float]:
     """Median objects, visible objects, frames and pushes per scene of a suite."""
-    from ipr.scene import load_visible_pixel_counts
+    from ipr_shapes.scene import load_visible_pixel_counts
 
     objects, visible, frames, pushes = [], [], [], []
     for scene in scenes:
@@ -65,8 +65,8 @@ def suite_statistics(scenes: list[Path]) -> dict[str, float]:
 
 def oracle_scores(scenes: list[Path]) -> dict[str, float]:
     """Minimum and median IoU of the ground truth scored as a result, both spaces."""
-    from ipr.ground_truth import write_ground_truth_result
-    from ipr.metrics import evaluate
+    from ipr_shapes.ground_truth import write_ground_truth_result
+    from ipr_shapes.metrics import evaluate
 
     scene_iou, object_iou, seconds = [], [], []
     with tempfile.TemporaryDirectory() as folder:
@@ -90,7 +90,7 @@ def run(suites: dict[str, list[Path]]) -> str:
     """Markdown section with the foundation figures."""
     timings = generation_timing()
     lines = [
-        "## Scene generation (`ipr synth`)",
+        "## Scene generation (`ipr-shapes synth`)",
         "",
         f"Fresh scenes generated one after another in one process, {TIMING_SCENES_PER_KIND} "
         "per kind (table, container and drawer arrangements in turn), 640x480, "
@@ -104,7 +104,7 @@ def run(suites: dict[str, list[Path]]) -> str:
         "## Benchmark suites",
         "",
         "Generated on first use from fixed seeds and cached outside the repository "
-        "(`ipr suite NAME`); medians per scene.",
+        "(`ipr-shapes suite NAME`); medians per scene.",
         "",
     ]
     rows = []
@@ -125,7 +125,7 @@ def run(suites: dict[str, list[Path]]) -> str:
     lines += [
         "## Metrics sanity: ground truth scored as a result",
         "",
-        "`ipr ground-truth` then `ipr eval` on every scene; IoU must be at least 0.99 in both "
+        "`ipr-shapes ground-truth` then `ipr-shapes eval` on every scene; IoU must be at least 0.99 in both "
         "spaces (5 mm voxels). `eval s` is the median time of one evaluation.",
         "",
     ]

@@ -3,8 +3,8 @@
 
 For every scene of the real data sets without ground truth the benchmark can score
 (``real_unlabelled``) and of the bin-picking scenes (``bins_real``), frame 0 is perceived by
-``ipr.perception.perceive_scene`` (default configuration, free space off, one BLAS thread) and
-drawn as the ``ipr segment`` overlay (``ipr.perception.output.overlay_image``): objects tinted
+``ipr_shapes.perception.perceive_scene`` (default configuration, free space off, one BLAS thread) and
+drawn as the ``ipr-shapes segment`` overlay (``ipr_shapes.perception.output.overlay_image``): objects tinted
 by id and numbered, facet borders dark, the support's pixels (what was taken as the table) flat
 blue, what lies below it dark blue, walls ochre; everything else is the frame dimmed. The images
 are JPEG (at most ``WIDTH`` px wide, quality ``QUALITY``) so the repository stays small; the
@@ -14,7 +14,7 @@ loading or perception fails gets a grey placeholder naming the error.
 The page lists per frame the segments found, whether a support was found (and its share of the
 frame's depth pixels), the walls, the perception time of the frame (one run) and, where the
 scene has ground truth (bins_real), the annotated boxes visible and the share with a segment
-of F >= 0.75 (``ipr.segmentation_metrics``).
+of F >= 0.75 (``ipr_shapes.segmentation_metrics``).
 """
 
 from __future__ import annotations
@@ -64,7 +64,7 @@ class GalleryFrame:
 
 def data_sets() -> dict[str, Path | None]:
     """The real data sets of the gallery: name -> folder in the shared data (None: absent)."""
-    from ipr.data import bins_real_dir, real_unlabelled_dir
+    from ipr_shapes.data import bins_real_dir, real_unlabelled_dir
 
     return {"real_unlabelled": real_unlabelled_dir(), "bins_real": bins_real_dir()}
 
@@ -99,9 +99,9 @@ def _placeholder(text: str, size: tuple[int, int] = (WIDTH, 480)) -> Image.Image
 def gallery_frame(scene_path: Path, data_set: str, out_dir: Path) -> GalleryFrame:
     """Perceive frame 0 of a scene, write its overlay ``out_dir/<scene>.jpg``, return its row."""
     from benchmarks.common import one_thread
-    from ipr.perception import perceive_scene
-    from ipr.perception.output import KNOWN_SUPPORT, known_plane_pixels, overlay_image
-    from ipr.scene import load_scene
+    from ipr_shapes.perception import perceive_scene
+    from ipr_shapes.perception.output import KNOWN_SUPPORT, known_plane_pixels, overlay_image
+    from ipr_shapes.scene import load_scene
 
     name = f"{scene_path.name}.jpg"
     try:
@@ -121,7 +121,7 @@ def gallery_frame(scene_path: Path, data_set: str, out_dir: Path) -> GalleryFram
     valid = int((frame.depth_m > 0).sum())
     gt_visible = gt_found = None
     if (scene_path / "scene_gt.json").is_file():
-        from ipr.segmentation_metrics import ground_truth_masks, segmentation_scores
+        from ipr_shapes.segmentation_metrics import ground_truth_masks, segmentation_scores
 
         truth, _, _ = ground_truth_masks(scene_path, frame.index, frame=frame)
         scores = segmentation_scores(labels, truth)
@@ -151,7 +151,7 @@ def page(rows: list[GalleryFrame], *, commit: str, seconds: float) -> str:
         "Frame 0 of every real scene without usable ground truth for the benchmark "
         "(`real_unlabelled`: household objects on lab tables) and of every bin-picking scene "
         "(`bins_real`: boxes in a red bin, seen from above), perceived by `perceive_scene` "
-        "(default configuration) and drawn as the `ipr segment` overlay: **objects tinted by id "
+        "(default configuration) and drawn as the `ipr-shapes segment` overlay: **objects tinted by id "
         "and numbered**, facet borders dark; **flat blue: the support** (pixels within its "
         "clearance: what was taken as the table), **dark blue: below the support** (discarded "
         "as under the table), **ochre: walls**; the rest is the frame dimmed. Judge: is the "

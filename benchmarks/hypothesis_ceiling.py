@@ -9,12 +9,12 @@ hypotheses``), or on its own for a subset::
 Per scene: frame 0 is perceived, the hypotheses are prepared (``prepare_hypotheses``, the
 default configuration, seed 0, as the Collision Checker's run draws them) and the Collision
 Checker's marginals taken from them (``uniform_posteriors``); the output of each object is then
-carved by frame 0's free space as ``ipr infer`` writes it (``ipr.carving``). Against the ground
+carved by frame 0's free space as ``ipr-shapes infer`` writes it (``ipr_shapes.carving``). Against the ground
 truth (benchmark code may read it; inference never does), each visible object (>= 100 pixels in
 frame 0) is matched to a prediction one-to-one by the Hungarian assignment on the Collision
 Checker's output IoU (5 mm voxels), and scores:
 
-- ``collision checker``: the IoU of the carved output (``ipr eval``'s object IoU);
+- ``collision checker``: the IoU of the carved output (``ipr-shapes eval``'s object IoU);
 - ``oracle``: the best IoU of the object's candidates the Collision Checker kept (non-zero
   probability: jointly feasible), convex as inferred: the ceiling of any choice among them;
 - per generator (``ShapeHypothesis.generator``), the best IoU of that generator's candidates,
@@ -47,7 +47,7 @@ MIN_VISIBLE_PX = 100
 
 
 def _iou(a: np.ndarray, b: np.ndarray) -> float:
-    from ipr import voxels
+    from ipr_shapes import voxels
 
     common = voxels.intersection_count(a, b)
     union = a.size + b.size - common
@@ -56,9 +56,9 @@ def _iou(a: np.ndarray, b: np.ndarray) -> float:
 
 def _perceive(path: Path, cache: Path | None):
     """Frame 0's objects, free space and planes (pickled in ``cache`` when given)."""
-    from ipr.config import Config
-    from ipr.perception import perceive_scene
-    from ipr.scene import load_scene
+    from ipr_shapes.config import Config
+    from ipr_shapes.perception import perceive_scene
+    from ipr_shapes.scene import load_scene
 
     stored = cache / f"{path.parent.name}-{path.name}.pkl" if cache else None
     if stored is not None and stored.exists():
@@ -77,12 +77,12 @@ def measure_scene(path: Path, config=None, cache: Path | None = None) -> dict:
     """One scene's rows: per visible ground-truth object its scores (module doc)."""
     from scipy.optimize import linear_sum_assignment
 
-    from ipr import voxels
-    from ipr.carving import carve_posteriors, surface_views
-    from ipr.collision_checker import uniform_posteriors
-    from ipr.config import Config
-    from ipr.ground_truth import frame0_ground_truth, visible_pixel_counts
-    from ipr.hypotheses import prepare_hypotheses
+    from ipr_shapes import voxels
+    from ipr_shapes.carving import carve_posteriors, surface_views
+    from ipr_shapes.collision_checker import uniform_posteriors
+    from ipr_shapes.config import Config
+    from ipr_shapes.ground_truth import frame0_ground_truth, visible_pixel_counts
+    from ipr_shapes.hypotheses import prepare_hypotheses
 
     config = config or Config()
     scene, objects_per_frame, space, planes = _perceive(path, cache)
@@ -239,8 +239,8 @@ def main(argv: list[str] | None = None) -> int:
         "--algorithm1-only", action="store_true", help="no structure-aware candidates (before)"
     )
     args = parser.parse_args(argv)
-    from ipr.config import Config
-    from ipr.suites import suite_scenes
+    from ipr_shapes.config import Config
+    from ipr_shapes.suites import suite_scenes
 
     config = Config()
     if args.algorithm1_only:

@@ -1,4 +1,4 @@
-"""Inference benchmarks: accuracy and speed of ``ipr infer`` per method on every suite.
+"""Inference benchmarks: accuracy and speed of ``ipr-shapes infer`` per method on every suite.
 
 The ``inference`` section of docs/BENCHMARKS.md (``python -m benchmarks.run --only inference``),
 in three steps, each its own module:
@@ -33,7 +33,7 @@ from pathlib import Path
 from benchmarks import inference_render as render
 from benchmarks.inference_run import run_comparison, run_scene
 from benchmarks.inference_score import score_comparison, score_run
-from ipr.methods import get_method
+from ipr_shapes.methods import get_method
 
 
 def _status(row: dict) -> str:
@@ -73,7 +73,7 @@ class Runs:
     ``budget`` None is the default configuration (``Config().inference.budget_per_object_s``)."""
 
     def __init__(self, suites: dict[str, list[Path]]) -> None:
-        from ipr.config import Config
+        from ipr_shapes.config import Config
 
         self.suites = suites
         self.default_budget = Config().inference.budget_per_object_s
@@ -174,7 +174,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.scene:
         scenes = list(args.scene)
     else:
-        from ipr.suites import suite_scenes
+        from ipr_shapes.suites import suite_scenes
 
         scenes = suite_scenes(args.suite)[: args.limit]
     runs = Runs({args.suite: scenes})

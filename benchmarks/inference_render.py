@@ -36,7 +36,7 @@ from benchmarks.inference_score import (
     ok_rows,
     pooled_margins,
 )
-from ipr.methods import METHODS
+from ipr_shapes.methods import METHODS
 
 #: The paper's Collision Checker (Tables II and III): object space and scene space IoU/F1/P/R.
 PAPER_COLLISION_CHECKER = {
@@ -203,7 +203,7 @@ def dynamic_section(runs: RowSource) -> str:
         math.isfinite(walls[slowest]) and walls[slowest] <= TARGET_WALL_S_PER_OBJECT,
     ]
     lines = [
-        "## Physics-based inference on ycb-dynamic (`ipr infer --method ...`)",
+        "## Physics-based inference on ycb-dynamic (`ipr-shapes infer --method ...`)",
         "",
         "Inverse physics reasoning (Song & Boularias 2018): tree sampling of joint shape models "
         "scored by simulating them (gravity only: `ipr+`, or gravity and the recorded pushes: "
@@ -214,7 +214,7 @@ def dynamic_section(runs: RowSource) -> str:
         f"({runs.default_budget:g} s of inference per object after perception and hypotheses), "
         "all cores, seed 0, 32 hypotheses per object. IoU: mean over scenes (median in "
         "brackets), 5 mm voxels, objects visible in frame 0. `wall s/object`: the whole "
-        "`ipr infer` time divided by the objects (median over scenes); `inference s/object` "
+        "`ipr-shapes infer` time divided by the objects (median over scenes); `inference s/object` "
         "the inference stage alone; `samples/scene`: joint models evaluated (median); "
         "`fallbacks`: scenes answered by the Collision Checker because no sample finished or "
         "every one was impossible. `best hypothesis IoU`: the object IoU had each object's "
@@ -485,7 +485,7 @@ def budget_section(runs: RowSource, suite: str = "ycb-dynamic", image: Path | No
 def checker_section(runs: RowSource) -> str:
     """Markdown section: the Collision Checker on every suite, next to the paper."""
     lines = [
-        "## Collision Checker (`ipr infer --method collision-checker`)",
+        "## Collision Checker (`ipr-shapes infer --method collision-checker`)",
         "",
         "The paper's ablation: a uniform prior over jointly feasible shapes (no physics). "
         "End to end per scene, seed 0, one BLAS thread; accuracy is the mean over scenes "
@@ -532,7 +532,7 @@ def checker_section(runs: RowSource) -> str:
         "Seconds per object, medians over scenes. Targets: hypothesis generation at most 0.5 s, "
         "Collision Checker end to end at most 1 s per object on one core (the paper: 7.75 s and "
         "0.32 s). `end to end` counts hypotheses and inference; `with perception` is the whole "
-        "`ipr infer` wall time (all frames perceived) divided by the objects. `volume spread` is "
+        "`ipr-shapes infer` wall time (all frames perceived) divided by the objects. `volume spread` is "
         "the median over all objects of max/min hypothesis volume (32 hypotheses per object).",
         "",
         markdown_table(

@@ -1,13 +1,13 @@
 """Inference benchmark, step 1 of 3: run the methods on the scenes and keep every run on disk.
 
-Each (suite, scene, method, settings, code version) is run once, end to end (``ipr.pipeline.infer``:
+Each (suite, scene, method, settings, code version) is run once, end to end (``ipr_shapes.pipeline.infer``:
 perception, hypotheses, inference), in a child process of its own (``isolated``: BLAS limited to
 one thread there; the physics-based methods add their sampling workers), and kept in the run
 cache (``runs_dir()``: ``<ipr cache>/runs/inference``, beside the generated suites of
-``ipr.suites``)::
+``ipr_shapes.suites``)::
 
     <suite>/<scene>/<method>-<key>/run.json    what was run, with what, how long it took
-    <suite>/<scene>/<method>-<key>/result/     the ipr result directory (``ipr infer``'s output)
+    <suite>/<scene>/<method>-<key>/result/     the ipr result directory (``ipr-shapes infer``'s output)
 
 ``key`` hashes the scene's path, the method, seed, sample count, workers, the inference budget,
 the whole configuration and ``code_key()`` (the ipr package's source files and this module's), so
@@ -59,7 +59,7 @@ RESULT = "result"
 
 def with_budget(config, budget_per_object_s: float):
     """``config`` (default ``Config()``) with the default inference budget per object."""
-    from ipr.config import Config
+    from ipr_shapes.config import Config
 
     config = config or Config()
     inference = dataclasses.replace(config.inference, budget_per_object_s=budget_per_object_s)
@@ -68,7 +68,7 @@ def with_budget(config, budget_per_object_s: float):
 
 def with_hypotheses(config, count: int):
     """``config`` (default ``Config()``) with ``count`` shape hypotheses per object."""
-    from ipr.config import Config
+    from ipr_shapes.config import Config
 
     config = config or Config()
     return dataclasses.replace(
@@ -89,8 +89,8 @@ def error_text(error: BaseException) -> str:
 
 def runs_dir() -> Path:
     """Root of the run cache: ``$IPR_BENCH_RUNS``, else ``<ipr cache>/runs/inference``
-    (``ipr.data.cache_dir()``: ``$IPR_CACHE`` or ``~/.cache/ipr``, outside the repository)."""
-    from ipr.data import cache_dir
+    (``ipr_shapes.data.cache_dir()``: ``$IPR_CACHE`` or ``~/.cache/ipr``, outside the repository)."""
+    from ipr_shapes.data import cache_dir
 
     override = os.environ.get("IPR_BENCH_RUNS")
     return Path(override) if override else cache_dir() / "runs" / "inference"
@@ -104,9 +104,9 @@ def code_key() -> str:
     relative to it) and this module. Computed once per process."""
     global _CODE_KEY
     if _CODE_KEY is None:
-        import ipr
+        import ipr_shapes
 
-        package = Path(ipr.__file__).resolve().parent
+        package = Path(ipr_shapes.__file__).resolve().parent
         digest = hashlib.sha256()
         for source in sorted(package.rglob("*.py")):
             digest.update(source.relative_to(package).as_posix().encode())
@@ -135,7 +135,7 @@ def run_settings(
     """What decides a run's outcome, as stored in its record and hashed into its key: the
     scene's resolved path, the method, seed, samples, workers, the budget per object (None: the
     default configuration's), the whole configuration's repr and ``code_key()``."""
-    from ipr.config import Config
+    from ipr_shapes.config import Config
 
     return {
         "scene": str(Path(scene).resolve()),
@@ -247,7 +247,7 @@ def isolated(function, *args, timeout_s: float, **kwargs):
     import signal
 
     context = multiprocessing.get_context("forkserver")
-    context.set_forkserver_preload(["ipr", "ipr.pipeline", __name__])
+    context.set_forkserver_preload(["ipr_shapes", "ipr_shapes.pipeline", __name__])
     receiver, sender = context.Pipe(duplex=False)
     process = context.Process(
         target=_child, args=(sender, function, args, kwargs, timeout_s), daemon=False
@@ -284,10 +284,10 @@ def isolated(function, *args, timeout_s: float, **kwargs):
 
 
 def infer_scene(partial: Path, settings: dict, config=None) -> None:
-    """Infer ``settings["scene"]`` with its method into ``partial/result`` (``ipr infer``'s
+    """Infer ``settings["scene"]`` with its method into ``partial/result`` (``ipr-shapes infer``'s
     output) and write ``partial/run.json``: the settings, the wall time of the ``infer`` call,
     and the error when it raised (then there is no result)."""
-    from ipr.pipeline import infer
+    from ipr_shapes.pipeline import infer
 
     record = {**settings, "error": None, "wall_s": None, "created": None}
     try:
@@ -372,9 +372,9 @@ def compare_scene(scene_path: Path, *, hypotheses: int = COMPARISON_HYPOTHESES) 
     "fallback"} when run; "skipped" when exhaustive refuses the scene (too many objects or
     joint models), has no object or fell back.
     """
-    from ipr.errors import IprError
-    from ipr.pipeline import run_pipeline
-    from ipr.scene import load_scene
+    from ipr_shapes.errors import IprError
+    from ipr_shapes.pipeline import run_pipeline
+    from ipr_shapes.scene import load_scene
 
     row = {"scene": Path(scene_path).name, "status": "failed", "reason": None}
     base = with_hypotheses(None, hypotheses)

@@ -3,7 +3,7 @@
 Functions of the run records of ``benchmarks.inference_run`` (and the result directories and
 ground truth they point to) to rows of figures, and of rows to the statistics the page shows;
 nothing here runs a method. A scene's row (``score_run``) has its object- and scene-space IoU,
-F1, precision and recall (``ipr.metrics.evaluate``, 5 mm voxels, objects visible in frame 0),
+F1, precision and recall (``ipr_shapes.metrics.evaluate``, 5 mm voxels, objects visible in frame 0),
 the seconds per object of each stage, the samples drawn, the hypotheses' volume spreads and the
 best-hypothesis ceiling (``best_hypothesis_iou``). A run that failed, or whose evaluation
 raises, scores 0 (``failed_row``). Time per object divides a scene's seconds by its number of
@@ -56,9 +56,9 @@ def best_hypothesis_iou(scene: Path, result, evaluation) -> float:
     hypotheses), at the evaluation's voxel pitch. For the Collision Checker the written
     hypotheses are every jointly feasible candidate, so this bounds what any inference could
     pick from them; for the physics-based methods, the candidates their samples visited."""
-    from ipr import voxels
-    from ipr.ground_truth import frame0_ground_truth
-    from ipr.result import read_mesh
+    from ipr_shapes import voxels
+    from ipr_shapes.ground_truth import frame0_ground_truth
+    from ipr_shapes.result import read_mesh
 
     poses, models, _ = frame0_ground_truth(scene)
     world_from_camera = result.world_from_camera[0]
@@ -89,8 +89,8 @@ def score_run(record: dict) -> dict:
     """One row of figures for a run record (``inference_run.run_scene``): its result evaluated
     against the scene's ground truth, its timings per object; ``failed_row`` when the run
     failed or its evaluation raises."""
-    from ipr.metrics import evaluate
-    from ipr.result import load_result
+    from ipr_shapes.metrics import evaluate
+    from ipr_shapes.result import load_result
 
     scene = Path(record["scene"])
     method = record["method"]

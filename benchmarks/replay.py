@@ -4,13 +4,13 @@ The ``replay`` section of docs/BENCHMARKS.md (``python -m benchmarks.run --only 
 printed with ``python -m benchmarks.replay [--limit N] [--scene DIR ...]``.
 
 Each generated dynamic scene's recorded pushes are replayed in worlds that step by step move
-from the generator's own simulation to the world inference builds (``ipr.physics``), and every
+from the generator's own simulation to the world inference builds (``ipr_shapes.physics``), and every
 object's simulated motion since frame 0 is compared with its true motion after each push: the
 mean distance (mm) between the true shape's convex-hull vertices moved by each. Figures are
 over the (object, frame) pairs that truly moved more than ``MOVED_M`` (median and quartiles).
 The rungs (``RUNGS``):
 
-a. the generator's world (``ipr.synth.piles.PileWorld``) rebuilt from the scene's seed and
+a. the generator's world (``ipr_shapes.synth.piles.PileWorld``) rebuilt from the scene's seed and
    replayed from its own integration state at frame 0 (the ladder's zero: the generator's
    own simulation, which the scene files' poses match to micrometres);
 b. (a) with each object's start pose jittered by ``JITTER_M`` along a random direction and
@@ -21,12 +21,12 @@ d. (c) with friction ``PhysicsConfig().friction`` for every object (the generato
 e. (d) with masses from ``PhysicsConfig().density_kg_m3`` times the mesh volume (the generator
    uses catalogue masses);
 f. (e) with each object's convex hull as its mesh (and mass from the hull's volume);
-g. the inference world as it is: ``ipr.physics.build_world`` with the true shapes' hulls at the
+g. the inference world as it is: ``ipr_shapes.physics.build_world`` with the true shapes' hulls at the
    true frame-0 poses on the support perception found, default ``PhysicsConfig``
    (``benchmarks.dev_push_replay.replay_errors``).
 
 The generator's world is rebuilt by replaying the accepted attempt's draws up to the settled
-pile (the same order as ``ipr.synth.generate._attempt``), and the rebuilt pile is checked
+pile (the same order as ``ipr_shapes.synth.generate._attempt``), and the rebuilt pile is checked
 against the scene's frame-0 ground truth: a generator change that breaks the replay fails
 loudly instead of measuring a different world. Benchmark code may read the ground truth;
 inference never does.
@@ -67,7 +67,7 @@ RUNGS = {
     "d": "(c) + friction 1.0 for all",
     "e": "(d) + masses from a uniform density",
     "f": "(e) + convex hulls",
-    "g": "the inference world as it is (`ipr.physics`)",
+    "g": "the inference world as it is (`ipr_shapes.physics`)",
 }
 
 
@@ -106,7 +106,7 @@ class GeneratorScene:
 
 
 def _synth_config(values: dict):
-    from ipr.synth import SynthConfig
+    from ipr_shapes.synth import SynthConfig
 
     names = {f.name for f in dataclasses.fields(SynthConfig)}
     return SynthConfig(
@@ -116,16 +116,18 @@ def _synth_config(values: dict):
 
 def rebuild_generator_scene(path: Path) -> GeneratorScene:
     """The generator's world of scene ``path`` at frame 0 (``synth.json``'s seed, attempt and
-    configuration, the YCB models of ``ipr.data.ycb_models_dir``). Raises ValueError when the
-    scene was not written by ``ipr synth`` as a dynamic scene or the rebuilt pile differs from
+    configuration, the YCB models of ``ipr_shapes.data.ycb_models_dir``). Raises ValueError when the
+    scene was not written by ``ipr-shapes synth`` as a dynamic scene or the rebuilt pile differs from
     the scene's frame-0 ground truth."""
-    from ipr.scene import load_ground_truth, load_scene
-    from ipr.synth import object_pool
-    from ipr.synth.piles import PileWorld, sample_layout
+    from ipr_shapes.scene import load_ground_truth, load_scene
+    from ipr_shapes.synth import object_pool
+    from ipr_shapes.synth.piles import PileWorld, sample_layout
 
     info_path = path / "synth.json"
     if not info_path.is_file():
-        raise ValueError(f"{path}: no synth.json; the ladder replays scenes from `ipr synth`")
+        raise ValueError(
+            f"{path}: no synth.json; the ladder replays scenes from `ipr-shapes synth`"
+        )
     info = json.loads(info_path.read_text(encoding="utf-8"))
     if info.get("kind") != "dynamic":
         raise ValueError(f"{info_path}: kind {info.get('kind')!r}, the ladder needs pushes")
@@ -135,7 +137,7 @@ def rebuild_generator_scene(path: Path) -> GeneratorScene:
     pool, _ = object_pool(None, config)
     arrangement = info["arrangement"]
     attempt = int(info["attempts"]) - 1
-    # The draws of ipr.synth.generate._attempt, in its order, up to the settled pile.
+    # The draws of ipr_shapes.synth.generate._attempt, in its order, up to the settled pile.
     rng = np.random.default_rng(np.random.SeedSequence(int(info["seed"]), spawn_key=(attempt,)))
     if arrangement != "table":
         pool = [item for item in pool if item.extents.max() <= config.boxed_max_extent_m] or pool
@@ -203,7 +205,7 @@ def jittered(poses: np.ndarray, rng: np.random.Generator) -> np.ndarray:
 def _replay_generator(world, scene: GeneratorScene) -> list[tuple[float, float]]:
     """Replay the pushes in a generator world placed at its start; (error, motion) pairs. An
     object that falls off the table is measured where it fell."""
-    from ipr.synth.piles import Rejected
+    from ipr_shapes.synth.piles import Rejected
 
     start = world.poses()
     rows = []
@@ -227,7 +229,7 @@ def _variant_world(scene: GeneratorScene, *, friction=None, density=None, hulls=
     density (kg/m^3) times the (hull) volume, and/or convex hulls as meshes."""
     import trimesh
 
-    from ipr.synth.piles import PileWorld
+    from ipr_shapes.synth.piles import PileWorld
 
     base = scene.world
     objects = []
@@ -253,7 +255,7 @@ def _variant_world(scene: GeneratorScene, *, friction=None, density=None, hulls=
 
 def generator_rungs(scene: GeneratorScene, seed: int = 0) -> dict[str, list[tuple[float, float]]]:
     """Rungs (a)-(f) of one scene: rung key -> (error, true motion) per (object, later frame)."""
-    from ipr.physics import PhysicsConfig
+    from ipr_shapes.physics import PhysicsConfig
 
     physics = PhysicsConfig()
     world = scene.world
@@ -281,7 +283,7 @@ def generator_rungs(scene: GeneratorScene, seed: int = 0) -> dict[str, list[tupl
 def inference_rung(path: Path) -> list[tuple[float, float]]:
     """Rung (g): the inference world as it is (default ``PhysicsConfig``)."""
     from benchmarks.dev_push_replay import replay_errors
-    from ipr.physics import PhysicsConfig
+    from ipr_shapes.physics import PhysicsConfig
 
     physics = PhysicsConfig()
     return replay_errors(path, physics.friction, physics.timestep_s)
@@ -375,8 +377,8 @@ def section(scenes: Sequence[Path], suite: str = "ycb-dynamic") -> str:
         "## Replaying the pushes: how far the simulator is from the data",
         "",
         f"The recorded pushes of {len(scenes)} {suite} scenes replayed in worlds "
-        "that go step by step from the generator's own simulation (`ipr.synth`) to the world "
-        "inference builds (`ipr.physics`), with the true shapes (`benchmarks.replay`). After "
+        "that go step by step from the generator's own simulation (`ipr_shapes.synth`) to the world "
+        "inference builds (`ipr_shapes.physics`), with the true shapes (`benchmarks.replay`). After "
         "each push, every object's simulated motion since frame 0 is compared with its true "
         "motion: the mean distance between its true convex hull's vertices moved by each. "
         f"Figures over the (object, frame) pairs that truly moved more than {MOVED_M * 1e3:g} "
@@ -413,9 +415,9 @@ def main(argv: list[str] | None = None) -> int:
         scenes = list(args.scene)
         for scene in scenes:
             if not (scene / "synth.json").is_file():
-                parser.error(f"{scene}: not a scene written by `ipr synth` (no synth.json)")
+                parser.error(f"{scene}: not a scene written by `ipr-shapes synth` (no synth.json)")
     else:
-        from ipr.suites import suite_scenes
+        from ipr_shapes.suites import suite_scenes
 
         scenes = suite_scenes("ycb-dynamic")[: args.limit]
     print(section(scenes))

@@ -1,7 +1,7 @@
 """Run every benchmark and rewrite docs/BENCHMARKS.md (``make bench``).
 
 Usage: ``python -m benchmarks.run [--only SECTION ...]``. Suites are generated on first use and
-cached (see ``ipr.suites``); figures are medians over each suite's scenes. Each section sits
+cached (see ``ipr_shapes.suites``); figures are medians over each suite's scenes. Each section sits
 between ``<!-- section: NAME -->`` and ``<!-- end section: NAME -->`` in the page; ``--only``
 reruns the named sections and keeps the others as the page has them (a section the page lacks
 is appended). The inference section keeps each of its runs on disk (``benchmarks.inference_run``):
@@ -65,7 +65,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--only", nargs="*", choices=sorted(SECTIONS), help="sections to run")
     args = parser.parse_args(argv)
-    from ipr.suites import SUITES, suite_scenes
+    from ipr_shapes.suites import SUITES, suite_scenes
 
     started = time.perf_counter()
     suites = {}

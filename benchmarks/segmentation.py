@@ -1,9 +1,9 @@
 """Segmentation benchmark: per-object overlap of the tracked perception labels with the
 ground-truth masks, id consistency across frames, and perception time per frame.
 
-For every scene of every suite the perception under test (``ipr.perception.perceive_scene``,
+For every scene of every suite the perception under test (``ipr_shapes.perception.perceive_scene``,
 imported lazily) labels every frame; every frame is scored against the ground-truth masks of
-``ipr.segmentation_metrics.ground_truth_masks`` (BOP visibility, objects with at least 100
+``ipr_shapes.segmentation_metrics.ground_truth_masks`` (BOP visibility, objects with at least 100
 visible pixels; the scene's own BOP ``mask_visib/`` files where it has them, as bins-real does)
 with the OSD/OCID object-overlap convention (``segmentation_scores``), and the
 sequence's id consistency is counted (``id_consistency_counts``). A scene whose perception raises
@@ -39,7 +39,7 @@ import numpy as np
 from benchmarks.common import markdown_table, median, one_thread
 
 if TYPE_CHECKING:  # ipr is imported lazily (the GL backend is chosen first)
-    from ipr.segmentation_metrics import LostId
+    from ipr_shapes.segmentation_metrics import LostId
 
 #: Targets: share of visible objects with F >= 0.75 per suite (in the order the suites are
 #: reported), share of ids kept (ycb-dynamic), time per frame.
@@ -64,7 +64,7 @@ class SceneSegmentation:
     reading (what a perfect depth-based segmentation can reach);
     ``frame0_visible`` visible objects in frame 0; ``ids_consistent`` of ``ids_counted``
     (object, later frame) pairs kept their id, ``lost_ids`` the other counted pairs
-    (``ipr.segmentation_metrics.LostId``); ``per_frame_s`` perception seconds per frame;
+    (``ipr_shapes.segmentation_metrics.LostId``); ``per_frame_s`` perception seconds per frame;
     ``error`` the perception's exception (then scored as an empty prediction), else None.
     """
 
@@ -84,19 +84,19 @@ class SceneSegmentation:
     @property
     def share_f75(self) -> float:
         """Share of the scene's visible (object, frame) rows with F >= 0.75 (nan if none)."""
-        from ipr.segmentation_metrics import F_THRESHOLD
+        from ipr_shapes.segmentation_metrics import F_THRESHOLD
 
         return float(np.mean(self.f_measure >= F_THRESHOLD)) if self.f_measure.size else math.nan
 
 
 def default_perceive(timing_runs: int = TIMING_RUNS) -> Perceive:
-    """The perception under test, ``ipr.perception.perceive_scene``, as a ``Perceive``.
+    """The perception under test, ``ipr_shapes.perception.perceive_scene``, as a ``Perceive``.
 
     The scene is perceived ``timing_runs`` times: the labels are the first run's (the
     perception is deterministic) and each frame's time is its median over the runs, so that a
     burst of load on a shared machine does not decide a frame's figure.
     """
-    from ipr.perception import perceive_scene
+    from ipr_shapes.perception import perceive_scene
 
     keywords = {}
     if "with_free_space" in inspect.signature(perceive_scene).parameters:
@@ -114,13 +114,13 @@ def default_perceive(timing_runs: int = TIMING_RUNS) -> Perceive:
 
 
 class _Renderers:
-    """One ``ipr.rendering.Renderer`` per image size, closed together."""
+    """One ``ipr_shapes.rendering.Renderer`` per image size, closed together."""
 
     def __init__(self) -> None:
         self._by_size: dict[tuple[int, int], object] = {}
 
     def get(self, width: int, height: int) -> object:
-        from ipr.rendering import Renderer
+        from ipr_shapes.rendering import Renderer
 
         if (width, height) not in self._by_size:
             self._by_size[(width, height)] = Renderer(width, height)
@@ -136,8 +136,8 @@ def evaluate_scene(
     scene_path: Path, perceive: Perceive, renderers: _Renderers
 ) -> SceneSegmentation:
     """Run ``perceive`` on one scene and score every frame (module doc)."""
-    from ipr.scene import load_scene
-    from ipr.segmentation_metrics import (
+    from ipr_shapes.scene import load_scene
+    from ipr_shapes.segmentation_metrics import (
         ground_truth_masks,
         id_consistency_counts,
         segmentation_scores,
@@ -198,7 +198,7 @@ def evaluate_suite(scenes: list[Path], perceive: Perceive) -> list[SceneSegmenta
 
 def suite_figures(results: list[SceneSegmentation]) -> dict[str, float]:
     """The suite's figures (module doc); ratios in [0, 1], times in ms, nan when undefined."""
-    from ipr.segmentation_metrics import F_THRESHOLD
+    from ipr_shapes.segmentation_metrics import F_THRESHOLD
 
     scored = [r for r in results if r.f_measure.size]
     pooled_f = np.concatenate([r.f_measure for r in results]) if results else np.zeros(0)
@@ -252,11 +252,11 @@ def _met(value: float, target: float, *, at_most: bool = False) -> str:
 def run(suites: dict[str, list[Path]], perceive: Perceive | None = None) -> str:
     """Markdown section with the segmentation figures of every suite.
 
-    ``perceive`` defaults to ``ipr.perception.perceive_scene`` (imported here, lazily); when that
+    ``perceive`` defaults to ``ipr_shapes.perception.perceive_scene`` (imported here, lazily); when that
     cannot be imported the section says so instead of failing the whole benchmark run.
     """
     header = [
-        "## Segmentation and tracking (`ipr.perception`)",
+        "## Segmentation and tracking (`ipr_shapes.perception`)",
         "",
         "Every frame of every scene is segmented and tracked by `perceive_scene`, and scored "
         "against ground-truth masks rendered from the models and poses (BOP visibility: front-most "
@@ -268,7 +268,7 @@ def run(suites: dict[str, list[Path]], perceive: Perceive | None = None) -> str:
         "rows; `F>=0.75`: share of visible objects with F >= 0.75, median over scenes and pooled "
         "over all (object, frame) rows; `ids kept`: share of (object, later frame) pairs whose "
         "object, found in frame 0 (F >= 0.5), has its best segment (F >= 0.5) under the same "
-        "id (`ipr.segmentation_metrics`). Time: perception per frame (planes to facets, tracking "
+        "id (`ipr_shapes.segmentation_metrics`). Time: perception per frame (planes to facets, tracking "
         "shared out, free space excluded), one BLAS thread, 640x480, each frame's median over "
         f"{TIMING_RUNS} runs. `ceiling`: the pooled "
         "F>=0.75 share of the ground truth itself restricted to pixels with a depth reading "
@@ -405,7 +405,7 @@ def main(argv: list[str] | None = None) -> int:
         help="TOML settings over the defaults (its [perception] sections; one timing run)",
     )
     args = parser.parse_args(argv)
-    from ipr.suites import REAL, SUITES, suite_scenes
+    from ipr_shapes.suites import REAL, SUITES, suite_scenes
 
     names = args.suite or list(REAL)
     unknown = [name for name in names if name not in SUITES]

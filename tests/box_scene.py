@@ -8,10 +8,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import ConvexHull
 
-from ipr.camera import backproject, look_at
-from ipr.perception.free_space import FREE, OCCUPIED, SpaceMap, VoxelGrid, observe_space
-from ipr.perception.types import Facet, KnownPlane, PartialObject
-from ipr.rendering import render_depth_and_ids
+from ipr_shapes.camera import backproject, look_at
+from ipr_shapes.perception.free_space import FREE, OCCUPIED, SpaceMap, VoxelGrid, observe_space
+from ipr_shapes.perception.types import Facet, KnownPlane, PartialObject
+from ipr_shapes.rendering import render_depth_and_ids
 
 BOX_HALF = np.array([0.05, 0.03, 0.02])  # m, centred at (0, 0, 0.02): bottom on z = 0
 WIDTH, HEIGHT = 320, 240

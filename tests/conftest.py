@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ipr.camera import look_at
-from ipr.data import shared_data_dir
-from ipr.scene import Frame, Push, Pusher, write_scene
+from ipr_shapes.camera import look_at
+from ipr_shapes.data import shared_data_dir
+from ipr_shapes.scene import Frame, Push, Pusher, write_scene
 
 
 def plane_depth(K: np.ndarray, world_from_camera: np.ndarray, shape: tuple[int, int]) -> np.ndarray:

@@ -1,5 +1,5 @@
-"""ipr.from_arrays: frames in memory make the same Scene as their folder, by the same rules; and
-ipr.infer runs on it as on the folder."""
+"""ipr_shapes.from_arrays: frames in memory make the same Scene as their folder, by the same rules; and
+ipr_shapes.infer runs on it as on the folder."""
 
 from __future__ import annotations
 
@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
-import ipr
-from ipr.errors import ArrayInputError
-from ipr.scene import Push, Pusher, Scene, load_scene, write_scene
+import ipr_shapes
+from ipr_shapes.errors import ArrayInputError
+from ipr_shapes.scene import Push, Pusher, Scene, load_scene, write_scene
 from tests.conftest import make_frames
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -59,11 +59,13 @@ def test_arrays_of_a_folder_make_the_scene_load_scene_reads(scene_dir: Path):
     # uint16 units with the file's scale, one K per frame.
     units = _depth_units(scene_dir, folder)
     K = np.stack([f.K for f in folder.frames])
-    made = ipr.from_arrays(rgb, units, K, depth_scale=scale, world_from_camera=poses, **common)
+    made = ipr_shapes.from_arrays(
+        rgb, units, K, depth_scale=scale, world_from_camera=poses, **common
+    )
     assert_same_scene(made, folder)
     assert made.path == scene_dir
     # float metres, lists, a shared K and (R, t) poses.
-    made = ipr.from_arrays(
+    made = ipr_shapes.from_arrays(
         [f.rgb for f in folder.frames],
         [f.depth_m for f in folder.frames],
         folder.frames[0].K,
@@ -78,7 +80,7 @@ def test_without_poses_the_world_frame_comes_from_the_support_as_for_a_folder(tm
     scene_dir = write_scene(tmp_path / "static", make_frames(2), write_poses=False)
     folder = load_scene(scene_dir)
     frames = folder.frames  # depth as the folder holds it (whole millimetres)
-    made = ipr.from_arrays([f.rgb for f in frames], [f.depth_m for f in frames], frames[0].K)
+    made = ipr_shapes.from_arrays([f.rgb for f in frames], [f.depth_m for f in frames], frames[0].K)
     assert_same_scene(made, folder)
     assert made.world_frame_source == "support_plane" and made.path == Path("<arrays>")
     # Pushes given in frame 0's camera coordinates land in that world frame.
@@ -86,7 +88,7 @@ def test_without_poses_the_world_frame_comes_from_the_support_as_for_a_folder(tm
     start_world = np.array([-0.1, 0.0, 0.05])
     start_camera = camera[:3, :3] @ start_world + camera[:3, 3]
     push = Push(0, 1, start_camera, camera[:3, :3] @ np.array([1.0, 0, 0]), 0.05, 0.05)
-    pushed = ipr.from_arrays(
+    pushed = ipr_shapes.from_arrays(
         [f.rgb for f in frames],
         [f.depth_m for f in frames],
         frames[0].K,
@@ -177,11 +179,11 @@ def _scaled_pose(rgb, depth, K, pose):
 def test_bad_arrays_are_refused_naming_the_argument_and_the_fix(change, where, words):
     args, kwargs = change(*_good())
     with pytest.raises(ArrayInputError) as caught:
-        ipr.from_arrays(*args, **kwargs)
+        ipr_shapes.from_arrays(*args, **kwargs)
     error = caught.value
     assert isinstance(error, ValueError)
     message = str(error)
-    assert message.startswith(f"ipr.from_arrays: {where}: ") and words in message, message
+    assert message.startswith(f"ipr_shapes.from_arrays: {where}: ") and words in message, message
     assert "\n" not in message
 
 
@@ -190,17 +192,17 @@ def test_gravity_that_the_arrays_cannot_tell_names_the_array_fix():
     rng = np.random.default_rng(0)
     noise = rng.uniform(0.3, 2.0, size=depth.shape).astype(np.float32)  # no plane anywhere
     with pytest.raises(ArrayInputError, match=r"depth\[0\].*up_camera="):
-        ipr.from_arrays(rgb, noise, K)
+        ipr_shapes.from_arrays(rgb, noise, K)
 
 
 def test_importing_ipr_stays_light_and_the_api_loads_on_first_use():
     code = (
-        "import sys, ipr\n"
-        "heavy = [m for m in ('numpy', 'mujoco', 'ipr.scene', 'ipr.pipeline') if m in sys.modules]\n"
+        "import sys, ipr_shapes\n"
+        "heavy = [m for m in ('numpy', 'mujoco', 'ipr_shapes.scene', 'ipr_shapes.pipeline') if m in sys.modules]\n"
         "assert not heavy, heavy\n"
-        "assert callable(ipr.from_arrays) and 'from_arrays' in dir(ipr) and 'infer' in dir(ipr)\n"
-        "assert 'ipr.arrays' in sys.modules and 'ipr.pipeline' not in sys.modules\n"
-        "try:\n    ipr.no_such_name\nexcept AttributeError:\n    print('ok')\n"
+        "assert callable(ipr_shapes.from_arrays) and 'from_arrays' in dir(ipr_shapes) and 'infer' in dir(ipr_shapes)\n"
+        "assert 'ipr_shapes.arrays' in sys.modules and 'ipr_shapes.pipeline' not in sys.modules\n"
+        "try:\n    ipr_shapes.no_such_name\nexcept AttributeError:\n    print('ok')\n"
     )
     completed = subprocess.run(
         [sys.executable, "-c", code],
@@ -210,18 +212,20 @@ def test_importing_ipr_stays_light_and_the_api_loads_on_first_use():
         timeout=120,
     )
     assert completed.returncode == 0 and completed.stdout.strip() == "ok", completed.stderr
-    from ipr import pipeline
+    from ipr_shapes import pipeline
 
-    assert ipr.infer is pipeline.infer_scene and ipr.save_result is pipeline.save_result
+    assert (
+        ipr_shapes.infer is pipeline.infer_scene and ipr_shapes.save_result is pipeline.save_result
+    )
 
 
 @pytest.mark.slow
 def test_infer_on_arrays_gives_the_result_of_the_folder(scene_dir: Path, tmp_path: Path):
-    from ipr.pipeline import infer
-    from ipr.result import load_result
+    from ipr_shapes.pipeline import infer
+    from ipr_shapes.result import load_result
 
     folder = load_scene(scene_dir)
-    made = ipr.from_arrays(
+    made = ipr_shapes.from_arrays(
         [f.rgb for f in folder.frames],
         [f.depth_m for f in folder.frames],
         folder.frames[0].K,
@@ -231,7 +235,7 @@ def test_infer_on_arrays_gives_the_result_of_the_folder(scene_dir: Path, tmp_pat
     )
     options = dict(seed=3, samples=2, workers=1)
     from_folder = infer(scene_dir, tmp_path / "folder", **options)
-    result = ipr.infer(made, tmp_path / "arrays", **options)
+    result = ipr_shapes.infer(made, tmp_path / "arrays", **options)
     assert result.posteriors and result.run.scene is made
     written = [load_result(from_folder), load_result(tmp_path / "arrays")]
     assert [len(r.objects) for r in written] == [len(result.posteriors)] * 2
@@ -242,5 +246,5 @@ def test_infer_on_arrays_gives_the_result_of_the_folder(scene_dir: Path, tmp_pat
     provenance = json.loads((tmp_path / "arrays" / "result.json").read_text())["provenance"]
     assert provenance["scene"] == "<arrays>" and provenance["seed"] == 3
     # The result in memory writes the same folder again.
-    again = ipr.save_result(result, tmp_path / "again")
+    again = ipr_shapes.save_result(result, tmp_path / "again")
     assert load_result(again).objects[0].probability == written[1].objects[0].probability

@@ -1,4 +1,4 @@
-"""ipr import-bag: bags written with rosbags' own writers (ROS 2 sqlite3 and mcap, ROS 1) from a
+"""ipr-shapes import-bag: bags written with rosbags' own writers (ROS 2 sqlite3 and mcap, ROS 1) from a
 scene folder convert back into the same scene; bad bags fail in one line, writing nothing."""
 
 from __future__ import annotations
@@ -17,10 +17,10 @@ from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from scipy.spatial.transform import Rotation
 
-from ipr.bag import BagOptions
-from ipr.camera import invert_transform, make_transform
-from ipr.cli import EXIT_INPUT_ERROR, BagOptionsDefaults, main
-from ipr.scene import Scene, load_scene
+from ipr_shapes.bag import BagOptions
+from ipr_shapes.camera import invert_transform, make_transform
+from ipr_shapes.cli import EXIT_INPUT_ERROR, BagOptionsDefaults, main
+from ipr_shapes.scene import Scene, load_scene
 
 #: A fixed world -> camera mount (static tf), the rest of the chain is dynamic.
 MOUNT = make_transform(Rotation.from_euler("z", 30, degrees=True).as_matrix(), [0.2, -0.1, 0.5])
@@ -309,7 +309,9 @@ def test_bad_bags_fail_in_one_line_and_write_nothing(
     out = tmp_path / "out"
     assert _convert(bag, out, *args) == EXIT_INPUT_ERROR
     err = capsys.readouterr().err.strip()
-    assert err.startswith("ipr import-bag: error: ") and words in err and "\n" not in err, err
+    assert err.startswith("ipr-shapes import-bag: error: ") and words in err and "\n" not in err, (
+        err
+    )
     assert not out.exists() and sorted(p.name for p in tmp_path.iterdir()) == ["in", "scene"]
 
 

@@ -1,4 +1,4 @@
-"""``ipr batch``: many scenes, one result each, resumable, failures reported, scores."""
+"""``ipr-shapes batch``: many scenes, one result each, resumable, failures reported, scores."""
 
 from __future__ import annotations
 
@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from ipr.batch import find_scenes
-from ipr.cli import EXIT_INPUT_ERROR, main
-from ipr.errors import IprError
+from ipr_shapes.batch import find_scenes
+from ipr_shapes.cli import EXIT_INPUT_ERROR, main
+from ipr_shapes.errors import IprError
 
 
 def test_scenes_are_found_in_folders_of_scenes_and_globs(scene_dir: Path, tmp_path: Path):
@@ -68,7 +68,7 @@ def test_a_batch_runs_scores_resumes_and_reports_failures(tmp_path: Path, jobs: 
 
 @pytest.mark.slow
 def test_killing_a_batch_ends_its_workers_without_tracebacks(tmp_path: Path):
-    """SIGKILL of `ipr batch --jobs 2` mid-run: its pool workers end with it, silently (no
+    """SIGKILL of `ipr-shapes batch --jobs 2` mid-run: its pool workers end with it, silently (no
     BrokenPipe or EOFError traceback on the shared stderr), and leave no process behind."""
     import os
     import signal
@@ -79,7 +79,7 @@ def test_killing_a_batch_ends_its_workers_without_tracebacks(tmp_path: Path):
     scenes = tmp_path / "scenes"
     synth = ["synth", str(scenes), "--kind", "static", "--seed", "5", "--count", "2"]
     assert main([*synth, "--width", "320", "--height", "240"]) == 0
-    command = [sys.executable, "-m", "ipr", "batch", str(scenes), "-o", str(tmp_path / "out"),
+    command = [sys.executable, "-m", "ipr_shapes", "batch", str(scenes), "-o", str(tmp_path / "out"),
                "--jobs", "2", "--time-budget", "60"]  # fmt: skip
     errors = tmp_path / "stderr.txt"
     with errors.open("wb") as stderr:

@@ -1,4 +1,4 @@
-"""``ipr batch --ray ADDRESS``: scenes on an existing Ray cluster (a local head started here, on
+"""``ipr-shapes batch --ray ADDRESS``: scenes on an existing Ray cluster (a local head started here, on
 127.0.0.1 only), with the local pool's semantics; and every way ``--ray`` can be refused."""
 
 from __future__ import annotations
@@ -19,16 +19,16 @@ from pathlib import Path
 
 import pytest
 
-from ipr.batch import (
+from ipr_shapes.batch import (
     SceneOutcome,
     _run_all,
     _Runner,
     run_scene_detached,
     write_result_files,
 )
-from ipr.cli import EXIT_INPUT_ERROR, main
-from ipr.cluster import RAY_INSTALL, _deadline, check_reachable, parse_address
-from ipr.errors import IprError
+from ipr_shapes.cli import EXIT_INPUT_ERROR, main
+from ipr_shapes.cluster import RAY_INSTALL, _deadline, check_reachable, parse_address
+from ipr_shapes.errors import IprError
 
 #: result.json keys that hold wall-clock times or the time of writing: the only keys that may
 #: differ between two runs of one scene with one seed.
@@ -195,7 +195,7 @@ def _ray_installed() -> bool:
 def _ipr(*args: str) -> subprocess.CompletedProcess:
     """``ipr ARGS`` in a process of its own (a Ray driver), with the loopback setting."""
     return subprocess.run(
-        [sys.executable, "-m", "ipr", *args],
+        [sys.executable, "-m", "ipr_shapes", *args],
         capture_output=True,
         text=True,
         timeout=900,

@@ -7,14 +7,14 @@ from pathlib import Path
 import pytest
 from benchmarks.inference_score import best_hypothesis_iou
 
-from ipr.ground_truth import write_ground_truth_result
-from ipr.metrics import evaluate
-from ipr.result import load_result, write_result
+from ipr_shapes.ground_truth import write_ground_truth_result
+from ipr_shapes.metrics import evaluate
+from ipr_shapes.result import load_result, write_result
 
 
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory) -> Path:
-    from ipr.synth import SynthConfig, generate_scenes
+    from ipr_shapes.synth import SynthConfig, generate_scenes
 
     folder = tmp_path_factory.mktemp("scenes")
     config = SynthConfig(width=320, height=240, write_preview=False)

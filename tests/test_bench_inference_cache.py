@@ -66,12 +66,12 @@ def test_a_run_killed_after_its_time_limit_is_not_kept(runs_root, tmp_path, monk
 
 
 def test_the_code_key_follows_the_package_source(tmp_path, monkeypatch):
-    import ipr
+    import ipr_shapes
 
-    package = tmp_path / "ipr"
+    package = tmp_path / "ipr_shapes"
     package.mkdir()
     (package / "__init__.py").write_text("x = 1\n")
-    monkeypatch.setattr(ipr, "__file__", str(package / "__init__.py"))
+    monkeypatch.setattr(ipr_shapes, "__file__", str(package / "__init__.py"))
     monkeypatch.setattr(inference_run, "_CODE_KEY", None)
     before = inference_run.code_key()
     (package / "__init__.py").write_text("x = 2\n")

@@ -67,7 +67,7 @@ def test_the_generator_world_is_rebuilt_and_replays_its_pushes_exactly(tmp_path)
 
     from benchmarks.replay import generator_rungs, rebuild_generator_scene
 
-    from ipr.synth import SynthConfig, generate_scene
+    from ipr_shapes.synth import SynthConfig, generate_scene
 
     config = SynthConfig(width=160, height=120, min_visible_px=20, max_objects=4)
     path = generate_scene(tmp_path, kind="dynamic", seed=4, arrangement="table", config=config)

@@ -16,7 +16,7 @@ from tests.conftest import make_frames
 def _scene_with_masks(root: Path) -> tuple[Path, np.ndarray]:
     """A one-frame scene (the conftest table with its bump) whose ground truth is one object
     given only as a mask_visib/ file (no model: rendering it would fail)."""
-    from ipr.scene import write_scene
+    from ipr_shapes.scene import write_scene
 
     frame = make_frames(1)[0]
     scene = write_scene(root / "masked", [frame])

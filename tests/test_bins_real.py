@@ -1,6 +1,6 @@
 """The whole chain on a real bin-picking scene (boxes in mm, 8-vertex models, no camera pose):
-the oracle scores 1 with boxes of their true volume, and ``ipr infer --method
-collision-checker`` then ``ipr eval`` produce a scored result. Skipped without the data."""
+the oracle scores 1 with boxes of their true volume, and ``ipr-shapes infer --method
+collision-checker`` then ``ipr-shapes eval`` produce a scored result. Skipped without the data."""
 
 from __future__ import annotations
 
@@ -9,10 +9,10 @@ from pathlib import Path
 
 import pytest
 
-from ipr.cli import main
-from ipr.data import bins_real_dir
-from ipr.metrics import evaluate
-from ipr.scene import load_model
+from ipr_shapes.cli import main
+from ipr_shapes.data import bins_real_dir
+from ipr_shapes.metrics import evaluate
+from ipr_shapes.scene import load_model
 
 SCENE = "bins_000"  # 14 annotated boxes, all visible: 8 soap bars and 6 toothpaste boxes
 

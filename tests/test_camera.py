@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from ipr.camera import (
+from ipr_shapes.camera import (
     apply_transform,
     backproject,
     invert_transform,
@@ -12,7 +12,7 @@ from ipr.camera import (
     mujoco_camera_pose,
     project,
 )
-from ipr.gl import offscreen_context_class
+from ipr_shapes.gl import offscreen_context_class
 
 mujoco = pytest.importorskip("mujoco")
 

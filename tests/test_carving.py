@@ -1,4 +1,4 @@
-"""Output shapes carved by observed free space (ipr.carving): real renders, real voxelisation."""
+"""Output shapes carved by observed free space (ipr_shapes.carving): real renders, real voxelisation."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from ipr import voxels
-from ipr.camera import look_at
-from ipr.carving import (
+from ipr_shapes import voxels
+from ipr_shapes.camera import look_at
+from ipr_shapes.carving import (
     CarvingConfig,
     SurfaceView,
     carve_mesh,
@@ -20,8 +20,8 @@ from ipr.carving import (
     surface_views,
     voxel_surface,
 )
-from ipr.perception.types import PartialObject
-from ipr.rendering import render_depth_and_ids
+from ipr_shapes.perception.types import PartialObject
+from ipr_shapes.rendering import render_depth_and_ids
 from tests.box_scene import box_mesh
 
 PITCH = voxels.DEFAULT_PITCH_M

@@ -1,4 +1,4 @@
-"""The declarative field checks (``ipr.checks``) and the perception config's tables."""
+"""The declarative field checks (``ipr_shapes.checks``) and the perception config's tables."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ from typing import ClassVar
 import numpy as np
 import pytest
 
-from ipr.checks import Checks, Interval, Options, Pair, Predicate, check_fields
-from ipr.perception.config import (
+from ipr_shapes.checks import Checks, Interval, Options, Pair, Predicate, check_fields
+from ipr_shapes.perception.config import (
     DenoiseConfig,
     PerceptionConfig,
     PlanesConfig,
@@ -131,7 +131,7 @@ def test_bad_perception_values_are_refused_with_the_range():
 
 
 def test_every_field_of_the_whole_configuration_is_declared():
-    from ipr.config import Config
+    from ipr_shapes.config import Config
 
     groups = _groups(Config())[1:]  # the sections and their nested groups
     assert {type(g).__name__ for g in groups} >= {
@@ -165,7 +165,7 @@ def test_every_field_of_the_whole_configuration_is_declared():
     ],
 )
 def test_bad_values_anywhere_are_refused_with_the_range(section, changes, message):
-    from ipr.config import Config
+    from ipr_shapes.config import Config
 
     with pytest.raises(ValueError, match=message):
         replace(getattr(Config(), section), **changes)

@@ -10,12 +10,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ipr.cli import EXIT_INPUT_ERROR, main
+from ipr_shapes.cli import EXIT_INPUT_ERROR, main
 
 
 def test_help_lists_every_command():
     completed = subprocess.run(
-        [sys.executable, "-m", "ipr", "--help"], capture_output=True, text=True
+        [sys.executable, "-m", "ipr_shapes", "--help"], capture_output=True, text=True
     )
     assert completed.returncode == 0
     for command in ("synth", "eval", "ground-truth", "check", "suite"):
@@ -71,7 +71,7 @@ def test_bad_scene_gives_one_line_error_and_nonzero_exit(tmp_path: Path):
     (tmp_path / "scene").mkdir()
     (tmp_path / "scene" / "scene_camera.json").write_text("{not json")
     completed = subprocess.run(
-        [sys.executable, "-m", "ipr", "check", str(tmp_path / "scene")],
+        [sys.executable, "-m", "ipr_shapes", "check", str(tmp_path / "scene")],
         capture_output=True,
         text=True,
     )
@@ -103,7 +103,7 @@ def test_eval_json_is_not_half_written_on_error(scene_dir: Path, tmp_path: Path)
 def test_segment_writes_labels_facets_and_overlays(tmp_path: Path, capsys):
     from PIL import Image
 
-    from ipr.synth import SynthConfig, generate_scene
+    from ipr_shapes.synth import SynthConfig, generate_scene
 
     scene = generate_scene(
         tmp_path / "scenes",
@@ -138,8 +138,8 @@ def test_segment_writes_labels_facets_and_overlays(tmp_path: Path, capsys):
 
 @pytest.mark.slow
 def test_infer_collision_checker_end_to_end(tmp_path: Path, capsys):
-    from ipr.result import load_result
-    from ipr.synth import SynthConfig, generate_scene
+    from ipr_shapes.result import load_result
+    from ipr_shapes.synth import SynthConfig, generate_scene
 
     scene = generate_scene(
         tmp_path / "scenes",
@@ -202,9 +202,9 @@ def test_infer_rejects_bad_budget_and_existing_output(scene_dir: Path, tmp_path:
 
 
 def test_segment_and_infer_on_an_empty_table_give_empty_results(tmp_path: Path):
-    from ipr.camera import look_at
-    from ipr.result import load_result
-    from ipr.scene import Frame, write_scene
+    from ipr_shapes.camera import look_at
+    from ipr_shapes.result import load_result
+    from ipr_shapes.scene import Frame, write_scene
 
     K = np.array([[150.0, 0, 79.5], [0, 150.0, 59.5], [0, 0, 1]])
     world_from_camera = look_at(np.array([0.0, -0.45, 0.45]), np.zeros(3))
@@ -222,7 +222,7 @@ def test_segment_and_infer_on_an_empty_table_give_empty_results(tmp_path: Path):
 
 
 def test_segment_without_support_plane_fails_clearly(tmp_path: Path):
-    from ipr.scene import Frame, write_scene
+    from ipr_shapes.scene import Frame, write_scene
 
     from .conftest import make_frames
 
@@ -232,7 +232,7 @@ def test_segment_without_support_plane_fails_clearly(tmp_path: Path):
         tmp_path / "noise", [Frame(0, frame.rgb, noise, frame.K, frame.world_from_camera)]
     )
     completed = subprocess.run(
-        [sys.executable, "-m", "ipr", "segment", str(scene), "-o", str(tmp_path / "out")],
+        [sys.executable, "-m", "ipr_shapes", "segment", str(scene), "-o", str(tmp_path / "out")],
         capture_output=True,
         text=True,
     )
@@ -264,8 +264,8 @@ def test_ground_truth_of_a_scene_without_ground_truth_fails_clearly(
 def test_infer_default_method_writes_the_full_result_and_is_reproducible(tmp_path: Path, capsys):
     from PIL import Image
 
-    from ipr.result import load_result
-    from ipr.synth import SynthConfig, generate_scene
+    from ipr_shapes.result import load_result
+    from ipr_shapes.synth import SynthConfig, generate_scene
 
     scene = generate_scene(
         tmp_path / "scenes",
@@ -309,8 +309,8 @@ def test_infer_default_method_writes_the_full_result_and_is_reproducible(tmp_pat
 def test_infer_with_a_budget_too_small_for_one_sample_falls_back_and_says_so(
     tmp_path: Path, capsys
 ):
-    from ipr.result import load_result
-    from ipr.synth import SynthConfig, generate_scene
+    from ipr_shapes.result import load_result
+    from ipr_shapes.synth import SynthConfig, generate_scene
 
     scene = generate_scene(
         tmp_path / "scenes", kind="static", seed=5, config=SynthConfig(width=320, height=240)
@@ -365,7 +365,7 @@ def test_up_option_is_documented(command: str, capsys):
 def test_gravity_that_cannot_be_determined_is_said_clearly(tmp_path: Path):
     """No camera pose and no plane in frame 0: one line naming the frame and both fixes, a
     non-zero exit and no output."""
-    from ipr.scene import Frame, write_scene
+    from ipr_shapes.scene import Frame, write_scene
 
     from .conftest import make_frames
 
@@ -378,7 +378,7 @@ def test_gravity_that_cannot_be_determined_is_said_clearly(tmp_path: Path):
     )
     for command in (["segment", str(scene), "-o", str(tmp_path / "out")], ["check", str(scene)]):
         completed = subprocess.run(
-            [sys.executable, "-m", "ipr", *command], capture_output=True, text=True
+            [sys.executable, "-m", "ipr_shapes", *command], capture_output=True, text=True
         )
         assert completed.returncode == EXIT_INPUT_ERROR
         error = completed.stderr
@@ -389,7 +389,7 @@ def test_gravity_that_cannot_be_determined_is_said_clearly(tmp_path: Path):
 
 
 def test_segment_and_check_take_the_up_direction(tmp_path: Path, capsys):
-    from ipr.scene import load_scene, write_scene
+    from ipr_shapes.scene import load_scene, write_scene
 
     from .conftest import make_frames
 

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ipr.cli import EXIT_INPUT_ERROR, main
+from ipr_shapes.cli import EXIT_INPUT_ERROR, main
 
 
 def _edit(path: Path, change) -> None:
@@ -36,7 +36,7 @@ def _refused(capsys, args: list[str], *parts: str) -> str:
 
 def _run(args: list[str], timeout: float = 60) -> subprocess.CompletedProcess:
     return subprocess.run(
-        [sys.executable, "-m", "ipr", *args], capture_output=True, text=True, timeout=timeout
+        [sys.executable, "-m", "ipr_shapes", *args], capture_output=True, text=True, timeout=timeout
     )
 
 
@@ -61,8 +61,8 @@ def test_implausible_pushes_are_refused_by_check(scene_dir: Path, capsys, change
 
 def test_a_slow_push_replays_in_bounded_time():
     """A push at the slowest plausible speed is simulated for at most push_max_s."""
-    from ipr.physics import PhysicsConfig, build_world
-    from ipr.scene import Push, Pusher
+    from ipr_shapes.physics import PhysicsConfig, build_world
+    from ipr_shapes.scene import Push, Pusher
 
     from .box_scene import box_mesh
 
@@ -161,7 +161,7 @@ def test_output_in_the_current_folder_or_a_full_disk_is_refused(
         _refused(capsys, ["segment", str(scene_dir), "-o", out, "--overwrite"], "current folder")
     import shutil
 
-    from ipr import atomic
+    from ipr_shapes import atomic
 
     real = shutil.disk_usage
     monkeypatch.setattr(
@@ -172,7 +172,7 @@ def test_output_in_the_current_folder_or_a_full_disk_is_refused(
 
 
 def test_stale_staging_of_a_killed_run_is_cleaned_and_a_live_ones_kept(tmp_path: Path):
-    from ipr.atomic import STAGING_TAG, _owner_tag, staged_directory
+    from ipr_shapes.atomic import STAGING_TAG, _owner_tag, staged_directory
 
     target = tmp_path / "result"
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
@@ -195,7 +195,7 @@ def test_stale_staging_of_a_killed_run_is_cleaned_and_a_live_ones_kept(tmp_path:
 def test_a_killed_runs_staging_folder_is_cleaned_by_the_next_run(scene_dir: Path, tmp_path):
     out = tmp_path / "seg"
     process = subprocess.Popen(
-        [sys.executable, "-m", "ipr", "segment", str(scene_dir), "-o", str(out)],
+        [sys.executable, "-m", "ipr_shapes", "segment", str(scene_dir), "-o", str(out)],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
     )
@@ -212,8 +212,8 @@ def test_a_killed_runs_staging_folder_is_cleaned_by_the_next_run(scene_dir: Path
 
 @pytest.mark.slow
 def test_warnings_go_to_stderr_not_stdout(tmp_path: Path):
-    from ipr.camera import look_at
-    from ipr.scene import Frame, write_scene
+    from ipr_shapes.camera import look_at
+    from ipr_shapes.scene import Frame, write_scene
 
     K = np.array([[150.0, 0, 79.5], [0, 150.0, 59.5], [0, 0, 1]])
     world_from_camera = look_at(np.array([0.0, -0.45, 0.45]), np.zeros(3))
@@ -238,9 +238,9 @@ def test_nothing_segmented_where_much_lies_off_the_planes_is_an_error(tmp_path: 
     off every plane is refused, naming the frame and the fixes; an empty table passes."""
     import dataclasses
 
-    from ipr.errors import SceneError
-    from ipr.perception import check_objects_found, perceive_scene
-    from ipr.scene import load_scene, write_scene
+    from ipr_shapes.errors import SceneError
+    from ipr_shapes.perception import check_objects_found, perceive_scene
+    from ipr_shapes.scene import load_scene, write_scene
 
     from .conftest import make_frames
 
@@ -282,7 +282,7 @@ def test_frames_option_chooses_frames_and_refuses_a_push_half_chosen(scene_dir: 
 
 @pytest.mark.slow
 def test_eval_refuses_implausible_ground_truth_and_results(tmp_path: Path, capsys):
-    from ipr.synth import SynthConfig, generate_scene
+    from ipr_shapes.synth import SynthConfig, generate_scene
 
     scene = generate_scene(tmp_path / "scenes", kind="static", seed=3,
                            config=SynthConfig(width=160, height=120))  # fmt: skip

@@ -7,12 +7,12 @@ import itertools
 import numpy as np
 import pytest
 
-from ipr.collision_checker import CollisionCheckerConfig, collision_checker
-from ipr.factor_graph import exact_marginals, gibbs_marginals
-from ipr.hypotheses import ConstraintConfig, HypothesisConfig
-from ipr.perception.free_space import FREE, SpaceMap
-from ipr.perception.types import Facet, PartialObject
-from ipr.result import load_result, write_posterior_result
+from ipr_shapes.collision_checker import CollisionCheckerConfig, collision_checker
+from ipr_shapes.factor_graph import exact_marginals, gibbs_marginals
+from ipr_shapes.hypotheses import ConstraintConfig, HypothesisConfig
+from ipr_shapes.perception.free_space import FREE, SpaceMap
+from ipr_shapes.perception.types import Facet, PartialObject
+from ipr_shapes.result import load_result, write_posterior_result
 
 from .box_scene import GRID, SUPPORT, partial_box, render_view
 

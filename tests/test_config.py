@@ -10,12 +10,12 @@ from pathlib import Path
 
 import pytest
 
-from ipr.cli import EXIT_INPUT_ERROR, build_parser, main
-from ipr.config import Config, config_digest, config_to_toml, read_config
-from ipr.errors import IprError
-from ipr.inference import InferenceConfig
-from ipr.likelihood import LikelihoodConfig
-from ipr.methods import DEFAULT_METHOD, METHODS, get_method
+from ipr_shapes.cli import EXIT_INPUT_ERROR, build_parser, main
+from ipr_shapes.config import Config, config_digest, config_to_toml, read_config
+from ipr_shapes.errors import IprError
+from ipr_shapes.inference import InferenceConfig
+from ipr_shapes.likelihood import LikelihoodConfig
+from ipr_shapes.methods import DEFAULT_METHOD, METHODS, get_method
 
 README = Path(__file__).resolve().parents[1] / "README.md"
 
@@ -112,7 +112,7 @@ def test_the_registry_is_what_the_cli_offers_and_the_readme_lists():
 
 def test_infer_help_describes_every_method():
     completed = subprocess.run(
-        [sys.executable, "-m", "ipr", "infer", "--help"], capture_output=True, text=True
+        [sys.executable, "-m", "ipr_shapes", "infer", "--help"], capture_output=True, text=True
     )
     assert completed.returncode == 0
     text = " ".join(completed.stdout.split())

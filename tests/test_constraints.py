@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ipr.hypotheses import UnaryTolerances
-from ipr.hypotheses.constraints import (
+from ipr_shapes.hypotheses import UnaryTolerances
+from ipr_shapes.hypotheses.constraints import (
     ConstraintConfig,
     OverlapCache,
     compatibility_matrix,
@@ -16,9 +16,9 @@ from ipr.hypotheses.constraints import (
     penetration_depth,
     unary_feasible,
 )
-from ipr.perception.free_space import FREE, SpaceMap, VoxelGrid
-from ipr.perception.types import KnownPlane
-from ipr.products import ShapeHypothesis
+from ipr_shapes.perception.free_space import FREE, SpaceMap, VoxelGrid
+from ipr_shapes.perception.types import KnownPlane
+from ipr_shapes.products import ShapeHypothesis
 
 from .box_scene import SUPPORT, box_mesh
 

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy.spatial import ConvexHull
 
-from ipr.perception.config import DenoiseConfig, PerceptionConfig
-from ipr.perception.denoise import object_plane_depth
+from ipr_shapes.perception.config import DenoiseConfig, PerceptionConfig
+from ipr_shapes.perception.denoise import object_plane_depth
 
 
 def _slanted_pair(noise_m: float = 0.002, seed: int = 0):

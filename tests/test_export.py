@@ -1,4 +1,4 @@
-"""ipr.export and `ipr export`: every format loads in the engine or reader it is for, with the
+"""ipr_shapes.export and `ipr-shapes export`: every format loads in the engine or reader it is for, with the
 masses, inertias, volumes and poses the manifest states; bad input is refused cleanly."""
 
 from __future__ import annotations
@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 import trimesh
 
-from ipr import voxels
-from ipr.carving import voxel_surface
-from ipr.cli import build_parser, main
-from ipr.errors import ResultError
-from ipr.export import (
+from ipr_shapes import voxels
+from ipr_shapes.carving import voxel_surface
+from ipr_shapes.cli import build_parser, main
+from ipr_shapes.errors import ResultError
+from ipr_shapes.export import (
     COLLISION_METHODS,
     FORMATS,
     ExportConfig,
@@ -26,9 +26,9 @@ from ipr.export import (
     export_result,
     load_export_manifest,
 )
-from ipr.export.formats import GLTF_FROM_WORLD
-from ipr.export.surface import is_lattice_mesh, smooth_surface
-from ipr.result import write_result
+from ipr_shapes.export.formats import GLTF_FROM_WORLD
+from ipr_shapes.export.surface import is_lattice_mesh, smooth_surface
+from ipr_shapes.result import write_result
 
 PITCH = voxels.DEFAULT_PITCH_M
 
@@ -374,7 +374,7 @@ def assert_refused(capsys, argv: list[str], words: str) -> None:
     assert main(argv) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1, err
-    assert err.startswith("ipr export: error:") and words in err, err
+    assert err.startswith("ipr-shapes export: error:") and words in err, err
 
 
 def test_a_malformed_result_is_refused_in_one_line_and_nothing_is_written(tmp_path, capsys):
@@ -434,7 +434,7 @@ def test_the_result_itself_is_never_the_output(tmp_path, capsys):
 
 
 def test_a_failure_while_writing_leaves_nothing(result_dir, tmp_path, monkeypatch):
-    from ipr.export import formats
+    from ipr_shapes.export import formats
 
     def fail(folder, scene, config):
         (folder / "scene.xml").write_text("half", encoding="utf-8")
@@ -505,7 +505,7 @@ def test_coacd_splits_a_concave_shape_into_convex_pieces(tmp_path):
 
 @pytest.mark.slow
 def test_a_generated_scene_s_ground_truth_exports_and_rests(tmp_path):
-    """End to end: ipr synth, ipr ground-truth, ipr export --format mjcf, one second in MuJoCo."""
+    """End to end: ipr-shapes synth, ipr-shapes ground-truth, ipr-shapes export --format mjcf, one second in MuJoCo."""
     assert main(["synth", str(tmp_path / "scenes"), "--kind", "static", "--seed", "3"]) == 0
     scene = tmp_path / "scenes" / "static_000000"
     assert main(["ground-truth", str(scene), "-o", str(tmp_path / "gt")]) == 0
@@ -576,13 +576,13 @@ def test_sdf_loads_in_libsdformat(exports, tmp_path):
 
 def test_exported_objects_wear_their_ids_colours(result_dir):
     """Each object's colour in the MJCF, URDF, SDF and GLB is its id's in the overlays and
-    report.html (``ipr.perception.output.palette``), not its position's."""
+    report.html (``ipr_shapes.perception.output.palette``), not its position's."""
     import dataclasses
     import xml.etree.ElementTree as ET
 
-    from ipr.export.formats import glb_scene, sdf_world, urdf_document
-    from ipr.export.mjcf import mjcf_document
-    from ipr.perception.output import palette
+    from ipr_shapes.export.formats import glb_scene, sdf_world, urdf_document
+    from ipr_shapes.export.mjcf import mjcf_document
+    from ipr_shapes.perception.output import palette
 
     scene = build_scene(result_dir)
     # Result ids are the segmentation's (1, 4, 9, ...): give the objects ids unlike positions.

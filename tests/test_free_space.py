@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ipr import voxels
-from ipr.perception.free_space import FREE, OCCUPIED, UNKNOWN, VoxelGrid, observe_space
-from ipr.scene import default_models_dir, load_ground_truth, load_model, load_scene
-from ipr.synth import SynthConfig, generate_scene
+from ipr_shapes import voxels
+from ipr_shapes.perception.free_space import FREE, OCCUPIED, UNKNOWN, VoxelGrid, observe_space
+from ipr_shapes.scene import default_models_dir, load_ground_truth, load_model, load_scene
+from ipr_shapes.synth import SynthConfig, generate_scene
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""View fusion: a later frame's view of a moved object registered into frame 0 (ipr.fusion)."""
+"""View fusion: a later frame's view of a moved object registered into frame 0 (ipr_shapes.fusion)."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from ipr.camera import backproject
-from ipr.fusion import (
+from ipr_shapes.camera import backproject
+from ipr_shapes.fusion import (
     FusedViews,
     FusionConfig,
     SweptCapsule,
@@ -17,8 +17,8 @@ from ipr.fusion import (
     register_view,
     tracked_free_spaces,
 )
-from ipr.perception.free_space import FREE, UNKNOWN, SpaceMap
-from ipr.scene import Push, Pusher
+from ipr_shapes.perception.free_space import FREE, UNKNOWN, SpaceMap
+from ipr_shapes.scene import Push, Pusher
 from tests.box_scene import BOX_HALF, SUPPORT, K, box_mesh, partial_box, render_view
 
 EYE = (0.2, -0.35, 0.3)
@@ -268,7 +268,7 @@ def test_registration_keeps_frame_0s_points_out_of_the_later_frames_free_space()
     # the patch at any quarter turn equally well. The later frame saw empty space on both
     # sides of the square along x: frame 0's patch can only lie along y there (turned a
     # quarter turn), not along x.
-    from ipr.perception.free_space import VoxelGrid
+    from ipr_shapes.perception.free_space import VoxelGrid
 
     long_side, short_side = np.linspace(-0.05, 0.05, 41), np.linspace(-0.02, 0.02, 17)
     reference = np.array([[x, y, 0.05] for x in long_side for y in short_side])

@@ -1,6 +1,6 @@
 """Fuzzing the entry points (issue 31, item 3): scene and result folders with mutated JSON values
 and types, corrupt and oversized PNGs and odd files (FIFO, folder, empty file, symlink loop).
-``ipr check``, ``ipr eval`` and ``ipr export`` must exit 0 or 2, say a failure in one line on
+``ipr-shapes check``, ``ipr-shapes eval`` and ``ipr-shapes export`` must exit 0 or 2, say a failure in one line on
 stderr without a traceback, leave no output behind and finish within a time bound.
 Deterministic (``derandomize``): the same cases on every run."""
 
@@ -22,7 +22,7 @@ hypothesis = pytest.importorskip("hypothesis")
 from hypothesis import HealthCheck, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
-from ipr.cli import main  # noqa: E402
+from ipr_shapes.cli import main  # noqa: E402
 
 #: Seconds one command may take on a mutated 160 x 120 scene.
 TIME_BOUND_S = 20
@@ -191,7 +191,7 @@ scene_mutations = st.lists(
 
 @pytest.fixture(scope="module")
 def base_scene(tmp_path_factory) -> Path:
-    from ipr.scene import Push, Pusher, write_scene
+    from ipr_shapes.scene import Push, Pusher, write_scene
 
     from .conftest import make_frames
 
@@ -251,8 +251,8 @@ result_mutations = st.lists(
 
 @pytest.fixture(scope="module")
 def base_result(tmp_path_factory) -> tuple[Path, Path]:
-    from ipr.ground_truth import write_ground_truth_result
-    from ipr.synth import SynthConfig, generate_scene
+    from ipr_shapes.ground_truth import write_ground_truth_result
+    from ipr_shapes.synth import SynthConfig, generate_scene
 
     folder = tmp_path_factory.mktemp("fuzz-result")
     scene = generate_scene(

@@ -8,7 +8,7 @@ from pathlib import Path
 from benchmarks import gallery
 from PIL import Image
 
-from ipr.scene import write_scene
+from ipr_shapes.scene import write_scene
 from tests.conftest import make_frames
 
 

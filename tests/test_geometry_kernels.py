@@ -1,4 +1,4 @@
-"""Each compiled geometry kernel (``ipr.geometry.kernels``) gives what the numpy expression it
+"""Each compiled geometry kernel (``ipr_shapes.geometry.kernels``) gives what the numpy expression it
 replaced gave: same bits where the kernel keeps numpy's order of operations, equal to rounding
 otherwise (stated per test). The perception kernels: ``test_kernels.py``.
 """
@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ipr.camera import backproject, look_at
-from ipr.geometry import kernels
+from ipr_shapes.camera import backproject, look_at
+from ipr_shapes.geometry import kernels
 
 
 def test_world_points_equal_backprojection_then_transform():

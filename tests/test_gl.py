@@ -14,21 +14,21 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 #: Imports every module of ipr, then renders in a fork-server worker, in this process through
-#: ipr.rendering, and through MuJoCo's own Renderer; prints what changed in os.environ.
+#: ipr_shapes.rendering, and through MuJoCo's own Renderer; prints what changed in os.environ.
 SCRIPT = """
 import importlib, json, multiprocessing, os, pkgutil
 before = dict(os.environ)
-import ipr
-for module in pkgutil.walk_packages(ipr.__path__, "ipr."):
-    if module.name != "ipr.__main__":  # runs the command
+import ipr_shapes
+for module in pkgutil.walk_packages(ipr_shapes.__path__, "ipr_shapes."):
+    if module.name != "ipr_shapes.__main__":  # runs the command
         importlib.import_module(module.name)
 import mujoco  # imported before any choice: MuJoCo picked its GL context with no MUJOCO_GL
 after_import = {k: v for k, v in os.environ.items() if before.get(k) != v}
 after_import.update({k: None for k in before if k not in os.environ})
 
 import numpy as np
-from ipr.camera import look_at
-from ipr.rendering import render_depth_and_ids
+from ipr_shapes.camera import look_at
+from ipr_shapes.rendering import render_depth_and_ids
 
 box = (np.array([[x, y, z] for x in (-.05, .05) for y in (-.05, .05) for z in (0, .1)]),
        np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
@@ -36,13 +36,13 @@ box = (np.array([[x, y, z] for x in (-.05, .05) for y in (-.05, .05) for z in (0
 K = np.array([[60.0, 0, 31.5], [0, 60.0, 23.5], [0, 0, 1]])
 args = ([box], [None], K, 64, 48, look_at(np.array([0.3, -0.3, 0.4]), np.zeros(3)))
 context = multiprocessing.get_context("forkserver")
-context.set_forkserver_preload(["ipr.inference.pool"])  # as the sampling pool does
+context.set_forkserver_preload(["ipr_shapes.inference.pool"])  # as the sampling pool does
 with context.Pool(1) as pool:
     worker_depth, _ = pool.apply(render_depth_and_ids, args)
     worker_gl = pool.apply(os.getenv, ("MUJOCO_GL",))
 depth, index = render_depth_and_ids(*args)
-import ipr.gl
-backend = ipr.gl.check_rendering()
+import ipr_shapes.gl
+backend = ipr_shapes.gl.check_rendering()
 print(json.dumps({
     "changed_by_import": after_import,
     "worker_sees_box": bool((worker_depth > 0).any()),

@@ -7,16 +7,16 @@ import dataclasses
 import numpy as np
 import pytest
 
-from ipr import voxels
-from ipr.hypotheses import (
+from ipr_shapes import voxels
+from ipr_shapes.hypotheses import (
     HypothesisConfig,
     ShapeHypothesis,
     generate_hypotheses,
     minimum_shape,
     volume_spread,
 )
-from ipr.perception.free_space import FREE, SpaceMap
-from ipr.perception.types import Facet, PartialObject
+from ipr_shapes.perception.free_space import FREE, SpaceMap
+from ipr_shapes.perception.types import Facet, PartialObject
 
 from .box_scene import BOX_HALF, GRID, SUPPORT, box_mesh, merged_space, partial_box, render_view
 
@@ -151,7 +151,7 @@ def test_deterministic_per_seed(oblique):
 def test_a_slow_machine_gets_the_same_hypotheses(oblique, monkeypatch):
     """No wall-clock limit by default: a clock that runs 100 s per reading (a heavily loaded
     machine) changes nothing; with ``timeout_s`` set the same clock simplifies the rest."""
-    import ipr.hypotheses.generate as module
+    import ipr_shapes.hypotheses.generate as module
 
     obj, space = oblique
     config = dataclasses.replace(CONFIG, count=6)

@@ -9,13 +9,13 @@ import time
 import numpy as np
 import pytest
 
-from ipr.camera import look_at
-from ipr.inference import InferenceConfig, infer_shapes
-from ipr.likelihood import LikelihoodConfig, observed_frames
-from ipr.physics import Body, PhysicsConfig, build_world
-from ipr.products import PreparedHypotheses, ShapeHypothesis
-from ipr.rendering import render_depth_and_ids
-from ipr.scene import Frame, Push, Pusher
+from ipr_shapes.camera import look_at
+from ipr_shapes.inference import InferenceConfig, infer_shapes
+from ipr_shapes.likelihood import LikelihoodConfig, observed_frames
+from ipr_shapes.physics import Body, PhysicsConfig, build_world
+from ipr_shapes.products import PreparedHypotheses, ShapeHypothesis
+from ipr_shapes.rendering import render_depth_and_ids
+from ipr_shapes.scene import Frame, Push, Pusher
 from tests.box_scene import BACKDROP, HEIGHT, SUPPORT, TABLE, WIDTH, K, box_mesh
 
 TRUE_HALF = np.array([0.05, 0.03, 0.02])
@@ -199,8 +199,8 @@ def test_stability_of_the_true_box_with_the_default_physics():
 
 
 def test_exhaustive_refuses_scenes_it_cannot_enumerate():
-    from ipr.errors import IprError
-    from ipr.inference import InferenceProblem, exhaustive_models
+    from ipr_shapes.errors import IprError
+    from ipr_shapes.inference import InferenceProblem, exhaustive_models
 
     observed = _push_scene()
     problem = InferenceProblem(
@@ -225,8 +225,8 @@ def test_exhaustive_refuses_scenes_it_cannot_enumerate():
 
 
 def test_completion_image_shows_the_input_beside_the_completed_objects():
-    from ipr.collision_checker import uniform_posteriors
-    from ipr.report import completion_image
+    from ipr_shapes.collision_checker import uniform_posteriors
+    from ipr_shapes.report import completion_image
 
     frame, _ = _frame(0, (0.0, -0.35, 0.3))
     posteriors = uniform_posteriors(_prepared(TRUE_BOX, TOP_SLAB))
@@ -241,7 +241,7 @@ def test_completion_image_shows_the_input_beside_the_completed_objects():
 
 def _fabricated_problem(count: int, compatible: dict | None = None, weighting="hypothesis"):
     """A problem of ``count`` objects with two candidates each, for estimators alone."""
-    from ipr.inference import InferenceProblem
+    from ipr_shapes.inference import InferenceProblem
 
     return InferenceProblem(
         ids=tuple(range(1, count + 1)),
@@ -260,14 +260,14 @@ def _fabricated_problem(count: int, compatible: dict | None = None, weighting="h
 
 
 def _result(index: int, choice, norms, log_q):
-    from ipr.inference import SampleResult
+    from ipr_shapes.inference import SampleResult
 
     norms = np.asarray(norms, float)[None, :]
     return SampleResult(index, tuple(choice), float(sum(log_q)), -1.0, 0.0, 0.0, 0, norms, log_q)
 
 
 def test_hypothesis_weighting_scores_each_candidate_by_its_own_evidence_not_its_draws():
-    from ipr.inference import marginals
+    from ipr_shapes.inference import marginals
 
     # Candidate 0 was drawn nine times, candidate 1 once (exploration 0.9 / 0.1), and
     # candidate 1 fits better by 0.01 of depth error norm.
@@ -285,7 +285,7 @@ def test_hypothesis_weighting_scores_each_candidate_by_its_own_evidence_not_its_
 
 
 def test_hypothesis_weighting_respects_the_pairwise_constraints():
-    from ipr.inference import marginals
+    from ipr_shapes.inference import marginals
 
     # Object 0's candidate 0 cannot coexist with object 1's candidate 1.
     compatible = {(0, 1): np.array([[True, False], [True, True]])}
@@ -303,9 +303,9 @@ def test_hypothesis_weighting_respects_the_pairwise_constraints():
 
 
 def test_a_joint_model_drawn_again_is_not_simulated_again():
-    from ipr.collision_checker import uniform_posteriors
-    from ipr.inference import Sampler, build_problem
-    from ipr.methods import METHODS
+    from ipr_shapes.collision_checker import uniform_posteriors
+    from ipr_shapes.inference import Sampler, build_problem
+    from ipr_shapes.methods import METHODS
 
     prepared = _prepared(TRUE_BOX, DEEP_BOX)
     problem, _ = build_problem(

@@ -14,11 +14,11 @@ import math
 import numpy as np
 import pytest
 
-from ipr.camera import look_at
-from ipr.collision_checker import uniform_posteriors
-from ipr.factor_graph import posterior_medoid
-from ipr.hypotheses import ConstraintConfig, OverlapCache, overlap_threshold
-from ipr.inference import (
+from ipr_shapes.camera import look_at
+from ipr_shapes.collision_checker import uniform_posteriors
+from ipr_shapes.factor_graph import posterior_medoid
+from ipr_shapes.hypotheses import ConstraintConfig, OverlapCache, overlap_threshold
+from ipr_shapes.inference import (
     InferenceConfig,
     InferenceProblem,
     Sampler,
@@ -28,12 +28,12 @@ from ipr.inference import (
     infer_shapes,
     marginals,
 )
-from ipr.likelihood import LikelihoodConfig, observed_frames
-from ipr.methods import METHODS
-from ipr.physics import Body, build_world
-from ipr.products import PreparedHypotheses, ShapeHypothesis
-from ipr.rendering import render_depth_and_ids
-from ipr.scene import Frame, Push, Pusher
+from ipr_shapes.likelihood import LikelihoodConfig, observed_frames
+from ipr_shapes.methods import METHODS
+from ipr_shapes.physics import Body, build_world
+from ipr_shapes.products import PreparedHypotheses, ShapeHypothesis
+from ipr_shapes.rendering import render_depth_and_ids
+from ipr_shapes.scene import Frame, Push, Pusher
 from tests.box_scene import BACKDROP, HEIGHT, SUPPORT, TABLE, WIDTH, K, box_mesh
 
 #: Decisive evidence: Eq. 2's alpha high enough that a visible mismatch rules a model out.
@@ -415,7 +415,7 @@ def test_pixels_under_the_robot_mask_are_no_evidence(push_scene):
 def _constructed_problem(weighting: str) -> InferenceProblem:
     """Two objects with two candidates each, uniform priors, Eq. 2 with alpha x decimation =
     1/m (so an object's log-likelihood term is minus its depth error norm)."""
-    from ipr.likelihood import ObservedFrames
+    from ipr_shapes.likelihood import ObservedFrames
 
     observed = ObservedFrames(
         (0,), (), np.zeros((1, 1, 1), np.float32), np.zeros((1, 1, 1), np.int32),

@@ -1,4 +1,4 @@
-"""Each compiled perception kernel (``ipr.perception.kernels``) gives what the numpy expression it
+"""Each compiled perception kernel (``ipr_shapes.perception.kernels``) gives what the numpy expression it
 replaced gave (the geometry kernels: ``test_geometry_kernels.py``).
 
 The references below are the earlier numpy implementations, kept here only to pin the results:
@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 from scipy.ndimage import uniform_filter
 
-from ipr.camera import backproject_pixels, look_at
-from ipr.geometry import kernels as geometry_kernels
-from ipr.perception import kernels
-from ipr.perception.denoise import objects_plane_depth
-from ipr.perception.facets import pixel_areas
+from ipr_shapes.camera import backproject_pixels, look_at
+from ipr_shapes.geometry import kernels as geometry_kernels
+from ipr_shapes.perception import kernels
+from ipr_shapes.perception.denoise import objects_plane_depth
+from ipr_shapes.perception.facets import pixel_areas
 
 
 def _normalise(vectors: np.ndarray) -> np.ndarray:
@@ -280,8 +280,8 @@ def _reference_borders(labels, points, depth_m, valid, gap_m, low, high):
 
 
 def test_container_borders_match_the_numpy_version_in_order():
-    from ipr.perception.config import PerceptionConfig
-    from ipr.perception.containers import _borders
+    from ipr_shapes.perception.config import PerceptionConfig
+    from ipr_shapes.perception.containers import _borders
 
     rng = np.random.default_rng(12)
     labels = np.zeros((60, 80), dtype=np.int32)

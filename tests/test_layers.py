@@ -18,7 +18,7 @@ def test_no_module_imports_itself_through_others():
     would otherwise hide one)."""
     import grimp
 
-    graph = grimp.build_graph("ipr")
+    graph = grimp.build_graph("ipr_shapes")
     modules = sorted(graph.modules)
     imports = {m: sorted(graph.find_modules_directly_imported_by(m)) for m in modules}
     order: dict[str, int] = {}

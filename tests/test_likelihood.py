@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ipr.likelihood import LikelihoodConfig, depth_error_norms, log_likelihood
+from ipr_shapes.likelihood import LikelihoodConfig, depth_error_norms, log_likelihood
 
 CONFIG = LikelihoodConfig(error_cap_m=0.1, occlusion_margin_m=0.01)
 

@@ -9,14 +9,14 @@ import numpy as np
 import pytest
 import trimesh
 
-from ipr import voxels
-from ipr.camera import invert_transform, look_at
-from ipr.data import ycbv_real_dir
-from ipr.ground_truth import write_ground_truth_result
-from ipr.metrics import evaluate, format_table, scores
-from ipr.rendering import render_depth_and_ids
-from ipr.result import load_result, write_result
-from ipr.scene import Frame, ObjectPose, load_ground_truth, load_model, write_scene
+from ipr_shapes import voxels
+from ipr_shapes.camera import invert_transform, look_at
+from ipr_shapes.data import ycbv_real_dir
+from ipr_shapes.ground_truth import write_ground_truth_result
+from ipr_shapes.metrics import evaluate, format_table, scores
+from ipr_shapes.rendering import render_depth_and_ids
+from ipr_shapes.result import load_result, write_result
+from ipr_shapes.scene import Frame, ObjectPose, load_ground_truth, load_model, write_scene
 
 K = np.array([[300.0, 0.0, 159.5], [0.0, 300.0, 119.5], [0.0, 0.0, 1.0]])
 WIDTH, HEIGHT = 320, 240
@@ -296,7 +296,7 @@ def test_object_order_does_not_matter(ycbv, tmp_path):
 
 
 def test_pixels_without_a_depth_reading_show_the_front_most_model():
-    from ipr.ground_truth import rendered_visible_pixel_counts
+    from ipr_shapes.ground_truth import rendered_visible_pixel_counts
 
     camera_from_model = _translation([0.0, 0.0, 0.6])  # a 10 cm cube 0.6 m ahead
     counts = {}

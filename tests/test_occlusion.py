@@ -1,14 +1,14 @@
-"""Joining pieces of one object cut apart by an occluder (ipr.perception.occlusion)."""
+"""Joining pieces of one object cut apart by an occluder (ipr_shapes.perception.occlusion)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from ipr.perception.config import OccludedPiecesConfig
-from ipr.perception.free_space import VoxelGrid, observe_space
-from ipr.perception.occlusion import join_occluded_pieces
-from ipr.perception.tracking import segment_features
-from ipr.perception.types import KnownPlane, PartialObject
+from ipr_shapes.perception.config import OccludedPiecesConfig
+from ipr_shapes.perception.free_space import VoxelGrid, observe_space
+from ipr_shapes.perception.occlusion import join_occluded_pieces
+from ipr_shapes.perception.tracking import segment_features
+from ipr_shapes.perception.types import KnownPlane, PartialObject
 from tests.test_segmentation import K, box, camera, render
 
 SUPPORT = KnownPlane("support", np.array([0.0, 0.0, 1.0]), 0.0, np.zeros((0, 3)))

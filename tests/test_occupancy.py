@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 import trimesh
 
-from ipr import voxels
-from ipr.camera import look_at
-from ipr.errors import ResultError
-from ipr.products import ObjectPosterior, ShapeHypothesis
-from ipr.result import (
+from ipr_shapes import voxels
+from ipr_shapes.camera import look_at
+from ipr_shapes.errors import ResultError
+from ipr_shapes.products import ObjectPosterior, ShapeHypothesis
+from ipr_shapes.result import (
     OCCUPANCY_FILE,
     load_occupancy,
     posterior_occupancy,
@@ -166,9 +166,9 @@ def _save(path, arrays):
 def test_free_voxels_counted_from_keys_match_the_map_at_the_centres():
     """unary_report looks keys up in a SpaceMap of the same pitch by their integer indices: the
     same states as ``state_at`` at the voxel centres, grid edges and outside included."""
-    from ipr import voxels as vox
-    from ipr.perception.free_space import FREE, SpaceMap, VoxelGrid
-    from ipr.perception.occupancy import unary_report
+    from ipr_shapes import voxels as vox
+    from ipr_shapes.perception.free_space import FREE, SpaceMap, VoxelGrid
+    from ipr_shapes.perception.occupancy import unary_report
 
     rng = np.random.default_rng(0)
     grid = VoxelGrid.around(np.array([-0.3, -0.2, -0.05]), np.array([0.25, 0.3, 0.3]), 0.005)

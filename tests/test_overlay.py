@@ -1,4 +1,4 @@
-"""The overlays of ``ipr segment`` and the gallery show the known planes: the support (what was
+"""The overlays of ``ipr-shapes segment`` and the gallery show the known planes: the support (what was
 taken as the table), what lies below it and walls, in their colours, under the objects."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from ipr.perception.output import (
+from ipr_shapes.perception.output import (
     KNOWN_BELOW,
     KNOWN_COLOURS,
     KNOWN_NONE,
@@ -19,7 +19,7 @@ from ipr.perception.output import (
     overlay_image,
     palette,
 )
-from ipr.perception.types import KnownPlane
+from ipr_shapes.perception.types import KnownPlane
 from tests.conftest import make_frames
 
 

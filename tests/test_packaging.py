@@ -74,9 +74,13 @@ def _imported(module: str, folder: str) -> bool:
     )
 
 
-def test_the_distribution_name_is_not_the_unrelated_ipr_on_the_index():
+def test_the_names_are_not_the_unrelated_ipr_on_the_index():
+    """On the package index "ipr" is another project with the import package and command "ipr":
+    the distribution, the command and the import package all carry another name."""
     assert PYPROJECT["project"]["name"] == "ipr-shapes"
-    assert PYPROJECT["project"]["scripts"] == {"ipr": "ipr.cli:main"}
+    assert PYPROJECT["project"]["scripts"] == {"ipr-shapes": "ipr_shapes.cli:main"}
+    packages = [p.name for p in (ROOT / "src").iterdir() if (p / "__init__.py").is_file()]
+    assert packages == ["ipr_shapes"]
 
 
 def test_every_supported_python_is_admitted_and_no_other():
@@ -87,7 +91,7 @@ def test_every_supported_python_is_admitted_and_no_other():
 
 @pytest.mark.parametrize(
     "group, folder",
-    [("runtime", "src/ipr"), ("bench", "benchmarks")],
+    [("runtime", "src/ipr_shapes"), ("bench", "benchmarks")],
 )
 def test_every_declared_dependency_is_imported(group: str, folder: str):
     project = PYPROJECT["project"]
@@ -183,7 +187,7 @@ def test_licence_and_citation_match_the_package():
     assert (ROOT / "LICENSE").read_text(encoding="utf-8").startswith("MIT License")
     citation = (ROOT / "CITATION.cff").read_text(encoding="utf-8")
     version = re.search(
-        r'^__version__ = "([^"]+)"', (ROOT / "src/ipr/__init__.py").read_text(), re.MULTILINE
+        r'^__version__ = "([^"]+)"', (ROOT / "src/ipr_shapes/__init__.py").read_text(), re.MULTILINE
     )
     assert re.search(rf"^version: {re.escape(version.group(1))}$", citation, re.MULTILINE)
     assert re.search(r"^license: MIT$", citation, re.MULTILINE)

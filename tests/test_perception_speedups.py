@@ -12,19 +12,19 @@ import pytest
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from ipr.camera import look_at
-from ipr.perception import supervoxels as supervoxels_module
-from ipr.perception.config import PerceptionConfig, SupervoxelsConfig
-from ipr.perception.facets import _components, mean_shift_directions, pixel_areas
-from ipr.perception.robot import robot_pixels
-from ipr.perception.supervoxels import _VoxelIndex, compute_supervoxels, organised_normals_at
-from ipr.perception.tracking import (
+from ipr_shapes.camera import look_at
+from ipr_shapes.perception import supervoxels as supervoxels_module
+from ipr_shapes.perception.config import PerceptionConfig, SupervoxelsConfig
+from ipr_shapes.perception.facets import _components, mean_shift_directions, pixel_areas
+from ipr_shapes.perception.robot import robot_pixels
+from ipr_shapes.perception.supervoxels import _VoxelIndex, compute_supervoxels, organised_normals_at
+from ipr_shapes.perception.tracking import (
     _colour_codes,
     _grouped_percentile,
     _shared_count,
     segment_features,
 )
-from ipr.scene import Frame, Push, Pusher
+from ipr_shapes.scene import Frame, Push, Pusher
 
 K = np.array([[300.0, 0.0, 79.5], [0.0, 300.0, 59.5], [0.0, 0.0, 1.0]])
 
@@ -293,7 +293,7 @@ def test_shared_count_is_the_size_of_the_intersection():
 def _reference_fill(labels, valid, max_distance_px):
     """Each pixel without depth takes the label of its nearest valid pixel within the distance
     (ties: first offset in row-major order), pixel by pixel."""
-    from ipr.perception.segmentation import _offsets_by_distance
+    from ipr_shapes.perception.segmentation import _offsets_by_distance
 
     result = labels.copy()
     height, width = labels.shape
@@ -311,7 +311,7 @@ def _reference_fill(labels, valid, max_distance_px):
 def test_fill_label_holes_matches_the_pixel_by_pixel_fill(seed):
     """Large holes far from every segment (skipped by the fast path), thin dropout bands between
     segments and the background, and a labelled pixel without depth."""
-    from ipr.perception.segmentation import fill_label_holes
+    from ipr_shapes.perception.segmentation import fill_label_holes
 
     rng = np.random.default_rng(seed)
     labels = np.zeros((60, 80), dtype=np.int32)

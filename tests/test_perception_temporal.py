@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ipr.camera import backproject
-from ipr.perception.config import PerceptionConfig, TemporalConfig
-from ipr.perception.segmentation import anchor_parts
-from ipr.perception.temporal import (
+from ipr_shapes.camera import backproject
+from ipr_shapes.perception.config import PerceptionConfig, TemporalConfig
+from ipr_shapes.perception.segmentation import anchor_parts
+from ipr_shapes.perception.temporal import (
     ARRIVED,
     NOT_COMPARED,
     REVEALED,
@@ -19,7 +19,7 @@ from ipr.perception.temporal import (
     same_plane,
     supervoxel_anchors,
 )
-from ipr.perception.types import KnownPlane, Supervoxels
+from ipr_shapes.perception.types import KnownPlane, Supervoxels
 
 K = np.array([[100.0, 0.0, 20.0], [0.0, 100.0, 15.0], [0.0, 0.0, 1.0]])
 
@@ -177,7 +177,7 @@ def test_walls_stay_and_a_new_wall_of_arrived_pixels_is_a_pushed_box():
 def test_a_frame_keeps_the_grouping_of_objects_that_did_not_move():
     from dataclasses import replace
 
-    from ipr.perception.segmentation import segment_frame
+    from ipr_shapes.perception.segmentation import segment_frame
     from tests.test_segmentation import box, camera, render, segment_of_point
 
     pose = camera()

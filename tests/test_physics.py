@@ -5,17 +5,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ipr.camera import look_at
-from ipr.perception.types import KnownPlane
-from ipr.physics import (
+from ipr_shapes.camera import look_at
+from ipr_shapes.perception.types import KnownPlane
+from ipr_shapes.physics import (
     Body,
     PhysicsConfig,
     build_world,
     decimated_camera,
     decimated_pixels,
 )
-from ipr.rendering import Renderer, render_depth_and_ids
-from ipr.scene import Push, Pusher
+from ipr_shapes.rendering import Renderer, render_depth_and_ids
+from ipr_shapes.scene import Push, Pusher
 from tests.box_scene import SUPPORT, box_mesh
 
 STANDING = box_mesh(np.array([0.05, 0.03, 0.02]), np.array([0.0, 0.0, 0.02]))
@@ -177,7 +177,7 @@ def test_settle_each_holds_each_shape_once_at_rest_and_measures_as_settle_does()
 
 
 def test_resting_drop_settles_only_the_clear_cases_and_agrees_with_the_simulation():
-    from ipr.physics import convex_centroid, resting_drop
+    from ipr_shapes.physics import convex_centroid, resting_drop
 
     def screened(mesh, obstacles=()):
         vertices = mesh[0]

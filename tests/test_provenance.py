@@ -1,5 +1,5 @@
 """What a result records about how it was made (``provenance``, ``config.toml``), and the run's
-progress as its observer hears it (``ipr.progress``) and as the command shows it."""
+progress as its observer hears it (``ipr_shapes.progress``) and as the command shows it."""
 
 from __future__ import annotations
 
@@ -12,15 +12,15 @@ from pathlib import Path
 
 import pytest
 
-import ipr
-from ipr import cli, pipeline
-from ipr import result as result_module
-from ipr.config import Config, config_digest, read_config
-from ipr.errors import IprError
-from ipr.pipeline import infer, run_pipeline
-from ipr.progress import ProgressEvent
-from ipr.result import load_result
-from ipr.scene import load_scene
+import ipr_shapes
+from ipr_shapes import cli, pipeline
+from ipr_shapes import result as result_module
+from ipr_shapes.config import Config, config_digest, read_config
+from ipr_shapes.errors import IprError
+from ipr_shapes.pipeline import infer, run_pipeline
+from ipr_shapes.progress import ProgressEvent
+from ipr_shapes.result import load_result
+from ipr_shapes.scene import load_scene
 
 
 def test_a_result_records_what_produced_it(scene_dir: Path, tmp_path: Path):
@@ -35,7 +35,7 @@ def test_a_result_records_what_produced_it(scene_dir: Path, tmp_path: Path):
         config=read_config(config_file),
     )
     provenance = load_result(out, load_meshes=False).extra["provenance"]
-    assert provenance["ipr_version"] == ipr.__version__
+    assert provenance["ipr_version"] == ipr_shapes.__version__
     assert provenance["distribution"] == "ipr-shapes"
     assert provenance["method"] == "collision-checker" and provenance["seed"] == 3
     assert provenance["budget"] == {"time_budget_s": 60.0, "samples": None, "workers": None}
@@ -100,7 +100,15 @@ def test_the_command_shows_no_progress_when_stderr_is_not_a_terminal(
     scene_dir: Path, tmp_path: Path
 ):
     completed = subprocess.run(
-        [sys.executable, "-m", "ipr", "segment", str(scene_dir), "-o", str(tmp_path / "seg")],
+        [
+            sys.executable,
+            "-m",
+            "ipr_shapes",
+            "segment",
+            str(scene_dir),
+            "-o",
+            str(tmp_path / "seg"),
+        ],
         capture_output=True,
         text=True,
     )

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from ipr.camera import look_at
-from ipr.rendering import Renderer, render_depth_and_ids
+from ipr_shapes.camera import look_at
+from ipr_shapes.rendering import Renderer, render_depth_and_ids
 
 pytest.importorskip("mujoco")
 

@@ -1,4 +1,4 @@
-"""``report.html`` (``ipr.report_html``): a self-contained page with the frames and pushes, the
+"""``report.html`` (``ipr_shapes.report_html``): a self-contained page with the frames and pushes, the
 segmentation with the result's ids, a 3-D view, hypotheses, timings and settings; the result's
 own ids and labels; and, slow, the page rendered by headless Chromium."""
 
@@ -17,12 +17,12 @@ import pytest
 import trimesh
 from PIL import Image
 
-from ipr.cli import EXIT_INPUT_ERROR, main
-from ipr.errors import ResultError
-from ipr.perception.output import label_png, palette
-from ipr.report_html import REPORT_FILE, result_labels, write_report
-from ipr.result import load_occupancy, load_result, write_result
-from ipr.scene import load_scene
+from ipr_shapes.cli import EXIT_INPUT_ERROR, main
+from ipr_shapes.errors import ResultError
+from ipr_shapes.perception.output import label_png, palette
+from ipr_shapes.report_html import REPORT_FILE, result_labels, write_report
+from ipr_shapes.result import load_occupancy, load_result, write_result
+from ipr_shapes.scene import load_scene
 
 BOX = ((-0.03, -0.03, 0.0), (0.03, 0.03, 0.03))  # the conftest scene's bump, metres
 
@@ -224,7 +224,7 @@ def test_a_result_without_labels_still_gets_a_page(scene_dir: Path, tmp_path: Pa
 
 
 def test_a_result_of_another_writer_needs_its_scene_named(scene_dir: Path, tmp_path: Path, capsys):
-    """No provenance (or one of another shape): ``ipr report`` asks for --scene in one line;
+    """No provenance (or one of another shape): ``ipr-shapes report`` asks for --scene in one line;
     further keys of unexpected shapes are left out of the page, not a crash."""
     box = _box(*BOX)
     odd = {"provenance": "by hand", "objects_summary": [{"object_id": "x"}], "inference": [1]}
@@ -266,10 +266,10 @@ def _browse(browser: str, page: Path, *args: str) -> subprocess.CompletedProcess
 
 @pytest.mark.slow
 def test_report_of_a_real_run_renders_in_headless_chromium(tmp_path: Path):
-    """``ipr infer`` on a pushed scene, then Chromium: the page's script ran to its end with no
+    """``ipr-shapes infer`` on a pushed scene, then Chromium: the page's script ran to its end with no
     error or console message, and the 3-D view shows the objects (their colours fill part of
-    the canvas). The result's ids are ``ipr segment``'s."""
-    from ipr.synth import SynthConfig, generate_scene
+    the canvas). The result's ids are ``ipr-shapes segment``'s."""
+    from ipr_shapes.synth import SynthConfig, generate_scene
 
     browser = _chromium()
     scene = generate_scene(

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 import trimesh
 
-from ipr.camera import look_at
-from ipr.data import ycbv_real_dir
-from ipr.errors import IprError, ResultError
-from ipr.ground_truth import write_ground_truth_result
-from ipr.result import (
+from ipr_shapes.camera import look_at
+from ipr_shapes.data import ycbv_real_dir
+from ipr_shapes.errors import IprError, ResultError
+from ipr_shapes.ground_truth import write_ground_truth_result
+from ipr_shapes.result import (
     RESULT_FORMAT,
     load_result,
     read_mesh,
@@ -273,7 +273,7 @@ def ycbv_scene():
 
 
 def test_ground_truth_result(ycbv_scene, tmp_path):
-    from ipr.scene import load_ground_truth, load_model, load_scene
+    from ipr_shapes.scene import load_ground_truth, load_model, load_scene
 
     out = write_ground_truth_result(ycbv_scene, tmp_path / "gt")
     result = load_result(out)

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from ipr.camera import invert_transform
-from ipr.errors import SceneError
-from ipr.scene import load_scene, write_scene
+from ipr_shapes.camera import invert_transform
+from ipr_shapes.errors import SceneError
+from ipr_shapes.scene import load_scene, write_scene
 
 from .conftest import make_frames
 

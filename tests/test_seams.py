@@ -1,4 +1,4 @@
-"""Cutting segments along straight colour seams (``ipr.perception.seams``, opt-in).
+"""Cutting segments along straight colour seams (``ipr_shapes.perception.seams``, opt-in).
 
 Two boxes of one height touching side by side have coplanar tops: the convexity graph sees one
 surface. Painted like real packed boxes (a thin dark gap between them), the seam setting cuts
@@ -13,9 +13,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from ipr.perception.config import PerceptionConfig, SeamsConfig
-from ipr.perception.segmentation import segment_frame
-from ipr.scene import Frame
+from ipr_shapes.perception.config import PerceptionConfig, SeamsConfig
+from ipr_shapes.perception.segmentation import segment_frame
+from ipr_shapes.scene import Frame
 from tests.test_segmentation import box, camera, render, segment_of_point
 
 ON = replace(PerceptionConfig(), seams=SeamsConfig(enabled=True))

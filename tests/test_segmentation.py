@@ -12,26 +12,26 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ipr.camera import look_at
-from ipr.perception.config import (
+from ipr_shapes.camera import look_at
+from ipr_shapes.perception.config import (
     ContainersConfig,
     PerceptionConfig,
     SegmentationConfig,
     WallsConfig,
 )
-from ipr.perception.planes import find_known_planes, static_geometry_mask
-from ipr.perception.robot import robot_pixels
-from ipr.perception.segmentation import (
+from ipr_shapes.perception.planes import find_known_planes, static_geometry_mask
+from ipr_shapes.perception.robot import robot_pixels
+from ipr_shapes.perception.segmentation import (
     SegmentationError,
     edge_weights,
     fill_label_holes,
     kmeans_labels,
     segment_frame,
 )
-from ipr.perception.supervoxels import compute_supervoxels, organised_normals
-from ipr.perception.types import Supervoxels
-from ipr.scene import Frame, Push, Pusher, load_scene
-from ipr.synth import SynthConfig, generate_scene
+from ipr_shapes.perception.supervoxels import compute_supervoxels, organised_normals
+from ipr_shapes.perception.types import Supervoxels
+from ipr_shapes.scene import Frame, Push, Pusher, load_scene
+from ipr_shapes.synth import SynthConfig, generate_scene
 
 WIDTH, HEIGHT = 320, 240
 K = np.array([[300.0, 0.0, 159.5], [0.0, 300.0, 119.5], [0.0, 0.0, 1.0]])
@@ -291,7 +291,7 @@ def test_pusher_pixels_are_removed():
 def container_scene(tmp_path_factory) -> Path:
     """A generated container scene with YCB objects (its figures below are of that scene; the
     procedural objects used without the shared data make another scene)."""
-    from ipr.data import shared_data_dir
+    from ipr_shapes.data import shared_data_dir
 
     if shared_data_dir() is None:
         pytest.skip("shared data (../shared/data or $IPR_DATA) is absent")
@@ -503,8 +503,8 @@ def test_a_mugs_inside_joins_the_mug_and_a_neighbour_stays_apart(shared_data: Pa
     loses the thin rim: the inside then meets the outer wall only where the wall hides it."""
     import trimesh
 
-    from ipr.rendering import render_depth_and_ids
-    from ipr.segmentation_metrics import segmentation_scores
+    from ipr_shapes.rendering import render_depth_and_ids
+    from ipr_shapes.segmentation_metrics import segmentation_scores
     from tests.box_scene import BACKDROP, TABLE, box_mesh
 
     mug = trimesh.load(shared_data / "ycb" / "models" / "025_mug.ply", process=False)

@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from ipr.errors import SceneError
-from ipr.rendering import Renderer
-from ipr.scene import Frame, load_scene, load_visible_pixel_counts
-from ipr.segmentation_metrics import (
+from ipr_shapes.errors import SceneError
+from ipr_shapes.rendering import Renderer
+from ipr_shapes.scene import Frame, load_scene, load_visible_pixel_counts
+from ipr_shapes.segmentation_metrics import (
     ground_truth_masks,
     id_consistency,
     id_consistency_counts,
@@ -217,7 +217,7 @@ def test_lost_ids_say_what_happened_to_each_pair() -> None:
 
 @pytest.mark.slow
 def test_ground_truth_masks_match_generator_counts(tmp_path: Path) -> None:
-    from ipr.synth import SynthConfig, generate_scene
+    from ipr_shapes.synth import SynthConfig, generate_scene
 
     scene_path = generate_scene(
         tmp_path,
@@ -256,7 +256,7 @@ def test_ground_truth_masks_on_real_frames(shared_data: Path) -> None:
 
 @pytest.mark.slow
 def test_ground_truth_masks_hide_objects_behind_generated_walls(tmp_path: Path) -> None:
-    from ipr.synth import SynthConfig, generate_scene
+    from ipr_shapes.synth import SynthConfig, generate_scene
 
     scene_path = generate_scene(
         tmp_path,
@@ -414,7 +414,7 @@ def test_malformed_mask_files_are_refused_naming_the_file(tmp_path: Path, breaks
 
 
 def test_ground_truth_masks_of_bins_real_are_its_mask_files() -> None:
-    from ipr.data import bins_real_dir
+    from ipr_shapes.data import bins_real_dir
 
     root = bins_real_dir()
     if root is None:

@@ -1,4 +1,4 @@
-"""Structure-aware candidates (ipr.hypotheses.structure): fits of generic families, and their
+"""Structure-aware candidates (ipr_shapes.hypotheses.structure): fits of generic families, and their
 candidates on rendered shapes (the box of box_scene, a cylinder standing or lying)."""
 
 from __future__ import annotations
@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 import trimesh
 
-from ipr import voxels
-from ipr.camera import backproject
-from ipr.hypotheses import HypothesisConfig, generate_hypotheses, structure
-from ipr.perception.types import PartialObject
+from ipr_shapes import voxels
+from ipr_shapes.camera import backproject
+from ipr_shapes.hypotheses import HypothesisConfig, generate_hypotheses, structure
+from ipr_shapes.perception.types import PartialObject
 
 from .box_scene import SUPPORT, K, box_mesh, partial_box, render_view
 from .test_hypotheses import assert_valid

@@ -1,14 +1,14 @@
-"""Benchmark suites: every suite is offered by ``ipr suite``, and the real suites list the
+"""Benchmark suites: every suite is offered by ``ipr-shapes suite``, and the real suites list the
 shared data's scenes in place (skipped when the data is absent)."""
 
 from __future__ import annotations
 
 import pytest
 
-from ipr.cli import build_parser
-from ipr.data import bins_real_dir
-from ipr.errors import IprError
-from ipr.suites import REAL, SUITES, suite_scenes
+from ipr_shapes.cli import build_parser
+from ipr_shapes.data import bins_real_dir
+from ipr_shapes.errors import IprError
+from ipr_shapes.suites import REAL, SUITES, suite_scenes
 
 
 def test_ipr_suite_offers_every_suite() -> None:

@@ -1,4 +1,4 @@
-"""The support is the plane the objects rest on, not the largest plane (``ipr.geometry.support``):
+"""The support is the plane the objects rest on, not the largest plane (``ipr_shapes.geometry.support``):
 a table seen with the floor around it, boxes packed in a bin whose floor is hidden, a plain
 table; and the perception keeps the choice across frames."""
 
@@ -7,9 +7,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ipr.camera import backproject, invert_transform, look_at
-from ipr.geometry.planes import fit_plane_ransac
-from ipr.geometry.support import choose_support
+from ipr_shapes.camera import backproject, invert_transform, look_at
+from ipr_shapes.geometry.planes import fit_plane_ransac
+from ipr_shapes.geometry.support import choose_support
 
 WIDTH, HEIGHT = 160, 120
 K = np.array([[150.0, 0.0, WIDTH / 2 - 0.5], [0.0, 150.0, HEIGHT / 2 - 0.5], [0.0, 0.0, 1.0]])
@@ -149,7 +149,7 @@ def test_a_table_with_objects_keeps_the_largest_plane_exactly():
 
 
 def test_no_choice_without_candidates():
-    from ipr.geometry.support import SupportChoiceConfig
+    from ipr_shapes.geometry.support import SupportChoiceConfig
 
     depth = render(TABLE_SCENE, TABLE_CAMERA)
     grid = backproject(depth, K)
@@ -162,9 +162,9 @@ def test_no_choice_without_candidates():
 def test_scene_and_perception_agree_on_the_table_and_keep_it_in_later_frames(tmp_path):
     """Without camera poses, the loader builds the world on the table (not the floor); the
     perception finds the same support in frame 0 and keeps it in frame 1."""
-    from ipr.perception.config import PerceptionConfig
-    from ipr.perception.planes import find_support_plane
-    from ipr.scene import Frame, load_scene, write_scene
+    from ipr_shapes.perception.config import PerceptionConfig
+    from ipr_shapes.perception.planes import find_support_plane
+    from ipr_shapes.scene import Frame, load_scene, write_scene
 
     depth = render(TABLE_SCENE, TABLE_CAMERA)
     rgb = np.full((HEIGHT, WIDTH, 3), 128, np.uint8)

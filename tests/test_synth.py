@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from ipr.camera import apply_transform, project
-from ipr.data import ycb_models_dir
-from ipr.scene import load_ground_truth, load_model, load_scene
-from ipr.synth import (
+from ipr_shapes.camera import apply_transform, project
+from ipr_shapes.data import ycb_models_dir
+from ipr_shapes.scene import load_ground_truth, load_model, load_scene
+from ipr_shapes.synth import (
     ARRANGEMENTS,
     GenerationError,
     SynthConfig,
@@ -21,14 +21,14 @@ from ipr.synth import (
     generate_scenes,
     scene_seed,
 )
-from ipr.synth.catalogue import (
+from ipr_shapes.synth.catalogue import (
     PROCEDURAL_FIRST_ID,
     load_ycb_catalogue,
     procedural_catalogue,
     write_bop_models,
     ycb_pool,
 )
-from ipr.synth.sensor import depth_sigma, noisy_depth
+from ipr_shapes.synth.sensor import depth_sigma, noisy_depth
 
 YCB = ycb_models_dir()
 needs_ycb = pytest.mark.skipif(YCB is None, reason="shared YCB models not found (../shared/data)")

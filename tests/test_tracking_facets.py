@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ipr.camera import backproject
-from ipr.perception.config import PerceptionConfig, TrackingConfig
-from ipr.perception.facets import mean_shift_directions, object_facets, pixel_areas
-from ipr.perception.tracking import (
+from ipr_shapes.camera import backproject
+from ipr_shapes.perception.config import PerceptionConfig, TrackingConfig
+from ipr_shapes.perception.facets import mean_shift_directions, object_facets, pixel_areas
+from ipr_shapes.perception.tracking import (
     assign_segments,
     contact_pixels,
     merge_split_pieces,

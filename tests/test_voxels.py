@@ -7,8 +7,8 @@ import pytest
 import trimesh
 from scipy.spatial.transform import Rotation
 
-from ipr import voxels
-from ipr.data import ycb_models_dir
+from ipr_shapes import voxels
+from ipr_shapes.data import ycb_models_dir
 
 P = voxels.DEFAULT_PITCH_M
 

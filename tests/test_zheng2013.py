@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ipr import voxels
-from ipr.baselines import ZhengConfig, zheng2013
-from ipr.baselines.zheng2013 import manhattan_frame
-from ipr.perception.free_space import FREE
-from ipr.perception.types import Facet, PartialObject
-from ipr.result import load_result, write_posterior_result
+from ipr_shapes import voxels
+from ipr_shapes.baselines import ZhengConfig, zheng2013
+from ipr_shapes.baselines.zheng2013 import manhattan_frame
+from ipr_shapes.perception.free_space import FREE
+from ipr_shapes.perception.types import Facet, PartialObject
+from ipr_shapes.result import load_result, write_posterior_result
 
 from .box_scene import SUPPORT, box_mesh, partial_box, render_view
 
@@ -51,7 +51,7 @@ def test_a_partly_seen_box_is_completed_to_its_true_extent(oblique):
 
 
 def _hull(points):
-    from ipr.geometry.convex import convex_mesh
+    from ipr_shapes.geometry.convex import convex_mesh
 
     vertices, faces, _ = convex_mesh(points)
     return vertices, faces
@@ -130,7 +130,7 @@ def test_an_overhanging_object_stands_only_grouped_with_what_supports_it():
     assert outcome.groups == [(1, 2)]
     assert outcome.unstable == ()
     # Alone, the plank does fall: the grouping was needed.
-    from ipr.baselines.zheng2013 import _unstable
+    from ipr_shapes.baselines.zheng2013 import _unstable
 
     alone = _unstable([shapes[1], shapes[2]], (SUPPORT,), ZhengConfig())
     assert alone.tolist() == [True, False]
@@ -175,7 +175,7 @@ def test_the_result_is_a_normal_result(tmp_path, oblique):
 
 
 def test_bad_settings_are_refused():
-    from ipr.errors import IprError
+    from ipr_shapes.errors import IprError
 
     with pytest.raises((IprError, ValueError)):
         ZhengConfig(frame="sideways")
@@ -185,11 +185,11 @@ def test_bad_settings_are_refused():
 
 @pytest.mark.slow
 def test_ipr_infer_zheng2013_end_to_end_then_eval(tmp_path):
-    """``ipr infer --method zheng2013`` on a synthetic pile writes a result ``ipr eval`` scores."""
+    """``ipr-shapes infer --method zheng2013`` on a synthetic pile writes a result ``ipr-shapes eval`` scores."""
     import json
 
-    from ipr.cli import main
-    from ipr.synth import SynthConfig, generate_scene
+    from ipr_shapes.cli import main
+    from ipr_shapes.synth import SynthConfig, generate_scene
 
     scene = generate_scene(
         tmp_path / "scenes", kind="static", seed=2, arrangement="table",

@@ -1,5 +1,0 @@
-import sys
-
-from ipr.cli import main
-
-sys.exit(main())

@@ -1,9 +1,0 @@
-"""Other authors' methods the paper compares IPR with, reimplemented on ipr's perception.
-
-- ``zheng2013``: Zheng et al., "Beyond point clouds: scene understanding by reasoning geometry
-  and physics", CVPR 2013 (the paper's first baseline, ``ipr infer --method zheng2013``).
-"""
-
-from ipr.baselines.zheng2013 import ZhengConfig, ZhengOutcome, zheng2013
-
-__all__ = ["ZhengConfig", "ZhengOutcome", "zheng2013"]

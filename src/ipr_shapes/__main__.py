@@ -1,0 +1,5 @@
+import sys
+
+from ipr_shapes.cli import main
+
+sys.exit(main())

@@ -1,0 +1,231 @@
+"""The paper's Collision Checker baseline: IPR with a uniform prior and no physics.
+
+Every object gets hypotheses (``ipr_shapes.hypotheses.prepare_hypotheses``: Algorithm 1 and the unary
+constraints); the posterior over joint models is uniform over those that satisfy
+Constraints(X), and each object's output is read from its marginal over its own hypotheses.
+
+- Unary-infeasible hypotheses (below the support, in seen-free space, in walls) get probability
+  0. An object with no feasible hypothesis is represented by its minimum shape alone, with
+  probability 1.
+- The uniform distribution factorises over the connected components of the interaction graph
+  (objects some pair of whose hypotheses penetrate beyond the tolerance); each component's
+  marginals are exact by variable elimination (``ipr_shapes.factor_graph``) unless its largest table
+  would exceed ``max_exact_table`` entries, then sampled by Gibbs chains.
+- No feasible joint assignment in a component (noisy or concave objects): the pairwise
+  tolerance of that component is doubled, up to ``relax_steps`` times, then its pairwise
+  constraints are dropped (each object uniform over its feasible hypotheses); logged.
+- Output shape: the posterior medoid under voxel IoU (the Bayes choice under IoU loss), among
+  hypotheses with non-zero probability; the minimum shape when no hypothesis is feasible.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from ipr_shapes.checks import Checks, Interval, check_fields
+from ipr_shapes.factor_graph import (
+    TableTooLarge,
+    elimination_table_size,
+    exact_marginals,
+    gibbs_marginals,
+    interaction_components,
+    posterior_medoid,
+)
+from ipr_shapes.hypotheses import (
+    ConstraintConfig,
+    HypothesisConfig,
+    prepare_hypotheses,
+)
+from ipr_shapes.perception.free_space import SeenSpace, SpaceMap
+from ipr_shapes.perception.types import KnownPlane, PartialObject
+from ipr_shapes.products import ObjectPosterior, PreparedHypotheses
+from ipr_shapes.progress import ProgressCallback
+
+logger = logging.getLogger(__name__)
+
+METHOD = "collision-checker"
+
+
+@dataclass(frozen=True)
+class CollisionCheckerConfig:
+    """Settings of the Collision Checker.
+
+    Attributes:
+        max_exact_table: largest elimination table (entries) for exact marginals.
+        gibbs_chains: restarts of the sampler per component.
+        gibbs_sweeps: sweeps per chain (each visits every object of the component once).
+        gibbs_burn_in: sweeps after a chain first becomes feasible before counting.
+        relax_steps: doublings of the pairwise tolerance before dropping a component's
+            pairwise constraints when nothing is jointly feasible.
+    """
+
+    CHECKS: ClassVar[Checks] = {
+        "max_exact_table": Interval(1, None, integer=True),
+        "gibbs_chains": Interval(1, None, integer=True),
+        "gibbs_sweeps": Interval(1, None, integer=True),
+        "gibbs_burn_in": Interval(0, None, integer=True),
+        "relax_steps": Interval(0, None, integer=True),
+    }
+
+    max_exact_table: int = 2_000_000
+    gibbs_chains: int = 4
+    gibbs_sweeps: int = 300
+    gibbs_burn_in: int = 30
+    relax_steps: int = 3
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+# --------------------------------------------------------------------------------------------
+# Marginals of the uniform distribution over feasible joint assignments
+
+
+def _component_marginals(
+    component: list[int],
+    depths: Mapping[tuple[int, int], np.ndarray],
+    thresholds: Mapping[tuple[int, int], float],
+    sizes: Mapping[int, int],
+    config: CollisionCheckerConfig,
+    rng: np.random.Generator,
+    deadline: float,
+) -> tuple[dict[int, np.ndarray], str]:
+    """Marginals of one component and how they were obtained (module doc)."""
+    inside = [pair for pair in depths if pair[0] in component and pair[1] in component]
+    for step in range(config.relax_steps + 1):
+        edges = {pair: depths[pair] <= thresholds[pair] * 2.0**step for pair in inside}
+        edges = {pair: m for pair, m in edges.items() if not m.all()}
+        exact = elimination_table_size(component, edges, sizes) <= config.max_exact_table
+        if exact and len(component) <= 52:  # einsum's sublist format has 52 indices
+            try:
+                marginals = exact_marginals(component, edges, sizes, config.max_exact_table)
+                how = "exact"
+            except TableTooLarge:
+                exact = False
+        if not exact or len(component) > 52:
+            marginals = gibbs_marginals(
+                component, edges, sizes, rng, deadline,
+                chains=config.gibbs_chains, sweeps=config.gibbs_sweeps,
+                burn_in=config.gibbs_burn_in,
+            )  # fmt: skip
+            how = "gibbs"
+        if marginals is not None:
+            if step:
+                logger.info(
+                    "objects %s: feasible only with %gx the overlap tolerance", component, 2**step
+                )
+                how = f"relaxed-{how}"
+            return marginals, how
+    logger.warning(
+        "objects %s: no jointly feasible assignment even with relaxed tolerances; their "
+        "pairwise constraints are dropped",
+        component,
+    )
+    return {i: np.full(sizes[i], 1.0 / sizes[i]) for i in component}, "dropped"
+
+
+# --------------------------------------------------------------------------------------------
+# Public API
+
+
+def uniform_posteriors(
+    prepared: PreparedHypotheses,
+    config: CollisionCheckerConfig | None = None,
+    rng: np.random.Generator | None = None,
+    deadline: float = np.inf,
+) -> list[ObjectPosterior]:
+    """The Collision Checker's marginals from prepared hypotheses (module doc): uniform over
+    jointly feasible joint models; the Gibbs sampler stops at ``deadline``
+    (``time.perf_counter()`` seconds)."""
+    config = config or CollisionCheckerConfig()
+    rng = rng if rng is not None else np.random.default_rng(0)
+    ids, generated, candidates = prepared.ids, prepared.generated, prepared.candidates
+    sizes = {i: len(candidates[i]) for i in ids}
+    marginals: dict[int, np.ndarray] = {}
+    how: dict[int, str] = {}
+    for component in interaction_components(ids, prepared.depths):
+        if len(component) == 1:
+            i = component[0]
+            marginals[i] = np.full(sizes[i], 1.0 / sizes[i])
+            how[i] = "independent"
+            continue
+        result, method = _component_marginals(
+            component, prepared.depths, prepared.thresholds, sizes, config, rng, deadline
+        )
+        for i in component:
+            marginals[i], how[i] = result[i], method
+
+    posteriors = []
+    for i in ids:
+        hyps = generated[i]
+        probabilities = np.zeros(len(hyps))
+        probabilities[candidates[i]] = marginals[i]
+        probabilities /= probabilities.sum()
+        inference = "minimum" if hyps[0].index == -1 else how[i]
+        posteriors.append(
+            ObjectPosterior(
+                i,
+                hyps,
+                probabilities,
+                posterior_medoid(hyps, probabilities),
+                prepared.minima[i],
+                inference,
+                prepared.seconds[i],
+            )
+        )
+    return posteriors
+
+
+def collision_checker(
+    objects: tuple[PartialObject, ...],
+    space: SpaceMap | None,
+    planes: tuple[KnownPlane, ...],
+    config: CollisionCheckerConfig | None = None,
+    rng: np.random.Generator | None = None,
+    time_budget_s: float | None = None,
+    object_spaces: Mapping[int, SeenSpace] | None = None,
+    *,
+    hypotheses: HypothesisConfig | None = None,
+    constraints: ConstraintConfig | None = None,
+    progress: ProgressCallback | None = None,
+) -> list[ObjectPosterior]:
+    """Marginal shape posteriors of the objects of one frame (frame 0) under a uniform prior
+    restricted to jointly feasible models (module doc).
+
+    Args:
+        objects: the frame's partial objects (distinct ids).
+        space: the frame's free-space map (None: no free-space constraint).
+        planes: the frame's support and walls.
+        config: settings of the marginals (defaults: ``CollisionCheckerConfig()``).
+        rng: random source (default: seeded from ``hypotheses.seed``).
+        time_budget_s: total seconds; generation gets ``hypotheses.budget_share`` of it (split
+            over the objects, capping their timeouts) and the sampler stops at the end of it.
+        object_spaces: per object id, a seen-free space replacing ``space`` for that object
+            (``prepare_hypotheses``).
+        hypotheses, constraints: settings of generation and of the constraints (defaults).
+        progress: observer of the hypotheses' progress (``ipr_shapes.progress``).
+
+    Returns:
+        One ObjectPosterior per object, in the order of ``objects``.
+    """
+    config = config or CollisionCheckerConfig()
+    hypotheses = hypotheses or HypothesisConfig()
+    rng = rng if rng is not None else np.random.default_rng(hypotheses.seed)
+    started = time.perf_counter()
+    deadline = np.inf if time_budget_s is None else started + time_budget_s
+    generation_rng, sampler_rng = rng.spawn(2)
+    prepared = prepare_hypotheses(
+        objects, space, planes, hypotheses, constraints, generation_rng, time_budget_s,
+        object_spaces, progress,
+    )  # fmt: skip
+    posteriors = uniform_posteriors(prepared, config, sampler_rng, deadline)
+    logger.debug(
+        "collision checker: %d objects in %.3f s", len(objects), time.perf_counter() - started
+    )
+    return posteriors

@@ -1,0 +1,158 @@
+"""Compiled inner loops (numba) of the geometry every stage shares: world points and planes.
+
+The world points of a frame (``Frame.points_world``, used by the scene loader's callers and by
+every stage after it) and the scoring, inlier search and moments of the RANSAC plane fit
+(``ipr_shapes.geometry.planes.fit_plane_ransac``). The small helpers ``_rotated`` (the FMA order of
+numpy's ``points @ R.T + t``), ``_dot`` and ``_columns`` are also called by the perception
+kernels (``ipr_shapes.perception.kernels``), so that a plane distance or a world point is one
+expression everywhere.
+
+Why compiled: on the 2-core cloud machines ipr is measured on, numpy's per-pixel arithmetic is
+bound by memory traffic: each operator of an expression makes a full-size temporary, and a
+640x480 frame's (H, W, 3) float64 points are 7 MB. A loop compiled by numba does the same
+arithmetic in one pass with no temporaries (docs/DESIGN_NOTES.md, "Compiled kernels"). Each
+kernel here states the numpy expression it replaces; ``tests/test_geometry_kernels.py`` pins
+every one against that expression.
+
+Kernels are compiled on first use and cached on disk (``cache=True``, in ``__pycache__`` or
+``NUMBA_CACHE_DIR``). numba checks a cached kernel against its own source file only: after
+editing a helper here, clear the cache of ``ipr_shapes/perception/kernels.py`` too (its kernels have
+the helpers compiled in). ``NUMBA_DISABLE_JIT=1`` runs them as plain Python, for debugging.
+This module imports numba, which is slow to import: modules that must start fast
+(``ipr_shapes.scene``, ``ipr_shapes.geometry.planes``) import it inside the functions that need it.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+from llvmlite import ir
+from numba import types
+from numba.extending import intrinsic
+
+# nogil: callers may run perception in threads; no fastmath: the same IEEE arithmetic as numpy.
+_jit = numba.njit(cache=True, nogil=True)
+
+
+@intrinsic
+def _fused_multiply_add(typing_context, a, b, c):
+    """a * b + c rounded once (LLVM's fma; Python 3.11 has no math.fma)."""
+    signature = types.float64(types.float64, types.float64, types.float64)
+
+    def codegen(context, builder, signature, arguments):
+        double = ir.DoubleType()
+        function = builder.module.declare_intrinsic(
+            "llvm.fma", [double], ir.FunctionType(double, [double, double, double])
+        )
+        return builder.call(function, arguments)
+
+    return signature, codegen
+
+
+@_jit
+def _rotated(x: float, y: float, z: float, transform: np.ndarray, axis: int) -> float:
+    """Coordinate ``axis`` of transform[:3, :3] @ (x, y, z) + transform[:3, 3], with the products
+    accumulated by fused multiply-adds in x, y, z order as OpenBLAS's double-precision kernels
+    accumulate them on x86-64 CPUs with FMA: the same bits as numpy's ``points @ R.T + t``
+    there (a plain sum differs in the last bit, which can flip a borderline segment), equal to
+    rounding elsewhere."""
+    accumulated = x * transform[axis, 0]
+    accumulated = _fused_multiply_add(y, transform[axis, 1], accumulated)
+    accumulated = _fused_multiply_add(z, transform[axis, 2], accumulated)
+    return accumulated + transform[axis, 3]
+
+
+@_jit
+def _dot(rows: np.ndarray, index: int, vector: np.ndarray) -> float:
+    """rows[index] . vector for (N, 3) rows and a (3,) vector, summed in x, y, z order (the
+    plane distances and facing tests of the kernels here and in ``ipr_shapes.perception.kernels``
+    all take this one product)."""
+    return rows[index, 0] * vector[0] + rows[index, 1] * vector[1] + rows[index, 2] * vector[2]
+
+
+@_jit
+def world_points(depth_m: np.ndarray, K: np.ndarray, world_from_camera: np.ndarray) -> np.ndarray:
+    """(H, W, 3) float64 world points (m) of every pixel of a (H, W) depth image (m) with
+    intrinsics K (3, 3) and a 4x4 world-from-camera transform; meaningless where depth is 0.
+
+    ``backproject(depth_m, K) @ R.T + t`` in one pass (``_rotated``: the same bits)."""
+    height, width = depth_m.shape
+    out = np.empty((height, width, 3))
+    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+    for row in range(height):
+        for col in range(width):
+            z = np.float64(depth_m[row, col])
+            x = (col - cx) / fx * z
+            y = (row - cy) / fy * z
+            for axis in range(3):
+                out[row, col, axis] = _rotated(x, y, z, world_from_camera, axis)
+    return out
+
+
+@_jit
+def plane_inlier_counts(
+    points: np.ndarray, normals: np.ndarray, offsets: np.ndarray, threshold_m: float
+) -> np.ndarray:
+    """(H,) int64 count of the (N, 3) points within ``threshold_m`` of each of H planes
+    {x : normals[h] . x + offsets[h] = 0} (unit (H, 3) normals): RANSAC's scores,
+    ``(np.abs(points @ normals.T + offsets) < threshold_m).sum(axis=0)`` without the (N, H)
+    arrays."""
+    xs, ys, zs = _columns(points)
+    counts = np.zeros(normals.shape[0], dtype=np.int64)
+    for h in range(normals.shape[0]):
+        n0, n1, n2, offset = normals[h, 0], normals[h, 1], normals[h, 2], offsets[h]
+        count = 0
+        for p in range(xs.shape[0]):  # branch-free: the compiler vectorises it
+            count += abs(xs[p] * n0 + ys[p] * n1 + zs[p] * n2 + offset) < threshold_m
+        counts[h] = count
+    return counts
+
+
+@_jit
+def _columns(points: np.ndarray):
+    """The three columns of (N, 3) ``points`` as contiguous (N,) float64 arrays."""
+    count = points.shape[0]
+    xs, ys, zs = np.empty(count), np.empty(count), np.empty(count)
+    for p in range(count):
+        xs[p], ys[p], zs[p] = points[p, 0], points[p, 1], points[p, 2]
+    return xs, ys, zs
+
+
+@_jit
+def plane_inliers(
+    points: np.ndarray, normal: np.ndarray, offset: float, threshold_m: float
+) -> np.ndarray:
+    """(K,) int64 indices of the (N, 3) points within ``threshold_m`` of the plane
+    {x : normal . x + offset = 0}, ascending: ``np.flatnonzero(np.abs(points @ normal +
+    offset) < threshold_m)`` in one pass."""
+    found = np.empty(points.shape[0], dtype=np.int64)
+    count = 0
+    for p in range(points.shape[0]):
+        if abs(_dot(points, p, normal) + offset) < threshold_m:
+            found[count] = p
+            count += 1
+    return found[:count].copy()
+
+
+@_jit
+def centred_scatter(points: np.ndarray, indices: np.ndarray):
+    """Centroid (3,) and scatter matrix (3, 3) (sum of outer products of the centred points)
+    of the (N, 3) points at ``indices`` (K,): a plane fit's moments, without gathering them."""
+    centroid = np.zeros(3)
+    for k in range(indices.shape[0]):
+        for axis in range(3):
+            centroid[axis] += points[indices[k], axis]
+    centroid /= max(indices.shape[0], 1)
+    scatter = np.zeros((3, 3))
+    for k in range(indices.shape[0]):
+        d0 = points[indices[k], 0] - centroid[0]
+        d1 = points[indices[k], 1] - centroid[1]
+        d2 = points[indices[k], 2] - centroid[2]
+        scatter[0, 0] += d0 * d0
+        scatter[0, 1] += d0 * d1
+        scatter[0, 2] += d0 * d2
+        scatter[1, 1] += d1 * d1
+        scatter[1, 2] += d1 * d2
+        scatter[2, 2] += d2 * d2
+    scatter[1, 0], scatter[2, 0], scatter[2, 1] = scatter[0, 1], scatter[0, 2], scatter[1, 2]
+    return centroid, scatter

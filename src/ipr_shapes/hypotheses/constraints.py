@@ -1,0 +1,293 @@
+"""Geometric constraints on hypotheses and joint models (paper Sec. IV-C, Constraints(X)).
+
+A joint model picks one hypothesis per object. It is feasible when no two chosen shapes
+intersect, none occupies space seen to be free in frame 0, and nothing is below the support or
+inside a known wall. Tolerances absorb sensor noise: observed surfaces are a few millimetres off,
+so two objects in contact may appear to overlap slightly.
+
+Overlap measure: penetration depth (m), computed exactly by MuJoCo's ``mj_geomDistance``
+between convex meshes, all of a scene's hypotheses compiled once into one model. A scene of 8
+objects x 32 hypotheses has up to 28 x 1024 pairs, and only this query, far faster per pair
+than manifold3d's exact intersection volume, fits the per-object budget (docs/DESIGN_NOTES.md,
+"Overlap by penetration depth"). Depth is also the better tolerance: noise is a distance (mm),
+whereas the volume of a noisy contact grows with the contact's area. ``intersection_volume``
+(manifold3d) stays available for reporting and tests.
+
+A bounding-box pre-test skips most pairs: the depth along the axis where the boxes overlap
+least bounds the penetration depth from above (moving one shape that far apart along that axis
+separates the boxes, hence the shapes), so pairs whose bound is within the tolerance are
+compatible without a query.
+
+Forced overlaps: when even the least-overlapping pair of two objects' hypotheses penetrates by
+more than the tolerance, the overlap is forced by the observations (segmentation bleeding,
+concave objects whose hulls interpenetrate), not by the hypotheses; with
+``relax_forced_overlap`` that pair of objects then tolerates the least depth plus the tolerance
+(logged), so that the constraint still ranks their hypotheses instead of forbidding them all.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from ipr_shapes import voxels
+from ipr_shapes.checks import Checks, Interval, Options, check_fields
+from ipr_shapes.hypotheses.generate import UnaryTolerances
+from ipr_shapes.perception.free_space import SeenSpace
+from ipr_shapes.perception.occupancy import allowed_voxels, plane_regions, unary_report
+from ipr_shapes.perception.types import KnownPlane
+from ipr_shapes.products import ShapeHypothesis
+
+logger = logging.getLogger(__name__)
+
+HypothesisKey = tuple[int, int]
+
+
+@dataclass(frozen=True)
+class ConstraintConfig:
+    """Tolerances of the geometric constraints (metres, shares, voxel counts).
+
+    Attributes:
+        overlap_tolerance_m: two objects' shapes may interpenetrate by this penetration depth
+            (sensor noise on touching surfaces, about one 5 mm voxel).
+        relax_forced_overlap: tolerate overlaps the observations force (module doc).
+
+    The unary tolerances (support, seen-free space, walls) are ``UnaryTolerances``, owned by
+    ``HypothesisConfig.unary`` so that generation and checking use the same values.
+    """
+
+    CHECKS: ClassVar[Checks] = {
+        "overlap_tolerance_m": Interval(0, None),
+        "relax_forced_overlap": Options(True, False),
+    }
+
+    overlap_tolerance_m: float = 0.005
+    relax_forced_overlap: bool = True
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+# --------------------------------------------------------------------------------------------
+# Pairwise overlap
+
+
+def key_of(h: ShapeHypothesis) -> HypothesisKey:
+    """Cache key of a hypothesis: (object id, hypothesis index)."""
+    return (int(h.object_id), int(h.index))
+
+
+def _mesh_model(hypotheses: Sequence[ShapeHypothesis]):
+    """A static MuJoCo model with one (non-colliding) mesh geom per hypothesis, and its data."""
+    import mujoco
+
+    spec = mujoco.MjSpec()
+    spec.modelname = "ipr_overlap"
+    for number, h in enumerate(hypotheses):
+        mesh = spec.add_mesh()
+        mesh.name = f"h{number}"
+        mesh.uservert = np.asarray(h.vertices, float).ravel().tolist()
+        mesh.userface = np.asarray(h.faces, np.int64).ravel().tolist()
+        geom = spec.worldbody.add_geom()
+        geom.type = mujoco.mjtGeom.mjGEOM_MESH
+        geom.meshname = mesh.name
+        geom.contype = 0
+        geom.conaffinity = 0
+    model = spec.compile()
+    data = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, data)
+    return model, data
+
+
+def penetration_depth(a: ShapeHypothesis, b: ShapeHypothesis) -> float:
+    """Penetration depth (m, >= 0; 0 when apart or touching) of two convex hypotheses, exact
+    (MuJoCo ``mj_geomDistance``). Compiles a two-mesh model per call: use ``OverlapCache``
+    for many pairs."""
+    return OverlapCache([a, b]).depth(a, b)
+
+
+def intersection_volume(a: ShapeHypothesis, b: ShapeHypothesis) -> float:
+    """Exact intersection volume (m^3) of two convex hypotheses (manifold3d; slow: for
+    reporting and tests, not the constraints)."""
+    import manifold3d
+
+    first = manifold3d.Manifold.hull_points(np.asarray(a.vertices, float))
+    second = manifold3d.Manifold.hull_points(np.asarray(b.vertices, float))
+    return float((first ^ second).volume())
+
+
+def pairwise_overlap(a: ShapeHypothesis, b: ShapeHypothesis) -> float:
+    """The overlap measure of the constraints: penetration depth in metres (module doc)."""
+    return penetration_depth(a, b)
+
+
+def _box_bounds(lo_a: np.ndarray, hi_a: np.ndarray, lo_b: np.ndarray, hi_b: np.ndarray):
+    """Upper bounds (m_a, m_b) on penetration depths from bounding boxes (m_a/m_b, 3) each."""
+    overlap = np.minimum(hi_a[:, None, :], hi_b[None, :, :]) - np.maximum(
+        lo_a[:, None, :], lo_b[None, :, :]
+    )
+    return np.maximum(overlap.min(axis=2), 0.0)
+
+
+class OverlapCache:
+    """Penetration depths between hypotheses, computed once per pair.
+
+    All hypotheses given at construction are compiled into one MuJoCo model (once: compiling
+    costs far more than a query); a pair's depth is then one ``mj_geomDistance`` query, cached
+    under the pair of keys (object id, hypothesis index). Keys must be unique.
+    """
+
+    def __init__(self, hypotheses: Iterable[ShapeHypothesis]) -> None:
+        self._hypotheses = list(hypotheses)
+        self._geom: dict[HypothesisKey, int] = {}
+        for number, h in enumerate(self._hypotheses):
+            key = key_of(h)
+            if key in self._geom:
+                raise ValueError(f"duplicate hypothesis key {key}")
+            self._geom[key] = number
+        self._model, self._data = (
+            _mesh_model(self._hypotheses) if self._hypotheses else (None, None)
+        )
+        self._depth: dict[tuple[HypothesisKey, HypothesisKey], float] = {}
+        self._matrices: dict[tuple, np.ndarray] = {}
+        self.queries = 0
+
+    def __contains__(self, h: ShapeHypothesis) -> bool:
+        return key_of(h) in self._geom and self._hypotheses[self._geom[key_of(h)]] is h
+
+    def depth(self, a: ShapeHypothesis, b: ShapeHypothesis) -> float:
+        """Exact penetration depth (m, >= 0) of two registered hypotheses."""
+        ka, kb = key_of(a), key_of(b)
+        pair = (ka, kb) if ka <= kb else (kb, ka)
+        cached = self._depth.get(pair)
+        if cached is None:
+            import mujoco
+
+            distance = mujoco.mj_geomDistance(
+                self._model, self._data, self._geom[ka], self._geom[kb], 0.0, None
+            )
+            self.queries += 1
+            cached = max(-float(distance), 0.0)
+            self._depth[pair] = cached
+        return cached
+
+    def depth_matrix(
+        self,
+        hyps_i: Sequence[ShapeHypothesis],
+        hyps_j: Sequence[ShapeHypothesis],
+        exact_above_m: float = 0.0,
+    ) -> np.ndarray:
+        """(m_i, m_j) penetration depths (m). Pairs whose bounding-box bound is at most
+        ``exact_above_m`` are not queried: they hold that bound (>= the true depth) instead."""
+        signature = (tuple(map(key_of, hyps_i)), tuple(map(key_of, hyps_j)), exact_above_m)
+        cached = self._matrices.get(signature)
+        if cached is not None:
+            return cached
+        bounds_i = np.array([h.bounds for h in hyps_i]).reshape(-1, 2, 3)
+        bounds_j = np.array([h.bounds for h in hyps_j]).reshape(-1, 2, 3)
+        depths = _box_bounds(bounds_i[:, 0], bounds_i[:, 1], bounds_j[:, 0], bounds_j[:, 1])
+        for a, b in zip(*np.nonzero(depths > exact_above_m), strict=True):
+            depths[a, b] = self.depth(hyps_i[a], hyps_j[b])
+        self._matrices[signature] = depths
+        return depths
+
+
+def compatibility_matrix(
+    hyps_i: Sequence[ShapeHypothesis],
+    hyps_j: Sequence[ShapeHypothesis],
+    config: ConstraintConfig | None = None,
+    cache: OverlapCache | None = None,
+) -> np.ndarray:
+    """(m_i, m_j) bool: True where hypothesis a of object i and b of object j may coexist
+    (penetration depth within the tolerance, relaxed for forced overlaps: module doc).
+
+    ``cache`` must hold every hypothesis of both lists (one is built for them otherwise).
+    """
+    config = config or ConstraintConfig()
+    if len(hyps_i) == 0 or len(hyps_j) == 0:
+        return np.ones((len(hyps_i), len(hyps_j)), dtype=bool)
+    if cache is None or not all(h in cache for h in (*hyps_i, *hyps_j)):
+        cache = OverlapCache([*hyps_i, *hyps_j])
+    tolerance = config.overlap_tolerance_m
+    depths = cache.depth_matrix(hyps_i, hyps_j, exact_above_m=tolerance)
+    return depths <= overlap_threshold(depths, config, hyps_i[0].object_id, hyps_j[0].object_id)
+
+
+def overlap_threshold(
+    depths: np.ndarray, config: ConstraintConfig, object_i: int = -1, object_j: int = -1
+) -> float:
+    """Penetration depth (m) tolerated between two objects given their depth matrix."""
+    tolerance = config.overlap_tolerance_m
+    least = float(depths.min()) if depths.size else 0.0
+    if config.relax_forced_overlap and least > tolerance:
+        logger.info(
+            "objects %d and %d overlap by at least %.1f mm whatever their hypotheses; tolerating "
+            "that overlap",
+            object_i,
+            object_j,
+            least * 1e3,
+        )
+        return least + tolerance
+    return tolerance
+
+
+# --------------------------------------------------------------------------------------------
+# Unary and joint feasibility
+
+
+def unary_feasible(
+    h: ShapeHypothesis,
+    space: SeenSpace | None,
+    planes: tuple[KnownPlane, ...],
+    tolerances: UnaryTolerances | None = None,
+) -> bool:
+    """True when ``h`` is not below the support (beyond ``support_tolerance_m``) and has at most
+    the tolerated voxels in seen-free space and in walls, beyond those its observed points'
+    own hull has (``h.forced_*_voxels``). Voxels at the space grid's pitch (5 mm default)."""
+    config = tolerances or UnaryTolerances()
+    regions = plane_regions(planes, config.wall_min_thickness_m)
+    needs_voxels = space is not None or any(not r.is_support for r in regions)
+    pitch = space.grid.voxel_size_m if space is not None else voxels.DEFAULT_PITCH_M
+    keys = h.keys(pitch) if needs_voxels else None
+    report = unary_report(h.vertices, keys, pitch, space, regions)
+    if report.below_support_m > config.support_tolerance_m:
+        return False
+    allowed = allowed_voxels(
+        report.voxel_count, config.free_space_tolerance, config.free_space_tolerance_voxels
+    )
+    free = report.free_voxels - h.forced_free_voxels
+    walls = report.wall_voxels - h.forced_wall_voxels
+    return free <= allowed and walls <= allowed
+
+
+def joint_feasible(
+    choice: Mapping[int, int],
+    hypotheses: Mapping[int, Sequence[ShapeHypothesis]],
+    space: SeenSpace | None,
+    planes: tuple[KnownPlane, ...],
+    config: ConstraintConfig | None = None,
+    cache: OverlapCache | None = None,
+    tolerances: UnaryTolerances | None = None,
+) -> bool:
+    """Constraints(X) of a joint model: ``choice`` maps object id -> index into
+    ``hypotheses[object id]``; every chosen shape is unary-feasible and no two intersect
+    (pairwise tolerance as in ``compatibility_matrix``, from the objects' full hypothesis lists;
+    unary ``tolerances`` default to ``UnaryTolerances()``).
+    """
+    config = config or ConstraintConfig()
+    chosen = {i: hypotheses[i][j] for i, j in choice.items()}
+    if not all(unary_feasible(h, space, planes, tolerances) for h in chosen.values()):
+        return False
+    if cache is None:
+        cache = OverlapCache([h for i in choice for h in hypotheses[i]])
+    ids = sorted(choice)
+    for position, i in enumerate(ids):
+        for j in ids[position + 1 :]:
+            matrix = compatibility_matrix(hypotheses[i], hypotheses[j], config, cache)
+            if not matrix[choice[i], choice[j]]:
+                return False
+    return True

@@ -1,0 +1,1177 @@
+"""Hidden-shape hypotheses of partial objects: Algorithm 1 of the paper (Sec. IV-B, IV-C).
+
+An object model is its observed facets plus imagined hidden ones. Each observed facet F (normal
+N out of the object, centre c) is mirrored about its tangent plane L = {x : N . (x - c) = 0} and
+the mirror image is pushed back by a distance d ~ U(D_min, D_max) against N; it becomes a
+hypothesised hidden facet (the far side of the object). The convex hull of all the facets then
+shows new facets (the sides joining front and back); those whose normal is not already present
+are mirrored and pushed in their turn, and so on until no new normal appears or time runs out.
+A hypothesis is the convex hull of everything: a closed convex mesh that contains every observed
+point of the object (all observed points take part in every hull, even those of facets that are
+too small to be mirrored).
+
+Choices made here (the paper leaves them open):
+
+- D_max by ray tracing. From each of a facet's points p a ray runs along -N through the frame's
+  free-space map; it ends at the first voxel seen FREE, where it enters the support (below the
+  plane) or a known wall's slab, or at ``max_depth_m`` (``border_max_depth_m`` for an object
+  cut by the image border, whose hidden part may extend beyond the picture). The mirror image
+  of p lies on the same line, t = 2 N.(p - c) + d behind p, and the paper asks that the space
+  between a facet and its mirror be hidden: 0 <= t <= limit(p), i.e. each ray allows
+  d in [-2 N.(p - c), limit(p) - 2 N.(p - c)]. The lower end matters for curved facets: a
+  smaller d puts the mirrored rim in front of the seen surface.
+- Robustness: the admissible d are those (on cells of the ray step) that violate at most a
+  ``ray_quantile`` share of the rays, so a single noisy voxel shortens one ray, not the facet.
+  The outline matters most: mirroring moves points along N, which is tilted from the camera's
+  rays wherever a facet is curved or oblique, so the mirror of a facet's rim can leave the
+  object's silhouette into seen-free space while most of its rays are fine. The rays from the
+  points within ``rim_width_m`` of the facet's outline (on its tangent plane) therefore form a
+  second set that must be satisfied on its own. D_max is the largest admissible d, and d is
+  drawn uniformly from the admissible d of at least D_min (``min_thickness_m``).
+- Conflicts: a strongly curved facet (a bottle's whole side) can have no d that suits enough
+  rays (its mirrored rim wants d large, its mirrored crest wants d small); then the d with the
+  fewest violations are used (logged) and the unary check below decides.
+- No room (D_max < D_min): the object is thinner than D_min there (a plate, a book lying flat),
+  so d = D_max, floored at ``min_room_m`` so the hypothesis keeps a volume; logged.
+- Sampling: for the observed facets, the uniform variates of the m hypotheses are stratified
+  (one per m-quantile, shuffled per facet). Each d is still uniform marginally, but the
+  m hypotheses cover the whole range, so their volumes are spread even for m = 16.
+- Hull facets: coplanar hull triangles are grouped greedily (largest first) with their
+  neighbours within ``hull_group_deg`` of the seed's normal; groups smaller than
+  ``min_facet_area_m2`` are ignored like small observed facets. "Shares a normal" means within
+  ``normal_merge_deg`` of an observed facet's normal, or of the normal (or its opposite) of a
+  facet already mirrored: the mirror of a facet is the opposite face, so both directions are done.
+- Resting on the support: a hull whose lowest point is within ``support_snap_m`` (2 cm) above
+  the support is extended down to it (its bottom vertices projected onto the plane). The
+  support's band removes an object's lowest centimetre of points with the table, so without
+  this every standing object floats a few millimetres to a centimetre above its support and
+  misses its bottom (docs/DESIGN_NOTES.md, "Shapes rest on the support they nearly touch").
+- Unary constraints at generation (the checks of ``ipr_shapes.hypotheses.constraints`` with this module's
+  tolerances): the hull is clipped at the support plane (exact, convex), so nothing is below it;
+  voxels (the free-space grid's pitch) in seen-free space or inside a wall's slab may not exceed
+  ``free_space_tolerance`` (share) or ``free_space_tolerance_voxels`` (count), whichever is larger,
+  *beyond those the observed points already force* (the hull of a concave object such as a bowl
+  covers seen-free space whatever is hidden). The voxel map calls everything within its surface
+  margin (1 cm) of an observed surface occupied, so it cannot stop growth just in front of a facet;
+  instead every hypothesis is cut at each observed facet's support plane (the object's outermost
+  observed point along N, plus ``facet_tolerance_m``): for a convex object the point with normal N
+  lies on that facet, so nothing of the object is in front of it. A hypothesis that fails is
+  resampled with its observed facets' variates halved each attempt (pulling d towards D_min), at
+  most ``max_attempts`` times; if every attempt fails, the one with the fewest offending voxels is
+  kept with ``feasible=False`` (logged) for the constraint stage to reject.
+- Structure-aware candidates (``ipr_shapes.hypotheses.structure``; docs/DESIGN_NOTES.md,
+  "Structure-aware candidates beside Algorithm 1"): ``structure_share`` of the m hypotheses
+  (rounded) are made by the structure-aware generators that apply to the object, taking turns
+  (symmetry, revolution, box, cylinder, sphere); Algorithm 1 makes the rest, and all of them
+  when none applies. Each is labelled with its generator (``ShapeHypothesis.generator``), goes
+  through the same hull, support snap, cuts and unary checks, and has two attempts: its
+  variates, then the family's own fit with no hidden extension.
+- Work and time: an object costs at most ``count * max_attempts * max_rounds`` rounds of
+  Algorithm 1, so by default there is no wall-clock limit and the output is a function of the
+  inputs and the rng alone, on any machine and under any load (docs/DESIGN_NOTES.md, "No
+  wall-clock limit on hypothesis generation"). With ``timeout_s`` set (a run given a time budget
+  sets it), the hypotheses left after ``timeout_s`` for an object use one round and one attempt
+  (logged); output then depends on the machine's speed.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+import numpy as np
+from scipy.spatial import ConvexHull, HalfspaceIntersection, QhullError
+
+from ipr_shapes import voxels
+from ipr_shapes.checks import Checks, Interval, OrNone, Predicate, check_fields
+from ipr_shapes.geometry.convex import clip_halfspace, convex_mesh
+from ipr_shapes.hypotheses import structure
+from ipr_shapes.perception.free_space import FREE, SeenSpace
+from ipr_shapes.perception.occupancy import PlaneRegion, allowed_voxels, plane_regions, unary_report
+from ipr_shapes.perception.types import KnownPlane, PartialObject
+from ipr_shapes.products import ShapeHypothesis, volume_spread
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class UnaryTolerances:
+    """Tolerances of the unary constraints, for sensor noise (one object at a time).
+
+    Attributes:
+        free_space_tolerance: share of a shape's voxels allowed in seen-free space (frame 0's,
+            or with ``ipr_shapes.fusion.TrackedFreeSpace`` later frames' too) or inside walls, beyond
+            those its observed points' own hull has.
+        free_space_tolerance_voxels: the same as a count; the larger of the two applies.
+        support_tolerance_m: hypotheses are cut at the support plane, or at the lowest observed
+            point when lower (every observed point stays inside); points more than this below
+            the plane are logged as outliers, and a shape reaching further below is infeasible.
+        wall_min_thickness_m: walls without a measured thickness are slabs this thick (m).
+    """
+
+    CHECKS: ClassVar[Checks] = {
+        "free_space_tolerance": Interval(0, 1),
+        "free_space_tolerance_voxels": Interval(0, None, integer=True),
+        "support_tolerance_m": Interval(0, None),
+        "wall_min_thickness_m": Interval(0, None),
+    }
+
+    free_space_tolerance: float = 0.02
+    free_space_tolerance_voxels: int = 20
+    support_tolerance_m: float = 0.005
+    wall_min_thickness_m: float = 0.005
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+@dataclass(frozen=True)
+class HypothesisConfig:
+    """Settings of hypothesis generation (metres, square metres, degrees, seconds).
+
+    Attributes:
+        count: m, hypotheses per object (paper: 16-32).
+        min_thickness_m: D_min, the smallest distance between a facet and its mirror image.
+        max_depth_m: cap on D_max (rays stop here), about the largest object size.
+        border_max_depth_m: the cap for objects cut by the image border.
+        min_room_m: floor of d when a facet has no room (D_max below this).
+        min_facet_area_m2: facets (observed or hull) smaller than this are not mirrored
+            (paper: (3 cm)^2); their points stay in every hull.
+        normal_merge_deg: a hull facet within this angle of a normal already handled is skipped.
+        hull_group_deg: hull triangles within this angle of a group's seed triangle (and
+            connected to it) form one hull facet.
+        ray_quantile: share of a facet's rays (of each ray set) an admissible d may violate.
+        max_rays: rays per observed facet (its points subsampled evenly).
+        hull_facet_rays: rays per hull facet (points sampled on its triangles).
+        max_hull_facets: new hull facets mirrored per round at most (the largest): curved
+            outlines give a ring of narrow side facets, each a small change, all costing rays.
+        hull_spacing_m: the hulls inside Algorithm 1's loop and the mirrored point clouds use
+            one point per cell of this size (the final hull keeps every observed point).
+        rim_width_m: observed facets' points this close to their outline form a second ray
+            set that admissible d must satisfy too (0: no rim set).
+        ray_step_m: spacing of the samples along rays (None: the space grid's pitch).
+        max_rounds: rounds of Algorithm 1's repeat loop at most (mirroring, then hull).
+        facet_tolerance_m: hypotheses are cut this far in front of each observed facet's
+            outermost point along its normal (seen-free space the voxel map's surface margin
+            cannot resolve).
+        max_attempts: samples tried per hypothesis before keeping an infeasible one.
+        support_snap_m: a hull whose lowest point is at most this far above the support is
+            extended down to it (0: never), the minimum shape included. The points within
+            ``PerceptionConfig.support.clearance_m`` (1 cm) of the support are removed with it,
+            an object's lowest centimetre among them, so the observed points stop short of a
+            support the object rests on.
+        support_band_m: the hull's vertices within this height of its lowest one are the
+            bottom projected onto the support.
+        unary: tolerances of the unary constraints (support, seen-free space, walls), shared
+            with ``ipr_shapes.hypotheses.constraints.unary_feasible`` so generation and checking
+            agree.
+        timeout_s: seconds per object before the remaining hypotheses are simplified; None
+            (default): no wall-clock limit, so results do not depend on the machine's load.
+        seed: seed used when no rng is given (combined with the object id).
+        budget_share: share of a run's time budget given to generation (when a budget is
+            given), split over the objects as their ``timeout_s``; inference gets the rest.
+        structure_share: share of ``count`` made by the structure-aware generators (rounded;
+            0: Algorithm 1 alone, as in the paper); the total stays ``count``.
+    """
+
+    CHECKS: ClassVar[Checks] = {
+        "count": Interval(1, None, integer=True),
+        "min_room_m": Interval(0, None, closed="neither"),
+        "min_thickness_m": Interval(0, None, closed="neither"),
+        "max_depth_m": Interval(0, None, closed="neither"),
+        "border_max_depth_m": Interval(0, None, closed="neither"),
+        ("min_room_m", "min_thickness_m", "max_depth_m"): Predicate(
+            lambda v: v[0] <= v[1] <= v[2], "ordered: min_room_m <= min_thickness_m <= max_depth_m"
+        ),
+        "min_facet_area_m2": Interval(0, None),
+        "normal_merge_deg": Interval(0, 180),
+        "hull_group_deg": Interval(0, 180),
+        "ray_quantile": Interval(0, 1),
+        "ray_step_m": OrNone(Interval(0, None, closed="neither")),
+        "rim_width_m": Interval(0, None),
+        "max_rays": Interval(1, None, integer=True),
+        "hull_facet_rays": Interval(1, None, integer=True),
+        "max_hull_facets": Interval(0, None, integer=True),
+        "hull_spacing_m": Interval(0, None, closed="neither"),
+        "max_rounds": Interval(1, None, integer=True),
+        "facet_tolerance_m": Interval(0, None),
+        "max_attempts": Interval(1, None, integer=True),
+        "support_snap_m": Interval(0, None),
+        "support_band_m": Interval(0, None),
+        "timeout_s": OrNone(Interval(0, None, closed="neither")),
+        "seed": Interval(0, None, integer=True),
+        "budget_share": Interval(0, 1, closed="neither"),
+        "structure_share": Interval(0, 1),
+    }
+
+    count: int = 32
+    min_thickness_m: float = 0.02
+    max_depth_m: float = 0.3
+    border_max_depth_m: float = 0.5
+    min_room_m: float = 0.005
+    min_facet_area_m2: float = 0.03**2
+    normal_merge_deg: float = 25.0
+    hull_group_deg: float = 12.0
+    ray_quantile: float = 0.1
+    ray_step_m: float | None = None
+    rim_width_m: float = 0.01
+    max_rays: int = 96
+    hull_facet_rays: int = 24
+    max_hull_facets: int = 8
+    hull_spacing_m: float = 0.01
+    max_rounds: int = 4
+    facet_tolerance_m: float = 0.002
+    unary: UnaryTolerances = field(default_factory=UnaryTolerances)
+    max_attempts: int = 4
+    support_snap_m: float = 0.02
+    support_band_m: float = 0.01
+    timeout_s: float | None = None
+    seed: int = 0
+    budget_share: float = 0.6
+    structure_share: float = 0.5
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+# --------------------------------------------------------------------------------------------
+# Known planes: the support as a half-space, walls as slabs bounded by their points' outline
+
+
+# --------------------------------------------------------------------------------------------
+# Convex hull meshes
+
+
+def _thicken(points: np.ndarray, direction: np.ndarray, thickness_m: float) -> np.ndarray:
+    """Points (M, 3) that span a volume: ``points`` plus a copy ``thickness_m`` along
+    -``direction``; if that is still flat (points collinear, or in a plane containing
+    ``direction``), also copies +-``thickness_m``/2 along the two directions across it."""
+    thick = np.concatenate([points, points - thickness_m * direction])
+    if convex_mesh(thick) is not None:
+        return thick
+    across = points - points.mean(axis=0)
+    across -= np.outer(across @ direction, direction)
+    if np.abs(across).max(initial=0.0) > 1e-12:
+        second = np.linalg.svd(across, full_matrices=False)[2][0]
+    else:
+        second = np.cross(direction, np.eye(3)[int(np.argmin(np.abs(direction)))])
+    second /= np.linalg.norm(second)
+    third = np.cross(direction, second)
+    half = 0.5 * thickness_m
+    offsets = [half * second, -half * second, half * third, -half * third]
+    return np.concatenate([thick, *(thick + offset for offset in offsets)])
+
+
+def _thin(points: np.ndarray, spacing_m: float) -> np.ndarray:
+    """One point (the first) per cubic cell of ``spacing_m`` (fewer, coarser hull vertices)."""
+    if spacing_m <= 0 or len(points) < 64:
+        return points
+    cells = np.floor(points / spacing_m).astype(np.int64)
+    _, first = np.unique(cells, axis=0, return_index=True)
+    return points[np.sort(first)]
+
+
+def _extreme_points(points: np.ndarray) -> np.ndarray:
+    """The points that matter for hulls: 3-D hull vertices, or all points when flat."""
+    if len(points) < 5:
+        return points
+    try:
+        return points[ConvexHull(points).vertices]
+    except (QhullError, ValueError):
+        return points
+
+
+# --------------------------------------------------------------------------------------------
+# Generation
+
+
+@dataclass(frozen=True, eq=False)
+class _SourceFacet:
+    """A facet to mirror: unit normal (3,), centre (3,), points to mirror (K, 3), and the d its
+    rays allow: the union of cells [c, c + width) for the lower edges ``cells`` (C,), metres
+    (``_admissible``); ``conflict`` when no d satisfies enough rays (the best compromise)."""
+
+    normal: np.ndarray
+    centre: np.ndarray
+    points: np.ndarray
+    cells: np.ndarray
+    width: float
+    source: str
+    conflict: bool = False
+
+    @property
+    def d_max(self) -> float:
+        """Largest admissible d (m): D_max."""
+        return float(self.cells.max()) + self.width if self.cells.size else 0.0
+
+
+@dataclass(frozen=True, eq=False)
+class _Context:
+    """Everything per object that does not change between hypotheses.
+
+    ``base_points`` are the observed points that matter for hulls (exact), ``loop_points`` the
+    same thinned to one per ``hull_spacing_m`` cell for the hulls inside Algorithm 1's loop.
+    ``cuts`` (C, 4) are half-spaces n . x + offset >= 0 every hypothesis is cut to: the support
+    planes (lowered to the lowest observed point) and the observed facets' support planes.
+    """
+
+    object_id: int
+    base_points: np.ndarray
+    loop_points: np.ndarray
+    observed: tuple[_SourceFacet, ...]
+    space: SeenSpace | None
+    regions: tuple[PlaneRegion, ...]
+    cuts: np.ndarray
+    cap_m: float
+    fallback_normal: np.ndarray
+    forced_free: int
+    forced_wall: int
+    pitch_m: float
+    config: HypothesisConfig
+
+
+def dominant_normal(obj: PartialObject, planes: tuple[KnownPlane, ...]) -> np.ndarray:
+    """(3,) unit direction towards the camera side of the object: area-weighted mean facet normal,
+    else the points' least-spread axis oriented along the support normal (else +z)."""
+    up = np.array([0.0, 0.0, 1.0])
+    for plane in planes:
+        if plane.kind == "support":
+            up = np.asarray(plane.normal, float)
+            break
+    if obj.facets:
+        total = sum(f.area_m2 * np.asarray(f.normal, float) for f in obj.facets)
+        norm = float(np.linalg.norm(total))
+        if norm > 1e-9:
+            return total / norm
+    points = np.asarray(obj.points, float)
+    if len(points) >= 3:
+        _, _, vt = np.linalg.svd(points - points.mean(axis=0), full_matrices=False)
+        normal = vt[-1]
+        return normal if normal @ up >= 0 else -normal
+    return up
+
+
+def _ray_limits(
+    origins: np.ndarray,
+    normal: np.ndarray,
+    space: SeenSpace | None,
+    regions: tuple[PlaneRegion, ...],
+    cap: float,
+    step: float,
+) -> np.ndarray:
+    """Distance (R,) from each origin (R, 3) along -``normal`` to the first blocked point, at
+    most ``cap`` (m): a voxel seen FREE (sampled every ``step``), the support plane (exact) or
+    a wall's slab."""
+    direction = -normal
+    limits = np.full(len(origins), cap)
+    for region in regions:
+        if region.is_support:
+            rate = float(direction @ region.plane.normal)  # d(signed distance) / dt
+            if rate < -1e-9:
+                reach = region.plane.signed_distance(origins) / -rate
+                limits = np.minimum(limits, np.maximum(reach, 0.0))
+    walls = [r for r in regions if not r.is_support]
+    if space is None and not walls:
+        return limits
+    t = (np.arange(int(np.ceil(cap / step))) + 1.0) * step
+    samples = (origins[:, None, :] + t[None, :, None] * direction).reshape(-1, 3)
+    blocked = np.zeros(len(samples), dtype=bool)
+    if space is not None:
+        blocked |= space.state_at(samples) == FREE
+    for region in walls:
+        blocked |= region.in_wall(samples)
+    blocked = blocked.reshape(len(origins), len(t))
+    first = np.argmax(blocked, axis=1)
+    hit = blocked[np.arange(len(origins)), first]
+    sampled = np.where(hit, t[first] - 0.5 * step, cap)
+    return np.minimum(limits, sampled)
+
+
+def _ray_bounds(
+    ray_points: np.ndarray, centre: np.ndarray, normal: np.ndarray, ctx_parts: tuple
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per ray, the range (low (R,), high (R,)) of d that keeps the mirror of its point p in
+    hidden space: the mirror lands t = 2 N.(p - c) + d behind p, and 0 <= t <= limit(p)."""
+    space, regions, cap, step = ctx_parts
+    limits = _ray_limits(ray_points, normal, space, regions, cap, step)
+    offsets = 2.0 * (ray_points - centre) @ normal
+    return -offsets, limits - offsets
+
+
+def _admissible(
+    ray_sets: list[tuple[np.ndarray, np.ndarray]], tolerance: float, step: float
+) -> tuple[np.ndarray, bool]:
+    """Lower edges (C,) of the cells of width ``step`` (from d = 0) whose centre violates at
+    most a ``tolerance`` share of the rays of every set, and whether none did (then the cells
+    with the fewest violations are returned: a compromise)."""
+    highs = [high for _, high in ray_sets if high.size]
+    top = max(float(max(h.max() for h in highs)), step) if highs else step
+    centres = np.arange(0.0, top + step, step) + 0.5 * step
+    worst = np.zeros(len(centres))
+    for low, high in ray_sets:
+        if low.size:
+            outside = (centres[:, None] < low[None, :]) | (centres[:, None] > high[None, :])
+            worst = np.maximum(worst, outside.mean(axis=1))
+    good = worst <= tolerance
+    conflict = not good.any()
+    if conflict:
+        good = worst <= worst.min() + 1e-12
+    return centres[good] - 0.5 * step, conflict
+
+
+def _support_cuts(
+    regions: tuple[PlaneRegion, ...],
+    points: np.ndarray,
+    tolerance_m: float = np.inf,
+    object_id: int = -1,
+) -> list[np.ndarray]:
+    """Half-spaces (4,) n . x + offset >= 0 above each support plane, lowered to the lowest
+    observed point (noisy points slightly below the plane are never cut off); points more than
+    ``tolerance_m`` below it are logged (segmentation outliers: the hull then reaches down)."""
+    cuts = []
+    for region in regions:
+        if region.is_support:
+            lowest = float(region.plane.signed_distance(points).min())
+            if lowest < -tolerance_m:
+                logger.info(
+                    "object %d: observed points %.1f mm below the support; hypotheses reach there",
+                    object_id,
+                    -lowest * 1e3,
+                )
+            level = min(0.0, lowest) - 1e-9
+            cuts.append(np.append(region.plane.normal, region.plane.offset - level))
+    return cuts
+
+
+def _rim_points(points: np.ndarray, normal: np.ndarray, width_m: float) -> np.ndarray:
+    """The points (K, 3) within ``width_m`` of the outline of their projection on the plane
+    across ``normal`` (empty when the projection is degenerate or ``width_m`` <= 0)."""
+    if width_m <= 0 or len(points) < 8:
+        return points[:0]
+    helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
+    u = np.cross(normal, helper)
+    u /= np.linalg.norm(u)
+    flat = np.column_stack([points @ u, points @ np.cross(normal, u)])
+    try:
+        outline = ConvexHull(flat).equations
+    except (QhullError, ValueError):
+        return points[:0]
+    depth = -(flat @ outline[:, :2].T + outline[:, 2]).max(axis=1)  # distance inside
+    return points[depth <= width_m]
+
+
+def _even_subsample(points: np.ndarray, count: int) -> np.ndarray:
+    """At most ``count`` points taken evenly (deterministic) from (N, 3) points."""
+    if len(points) <= count:
+        return points
+    return points[np.linspace(0, len(points) - 1, count).round().astype(np.int64)]
+
+
+def _prepare(
+    obj: PartialObject,
+    space: SeenSpace | None,
+    planes: tuple[KnownPlane, ...],
+    config: HypothesisConfig,
+) -> _Context:
+    """Per-object set-up: observed facets to mirror with their D_max, clip levels, baselines."""
+    points = np.asarray(obj.points, float).reshape(-1, 3)
+    points = points[np.all(np.isfinite(points), axis=1)]
+    if len(points) == 0:
+        raise ValueError(f"object {obj.id} has no finite observed point")
+    regions = plane_regions(planes, config.unary.wall_min_thickness_m)
+    cap = config.border_max_depth_m if obj.touches_border else config.max_depth_m
+    pitch = space.grid.voxel_size_m if space is not None else voxels.DEFAULT_PITCH_M
+    step = config.ray_step_m or pitch
+    ray_parts = (space, regions, cap, step)
+    fallback = dominant_normal(obj, planes)
+
+    used = [
+        f
+        for f in obj.facets
+        if f.area_m2 >= config.min_facet_area_m2
+        and np.isfinite(f.normal).all()
+        and np.linalg.norm(f.normal) > 1e-9
+        and np.isfinite(np.asarray(f.points, float)).all(axis=-1).any()
+    ]
+    if len(used) < len(obj.facets):
+        logger.debug(
+            "object %d: %d of %d facets are below %.1f cm^2 and are not mirrored",
+            obj.id,
+            len(obj.facets) - len(used),
+            len(obj.facets),
+            config.min_facet_area_m2 * 1e4,
+        )
+    sources = []
+    for f in used:
+        facet_points = np.asarray(f.points, float).reshape(-1, 3)
+        facet_points = facet_points[np.all(np.isfinite(facet_points), axis=1)]
+        sources.append((np.asarray(f.normal, float), facet_points, "observed"))
+    if not sources:
+        logger.info(
+            "object %d: no facet of at least %.1f cm^2; mirroring all its points as one facet",
+            obj.id,
+            config.min_facet_area_m2 * 1e4,
+        )
+        sources = [(fallback, points, "object")]
+    observed = []
+    for normal, facet_points, source in sources:
+        normal = normal / np.linalg.norm(normal)
+        centre = facet_points.mean(axis=0)
+        ray_sets = [
+            _ray_bounds(_even_subsample(facet_points, config.max_rays), centre, normal, ray_parts)
+        ]
+        rim = _rim_points(facet_points, normal, config.rim_width_m)
+        if len(rim):
+            # The outline's rays decide whether the mirror leaves the silhouette (module doc).
+            ray_sets.append(
+                _ray_bounds(_even_subsample(rim, config.max_rays), centre, normal, ray_parts)
+            )
+        cells, conflict = _admissible(ray_sets, config.ray_quantile, step)
+        d_max = float(cells.max()) + step
+        if conflict:
+            logger.info(
+                "object %d: no shift of a %s facet keeps its mirror out of seen-free space; "
+                "using the least violating (%.1f-%.1f mm)",
+                obj.id,
+                source,
+                cells.min() * 1e3,
+                d_max * 1e3,
+            )
+        elif d_max < config.min_room_m:
+            logger.info(
+                "object %d: a %s facet has no room behind it (D_max %.1f mm); d = %.1f mm",
+                obj.id,
+                source,
+                d_max * 1e3,
+                config.min_room_m * 1e3,
+            )
+        elif d_max < config.min_thickness_m:
+            logger.debug("object %d: facet thinner than D_min (D_max %.1f mm)", obj.id, d_max * 1e3)
+        mirror_points = _thin(_extreme_points(facet_points), config.hull_spacing_m)
+        observed.append(_SourceFacet(normal, centre, mirror_points, cells, step, source, conflict))
+
+    cuts = _support_cuts(regions, points, config.unary.support_tolerance_m, obj.id)
+    for facet in observed:
+        if facet.source == "observed":
+            # An observed facet is the object's extreme part along its normal N (for a convex
+            # object the point with normal N lies on it): nothing is in front of it. The reach
+            # is taken over all observed points, so that a non-convex object's other parts
+            # (a handle beyond a curved side's plane) are never cut off.
+            reach = float((points @ facet.normal).max()) + config.facet_tolerance_m
+            cuts.append(np.append(-facet.normal, reach))
+    forced_free = forced_wall = 0
+    base = _extreme_points(points)
+    observed_hull = convex_mesh(base)
+    if observed_hull is not None and (space is not None or any(not r.is_support for r in regions)):
+        keys = voxels.scanline_voxels(observed_hull[0], observed_hull[1], pitch)
+        report = unary_report(observed_hull[0], keys, pitch, space, regions)
+        forced_free, forced_wall = report.free_voxels, report.wall_voxels
+        if forced_free or forced_wall:
+            logger.debug(
+                "object %d: its observed hull already has %d free and %d wall voxels",
+                obj.id,
+                forced_free,
+                forced_wall,
+            )
+    return _Context(
+        obj.id,
+        base,
+        _thin(base, config.hull_spacing_m),
+        tuple(observed),
+        space,
+        regions,
+        np.array(cuts).reshape(-1, 4),
+        cap,
+        fallback,
+        forced_free,
+        forced_wall,
+        pitch,
+        config,
+    )
+
+
+def _distance(facet: _SourceFacet, u: float, config: HypothesisConfig) -> float:
+    """d for variate u in [0, 1): uniform over the admissible d at least D_min; when none is
+    (no room), the largest admissible d, at least ``min_room_m``."""
+    lower = np.maximum(facet.cells, config.min_thickness_m)
+    lengths = np.clip(facet.cells + facet.width - lower, 0.0, None)
+    total = float(lengths.sum())
+    if total <= 0:
+        return max(facet.d_max, config.min_room_m)
+    # Inverse CDF of the uniform distribution on the union of cells (monotone in u, so the
+    # stratification of u carries over to d).
+    target = u * total
+    ends = np.cumsum(lengths)
+    index = min(int(np.searchsorted(ends, target, side="right")), len(ends) - 1)
+    return float(lower[index] + (target - (ends[index] - lengths[index])))
+
+
+def _mirror(facet: _SourceFacet, d: float) -> np.ndarray:
+    """The facet's points mirrored about its tangent plane, then moved d against its normal."""
+    n = facet.normal
+    offsets = (facet.points - facet.centre) @ n
+    return facet.points - (2.0 * offsets + d)[:, None] * n
+
+
+def _hull_groups(
+    hull: ConvexHull, cos_group: float, min_area_m2: float
+) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """Facets of a hull of at least ``min_area_m2``, largest first: (unit normal (3,), triangle
+    indices, area m^2) each.
+
+    The largest unassigned triangle claims every unassigned triangle within the angle of its
+    normal, repeatedly; each such set is then split into connected parts (triangles sharing an
+    edge), so two parallel faces are two facets. Vectorised per seed.
+    """
+    normals = hull.equations[:, :3]
+    tri = hull.points[hull.simplices]
+    areas = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    count = len(areas)
+    label = np.full(count, -1, dtype=np.int64)
+    number = 0
+    unassigned = np.arange(count)
+    while unassigned.size and areas[unassigned].sum() >= min_area_m2:
+        seed = unassigned[int(np.argmax(areas[unassigned]))]
+        close = normals[unassigned] @ normals[seed] >= cos_group
+        label[unassigned[close]] = number
+        unassigned = unassigned[~close]
+        number += 1
+    label[unassigned] = np.arange(number, number + unassigned.size)  # too small to matter
+    rows = np.repeat(np.arange(count), 3)
+    cols = hull.neighbors.ravel()
+    same = label[rows] == label[cols]
+    part = _components(rows[same], cols[same], count)
+    parts = int(part.max()) + 1 if count else 0
+    part_area = np.bincount(part, weights=areas, minlength=parts)
+    part_normal = np.stack(
+        [np.bincount(part, weights=areas * normals[:, k], minlength=parts) for k in range(3)],
+        axis=1,
+    )
+    groups = []
+    for index in np.argsort(-part_area, kind="stable"):
+        if part_area[index] < min_area_m2:
+            break
+        normal = part_normal[index] / (np.linalg.norm(part_normal[index]) + 1e-15)
+        groups.append((normal, np.flatnonzero(part == index), float(part_area[index])))
+    return groups
+
+
+def _components(rows: np.ndarray, cols: np.ndarray, count: int) -> np.ndarray:
+    """Connected components (count,) numbered 0, 1, ... of the graph with edges rows[i] -
+    cols[i] (both directions listed): each node takes the smallest label among its
+    neighbours' until none changes (a hull's facets are small graphs; this costs a few
+    vectorised passes where scipy's sparse graph set-up dominates)."""
+    label = np.arange(count)
+    while True:
+        previous = label.copy()
+        np.minimum.at(label, rows, label[cols])
+        label = label[label]  # pointer jumping: follow labels to their own labels
+        if np.array_equal(label, previous):
+            break
+    return np.unique(label, return_inverse=True)[1]
+
+
+def _hull_source(
+    hull: ConvexHull,
+    normal: np.ndarray,
+    members: np.ndarray,
+    ctx: _Context,
+    rng: np.random.Generator,
+) -> _SourceFacet:
+    """A hull facet as a facet to mirror: its vertices, area-weighted centre and D_max from rays
+    cast from points sampled on it (pulled 15 % towards its centre, off the edges)."""
+    simplices = hull.simplices[members]
+    tri = hull.points[simplices]
+    areas = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    centre = (tri.mean(axis=1) * areas[:, None]).sum(axis=0) / max(areas.sum(), 1e-15)
+    count = ctx.config.hull_facet_rays
+    pick = rng.choice(len(areas), size=count, p=areas / areas.sum())
+    r1, r2 = rng.random(count), rng.random(count)
+    flip = r1 + r2 > 1
+    r1, r2 = np.where(flip, 1 - r1, r1), np.where(flip, 1 - r2, r2)
+    samples = tri[pick, 0] + r1[:, None] * (tri[pick, 1] - tri[pick, 0])
+    samples = samples + r2[:, None] * (tri[pick, 2] - tri[pick, 0])
+    samples = centre + 0.85 * (samples - centre)
+    step = ctx.config.ray_step_m or ctx.pitch_m
+    parts = (ctx.space, ctx.regions, ctx.cap_m, step)
+    cells, conflict = _admissible(
+        [_ray_bounds(samples, centre, normal, parts)], ctx.config.ray_quantile, step
+    )
+    points = hull.points[np.unique(simplices)]
+    return _SourceFacet(normal, centre, points, cells, step, "hull", conflict)
+
+
+@dataclass(frozen=True, eq=False)
+class _Sample:
+    """One run of Algorithm 1: the hull points and what produced them."""
+
+    points: np.ndarray
+    distances: list[float]
+    normals: list[np.ndarray]
+    sources: list[str]
+    rounds: int
+
+
+def _algorithm1(
+    ctx: _Context,
+    observed_u: np.ndarray,
+    rng: np.random.Generator,
+    max_rounds: int,
+) -> _Sample:
+    """Algorithm 1 for one hypothesis: mirror, hull, new hull facets, repeat."""
+    config = ctx.config
+    cos_merge = np.cos(np.radians(config.normal_merge_deg))
+    cos_group = np.cos(np.radians(config.hull_group_deg))
+    cloud = ctx.loop_points
+    hidden: list[np.ndarray] = []  # the hypothesised (mirrored) facets' points
+    handled = [f.normal for f in ctx.observed]
+    distances: list[float] = []
+    normals: list[np.ndarray] = []
+    sources: list[str] = []
+    todo = list(zip(ctx.observed, observed_u, strict=True))
+    rounds = 0
+    while todo:
+        rounds += 1
+        mirrored = []
+        for facet, u in todo:
+            d = _distance(facet, float(u), config)
+            mirrored.append(_mirror(facet, d))
+            handled.extend([facet.normal, -facet.normal])
+            distances.append(d)
+            normals.append(facet.normal)
+            sources.append(facet.source)
+        hidden.extend(mirrored)
+        cloud = np.concatenate([cloud, *mirrored])
+        if rounds >= max_rounds:
+            break
+        try:
+            hull = ConvexHull(cloud)
+        except (QhullError, ValueError):
+            break  # still flat: the final hull is thickened
+        cloud = hull.points[hull.vertices]  # only hull vertices matter from now on
+        known = np.array(handled)
+        todo = []
+        for normal, members, _ in _hull_groups(hull, cos_group, config.min_facet_area_m2):
+            if (known @ normal).max() >= cos_merge:
+                continue
+            if any(f.normal @ normal >= cos_merge for f, _ in todo):
+                continue
+            todo.append((_hull_source(hull, normal, members, ctx, rng), rng.random()))
+            if len(todo) >= config.max_hull_facets:
+                break
+    points = np.concatenate([ctx.base_points, *hidden])
+    return _Sample(points, distances, normals, sources, rounds)
+
+
+def rest_on_support(
+    vertices: np.ndarray, regions: tuple[PlaneRegion, ...], snap_m: float, band_m: float
+) -> np.ndarray | None:
+    """Points (K, 3) that extend a hull whose lowest vertex is at most ``snap_m`` above a
+    support plane down to it: the vertices within ``band_m`` of the lowest one, projected onto
+    the plane along its normal; None when no support is that close (module doc)."""
+    for region in regions:
+        if not region.is_support:
+            continue
+        heights = region.plane.signed_distance(vertices)
+        lowest = float(heights.min())
+        if 0.0 < lowest <= snap_m:
+            bottom = vertices[heights <= lowest + band_m]
+            normal = np.asarray(region.plane.normal, float)
+            return bottom - heights[heights <= lowest + band_m, None] * normal
+    return None
+
+
+def _finish(ctx: _Context, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """Closed convex mesh of the hypothesis' points: thickened if flat, extended down to a
+    support it nearly touches, cut at the support."""
+    mesh = convex_mesh(points)
+    if mesh is None:
+        logger.info("object %d: flat hypothesis; thickened by D_min", ctx.object_id)
+        mesh = convex_mesh(_thicken(points, ctx.fallback_normal, ctx.config.min_thickness_m))
+        if mesh is None:  # pragma: no cover - _thicken always spans a volume
+            raise RuntimeError(f"object {ctx.object_id}: cannot build a hull")
+    if ctx.config.support_snap_m > 0:
+        footprint = rest_on_support(
+            mesh[0], ctx.regions, ctx.config.support_snap_m, ctx.config.support_band_m
+        )
+        if footprint is not None:
+            extended = convex_mesh(np.concatenate([mesh[0], footprint]))
+            mesh = extended if extended is not None else mesh
+    violated = []
+    for cut in ctx.cuts:
+        if float((mesh[0] @ cut[:3]).min()) + cut[3] < -1e-12:
+            violated.append(cut)
+    if len(violated) >= 2:
+        # Several cuts at once: one half-space intersection and one hull instead of a hull per
+        # cut (the same polytope; the sequential cuts below remain the fallback).
+        cut_all = _cut_all(mesh, violated, ctx.base_points.mean(axis=0))
+        if cut_all is not None:
+            return cut_all
+    for cut in violated:
+        vertices, faces, _ = mesh
+        if float((vertices @ cut[:3]).min()) + cut[3] < -1e-12:
+            clipped = convex_mesh(clip_halfspace(vertices, faces, cut[:3], float(cut[3])))
+            if clipped is None:
+                logger.info("object %d: a cut would leave no volume; skipped", ctx.object_id)
+                continue
+            mesh = clipped
+    return mesh
+
+
+def _cut_all(
+    mesh: tuple[np.ndarray, np.ndarray, float], cuts: list[np.ndarray], interior: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """The convex mesh cut to every half-space n . x + offset >= 0 of ``cuts`` (4,) at once
+    (qhull's half-space intersection about ``interior``, a point strictly inside all of them:
+    the observed points' centroid); None when that point is not strictly inside or qhull
+    fails (the caller cuts one by one)."""
+    vertices, faces, _ = mesh
+    tri = vertices[faces]
+    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    lengths = np.linalg.norm(normals, axis=1)
+    keep = lengths > 1e-12
+    normals = normals[keep] / lengths[keep, None]
+    offsets = -np.einsum("ij,ij->i", normals, tri[keep, 0])
+    cut_array = np.asarray(cuts, float)
+    # Rows (a, b): a . x + b <= 0 inside; the hull's coplanar triangles give one plane each.
+    halfspaces = np.concatenate([np.column_stack([normals, offsets]), -cut_array])
+    halfspaces = np.unique(np.round(halfspaces, 9), axis=0)
+    if float((halfspaces[:, :3] @ interior + halfspaces[:, 3]).max()) >= -1e-7:
+        return None
+    try:
+        corners = HalfspaceIntersection(halfspaces, interior).intersections
+    except (QhullError, ValueError):
+        return None
+    # Planes meeting at one corner give copies of it a rounding apart: merge them (10 nm).
+    result = convex_mesh(np.unique(np.round(corners, 8), axis=0))
+    if result is None:
+        return None
+    # Corners that stayed a hair apart can leave sliver faces whose planes other vertices
+    # cross by more than rounding: then the one-cut-at-a-time path decides.
+    vertices, faces, _ = result
+    tri = vertices[faces]
+    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    lengths = np.linalg.norm(normals, axis=1)
+    keep = lengths > 1e-15
+    normals = normals[keep] / lengths[keep, None]
+    excess = vertices @ normals.T - np.einsum("ij,ij->i", normals, tri[keep, 0])
+    scale = float(np.ptp(vertices, axis=0).max())
+    return result if float(excess.max()) <= 1e-9 * scale else None
+
+
+def _evaluate(
+    ctx: _Context, mesh: tuple[np.ndarray, np.ndarray, float]
+) -> tuple[np.ndarray | None, int, int, bool]:
+    """Voxels, excess free and wall voxels, and feasibility of a mesh."""
+    vertices, faces, _ = mesh
+    needs_voxels = ctx.space is not None or any(not r.is_support for r in ctx.regions)
+    if not needs_voxels:
+        return None, 0, 0, True
+    keys = voxels.scanline_voxels(vertices, faces, ctx.pitch_m)
+    report = unary_report(vertices, keys, ctx.pitch_m, ctx.space, ctx.regions)
+    free = max(report.free_voxels - ctx.forced_free, 0)
+    wall = max(report.wall_voxels - ctx.forced_wall, 0)
+    allowed = allowed_voxels(
+        report.voxel_count,
+        ctx.config.unary.free_space_tolerance,
+        ctx.config.unary.free_space_tolerance_voxels,
+    )
+    return keys, free, wall, free <= allowed and wall <= allowed
+
+
+_Maker = Callable[[np.ndarray, int], np.ndarray]
+
+
+def _structure_makers(
+    obj: PartialObject, ctx: _Context
+) -> tuple[dict[str, _Maker], dict[str, int]]:
+    """The structure-aware generators (``ipr_shapes.hypotheses.structure``) that apply to an object,
+    fitted: name -> make(variates (6,), variant number) -> candidate points (K, 3); and per
+    generator the frames its variants cycle through."""
+    config = ctx.config
+    settings = structure.StructureSettings(
+        rim_m=max(config.rim_width_m, ctx.pitch_m),
+        max_rays=max(config.max_rays // 2, 1),
+        quantile=config.ray_quantile,
+        pitch_m=ctx.pitch_m,
+    )
+    points, point_normals = _point_normals(obj, 2000)
+    towards = ctx.fallback_normal
+    step = config.ray_step_m or ctx.pitch_m
+
+    def reach(origins: np.ndarray, direction: np.ndarray) -> np.ndarray:
+        return _ray_limits(origins, -direction, ctx.space, ctx.regions, ctx.cap_m, step)
+
+    makers: dict[str, _Maker] = {}
+    support = next((r.plane for r in ctx.regions if r.is_support), None)
+    facets = [(np.asarray(f.normal, float), float(f.area_m2)) for f in obj.facets]
+    frames = []  # (frame, plane subsets)
+    upright = None
+    if support is not None and len(points) >= 8:
+        upright = structure.upright_frame(
+            points, facets, np.asarray(support.normal, float), float(support.offset), towards
+        )
+        frames.append((upright, ((0, 1), (0,), (1,))))
+    own = structure.facet_frame(points, facets, towards) if len(points) >= 8 else None
+    if own is not None and not any(structure.same_frame(own, f) for f, _ in frames):
+        frames.append((own, ((0, 1, 2), (0, 1), (2,), (0,), (1,))))
+    fitted = []
+    for frame, subsets in frames:
+        room = structure.reaches(frame, frame.local(points), points, reach, settings)
+        # Extents and hulls only need the observed hull's vertices (reflections are affine).
+        fitted.append((frame, room, frame.local(ctx.base_points), subsets))
+    if fitted:
+
+        def symmetric(t: np.ndarray, k: int) -> np.ndarray:
+            frame, room, extreme, subsets = fitted[k % len(fitted)]
+            axes = subsets[(k // len(fitted)) % len(subsets)]
+            return structure.symmetry_points(frame, extreme, t * room, axes)
+
+        def box(t: np.ndarray, k: int) -> np.ndarray:
+            frame, room, extreme, _ = fitted[k % len(fitted)]
+            return structure.box_points(frame, extreme, t * room)
+
+        makers["symmetry"], makers["box"] = symmetric, box
+    if upright is not None:
+        found = structure.best_axis(upright, points, point_normals, towards, settings)
+        if found is not None:
+            axis, axis_local, fit = found
+            makers["revolution"] = lambda t, k: structure.revolution_points(
+                axis, axis_local, ctx.base_points, fit, float(t[0]), settings
+            )
+            makers["cylinder"] = lambda t, k: structure.revolution_points(
+                axis, axis_local, ctx.base_points, fit, float(t[0]), settings, constant=True
+            )
+    sphere = structure.fit_sphere(points)
+    if (
+        sphere is not None
+        and sphere.residual <= settings.sphere_residual
+        and sphere.radius <= float(np.ptp(points, axis=0).max())
+    ):
+        makers["sphere"] = lambda t, k: structure.sphere_points(
+            ctx.base_points, points, sphere, float(t[0]), settings, towards
+        )
+    return makers, {"symmetry": len(fitted), "box": len(fitted)}
+
+
+def _structure_plan(
+    makers: dict[str, _Maker],
+    fits: dict[str, int],
+    count: int,
+    rng: np.random.Generator,
+    ctx: _Context,
+) -> list[tuple[str, Callable[[float], _Sample]]]:
+    """``count`` structure-aware candidates, the applicable generators taking turns: (generator,
+    make) pairs, ``make(scale)`` the candidate's points with its variates scaled by ``scale``
+    (1, then 0 for the second attempt). Variates: ``structure.variates``."""
+    towards, min_thickness = ctx.fallback_normal, ctx.config.min_thickness_m
+    order = [name for name in structure.STRUCTURE_GENERATORS if name in makers]
+    if not order or count <= 0:
+        return []
+    counts = dict.fromkeys(order, 0)
+    for slot in range(count):
+        counts[order[slot % len(order)]] += 1
+    plan = []
+    for name in order:
+        n = counts[name]
+        variates = structure.variates(name, n, rng, fits.get(name, 1))
+        for k in range(n):
+
+            def make(scale: float, name=name, t=variates[k], k=k) -> _Sample:
+                cloud = makers[name](t * scale, k)
+                # At least D_min thick towards the camera, like the minimum shape: a face seen
+                # alone with no room behind it would otherwise give a sub-voxel sliver.
+                extent = float(np.ptp(cloud @ towards))
+                if extent < min_thickness:
+                    cloud = np.concatenate([cloud, cloud - (min_thickness - extent) * towards])
+                return _Sample(cloud, [], [], [], 0)
+
+            plan.append((name, make))
+    logger.debug("object %d: structure-aware candidates %s", ctx.object_id, counts)
+    return plan
+
+
+def _point_normals(obj: PartialObject, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """The finite observed points taken evenly, at most ``count`` (K, 3), and the normal of the
+    facet each belongs to (K, 3; zero for none)."""
+    points = np.asarray(obj.points, float).reshape(-1, 3)
+    index = np.flatnonzero(np.all(np.isfinite(points), axis=1))
+    if len(index) > count:
+        index = index[np.linspace(0, len(index) - 1, count).round().astype(np.int64)]
+    normals = np.zeros((len(index), 3))
+    if obj.facet_of_point is not None and obj.facets:
+        facet_normals = np.array([np.asarray(f.normal, float) for f in obj.facets])
+        owner = np.asarray(obj.facet_of_point)[index]
+        normals[owner >= 0] = facet_normals[owner[owner >= 0]]
+    return points[index], normals
+
+
+def generate_hypotheses(
+    obj: PartialObject,
+    space: SeenSpace | None,
+    planes: tuple[KnownPlane, ...],
+    config: HypothesisConfig | None = None,
+    rng: np.random.Generator | None = None,
+) -> tuple[ShapeHypothesis, ...]:
+    """``config.count`` complete-shape hypotheses of a partial object: Algorithm 1's first, then
+    the structure-aware candidates (``structure_share``; module doc).
+
+    Args:
+        obj: the observed part (points and facets, world frame, m).
+        space: the frame's free/occupied/unknown voxel map (None: no free-space limit).
+        planes: the frame's support and walls.
+        config: settings (defaults: ``HypothesisConfig()``).
+        rng: random source (default: seeded from ``config.seed`` and the object id).
+
+    Returns:
+        m closed convex hypotheses, each containing every observed point, none below the
+        support, each labelled with its generator; see the module doc for D_max, the no-room
+        rule, resampling and the timeout.
+    """
+    config = config or HypothesisConfig()
+    if rng is None:
+        rng = np.random.default_rng([config.seed, int(obj.id)])
+    started = time.perf_counter()
+    ctx = _prepare(obj, space, planes, config)
+    m = config.count
+    makers, fits = _structure_makers(obj, ctx) if config.structure_share > 0 else ({}, {})
+    structured = int(round(config.structure_share * m)) if makers else 0
+    m1 = m - structured  # Algorithm 1 makes the rest
+    # Stratified variates of the observed facets: column j is a shuffled set of m1 strata.
+    strata = np.stack([rng.permutation(m1) for _ in ctx.observed], axis=1)
+    observed_u = (strata + rng.random(strata.shape)) / max(m1, 1)
+    slot_rngs = rng.spawn(m1)
+    plan = _structure_plan(makers, fits, structured, rng.spawn(1)[0], ctx) if structured else []
+    hypotheses = []
+    timed_out = False
+    for k in range(m):
+        if (
+            not timed_out
+            and config.timeout_s is not None
+            and time.perf_counter() - started > config.timeout_s
+        ):
+            timed_out = True
+            logger.warning(
+                "object %d: hypothesis timeout (%.2f s) after %d of %d; the rest are simplified",
+                obj.id,
+                config.timeout_s,
+                k,
+                m,
+            )
+        max_rounds = 1 if timed_out else config.max_rounds
+        attempts = 1 if timed_out else config.max_attempts
+        if k >= m1:
+            # A structure-aware candidate's second attempt is its smallest (variates 0): a
+            # shape whose family does not fit fails there too, so more halving is wasted.
+            attempts = min(attempts, 2)
+        best = None
+        for attempt in range(attempts):
+            if k < m1:
+                sample = _algorithm1(ctx, observed_u[k] * 0.5**attempt, slot_rngs[k], max_rounds)
+                generator = "algorithm1"
+            else:
+                generator, make = plan[k - m1]
+                sample = make(0.0 if attempt else 1.0)
+            mesh = _finish(ctx, sample.points)
+            keys, free, wall, feasible = _evaluate(ctx, mesh)
+            candidate = (free + wall, attempt, sample, mesh, keys, free, wall, feasible)
+            if best is None or candidate[0] < best[0]:
+                best = candidate
+            if feasible:
+                best = candidate
+                break
+        assert best is not None
+        _, attempt, sample, mesh, keys, free, wall, feasible = best
+        if not feasible:
+            logger.info(
+                "object %d hypothesis %d (%s): no feasible sample in %d attempts (%d free, %d "
+                "wall voxels); kept as infeasible",
+                obj.id,
+                k,
+                generator,
+                attempts,
+                free,
+                wall,
+            )
+        vertices, faces, volume = mesh
+        hypotheses.append(
+            ShapeHypothesis(
+                object_id=int(obj.id),
+                index=k,
+                vertices=vertices,
+                faces=faces,
+                volume_m3=volume,
+                distances_m=np.array(sample.distances, dtype=float),
+                facet_normals=np.array(sample.normals, dtype=float).reshape(-1, 3),
+                facet_sources=tuple(sample.sources),
+                rounds=sample.rounds,
+                attempts=attempt + 1,
+                feasible=feasible,
+                free_voxels=free,
+                wall_voxels=wall,
+                forced_free_voxels=ctx.forced_free,
+                forced_wall_voxels=ctx.forced_wall,
+                voxel_keys=keys,
+                voxel_pitch_m=ctx.pitch_m,
+                generator=generator,
+            )
+        )
+    logger.debug(
+        "object %d: %d hypotheses in %.3f s, volumes %s",
+        obj.id,
+        m,
+        time.perf_counter() - started,
+        volume_spread(hypotheses),
+    )
+    return tuple(hypotheses)
+
+
+def minimum_shape(
+    obj: PartialObject,
+    planes: tuple[KnownPlane, ...],
+    config: HypothesisConfig | None = None,
+) -> ShapeHypothesis:
+    """The smallest plausible solid from the observed points only.
+
+    The convex hull of the observed points; where it is thinner than D_min along the object's
+    dominant normal (the direction towards the camera, ``dominant_normal``), a copy of the
+    points is added behind them so that it is D_min thick along that normal (flat or collinear
+    point sets are thickened the same way). Cut at the support plane like the hypotheses.
+    Index -1; no voxels.
+    """
+    config = config or HypothesisConfig()
+    points = np.asarray(obj.points, float).reshape(-1, 3)
+    points = points[np.all(np.isfinite(points), axis=1)]
+    if len(points) == 0:
+        raise ValueError(f"object {obj.id} has no finite observed point")
+    normal = dominant_normal(obj, planes)
+    base = _extreme_points(points)
+    extent = float(np.ptp(base @ normal))
+    thickness = 0.0
+    if extent < config.min_thickness_m:
+        thickness = config.min_thickness_m - extent
+        base = np.concatenate([base, base - thickness * normal])
+    if convex_mesh(base) is None:
+        logger.info("object %d: flat observed hull; minimum shape thickened", obj.id)
+        base = _thicken(base, normal, config.min_thickness_m)
+    regions = plane_regions(planes, config.unary.wall_min_thickness_m)
+    cuts = np.array(_support_cuts(regions, points)).reshape(-1, 4)
+    ctx = _Context(
+        obj.id, base, base, (), None, regions, cuts, config.max_depth_m, normal, 0, 0,
+        voxels.DEFAULT_PITCH_M, config,
+    )  # fmt: skip
+    vertices, faces, volume = _finish(ctx, base)
+    return ShapeHypothesis(
+        object_id=int(obj.id),
+        index=-1,
+        vertices=vertices,
+        faces=faces,
+        volume_m3=volume,
+        distances_m=np.array([thickness]),
+        facet_normals=normal[None, :],
+        facet_sources=("minimum",),
+        generator="minimum",
+    )

@@ -1,0 +1,128 @@
+"""The hypotheses stage's product: every object's hypotheses with their constraints measured.
+
+Algorithm 1 (``ipr_shapes.hypotheses.generate``) runs per object; the unary constraints
+(``ipr_shapes.hypotheses.constraints``) keep the feasible hypotheses (an object with none is
+represented by its minimum shape); the pairwise penetration depths are measured between the
+feasible hypotheses of objects whose envelopes overlap. Every inference method (the Collision
+Checker and the physics-based ones) starts from this ``PreparedHypotheses``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+from collections.abc import Mapping
+
+import numpy as np
+
+from ipr_shapes.hypotheses.constraints import (
+    ConstraintConfig,
+    OverlapCache,
+    overlap_threshold,
+    unary_feasible,
+)
+from ipr_shapes.hypotheses.generate import HypothesisConfig, generate_hypotheses, minimum_shape
+from ipr_shapes.perception.free_space import SeenSpace, SpaceMap
+from ipr_shapes.perception.types import KnownPlane, PartialObject
+from ipr_shapes.products import PreparedHypotheses, ShapeHypothesis, volume_spread
+from ipr_shapes.progress import ProgressCallback, report
+
+logger = logging.getLogger(__name__)
+
+
+def prepare_hypotheses(
+    objects: tuple[PartialObject, ...],
+    space: SpaceMap | None,
+    planes: tuple[KnownPlane, ...],
+    config: HypothesisConfig | None = None,
+    constraints: ConstraintConfig | None = None,
+    rng: np.random.Generator | None = None,
+    time_budget_s: float | None = None,
+    object_spaces: Mapping[int, SeenSpace] | None = None,
+    progress: ProgressCallback | None = None,
+) -> PreparedHypotheses:
+    """Generate each object's hypotheses and minimum shape, keep the unary-feasible ones and
+    measure the pairwise penetration depths between interacting objects' hypotheses.
+
+    ``object_spaces``: per object id, the seen-free space to use for that object instead of
+    ``space`` (``ipr_shapes.fusion.tracked_free_spaces``: later frames' free space through the
+    object's registered motion).
+
+    ``time_budget_s``: generation gets ``config.budget_share`` of it, split over the objects
+    (capping their timeouts). ``rng`` defaults to one seeded from ``config.seed``; each object
+    draws from its own child stream (``rng.spawn``). ``progress`` hears of each object done
+    (``ipr_shapes.progress``, stage ``hypotheses``).
+
+    Returns the objects' hypotheses with their unary and pairwise constraints, in the order of
+    ``objects``.
+    """
+    config = config or HypothesisConfig()
+    constraints = constraints or ConstraintConfig()
+    rng = rng if rng is not None else np.random.default_rng(config.seed)
+    ids = [int(obj.id) for obj in objects]
+    if len(set(ids)) != len(ids):
+        raise ValueError(f"object ids must be distinct, got {ids}")
+    hypothesis_config = config
+    if time_budget_s is not None:
+        per_object = config.budget_share * time_budget_s / max(len(objects), 1)
+        hypothesis_config = dataclasses.replace(
+            hypothesis_config,
+            timeout_s=per_object
+            if hypothesis_config.timeout_s is None
+            else min(hypothesis_config.timeout_s, per_object),
+        )
+    object_rngs = rng.spawn(len(objects))
+
+    generated: dict[int, tuple[ShapeHypothesis, ...]] = {}
+    minima: dict[int, ShapeHypothesis] = {}
+    candidates: dict[int, list[int]] = {}  # object -> indices of unary-feasible hypotheses
+    seconds: dict[int, float] = {}
+    report(progress, "hypotheses", 0, len(objects))
+    for done, (obj, object_rng) in enumerate(zip(objects, object_rngs, strict=True), start=1):
+        begin = time.perf_counter()
+        seen = (object_spaces or {}).get(obj.id, space)
+        hyps = generate_hypotheses(obj, seen, planes, hypothesis_config, object_rng)
+        minima[obj.id] = minimum_shape(obj, planes, hypothesis_config)
+        feasible = [k for k, h in enumerate(hyps) if unary_feasible(h, seen, planes, config.unary)]
+        if not feasible:
+            logger.warning("object %d: no feasible hypothesis; using its minimum shape", obj.id)
+            hyps = (minima[obj.id],)
+            feasible = [0]
+        generated[obj.id], candidates[obj.id] = hyps, feasible
+        seconds[obj.id] = time.perf_counter() - begin
+        report(progress, "hypotheses", done, len(objects))
+        logger.debug(
+            "object %d: %d/%d feasible, volumes %s",
+            obj.id,
+            len(feasible),
+            len(hyps),
+            volume_spread(hyps),
+        )
+
+    # Pairwise penetration depths between the feasible hypotheses of objects whose hypotheses'
+    # bounding boxes overlap by more than the tolerance.
+    chosen = {i: [generated[i][k] for k in candidates[i]] for i in ids}
+    cache = OverlapCache([h for i in ids for h in chosen[i]])
+    tolerance = constraints.overlap_tolerance_m
+    envelopes = {
+        i: np.stack([np.min([h.bounds[0] for h in chosen[i]], axis=0),
+                     np.max([h.bounds[1] for h in chosen[i]], axis=0)])
+        for i in ids
+    }  # fmt: skip
+    depths: dict[tuple[int, int], np.ndarray] = {}
+    thresholds: dict[tuple[int, int], float] = {}
+    for position, a in enumerate(ids):
+        for b in ids[position + 1 :]:
+            bound = np.min(
+                np.minimum(envelopes[a][1], envelopes[b][1])
+                - np.maximum(envelopes[a][0], envelopes[b][0])
+            )
+            if bound <= tolerance:
+                continue
+            matrix = cache.depth_matrix(chosen[a], chosen[b], exact_above_m=tolerance)
+            threshold = overlap_threshold(matrix, constraints, a, b)
+            if (matrix > threshold).any():
+                depths[(a, b)], thresholds[(a, b)] = matrix, threshold
+    logger.debug("hypotheses prepared: %d depth queries", cache.queries)
+    return PreparedHypotheses(ids, generated, minima, candidates, seconds, depths, thresholds)

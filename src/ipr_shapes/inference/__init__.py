@@ -1,0 +1,103 @@
+"""Inverse physics reasoning (paper Sec. IV-F, Algorithm 2): marginal shape posteriors from
+tree sampling of joint models scored by physics simulation.
+
+Hypotheses come from ``ipr_shapes.hypotheses.prepare_hypotheses`` (Algorithm 1 with the unary
+and pairwise constraints); only hypotheses the Collision Checker gives non-zero probability (part
+of some jointly feasible model) are candidates. Then, repeated until the time budget:
+
+1. **Tree sampling of one joint model.** Starting from the support (and walls) alone, at each
+   stage every unplaced object i gets exploration probabilities over its candidates j:
+   exp(-alpha_s * dist_ij), where dist_ij is how far (m; ``InferenceConfig.stability_measure``:
+   by default how far its centre of mass drops, or its mean vertex displacement) hypothesis j
+   moves in ``stability_s`` of simulated gravity among the placed objects (at their sampled
+   shapes) and the unplaced ones (at their minimum shapes), and 0 when j overlaps a placed
+   object's sampled shape (Constraints(X)). The object with the largest total ("mass") is
+   placed, with a hypothesis drawn from its normalised exploration probabilities.
+   - The other objects are static during a stability test (only i's hypotheses move): all of
+     i's candidates are tested in one simulation as mutually transparent bodies
+     (``ipr_shapes.physics``), and dist_ij depends only on i's *neighbours* (objects whose candidate
+     envelopes come within ``neighbour_margin_m`` of i's). The result is cached under (i, the
+     neighbours' current shapes), so the same partial scene is never simulated twice; the first
+     stage is shared by every sample.
+   - Throughput (docs/experiments/2026-11-26-sampling-throughput.md): each object's test world
+     is compiled once, with every shape its neighbours can take switched on or off per
+     context; a candidate is held where it is once at rest; a candidate that clearly stands on
+     the support alone, clear of every other shape, is settled without simulation
+     (``InferenceConfig.screen_resting``); samples run in threads sharing the caches.
+2. **Simulation of the full model** under gravity (settling) and, for the ``+action`` variants,
+   the recorded pushes; the depth images rendered from each frame's camera give the likelihood
+   (``ipr_shapes.likelihood``, Eq. 2). A simulation that explodes or flings an object scores 0.
+3. **From samples to marginals** (``InferenceConfig.weighting``). Eq. 2's exponent is a sum over
+   objects, so each object's evidence is its own term. Default ``"hypothesis"``: each
+   candidate's likelihood is the mean over the samples that chose it of exp(its own term);
+   with the priors as unary factors and the pairwise constraints as 0/1 factors, the marginals
+   follow by exact variable elimination (as the Collision Checker's do). Candidates no sample
+   chose get no probability, as with importance weights. The exploration probabilities decide what is visited,
+   not how much it weighs, so rare draws do not carry huge weights. ``"object"``: Algorithm
+   2's per-object update, w_i = P(O_i | X, mu) P(X_i) / q_i with q_i the exploration
+   probability with which X_i was drawn; the estimate of P(X_i^j | O, mu) is the
+   self-normalised sum of w_i over the samples that chose j. ``"joint"``: the full
+   w = P(O | X, mu) P(X) / q(X) for every object (q(X) the product of the draws' exploration
+   probabilities; the object order is a deterministic function of earlier draws): consistent
+   for the joint posterior, but at the sample counts a budget allows the proposal correction
+   1/q(X) sets its weights and its shapes were worse (docs/DESIGN_NOTES.md, 'Weighting:
+   "hypothesis" (default), "object", "joint"').
+
+Priors: ``uniform``, or ``size``: P(X_i^j) proportional to volume(X_i^j)^-size_prior_exponent
+(smaller models are more probable, the paper's informed prior), normalised per object.
+
+Output per object: the posterior medoid under voxel IoU (the Bayes choice under IoU loss), as the
+Collision Checker does. Anytime: before the first sample finishes the answer is the Collision
+Checker's; a budget too small for one sample returns it and says so. Samples are independent
+given their index (each draws from ``default_rng([seed, index])``), so a run with ``max_samples``
+and no deadline gives the same result with any number of workers.
+
+``exhaustive`` scores every jointly feasible joint model with the same likelihood (for scenes of
+at most ``max_exhaustive_objects`` objects and ``max_exhaustive_models`` models): the exact
+posterior the sampler estimates, to validate it.
+
+Modules: ``config`` (settings), ``problem`` (what a sampler solves), ``sampler`` (tree sampling
+and likelihood), ``pool`` (sampling threads and deadlines), ``estimators`` (samples to
+marginals), ``exhaustive`` (the exact posterior), ``infer`` (``infer_shapes``).
+"""
+
+from ipr_shapes.inference.config import WEIGHTINGS, InferenceConfig
+from ipr_shapes.inference.estimators import (
+    effective_sample_size,
+    factor_marginals,
+    hypothesis_log_likelihoods,
+    marginals,
+    object_log_weights,
+    sample_log_weights,
+)
+from ipr_shapes.inference.exhaustive import exhaustive_models
+from ipr_shapes.inference.infer import InferenceOutcome, infer_shapes
+from ipr_shapes.inference.pool import default_workers, run_samples
+from ipr_shapes.inference.problem import (
+    InferenceProblem,
+    SampleResult,
+    build_problem,
+    size_log_prior,
+)
+from ipr_shapes.inference.sampler import Sampler
+
+__all__ = [
+    "WEIGHTINGS",
+    "InferenceConfig",
+    "InferenceOutcome",
+    "InferenceProblem",
+    "SampleResult",
+    "Sampler",
+    "build_problem",
+    "default_workers",
+    "effective_sample_size",
+    "exhaustive_models",
+    "factor_marginals",
+    "hypothesis_log_likelihoods",
+    "infer_shapes",
+    "marginals",
+    "object_log_weights",
+    "run_samples",
+    "sample_log_weights",
+    "size_log_prior",
+]

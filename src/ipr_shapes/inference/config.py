@@ -1,0 +1,92 @@
+"""Settings of IPR inference (``ipr_shapes.inference``): the simulated world, the likelihood, tree
+sampling and how samples become marginals."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import ClassVar, Literal, get_args
+
+from ipr_shapes.checks import Checks, Interval, Options, OrNone, check_fields
+from ipr_shapes.likelihood import LikelihoodConfig
+from ipr_shapes.physics import PhysicsConfig
+
+#: How samples become marginals (``InferenceConfig.weighting``).
+Weighting = Literal["hypothesis", "object", "joint"]
+WEIGHTINGS: tuple[str, ...] = get_args(Weighting)
+#: What a stability test measures per hypothesis (``InferenceConfig.stability_measure``).
+StabilityMeasure = Literal["drop", "displacement"]
+STABILITY_MEASURES: tuple[str, ...] = get_args(StabilityMeasure)
+
+
+@dataclass(frozen=True)
+class InferenceConfig:
+    """Settings of IPR inference (module doc).
+
+    Attributes:
+        physics: the simulated world's parameters.
+        likelihood: Eq. 2's parameters.
+        stability_alpha_per_m: alpha of the exploration probabilities exp(-alpha * dist)
+            (1/m): a hypothesis that moves 1 cm while settling is e^-1 as likely to be explored
+            as one that stays put.
+        neighbour_margin_m: objects whose candidate envelopes are this close interact in
+            stability tests.
+        budget_per_object_s: default sampling budget (s) per object when no time budget is
+            given (perception, fusion, hypotheses and the Collision Checker come on top).
+        max_samples: stop after this many samples (None: only the budget stops).
+        workers: threads evaluating samples (None: all cores; 1: only the calling thread).
+        size_prior_exponent: the size prior's exponent (module doc).
+        max_exhaustive_objects: largest scene ``exhaustive`` accepts.
+        max_exhaustive_models: largest number of joint models ``exhaustive`` accepts.
+        weighting: how samples become marginals (module doc, step 3): "hypothesis" (each
+            candidate's own likelihood term averaged over the samples that chose it, combined
+            with the priors and the pairwise constraints by exact elimination), "object" (each
+            object's marginal weighs samples by its own likelihood term, prior and exploration
+            probability, Algorithm 2's per-object update) or "joint" (every object by the
+            joint weight).
+        stability_measure: a candidate's distance in a stability test: "drop" (how far its
+            centre of mass fell) or "displacement" (how far its vertices moved, on average).
+        max_factor_table: largest table (entries) of the exact elimination of "hypothesis"
+            weighting; larger components combine their objects' factors independently.
+        screen_resting: settle the stability tests of candidates that clearly stand on the
+            support alone without simulating them (``ipr_shapes.physics.resting_drop``).
+        screen_gap_m: a screened candidate's lowest vertex is at most this far from the
+            support (m), above or below.
+        screen_margin_m: a screened candidate's centre of mass is this far inside its
+            footprint, and no other shape or wall comes this close to its box (m).
+    """
+
+    CHECKS: ClassVar[Checks] = {
+        "stability_alpha_per_m": Interval(0, None),
+        "neighbour_margin_m": Interval(0, None),
+        "budget_per_object_s": Interval(0, None, closed="neither"),
+        "max_samples": OrNone(Interval(1, None, integer=True)),
+        "workers": OrNone(Interval(1, None, integer=True)),
+        "size_prior_exponent": Interval(0, None),
+        "max_exhaustive_objects": Interval(1, None, integer=True),
+        "max_exhaustive_models": Interval(1, None, integer=True),
+        "weighting": Options(*WEIGHTINGS),
+        "stability_measure": Options(*STABILITY_MEASURES),
+        "max_factor_table": Interval(1, None),
+        "screen_gap_m": Interval(0, None),
+        "screen_margin_m": Interval(0, None),
+    }
+
+    physics: PhysicsConfig = field(default_factory=PhysicsConfig)
+    likelihood: LikelihoodConfig = field(default_factory=LikelihoodConfig)
+    stability_alpha_per_m: float = 100.0
+    neighbour_margin_m: float = 0.02
+    budget_per_object_s: float = 1.75
+    max_samples: int | None = None
+    workers: int | None = None
+    size_prior_exponent: float = 1.0
+    max_exhaustive_objects: int = 4
+    max_exhaustive_models: int = 20_000
+    weighting: Weighting = "hypothesis"
+    stability_measure: StabilityMeasure = "drop"
+    max_factor_table: float = 1e6
+    screen_resting: bool = True
+    screen_gap_m: float = 0.002
+    screen_margin_m: float = 0.005
+
+    def __post_init__(self) -> None:
+        check_fields(self)

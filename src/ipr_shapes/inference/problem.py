@@ -1,0 +1,173 @@
+"""The problem every sampler solves: the candidates, their constraints and priors, the world and
+the observations (picklable, sent once to each worker), and one evaluated joint model."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ipr_shapes.inference.config import InferenceConfig
+from ipr_shapes.likelihood import ObservedFrames
+from ipr_shapes.methods import Method
+from ipr_shapes.perception.types import KnownPlane
+from ipr_shapes.products import ObjectPosterior, PreparedHypotheses, ShapeHypothesis
+from ipr_shapes.scene import Push, Pusher
+
+
+@dataclass(frozen=True, eq=False)
+class InferenceProblem:
+    """Everything a sampler needs (picklable, sent once to each worker).
+
+    Objects are referred to by position k (0..n-1) and candidates by position j into
+    ``candidates[k]``.
+
+    Attributes:
+        ids: (n,) object ids.
+        candidates: per object, its candidate hypotheses.
+        minima: per object, its minimum shape.
+        compatible: (a, b) with a < b -> (m_a, m_b) bool, False where the pair overlaps too much.
+        neighbours: per object, the positions of the objects it can touch.
+        log_prior: per object, (m_k,) log prior probabilities (normalised).
+        planes: frame-0 support and walls.
+        pusher: the pusher (None: no pushes).
+        pushes: the pushes replayed (empty for the gravity-only variants).
+        observed: the observed frames compared (frame 0 first).
+        config: settings.
+        seed: samples draw from ``default_rng([seed, index])``.
+    """
+
+    ids: tuple[int, ...]
+    candidates: tuple[tuple[ShapeHypothesis, ...], ...]
+    minima: tuple[ShapeHypothesis, ...]
+    compatible: dict[tuple[int, int], np.ndarray]
+    neighbours: tuple[tuple[int, ...], ...]
+    log_prior: tuple[np.ndarray, ...]
+    planes: tuple[KnownPlane, ...]
+    pusher: Pusher | None
+    pushes: tuple[Push, ...]
+    observed: ObservedFrames
+    config: InferenceConfig
+    seed: int
+
+    @property
+    def count(self) -> int:
+        """Number of objects n."""
+        return len(self.ids)
+
+    def compatibility(self, i: int, k: int) -> np.ndarray:
+        """(m_i, m_k) bool: candidates of i that may coexist with each candidate of k."""
+        if (i, k) in self.compatible:
+            return self.compatible[(i, k)]
+        if (k, i) in self.compatible:
+            return self.compatible[(k, i)].T
+        return np.ones((len(self.candidates[i]), len(self.candidates[k])), dtype=bool)
+
+
+@dataclass(frozen=True)
+class SampleResult:
+    """One evaluated joint model.
+
+    ``choice`` (n,) candidate positions; ``log_proposal`` log q(X) (0 for exhaustive);
+    ``log_likelihood`` log P(O | X, mu) (-inf: exploded or flung); ``log_prior`` log P(X);
+    ``seconds`` wall time spent; ``stability_tests`` simulations run for exploration;
+    ``norms`` (T, n) the depth error norms per compared frame and object (at the comparison
+    resolution; None when the simulation failed); ``object_log_proposal`` (n,) each object's
+    own log exploration probability.
+    """
+
+    index: int
+    choice: tuple[int, ...]
+    log_proposal: float
+    log_likelihood: float
+    log_prior: float
+    seconds: float
+    stability_tests: int
+    norms: np.ndarray | None = None
+    object_log_proposal: tuple[float, ...] = ()
+
+    @property
+    def log_weight(self) -> float:
+        """log of the importance weight P(O|X) P(X) / q(X)."""
+        return self.log_likelihood + self.log_prior - self.log_proposal
+
+
+def _envelope(shapes: Sequence[ShapeHypothesis]) -> np.ndarray:
+    return np.stack(
+        [np.min([s.bounds[0] for s in shapes], axis=0), np.max([s.bounds[1] for s in shapes], 0)]
+    )
+
+
+def size_log_prior(shapes: Sequence[ShapeHypothesis], exponent: float) -> np.ndarray:
+    """(m,) normalised log P(X^j) proportional to volume^-exponent (module doc)."""
+    volumes = np.array([max(s.volume_m3, 1e-12) for s in shapes])
+    log_prior = -exponent * np.log(volumes)
+    return log_prior - np.logaddexp.reduce(log_prior)
+
+
+def build_problem(
+    prepared: PreparedHypotheses,
+    uniform: Sequence[ObjectPosterior],
+    planes: tuple[KnownPlane, ...],
+    observed: ObservedFrames,
+    *,
+    variant: Method,
+    pusher: Pusher | None,
+    pushes: Sequence[Push],
+    config: InferenceConfig,
+    seed: int,
+) -> tuple[InferenceProblem, list[np.ndarray]]:
+    """The sampler's problem and, per object, the indices into its generated hypotheses of its
+    candidates (those with non-zero Collision Checker probability)."""
+    ids = tuple(prepared.ids)
+    indices, candidates = [], []
+    for i, posterior in zip(ids, uniform, strict=True):
+        keep = np.flatnonzero(posterior.probabilities > 0)
+        indices.append(keep)
+        candidates.append(tuple(prepared.generated[i][k] for k in keep))
+    position_of = {i: k for k, i in enumerate(ids)}
+    compatible = {}
+    for (a, b), depths in prepared.depths.items():
+        if prepared.generated[a][0].index == -1 or prepared.generated[b][0].index == -1:
+            continue  # an object reduced to its minimum shape constrains nothing
+        pa, pb = position_of[a], position_of[b]
+        # Depth matrices index the unary-feasible hypotheses; restrict to the candidates.
+        rows = np.searchsorted(prepared.candidates[a], indices[pa])
+        cols = np.searchsorted(prepared.candidates[b], indices[pb])
+        matrix = depths[np.ix_(rows, cols)] <= prepared.thresholds[(a, b)]
+        if not matrix.all():
+            compatible[(pa, pb) if pa < pb else (pb, pa)] = matrix if pa < pb else matrix.T
+    envelopes = [_envelope([*c, prepared.minima[i]]) for c, i in zip(candidates, ids, strict=True)]
+    margin = config.neighbour_margin_m
+    neighbours = []
+    for a, box in enumerate(envelopes):
+        near = []
+        for b, other in enumerate(envelopes):
+            if (
+                a != b
+                and np.all(box[0] - margin <= other[1])
+                and np.all(other[0] <= box[1] + margin)
+            ):
+                near.append(b)
+        neighbours.append(tuple(near))
+    if variant.prior == "size":
+        log_prior = tuple(size_log_prior(c, config.size_prior_exponent) for c in candidates)
+    else:
+        log_prior = tuple(np.full(len(c), -math.log(len(c))) for c in candidates)
+    problem = InferenceProblem(
+        ids,
+        tuple(candidates),
+        tuple(prepared.minima[i] for i in ids),
+        compatible,
+        tuple(neighbours),
+        log_prior,
+        tuple(planes),
+        pusher if variant.actions else None,
+        tuple(pushes) if variant.actions else (),
+        observed,
+        config,
+        seed,
+    )
+    return problem, indices

@@ -1,0 +1,378 @@
+"""Tree sampling of joint models (Algorithm 2's exploration probabilities from stability tests)
+and their likelihood (full simulation under gravity and the pushes, rendered depth vs observed).
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import math
+import threading
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from ipr_shapes.inference.problem import InferenceProblem, SampleResult
+from ipr_shapes.likelihood import depth_error_norms, log_likelihood
+from ipr_shapes.physics import (
+    Body,
+    World,
+    build_world,
+    convex_centroid,
+    resting_drop,
+    support_of,
+    wall_boxes,
+)
+from ipr_shapes.products import ShapeHypothesis
+
+
+class _Deadline(Exception):
+    """The time budget ran out in the middle of a sample."""
+
+
+@dataclass(frozen=True, eq=False)
+class _ObjectWorld:
+    """Object i's compiled stability-test world: ``options[(k, j)]`` the static shape of
+    neighbour k's candidate j (-1: its minimum shape), ``first`` the first of i's candidates
+    (one switchable body each, in order)."""
+
+    world: World
+    options: dict[tuple[int, int], int]
+    first: int
+
+
+class Sampler:
+    """Tree sampling and likelihood evaluation of one problem, with its stability cache.
+
+    Shared by the threads that sample one problem (``ipr_shapes.inference.pool``): the stability
+    cache and the evaluated models are shared; each thread has its own renderer and its own
+    copies of the compiled stability-test worlds (created on first use).
+    """
+
+    def __init__(self, problem: InferenceProblem) -> None:
+        self.problem = problem
+        self.cache: dict[tuple, np.ndarray] = {}
+        # Depth error norms of the joint models already simulated: the simulation and
+        # rendering are deterministic, so a model drawn again costs only its tree sampling.
+        self.evaluated: dict[tuple[int, ...], np.ndarray | None] = {}
+        self.stability_tests = 0
+        self.screened = 0
+        self._lock = threading.Lock()
+        self._compiled: dict[int, _ObjectWorld] = {}
+        self._centroids: dict[tuple[int, int], np.ndarray | None] = {}
+        self._walls = wall_boxes(problem.planes, problem.config.physics)
+        # Per thread: its copies of the stability-test worlds, its renderer, its test count.
+        self._local = threading.local()
+        self._renderers: list = []
+
+    # ----------------------------------------------------------------------------------------
+    # Exploration probabilities
+
+    def _thread_state(self):
+        local = self._local
+        if not hasattr(local, "worlds"):
+            local.worlds = {}
+            local.tests = 0
+            local.renderer = None
+        return local
+
+    def _object_world(self, i: int) -> _ObjectWorld:
+        """Object i's stability-test world for this thread (module doc, step 1): compiled once
+        per sampler with every shape its neighbours can take (each candidate and the minimum)
+        as static geometry switched on and off per context, and its candidates as switchable
+        transparent bodies; each thread simulates its own copy of the compiled model."""
+        local = self._thread_state()
+        if i in local.worlds:
+            return local.worlds[i]
+        with self._lock:
+            compiled = self._compiled.get(i)
+            if compiled is None:
+                problem = self.problem
+                options, bodies = {}, []
+                for k in problem.neighbours[i]:
+                    for j, shape in (*enumerate(problem.candidates[k]), (-1, problem.minima[k])):
+                        options[(k, j)] = len(bodies)
+                        bodies.append(Body(shape.vertices, shape.faces, dynamic=False))
+                first = len(bodies)
+                bodies += [
+                    Body(h.vertices, h.faces, candidate=True, switchable=True)
+                    for h in problem.candidates[i]
+                ]
+                world = build_world(bodies, problem.planes, problem.config.physics)
+                # The switched-off shapes stay in the static bodies' collision tree; without
+                # it (the same contacts) a step costs what it does in a world of the context
+                # alone (docs/experiments/2026-11-26-sampling-throughput.md).
+                world.model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_MIDPHASE
+                compiled = self._compiled[i] = _ObjectWorld(world, options, first)
+        world = compiled.world
+        own = dataclasses.replace(world, model=copy.copy(world.model))
+        own.data = mujoco.MjData(own.model)
+        local.worlds[i] = _ObjectWorld(own, compiled.options, compiled.first)
+        return local.worlds[i]
+
+    def _centroid(self, i: int, j: int) -> np.ndarray | None:
+        key = (i, j)
+        if key not in self._centroids:
+            self._centroids[key] = convex_centroid(self.problem.candidates[i][j].vertices)
+        return self._centroids[key]
+
+    def _screen(self, i: int, context: tuple[tuple[int, int], ...]) -> np.ndarray:
+        """(m_i,) the stability-test distance of each candidate of i that clearly stands on
+        the support alone (``ipr_shapes.physics.resting_drop``), NaN for the others (simulated)."""
+        problem = self.problem
+        candidates = problem.candidates[i]
+        distances = np.full(len(candidates), np.nan)
+        support = support_of(problem.planes)
+        config = problem.config
+        if not config.screen_resting or support is None:
+            return distances
+        obstacles = [
+            (problem.candidates[k][j] if j >= 0 else problem.minima[k]).bounds for k, j in context
+        ] + self._walls
+        for j, h in enumerate(candidates):
+            centroid = self._centroid(i, j)
+            if centroid is None:
+                continue
+            drop = resting_drop(
+                h.vertices, centroid, support, obstacles,
+                gap_m=config.screen_gap_m, margin_m=config.screen_margin_m,
+            )  # fmt: skip
+            if drop is not None:
+                distances[j] = drop
+        return distances
+
+    def _distances(self, i: int, placed: dict[int, int], deadline: float) -> np.ndarray:
+        """(m_i,) how far each candidate of i falls among its neighbours (cached).
+
+        Candidates that clearly stand on the support are screened (``_screen``); the others
+        are simulated together in object i's compiled world with the context switched in
+        (``_object_world``), each held as soon as it is at rest (``World.settle_each``)."""
+        problem = self.problem
+        context = tuple((k, placed.get(k, -1)) for k in problem.neighbours[i])
+        key = (i, context)
+        cached = self.cache.get(key)
+        if cached is not None:
+            return cached
+        if time.perf_counter() > deadline:
+            raise _Deadline
+        candidates = problem.candidates[i]
+        distances = self._screen(i, context)
+        simulate = np.flatnonzero(np.isnan(distances))
+        with self._lock:
+            self.screened += len(candidates) - len(simulate)
+        if len(simulate):
+            state = self._thread_state()
+            object_world = self._object_world(i)
+            world = object_world.world
+            chosen = dict(context)
+            for (k, j), body in object_world.options.items():
+                world.set_colliding(body, chosen[k] == j)
+            shapes = object_world.first + np.arange(len(candidates))
+            for j, body in enumerate(shapes):
+                world.hold(body, j not in simulate)
+            world.reset()
+            world.settle_each(shapes[simulate], problem.config.physics.stability_s)
+            state.tests += 1
+            with self._lock:
+                self.stability_tests += 1
+            if world.exploded and len(simulate) > 1:
+                # One unstable candidate spoils a shared simulation: test them one by one.
+                context_bodies = [
+                    Body(shape.vertices, shape.faces, dynamic=False)
+                    for shape in (
+                        problem.candidates[k][j] if j >= 0 else problem.minima[k]
+                        for k, j in context
+                    )
+                ]
+                distances[simulate] = np.concatenate(
+                    [self._single_distance(context_bodies, candidates[j]) for j in simulate]
+                )
+            else:
+                distances[simulate] = self._measure(world)[shapes[simulate]]
+        self.cache[key] = distances
+        return distances
+
+    def _single_distance(self, context: list[Body], h: ShapeHypothesis) -> np.ndarray:
+        world = build_world(
+            [*context, Body(h.vertices, h.faces)], self.problem.planes, self.problem.config.physics
+        )
+        world.settle(self.problem.config.physics.stability_s)
+        self._thread_state().tests += 1
+        with self._lock:
+            self.stability_tests += 1
+        return self._measure(world)[-1:]
+
+    def _measure(self, world) -> np.ndarray:
+        """Per body, the stability test's distance (``InferenceConfig.stability_measure``)."""
+        if self.problem.config.stability_measure == "drop":
+            return world.drops()
+        return world.displacements()
+
+    def exploration(self, i: int, placed: dict[int, int], deadline: float = math.inf):
+        """(m_i,) unnormalised exploration probabilities of object i's candidates given the
+        placed objects' candidate positions (module doc, step 1)."""
+        problem = self.problem
+        allowed = np.ones(len(problem.candidates[i]), dtype=bool)
+        for k, j in placed.items():
+            allowed &= problem.compatibility(i, k)[:, j]
+        distances = self._distances(i, placed, deadline)
+        with np.errstate(over="ignore"):
+            probabilities = np.exp(-problem.config.stability_alpha_per_m * distances)
+        return np.where(allowed, probabilities, 0.0)
+
+    def tree_sample(
+        self, rng: np.random.Generator, deadline: float = math.inf
+    ) -> tuple[tuple[int, ...], tuple[float, ...]]:
+        """Draw one joint model (candidate positions) and each object's log exploration
+        probability (their sum is log q(X))."""
+        n = self.problem.count
+        placed: dict[int, int] = {}
+        log_proposal = [0.0] * n
+        for _ in range(n):
+            best, best_mass, best_probabilities = -1, -1.0, None
+            for i in range(n):
+                if i in placed:
+                    continue
+                probabilities = self.exploration(i, placed, deadline)
+                mass = float(probabilities.sum())
+                if mass > best_mass:
+                    best, best_mass, best_probabilities = i, mass, probabilities
+            if best_mass <= 0:
+                # Nothing of this object fits or stays: explore its candidates uniformly.
+                best_probabilities = np.ones(len(self.problem.candidates[best]))
+                best_mass = float(best_probabilities.size)
+            distribution = best_probabilities / best_mass
+            j = int(rng.choice(distribution.size, p=distribution))
+            placed[best] = j
+            log_proposal[best] = math.log(distribution[j])
+        return tuple(placed[i] for i in range(n)), tuple(log_proposal)
+
+    # ----------------------------------------------------------------------------------------
+    # Likelihood
+
+    def _renderer_for(self, width: int, height: int):
+        """This thread's renderer (a GL context belongs to the thread that made it)."""
+        from ipr_shapes.rendering import Renderer
+
+        local = self._thread_state()
+        renderer = local.renderer
+        if renderer is None or (renderer.width, renderer.height) != (width, height):
+            if renderer is not None:
+                renderer.close()
+                with self._lock:
+                    self._renderers.remove(renderer)
+            renderer = local.renderer = Renderer(width, height)
+            with self._lock:
+                self._renderers.append(renderer)
+        return renderer
+
+    def depth_norms(self, choice: Sequence[int], deadline: float = math.inf) -> np.ndarray | None:
+        """(T, n) depth error norms of the joint model ``choice`` per compared frame and object
+        (module doc, step 2); None when the simulation exploded or flung an object."""
+        problem = self.problem
+        observed = problem.observed
+        shapes = [problem.candidates[k][j] for k, j in enumerate(choice)]
+        world = build_world(
+            [Body(h.vertices, h.faces) for h in shapes],
+            problem.planes,
+            problem.config.physics,
+            pusher=problem.pusher if problem.pushes else None,
+            cameras=observed.cameras,
+            render_static=True,
+        )
+        world.settle()
+        width = max(c.width for c in observed.cameras)
+        height = max(c.height for c in observed.cameras)
+        renderer = self._renderer_for(width, height)
+        ids = np.asarray(problem.ids, dtype=np.int32)
+        norms = []
+        for position, frame in enumerate(observed.frames):
+            for push in problem.pushes:
+                if push.after_frame == frame:
+                    if time.perf_counter() > deadline:
+                        raise _Deadline
+                    world.push(push)
+            if world.exploded or world.flung().any():
+                return None
+            depth, index = world.render(renderer, world.cameras[position])
+            predicted_ids = np.where(index >= 0, ids[np.maximum(index, 0)], 0)
+            norms.append(
+                depth_error_norms(
+                    observed.depth_m[position],
+                    observed.labels[position],
+                    observed.ignore[position],
+                    depth,
+                    predicted_ids,
+                    problem.ids,
+                    problem.config.likelihood,
+                )
+            )
+        return np.array(norms)
+
+    def _norms_of(self, choice: tuple[int, ...], deadline: float) -> np.ndarray | None:
+        """``depth_norms`` of ``choice``, simulated once per sampler."""
+        if choice not in self.evaluated:
+            self.evaluated[choice] = self.depth_norms(choice, deadline)
+        return self.evaluated[choice]
+
+    def log_likelihood_of(self, norms: np.ndarray | None) -> float:
+        """log P(O | X, mu) from ``depth_norms`` (-inf for a failed simulation)."""
+        if norms is None:
+            return -math.inf
+        return log_likelihood(
+            norms, self.problem.observed.decimation, self.problem.config.likelihood
+        )
+
+    def log_prior(self, choice: Sequence[int]) -> float:
+        """log P(X) of a joint model (product of the objects' priors)."""
+        return float(sum(self.problem.log_prior[k][j] for k, j in enumerate(choice)))
+
+    def sample(self, index: int, deadline: float = math.inf) -> SampleResult:
+        """Tree-sample joint model number ``index`` and score it."""
+        started = time.perf_counter()
+        tests = self._thread_state().tests
+        rng = np.random.default_rng([self.problem.seed, index])
+        choice, object_log_proposal = self.tree_sample(rng, deadline)
+        norms = self._norms_of(choice, deadline)
+        return SampleResult(
+            index,
+            choice,
+            float(sum(object_log_proposal)),
+            self.log_likelihood_of(norms),
+            self.log_prior(choice),
+            time.perf_counter() - started,
+            self._thread_state().tests - tests,
+            norms,
+            object_log_proposal,
+        )
+
+    def score(self, index: int, choice: Sequence[int], deadline: float = math.inf):
+        """Score a given joint model (exhaustive enumeration): proposal probability 1."""
+        started = time.perf_counter()
+        norms = self._norms_of(tuple(choice), deadline)
+        return SampleResult(
+            index, tuple(choice), 0.0, self.log_likelihood_of(norms), self.log_prior(choice),
+            time.perf_counter() - started, 0, norms, (0.0,) * len(choice),
+        )  # fmt: skip
+
+    def release(self) -> None:
+        """Close this thread's renderer and drop its worlds (a sampling thread's last call:
+        a GL context is closed by the thread that made it)."""
+        local = self._thread_state()
+        if local.renderer is not None:
+            with self._lock:
+                self._renderers.remove(local.renderer)
+            local.renderer.close()
+        local.renderer = None
+        local.worlds = {}
+
+    def close(self) -> None:
+        """Close this thread's renderer and any left by threads that did not ``release``."""
+        self.release()
+        with self._lock:
+            renderers, self._renderers = self._renderers, []
+        for renderer in renderers:
+            renderer.close()

@@ -1,0 +1,316 @@
+"""Perception: from RGB-D frames to tracked partial objects, facets and free space (paper Sec. III).
+
+``perceive_scene(scene)`` runs, per frame: known-plane and robot removal, supervoxels, the
+convexity-weighted graph and spectral clustering (``segmentation``); then tracking across frames
+(``tracking``), each object's points from its plane-fitted depth (``denoise``) with facets
+(``facets``), and the free/occupied/unknown voxel map of each frame (``free_space``).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ipr_shapes.perception.config import PerceptionConfig
+from ipr_shapes.perception.denoise import objects_plane_depth
+from ipr_shapes.perception.facets import object_facets
+from ipr_shapes.perception.free_space import SpaceMap, VoxelGrid, observe_space
+from ipr_shapes.perception.kernels import object_pixel_geometry
+from ipr_shapes.perception.robot import robot_pixels
+from ipr_shapes.perception.segmentation import segment_frame
+from ipr_shapes.perception.tracking import split_merged_objects, track_segments
+from ipr_shapes.perception.types import FrameSegmentation, KnownPlane, PartialObject
+from ipr_shapes.progress import ProgressCallback, report
+from ipr_shapes.scene import Scene
+
+__all__ = ["Perception", "PerceptionConfig", "perceive_scene", "track_scene"]
+
+
+@dataclass(frozen=True, eq=False)
+class Perception:
+    """Everything perception found in a scene.
+
+    Attributes:
+        labels: per frame, (H, W) int32 tracked object ids (0 = background, support, walls,
+            robot); the same id is the same object in every frame.
+        facet_labels: per frame, (H, W) int32 facet numbers (0 = none), unique within a frame.
+        objects: per frame, the partial objects O_{i,t} ordered by id.
+        planes: per frame, the support and walls found.
+        segmentations: per frame, the untracked segmentation with its supervoxel graph.
+        free_space: per frame, the voxel map (None when not computed or no object was found).
+        timing_s: seconds: ``per_frame`` (list; planes to facets, tracking shared out),
+            ``free_space_per_frame`` (list), and totals per step.
+    """
+
+    labels: list[np.ndarray]
+    facet_labels: list[np.ndarray]
+    objects: list[tuple[PartialObject, ...]]
+    planes: list[tuple[KnownPlane, ...]]
+    segmentations: list[FrameSegmentation]
+    free_space: list[SpaceMap | None]
+    timing_s: dict = field(default_factory=dict)
+
+    @property
+    def object_ids(self) -> list[int]:
+        """Every object id seen in any frame, sorted."""
+        return sorted({obj.id for frame_objects in self.objects for obj in frame_objects})
+
+
+def perceive_scene(
+    scene: Scene,
+    config: PerceptionConfig | None = None,
+    *,
+    with_free_space: bool = True,
+    progress: ProgressCallback | None = None,
+) -> Perception:
+    """Segment, track and decompose every frame of a scene into partial objects with facets.
+
+    ``progress`` (``ipr_shapes.progress``) hears ``perception`` as each frame is segmented (most of
+    the time) and ``free_space`` as each frame's voxel map is made, frame by frame.
+    """
+    config = config or PerceptionConfig()
+    count = len(scene.frames)
+    segment_seconds, segmentations, points = [], [], []
+    report(progress, "perception", 0, count)
+    for position, frame in enumerate(scene.frames):
+        started = time.perf_counter()
+        points.append(frame.points_world())
+        segmentations.append(
+            segment_frame(
+                frame,
+                pushes=scene.pushes,
+                pusher=scene.pusher,
+                config=config,
+                points_world=points[-1],
+                previous=(scene.frames[position - 1], segmentations[-1]) if position else None,
+            )
+        )
+        segment_seconds.append(time.perf_counter() - started)
+        report(progress, "perception", position + 1, count)
+
+    started = time.perf_counter()
+    labels = track_scene([s.labels for s in segmentations], scene, points, config)
+    tracking_seconds = time.perf_counter() - started
+
+    facet_seconds, objects, facet_labels = [], [], []
+    for frame, segmentation, frame_labels in zip(scene.frames, segmentations, labels, strict=True):
+        started = time.perf_counter()
+        frame_objects, frame_facets = _partial_objects(frame, segmentation, frame_labels, config)
+        objects.append(frame_objects)
+        facet_labels.append(frame_facets)
+        facet_seconds.append(time.perf_counter() - started)
+
+    free_space: list[SpaceMap | None] = [None] * len(scene.frames)
+    free_seconds = [0.0] * len(scene.frames)
+    grid = workspace_grid(objects, config) if with_free_space else None
+    if grid is not None:
+        report(progress, "free_space", 0, count)
+        for index, frame in enumerate(scene.frames):
+            started = time.perf_counter()
+            # The robot is not an obstacle to hypotheses, and space behind it is unknown.
+            ignore = robot_pixels(frame, scene.pushes, scene.pusher, config)
+            free_space[index] = observe_space(
+                frame.depth_m,
+                frame.K,
+                frame.world_from_camera,
+                grid,
+                surface_margin_m=config.free_space.surface_margin_m,
+                ignore_mask=ignore,
+            )
+            free_seconds[index] = time.perf_counter() - started
+            report(progress, "free_space", index + 1, count)
+
+    tracking_share = tracking_seconds / max(len(scene.frames), 1)
+    per_frame = [
+        s + f + tracking_share for s, f in zip(segment_seconds, facet_seconds, strict=True)
+    ]
+    timing = {
+        "per_frame": per_frame,
+        "free_space_per_frame": free_seconds,
+        "segmentation": sum(segment_seconds),
+        "tracking": tracking_seconds,
+        "facets": sum(facet_seconds),
+        "free_space": sum(free_seconds),
+    }
+    return Perception(
+        labels,
+        facet_labels,
+        objects,
+        [s.planes for s in segmentations],
+        segmentations,
+        free_space,
+        timing,
+    )
+
+
+def track_scene(
+    untracked: list[np.ndarray],
+    scene: Scene,
+    points: list[np.ndarray],
+    config: PerceptionConfig,
+) -> list[np.ndarray]:
+    """Tracked (H, W) int32 labels of a scene's frames from their per-frame segment labels
+    (``track_segments``, then ``split_merged_objects`` when enabled); ``points`` are the
+    frames' (H, W, 3) world points (m)."""
+    frames = scene.frames
+    labels = track_segments(
+        untracked,
+        points,
+        [f.rgb for f in frames],
+        config.tracking,
+        frames_depth=[f.depth_m for f in frames],
+    )
+    if config.tracking.split_merged_objects:
+        labels = split_merged_objects(
+            labels,
+            points,
+            [f.rgb for f in frames],
+            [f.depth_m for f in frames],
+            [f.K for f in frames],
+            [f.world_from_camera for f in frames],
+            config,
+        )
+    return labels
+
+
+def _partial_objects(
+    frame,
+    segmentation: FrameSegmentation,
+    labels: np.ndarray,
+    config: PerceptionConfig,
+) -> tuple[tuple[PartialObject, ...], np.ndarray]:
+    """Partial objects with facets for one frame's tracked labels; also the facet label image."""
+    height, width = labels.shape
+    flat_labels = labels.reshape(-1)
+    flat_rgb = frame.rgb.reshape(-1, 3)
+    valid = frame.depth_m.reshape(-1) > 0
+    supervoxels = segmentation.supervoxels
+    flat_supervoxel = supervoxels.labels.reshape(-1)
+    facet_image = np.zeros(height * width, dtype=np.int32)
+    border = np.zeros((height, width), dtype=bool)
+    border[:2, :] = border[-2:, :] = border[:, :2] = border[:, -2:] = True
+    border = border.reshape(-1)
+    next_facet = 1
+    objects = []
+    # Labels may cover depth holes inside an object; its points come from valid readings.
+    labelled = np.flatnonzero((flat_labels > 0) & valid)
+    order = labelled[np.argsort(flat_labels[labelled], kind="stable")]
+    object_ids, starts = np.unique(flat_labels[order], return_index=True)
+    ends = np.append(starts[1:], len(order))[: len(starts)]  # no segments: no ends
+    # Per-pixel quantities of all objects in one pass each (objects are slices of ``order``):
+    # real frames have a dozen small segments besides the objects, and per-object calls cost.
+    # Hulls take extreme points: sensor noise would bulge every hull out (denoise.py).
+    depth = objects_plane_depth(
+        frame.depth_m,
+        order,
+        np.append(starts, len(order)),
+        config.denoise.window_px if config.denoise.window_px >= 3 else 1,
+    )
+    supervoxel_all = flat_supervoxel[order]
+    has_all = supervoxel_all >= 0
+    world_all, areas_all = object_pixel_geometry(
+        order,
+        depth,
+        width,
+        frame.K,
+        frame.world_from_camera,
+        supervoxel_all,
+        np.ascontiguousarray(supervoxels.normals, dtype=np.float64),
+    )
+    rgb_all = flat_rgb[order]
+    border_all = border[order]
+    for object_id, start, end in zip(object_ids.tolist(), starts, ends, strict=True):
+        pixels = order[start:end]
+        point_supervoxel = supervoxel_all[start:end]
+        has_supervoxel = has_all[start:end]
+        object_supervoxels = np.unique(point_supervoxel[has_supervoxel])
+        world = world_all[start:end]
+        areas = areas_all[start:end]
+        facets, facet_of_point = object_facets(
+            object_supervoxels,
+            supervoxels.normals,
+            supervoxels.sizes,
+            supervoxels.adjacency,
+            np.where(
+                has_supervoxel,
+                point_supervoxel,
+                object_supervoxels[0] if len(object_supervoxels) else 0,
+            ),
+            world,
+            areas,
+            bandwidth=config.facets.bandwidth,
+        )
+        assigned = facet_of_point >= 0
+        facet_image[pixels[assigned]] = facet_of_point[assigned] + next_facet
+        next_facet += len(facets)
+        objects.append(
+            PartialObject(
+                object_id,
+                frame.index,
+                pixels,
+                world,
+                rgb_all[start:end],
+                facets,
+                facet_of_point,
+                bool(border_all[start:end].any()),
+            )
+        )
+    return tuple(objects), facet_image.reshape(height, width)
+
+
+def workspace_grid(
+    objects: list[tuple[PartialObject, ...]], config: PerceptionConfig
+) -> VoxelGrid | None:
+    """One free-space grid for all frames: the objects' bounds plus a margin (None if no object)."""
+    all_points = [obj.points for frame_objects in objects for obj in frame_objects]
+    if not all_points:
+        return None
+    stacked = np.concatenate(all_points)
+    low = np.percentile(stacked, 0.5, axis=0)
+    high = np.percentile(stacked, 99.5, axis=0)
+    margin = config.free_space.workspace_margin_m
+    minimum = np.array([low[0] - margin, low[1] - margin, low[2] - 0.05])
+    maximum = np.array([high[0] + margin, high[1] + margin, high[2] + margin])
+    return VoxelGrid.around(minimum, maximum, config.free_space.voxel_m)
+
+
+#: With no object found, at most this share of the first frame's depth points may lie off the
+#: support and walls (``check_objects_found``); more means the support choice went wrong.
+UNEXPLAINED_SHARE = 0.2
+#: A point within this distance (m) of a found plane lies on it.
+_ON_PLANE_M = 0.02
+
+
+def check_objects_found(scene: Scene, perception: Perception) -> None:
+    """Refuse a first frame in which no object was found although much of it lies off the
+    support and walls (more than ``UNEXPLAINED_SHARE`` of its depth points): the support choice
+    (gravity) went wrong, and an empty result would hide it. An empty table passes.
+
+    Raises:
+        SceneError: naming the frame and the fixes (--up, or camera poses).
+    """
+    from ipr_shapes.errors import SceneError
+    from ipr_shapes.scene import GRAVITY_FIX
+
+    if perception.objects[0]:
+        return
+    frame = scene.frames[0]
+    points = frame.points_world()[frame.depth_m > 0]
+    if len(points) == 0:
+        return
+    on_plane = np.zeros(len(points), dtype=bool)
+    for plane in perception.planes[0]:
+        on_plane |= np.abs(plane.signed_distance(points)) < _ON_PLANE_M
+    share = 1.0 - float(on_plane.mean())
+    if share > UNEXPLAINED_SHARE:
+        raise SceneError(
+            scene.path,
+            f"frame {frame.index}: no object found although {100 * share:.0f} % of its depth "
+            "points lie off the support and walls found: the support (gravity) was likely "
+            "chosen wrongly",
+            GRAVITY_FIX
+            if scene.world_frame_source != "camera_poses"
+            else "check the camera poses (cam_R_w2c, cam_t_w2c: world z must point up)",
+        )

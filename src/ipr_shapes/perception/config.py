@@ -1,0 +1,835 @@
+"""Parameters of the perception stage: one typed object of nested groups, one per step.
+
+``PerceptionConfig`` holds a frozen group per step of perception, in the order they run:
+``planes`` (RANSAC shared by the support and the walls), ``support``, ``walls``, ``robot``,
+``supervoxels``, ``segmentation``, ``containers``, ``seams``, ``temporal``, ``tracking``, ``denoise``,
+``facets``, ``free_space`` and ``occluded_pieces``, plus the ``seed`` of every random choice.
+Change one value with ``dataclasses.replace``::
+
+    config = replace(config, walls=replace(config.walls, max_span_m=0.0))
+
+Defaults follow the paper and its authors' code (ARCHITECTURE.md) where those give a value, and
+were otherwise chosen on synthetic development scenes (seeds outside every benchmark suite);
+the measurements behind them are in ``docs/experiments/perception-config-notes.md``. Lengths
+are in metres, angles in degrees, shares in [0, 1]. Every group checks its fields on
+construction against its ``CHECKS`` table (``ipr_shapes.checks``): a bad value raises ValueError
+naming the field, the value and the allowed range.
+"""
+
+from __future__ import annotations
+
+import numbers
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+from ipr_shapes.checks import Checks, Interval, Pair, Predicate, check_fields
+
+# Shorthands for the tables below.
+_POSITIVE = Interval(0, None, closed="neither")
+_NON_NEGATIVE = Interval(0, None)
+_SHARE = Interval(0, 1)
+_TILT = Interval(0, 90)
+_ANGLE = Interval(0, 180)
+_ANY = Interval(None, None)
+_COUNT = Interval(0, None, integer=True)
+_AT_LEAST_ONE = Interval(1, None, integer=True)
+
+
+@dataclass(frozen=True)
+class PlanesConfig:
+    """RANSAC settings shared by the support plane and the walls (``ipr_shapes.perception.planes``).
+
+    Attributes:
+        threshold_m: inlier distance (m) of a point to a plane; also the margin in front of a
+            known plane's face within which points belong to it. The authors use 1 cm.
+        sample_size: points (a random subset) on which hypotheses are scored; the winner is
+            refitted by least squares on its inliers, so the subset only has to rank them.
+    """
+
+    CHECKS: ClassVar[Checks] = {"threshold_m": _POSITIVE, "sample_size": _AT_LEAST_ONE}
+
+    threshold_m: float = 0.01
+    sample_size: int = 1000
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+@dataclass(frozen=True)
+class SupportConfig:
+    """The support (table) plane (``planes.find_support_plane``) and what lies on it.
+
+    The support is the plane the objects rest on, not always the largest plane
+    (``ipr_shapes.geometry.support.choose_support``: the tops of packed boxes and a floor seen beyond
+    a table are not the support).
+
+    Attributes:
+        iterations: RANSAC hypotheses for the support plane (the authors use 1000).
+        max_tilt_deg: the support's normal is within this angle (deg) of world +z, so that a
+            large wall or box face is not taken for the table.
+        clearance_m: points less than this (m) above the support belong to it (sensor noise
+            and the table's texture).
+        min_points, min_fraction: the support needs at least this many inliers and this share
+            of the frame's valid points, so that a small flat face is not taken for the table.
+        candidates: further planes (RANSAC with removal) examined in a scene's first frame to
+            tell whether the largest plane is the support (0: the largest plane always is, as
+            before; later frames keep the first frame's support when their largest plane is
+            not it: the support does not move).
+        see_through: share of the largest plane's extent (or of the space between the walls
+            around it) seen below it from which it is the tops of objects, not the support (a
+            table is opaque).
+    """
+
+    CHECKS: ClassVar[Checks] = {
+        "iterations": _AT_LEAST_ONE,
+        "max_tilt_deg": _TILT,
+        "clearance_m": _NON_NEGATIVE,
+        "min_points": _COUNT,
+        "min_fraction": _SHARE,
+        "candidates": _COUNT,
+        "see_through": _SHARE,
+    }
+
+    iterations: int = 1000
+    max_tilt_deg: float = 30.0
+    clearance_m: float = 0.01
+    min_points: int = 200
+    min_fraction: float = 0.1
+    candidates: int = 8
+    see_through: float = 0.01
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+@dataclass(frozen=True)
+class WallsConfig:
+    """Walls of containers and drawers (``planes.find_walls``): vertical planes standing on the
+    support, told apart from objects' faces by the cues below.
+
+    Attributes:
+        max_candidates: vertical planes examined per frame (0 = no walls); a frame shows at
+            most a drawer's front and sides.
+        max_points: the wall search uses at most this many points above the support (an even
+            subset), which bounds its cost on close-up frames.
+        iterations: RANSAC hypotheses per vertical plane.
+        min_points: inliers a wall candidate needs (fewer are noise or a thin edge).
+        normal_tilt_deg: only points whose (noisy) pixel normal is within this angle (deg) of
+            the horizontal vote for vertical planes, so that the table and tops do not.
+        min_length_m: a wall's visible run along the support is at least this long (m; the
+            generator's walls are >= 20 cm; YCB boxes' faces, up to 21 cm, are told apart by
+            the other cues).
+        max_gap_m: gaps (occlusions) shorter than this (m) do not break a wall's run.
+        min_height_m, max_height_m: range (m) of a wall's top above the support (a wall is
+            taller than a rim and lower than the scene's tall objects).
+        support_gap_m: a wall's lowest visible points are within this (m) of the support (a
+            wall stands on the table; a box's face lifted by what is below it does not).
+        max_thickness_m: walls are thinner than this (m); it is also the slab removed behind a
+            wall's visible face (its hidden inner face).
+        cap_depth_m: how far (m) behind a wall's face points "capping" it (a box's top) count.
+        max_capped_fraction: share of a wall's length allowed to have such points (objects
+            standing behind a drawer front and rising above it).
+        min_top_agreement: a wall accepted on its own (without a partner) has its top edge
+            within 2 cm of its top height over at least this share of its 2 cm columns (a
+            wall's rim is straight; the faces of a pile of objects are of many heights).
+        min_face_fill: ... and inliers in at least this share of the 2 cm cells of its face
+            between its bottom and its top (a wall is a solid face).
+        side_range_m: distance (m) from a wall within which the scene's other points are used
+            for the one-sided test (everything is in front of a wall, nothing behind it).
+        max_outside_fraction: share of those points allowed on the wall's minority side.
+        partner_min_length_m: shortest run (m) of a wall accepted through a partner wall (a
+            side wall seen at a grazing angle shows little of its length).
+        partner_separation_m: (min, max) distance (m) between opposite walls of a container.
+        partner_max_top_difference_m: partner walls' tops differ by at most this (m; a drawer
+            front is 3-5 cm taller than the sides).
+        partner_top_match_m: tops (m) of a wall whose bottom is hidden and of its partner
+            differ by at most this (one container's walls have one height).
+        corner_gap_m: two perpendicular walls meet within this (m) of the ends of their runs.
+        complete_corners: look for side walls seen edge-on at the ends of accepted walls
+            (``planes._edge_on_walls``), which the normal vote misses.
+        max_span_m: a wall's face may extend past its run (an object in front of it cuts it
+            in two) to pieces of its plane whose top is the wall's, up to this overall length
+            (m; 0 = the run only).
+        top_margin_m: points up to this (m) above a wall's top (its rim, with noise) are
+            removed with it.
+    """
+
+    CHECKS: ClassVar[Checks] = {
+        "max_candidates": _COUNT,
+        "max_points": _AT_LEAST_ONE,
+        "iterations": _AT_LEAST_ONE,
+        "min_points": _AT_LEAST_ONE,
+        "normal_tilt_deg": _TILT,
+        "min_length_m": _NON_NEGATIVE,
+        "max_gap_m": _NON_NEGATIVE,
+        ("min_height_m", "max_height_m"): Pair(_NON_NEGATIVE),
+        "support_gap_m": _NON_NEGATIVE,
+        "max_thickness_m": _POSITIVE,
+        "cap_depth_m": _NON_NEGATIVE,
+        "max_capped_fraction": _SHARE,
+        "min_top_agreement": _SHARE,
+        "min_face_fill": _SHARE,
+        "side_range_m": _NON_NEGATIVE,
+        "max_outside_fraction": _SHARE,
+        "partner_min_length_m": _NON_NEGATIVE,
+        "partner_separation_m": Pair(_NON_NEGATIVE),
+        "partner_max_top_difference_m": _NON_NEGATIVE,
+        "partner_top_match_m": _NON_NEGATIVE,
+        "corner_gap_m": _NON_NEGATIVE,
+        "max_span_m": _NON_NEGATIVE,
+        "top_margin_m": _NON_NEGATIVE,
+    }
+
+    max_candidates: int = 6
+    max_points: int = 30000
+    iterations: int = 200
+    min_points: int = 100
+    normal_tilt_deg: float = 25.0
+    min_length_m: float = 0.18
+    max_gap_m: float = 0.05
+    min_height_m: float = 0.05
+    max_height_m: float = 0.25
+    support_gap_m: float = 0.03
+    max_thickness_m: float = 0.018
+    cap_depth_m: float = 0.10
+    max_capped_fraction: float = 0.5
+    min_top_agreement: float = 0.6
+    min_face_fill: float = 0.5
+    side_range_m: float = 0.5
+    max_outside_fraction: float = 0.03
+    partner_min_length_m: float = 0.1
+    partner_separation_m: tuple[float, float] = (0.15, 0.55)
+    partner_max_top_difference_m: float = 0.06
+    partner_top_match_m: float = 0.015
+    corner_gap_m: float = 0.04
+    complete_corners: bool = True
+    max_span_m: float = 0.6
+    top_margin_m: float = 0.005
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+@dataclass(frozen=True)
+class RobotConfig:
+    """Removal of the robot's and the pusher's pixels (``ipr_shapes.perception.robot``).
+
+    Attributes:
+        pusher_margin_m: points within the pusher capsule's radius plus this (m) are removed
+            (the capsule's pose and the depth are both a little off).
+    """
+
+    CHECKS: ClassVar[Checks] = {"pusher_margin_m": _NON_NEGATIVE}
+
+    pusher_margin_m: float = 0.005
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+@dataclass(frozen=True)
+class SupervoxelsConfig:
+    """Pixel normals and VCCS-style supervoxels (``ipr_shapes.perception.supervoxels``).
+
+    Attributes:
+        voxel_size_m: voxel resolution (m; the authors' VCCS: 7.5 mm).
+        seed_size_m: seed spacing (m; the authors' VCCS: 2 cm): the size of a supervoxel.
+        normal_radius_px: pixel normals use the neighbours this many pixels away (px; further
+            neighbours average more noise away but blur edges).
+        normal_max_jump_m, normal_max_jump_ratio: a neighbour whose depth differs by more than
+            ``normal_max_jump_m + normal_max_jump_ratio * radius * depth`` (m; the ratio per
+            pixel of radius) is across a discontinuity and not used for the normal.
+        iterations: k-means rounds assigning voxels to seeds.
+        normal_weight: weight of the normal term (1 - cos) against the spatial term
+            (distance / seed size)^2 in the voxel-to-seed distance (VCCS: normal 1, spatial 1).
+        colour_weight: weight of the squared RGB distance (channels in [0, 1]) in that distance
+            (the authors' VCCS: 0; it stays off, as colour helped no more than noise).
+        min_points: supervoxel pieces with fewer pixels are merged into a neighbour (too few
+            for a normal).
+        max_points: supervoxel statistics use at most this many pixels (an even subset; every
+            kept pixel is still labelled through its voxel), which bounds the cost per frame.
+        dominant_face_deg: a supervoxel's normal and centre come from its pixels whose normal
+            is within this angle (deg) of its dominant direction (0 = all pixels), so that a
+            supervoxel across an edge takes its larger face's orientation.
+    """
+
+    CHECKS: ClassVar[Checks] = {
+        "voxel_size_m": _POSITIVE,
+        "seed_size_m": _POSITIVE,
+        "normal_radius_px": _AT_LEAST_ONE,
+        "normal_max_jump_m": _NON_NEGATIVE,
+        "normal_max_jump_ratio": _NON_NEGATIVE,
+        "iterations": _COUNT,
+        "normal_weight": _NON_NEGATIVE,
+        "colour_weight": _NON_NEGATIVE,
+        "min_points": _COUNT,
+        "max_points": _AT_LEAST_ONE,
+        "dominant_face_deg": _ANGLE,
+    }
+
+    voxel_size_m: float = 0.0075
+    seed_size_m: float = 0.02
+    normal_radius_px: int = 2
+    normal_max_jump_m: float = 0.01
+    normal_max_jump_ratio: float = 0.02
+    iterations: int = 3
+    normal_weight: float = 1.0
+    colour_weight: float = 0.0
+    min_points: int = 12
+    max_points: int = 50000
+    dominant_face_deg: float = 30.0
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+@dataclass(frozen=True)
+class SegmentationConfig:
+    """The convexity-weighted supervoxel graph, its spectral clustering and the segments kept
+    (``ipr_shapes.perception.segmentation``).
+
+    Attributes:
+        concavity_tolerance_deg: edges flatter than this (deg) count as convex (the authors'
+            LCCP: 10), so that noise on a flat face does not cut it.
+        sanity_angle_deg, sanity_sigmoid: a convex edge whose centre-to-centre direction is
+            within this angle (deg) of the crease line is singular, not convex (two objects
+            touching along a line); with the sigmoid (LCCP) the angle is scaled by
+            1 / (1 + exp(-0.25 (normal angle - 25))) (the authors' code: a fixed 45 degrees;
+            LCCP: 60 with the sigmoid).
+        smoothness_threshold: LCCP smoothness slack, in voxel sizes (the authors: 0.1).
+        concave_join_deg: a concave edge whose normals differ by less than this (deg) is still
+            strong when its two supervoxels have alike colours (``concave_join_colour``): a
+            curved concave surface (a bowl's inside) changes its normal a little at every
+            step, while two objects meet at a crease or a colour edge. 0: off (LCCP).
+        concave_join_colour: largest distance between the two supervoxels' mean
+            chromaticities (r, g, b over their sum) for ``concave_join_deg`` to apply.
+        concave_weight: graph weight of concave (or not smooth) edges; convex and flat edges
+            weigh 1, so the clustering cuts at concavities.
+        singular_weight: graph weight of convex edges that fail the sanity check.
+        dense_eigen_limit: components up to this many supervoxels use a dense eigensolver
+            (faster than the sparse one on small graphs).
+        eigengap_floor: noise floor added to the eigenvalues of L_sym before their ratios are
+            compared (the eigengap is the largest ratio of consecutive eigenvalues), so that
+            near-zero eigenvalues do not make huge ratios.
+        kmeans_restarts: k-means initialisations (seeded) on the spectral embedding.
+        max_objects: upper bound on the number of objects per frame.
+        min_object_pixels: segments with fewer pixels (with depth) are merged into a neighbour
+            or dropped (an object peeking over a drawer front can show ~50).
+        min_object_height_m: segments whose 90th-percentile height above the support is lower
+            (m) are support residue (noise, a slightly curved table), not objects.
+        label_fill_px: pixels without depth take the label of the nearest pixel with depth up
+            to this distance (px; edge dropout, small holes); 0 = no filling.
+    """
+
+    CHECKS: ClassVar[Checks] = {
+        "concavity_tolerance_deg": _ANGLE,
+        "sanity_angle_deg": _ANGLE,
+        "smoothness_threshold": _NON_NEGATIVE,
+        "concave_join_deg": _ANGLE,
+        "concave_join_colour": _NON_NEGATIVE,
+        "concave_weight": _NON_NEGATIVE,
+        "singular_weight": _NON_NEGATIVE,
+        "dense_eigen_limit": _COUNT,
+        "eigengap_floor": _POSITIVE,
+        "kmeans_restarts": _AT_LEAST_ONE,
+        "max_objects": _AT_LEAST_ONE,
+        "min_object_pixels": _COUNT,
+        "min_object_height_m": _NON_NEGATIVE,
+        "label_fill_px": _NON_NEGATIVE,
+    }
+
+    concavity_tolerance_deg: float = 10.0
+    sanity_angle_deg: float = 60.0
+    sanity_sigmoid: bool = True
+    smoothness_threshold: float = 0.1
+    concave_join_deg: float = 0.0
+    concave_join_colour: float = 0.02
+    concave_weight: float = 0.001
+    singular_weight: float = 0.001
+    dense_eigen_limit: int = 400
+    eigengap_floor: float = 0.001
+    kmeans_restarts: int = 4
+    max_objects: int = 20
+    min_object_pixels: int = 40
+    min_object_height_m: float = 0.015
+    label_fill_px: float = 3.0
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+@dataclass(frozen=True)
+class ContainersConfig:
+    """Joining the pieces of an open container's inside to the container
+    (``ipr_shapes.perception.containers``, where the rules are explained).
+
+    Attributes:
+        join_insides: join them at all (the convexity graph cuts an inside into pieces).
+        footprint_fraction, margin_m: share of a piece's points within the container's
+            footprint on the support (its convex hull or fitted circle), grown by this margin
+            (m): an inside lies within its container.
+        circle_rms_m, max_radius_m: the circle fitted to a container's footprint counts when
+            its RMS distance to the points is at most the first and its radius at most the
+            second (m): a round wall, which surrounds its inside at its full height.
+        top_tolerance_m, bottom_tolerance_m: how far (m) the piece's top may rise above the
+            container's and its bottom reach below the container's (an inside is below the
+            rim and above the container's floor).
+        max_chroma: largest L1 distance between the two mean chromaticities (shading does
+            not change chromaticity; an inside is darker than the outside).
+        rim_radius_m: the container's points this close (m) to the piece's on the support
+            are its rim around the piece.
+        max_front_ratio: the piece stands in front of the container along at most this share
+            of the pixel pairs where they meet (an object resting on a box stands in front).
+        min_contact_px: the two meet (touch, or the container hides the piece) along at least
+            this many 4-neighbour pixel pairs.
+        contact_gap_m: two neighbouring pixels whose points are closer than this (m) belong to
+            touching surfaces.
+        front_step_m: (low, high) depth step (m) between neighbouring pixels at which the
+            nearer one stands in front of the other (above ``high``: unrelated surfaces).
+    """
+
+    CHECKS: ClassVar[Checks] = {
+        "footprint_fraction": _SHARE,
+        "margin_m": _NON_NEGATIVE,
+        "circle_rms_m": _NON_NEGATIVE,
+        "max_radius_m": _NON_NEGATIVE,
+        "top_tolerance_m": _NON_NEGATIVE,
+        "bottom_tolerance_m": _NON_NEGATIVE,
+        "max_chroma": _NON_NEGATIVE,
+        "rim_radius_m": _NON_NEGATIVE,
+        "max_front_ratio": _SHARE,
+        "min_contact_px": _COUNT,
+        "contact_gap_m": _NON_NEGATIVE,
+        "front_step_m": Pair(_NON_NEGATIVE),
+    }
+
+    join_insides: bool = True
+    footprint_fraction: float = 0.9
+    margin_m: float = 0.01
+    circle_rms_m: float = 0.004
+    max_radius_m: float = 0.15
+    top_tolerance_m: float = 0.005
+    bottom_tolerance_m: float = 0.005
+    max_chroma: float = 0.2
+    rim_radius_m: float = 0.02
+    max_front_ratio: float = 0.5
+    min_contact_px: int = 3
+    contact_gap_m: float = 0.01
+    front_step_m: tuple[float, float] = (0.01, 0.1)
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+@dataclass(frozen=True)
+class SeamsConfig:
+    """Cutting segments along straight colour seams where the geometry is silent
+    (``ipr_shapes.perception.seams``): packed boxes of one height whose coplanar tops the convexity
+    graph cannot tell apart.
+
+    Off by default: on the generated scenes it also cuts a few multi-coloured boxes along a
+    printed border, which a single view cannot tell from a seam between two boxes
+    (docs/experiments/2026-11-26-colour-seams.md). Turn it on for packed boxes (bin picking).
+
+    Attributes:
+        enabled: cut segments along seams (False: labels as the graph gives them).
+        edge_factor: an edge pixel's colour gradient exceeds this many times the median
+            gradient of the frame's segment pixels (a noise scale of the camera and lighting).
+        coverage: share of a seam's pixels that lie on (within a pixel of) an edge pixel.
+        min_length_m: shortest seam (m, between its ends in 3D).
+        min_width_m: narrowest piece a cut may leave (m, twice the largest inscribed radius).
+        min_area_m2: smallest piece a cut may leave (m^2, its pixels' footprints at their
+            depth facing the camera).
+        max_normal_deg: the surfaces on both sides of a seam differ by at most this (deg):
+            a colour edge along a crease is an object's own edge, not a seam.
+        max_step_m: and they are offset along their normal by at most this (m).
+        max_cuts: most cuts per segment (bounds the time on a textured segment).
+    """
+
+    CHECKS: ClassVar[Checks] = {
+        "edge_factor": _POSITIVE,
+        "coverage": _SHARE,
+        "min_length_m": _NON_NEGATIVE,
+        "min_width_m": _NON_NEGATIVE,
+        "min_area_m2": _NON_NEGATIVE,
+        "max_normal_deg": _ANGLE,
+        "max_step_m": _NON_NEGATIVE,
+        "max_cuts": _COUNT,
+    }
+
+    enabled: bool = False
+    edge_factor: float = 4.0
+    coverage: float = 0.75
+    min_length_m: float = 0.04
+    min_width_m: float = 0.02
+    min_area_m2: float = 0.016**2
+    max_normal_deg: float = 15.0
+    max_step_m: float = 0.005
+    max_cuts: int = 32
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+@dataclass(frozen=True)
+class TemporalConfig:
+    """Segmenting frames after the first with the previous frame's help
+    (``ipr_shapes.perception.temporal``): objects that did not move keep their grouping.
+
+    Attributes:
+        anchoring: supervoxels on surfaces that did not move keep the previous grouping.
+        depth_tolerance_m, depth_tolerance_quadratic: a pixel is unchanged when its depth seen
+            from the previous camera differs from the previous reading by at most
+            ``depth_tolerance_m + depth_tolerance_quadratic * depth^2`` (m; the quadratic term
+            in 1/m, as sensor noise grows with depth squared).
+        static_fraction: a previous segment stayed when at least this share of its
+            unchanged-or-revealed pixels are unchanged (one that moved away reveals what was
+            behind it).
+        anchor_fraction: a supervoxel is anchored to a segment that stayed when at least this
+            share of its pixels are that segment's unchanged pixels.
+        near_m: pixels of a segment that stayed which came nearer by at most this (m) are its
+            own small shift (a nudged object), not something that arrived in front.
+        walls: frames after the first keep the previous frame's walls, and a wall found for
+            the first time is rejected when most of its pixels arrived since the previous
+            frame (a pushed or toppled box's face; ``temporal.consistent_walls``).
+        wall_angle_deg, wall_offset_m: two walls within this angle (deg) and offset (m) are
+            the same wall (walls do not move).
+        wall_max_arrived: largest share of arrived pixels a new wall may have.
+    """
+
+    CHECKS: ClassVar[Checks] = {
+        "depth_tolerance_m": _NON_NEGATIVE,
+        "depth_tolerance_quadratic": _NON_NEGATIVE,
+        "static_fraction": _SHARE,
+        "anchor_fraction": _SHARE,
+        "near_m": _NON_NEGATIVE,
+        "wall_angle_deg": _ANGLE,
+        "wall_offset_m": _NON_NEGATIVE,
+        "wall_max_arrived": _SHARE,
+    }
+
+    anchoring: bool = True
+    depth_tolerance_m: float = 0.005
+    depth_tolerance_quadratic: float = 0.004
+    static_fraction: float = 0.8
+    anchor_fraction: float = 0.5
+    near_m: float = 0.02
+    walls: bool = True
+    wall_angle_deg: float = 10.0
+    wall_offset_m: float = 0.02
+    wall_max_arrived: float = 0.1
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+@dataclass(frozen=True)
+class TrackingConfig:
+    """Matching of segments across frames (``ipr_shapes.perception.tracking``): weights and gates of
+    the matching cost (dimensionless unless stated) and the split-piece corrections.
+
+    Attributes:
+        overlap_weight, colour_weight, distance_weight, size_weight, height_weight: weights of
+            the cues (mask overlap, colour histogram, centroid distance, visible-area ratio, top
+            height); colour is the most telling cue across a push, the top height adds nothing
+            next to the size cue (weight 0).
+        max_motion_m: centroid displacement (m) mapped to the full distance cost (a push moves
+            objects up to about this far).
+        size_ratio_scale: ratio of visible areas (larger / smaller) mapped to the full size
+            cost, so that a large piece does not take the id of a sliver of its object.
+        height_scale_m: change of top height (m) mapped to the full height cost.
+        max_match_cost: first assignment stage: above this a segment is rather a new object.
+        elimination_cost: second stage, between the objects and segments the first left
+            unmatched: pairs up to this cost are matched (objects that moved far or toppled).
+        max_sightings: each object is compared through its last this many sightings (>= 1), so
+            that a face turned away by a push can still be recognised.
+        larger_piece_takes_id: when an object's id went to a small piece and a segment at
+            least ``piece_area_ratio`` times larger nearby that resembles the object (cost <=
+            ``piece_max_cost``) was left to start a new object, the larger piece takes the id
+            (``tracking.prefer_larger_pieces``).
+        larger_object_takes_segment: when a segment took the id of a small earlier piece and
+            an object left unmatched, at least ``piece_area_ratio`` times larger at its latest
+            sighting and nearby, costs at most ``piece_cost_margin`` more, that object takes
+            the segment (``tracking.prefer_larger_objects``).
+        piece_max_cost: the larger piece's or object's cost is at most this.
+        piece_max_gap_m: the two pieces' centroids are at most this far apart (m).
+        piece_area_ratio: visible-area ratio a piece or object needs to count as larger.
+        piece_cost_margin: see ``larger_object_takes_segment``.
+        merge_split_pieces: two touching segments of similar colour, each unmatched, matched
+            to the same known object or to one it resembles less, whose union resembles that
+            object better than either alone become one segment with its id (an object split in
+            this frame; ``tracking.merge_split_pieces``).
+        merge_max_colour: the two pieces' colour histograms are at most this Bhattacharyya
+            distance apart (in [0, 1]).
+        merge_margin: the union's cost is below both pieces' by more than this (negative: it
+            may be slightly dearer than the cheaper piece, since colour weighs most in the cost
+            and the union mixes two faces' colours).
+        merge_candidates: each object's this many cheapest segments are candidate pieces, and
+            joins repeat with the union as a piece (the thin marker cut in three or four needs
+            4).
+        merge_min_contact_px: the pieces share at least this many 4-neighbour pixel pairs with
+            depth ...
+        merge_contact_gap_m: ... whose world points are at most this far apart (m).
+        merge_split_objects: two known objects that touched in an earlier frame, one matched
+            in this frame and the other not, whose union in that frame resembles the matched
+            segment better than the matched object alone (by more than
+            ``object_merge_margin``) become one object in every frame (an object split in an
+            earlier frame and seen whole now; ``tracking.merge_split_objects``).
+        object_merge_margin: see ``merge_split_objects``.
+        split_merged_objects: an object first seen in frame t that explains part of an earlier
+            object's frame t-1 pixels (seen there as it, or seen empty since) takes that part
+            in frame t-1 and, carried back, in frame 0 (two touching objects one segment until
+            a push separates them; ``tracking.split_merged_objects``).
+        split_min_share, split_min_px: each part holds at least this share of the object's
+            frame t-1 pixels with depth, and this many pixels (the new object too).
+        split_margin: the split's cost is below the unsplit one's by more than this.
+        split_merged_segments: a segment matched to one object that also holds a known object
+            left unmatched in this frame (two objects pushed into contact and segmented as
+            one) gives that object the pixels its colour singles out, when each part then
+            resembles its object better (``tracking.split_merged_segments``).
+        segment_split_ratio: a pixel votes for the unmatched object when its colour bin is
+            this many times likelier under that object's histogram than under the segment's
+            object's.
+        segment_split_min_px: the largest 8-connected region of votes, the candidate part,
+            has at least this many pixels.
+        segment_split_margin: the rest of the segment costs less as its object than the whole
+            segment did by more than this.
+    """
+
+    CHECKS: ClassVar[Checks] = {
+        "overlap_weight": _NON_NEGATIVE,
+        "colour_weight": _NON_NEGATIVE,
+        "distance_weight": _NON_NEGATIVE,
+        "size_weight": _NON_NEGATIVE,
+        "height_weight": _NON_NEGATIVE,
+        "max_motion_m": _POSITIVE,
+        "size_ratio_scale": Interval(1, None, closed="neither"),
+        "height_scale_m": _POSITIVE,
+        "max_match_cost": _NON_NEGATIVE,
+        "elimination_cost": _NON_NEGATIVE,
+        "max_sightings": _AT_LEAST_ONE,
+        "piece_max_cost": _NON_NEGATIVE,
+        "piece_max_gap_m": _NON_NEGATIVE,
+        "piece_area_ratio": Interval(1, None),
+        "piece_cost_margin": _ANY,
+        "merge_max_colour": _SHARE,
+        "merge_margin": _ANY,
+        "merge_candidates": _COUNT,
+        "merge_min_contact_px": _COUNT,
+        "merge_contact_gap_m": _NON_NEGATIVE,
+        "object_merge_margin": _ANY,
+        "split_min_share": _SHARE,
+        "split_min_px": _COUNT,
+        "split_margin": _ANY,
+        "segment_split_ratio": _POSITIVE,
+        "segment_split_min_px": _COUNT,
+        "segment_split_margin": _ANY,
+    }
+
+    overlap_weight: float = 1.0
+    colour_weight: float = 2.0
+    distance_weight: float = 0.5
+    size_weight: float = 0.4
+    height_weight: float = 0.0
+    max_motion_m: float = 0.3
+    size_ratio_scale: float = 8.0
+    height_scale_m: float = 0.05
+    max_match_cost: float = 1.5
+    elimination_cost: float = 3.0
+    max_sightings: int = 3
+    larger_piece_takes_id: bool = True
+    piece_max_cost: float = 2.5
+    piece_max_gap_m: float = 0.1
+    piece_area_ratio: float = 2.0
+    larger_object_takes_segment: bool = True
+    piece_cost_margin: float = 0.6
+    merge_split_pieces: bool = True
+    merge_max_colour: float = 0.6
+    merge_margin: float = -0.2
+    merge_candidates: int = 4
+    merge_min_contact_px: int = 3
+    merge_contact_gap_m: float = 0.01
+    merge_split_objects: bool = True
+    object_merge_margin: float = 0.0
+    split_merged_objects: bool = True
+    split_min_share: float = 0.2
+    split_min_px: int = 200
+    split_margin: float = 0.0
+    split_merged_segments: bool = True
+    segment_split_ratio: float = 2.0
+    segment_split_min_px: int = 100
+    segment_split_margin: float = 0.0
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+def _window(value: object) -> bool:
+    """An odd integer, or any integer below 3 (raw depth)."""
+    integer = isinstance(value, numbers.Integral) and not isinstance(value, bool)
+    return integer and (value < 3 or value % 2 == 1)
+
+
+@dataclass(frozen=True)
+class DenoiseConfig:
+    """Partial objects' points from depth replaced by a local plane fit
+    (``ipr_shapes.perception.denoise``), so that hulls of the points no longer bulge out by the noise.
+
+    Attributes:
+        window_px: the fit runs over this many pixels square of the same object (px; odd, a
+            window centred on its pixel; < 3: raw readings).
+    """
+
+    CHECKS: ClassVar[Checks] = {
+        "window_px": Predicate(
+            _window, "odd (a window centred on its pixel) or below 3 to use raw depth"
+        ),
+    }
+
+    window_px: int = 5
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+@dataclass(frozen=True)
+class FacetsConfig:
+    """Facets of the partial objects (``ipr_shapes.perception.facets``).
+
+    Attributes:
+        bandwidth: mean-shift bandwidth on unit normals (chord length, in (0, 2]): normals
+            closer than about this form one facet.
+        min_area_m2: facets smaller than this (m^2) are ignored by hypotheses (the paper:
+            (3 cm)^2: smaller ones are noise). Hypotheses read their own copy,
+            ``ipr_shapes.hypotheses.HypothesisConfig.min_facet_area_m2``; perception does not use it.
+    """
+
+    CHECKS: ClassVar[Checks] = {
+        "bandwidth": Interval(0, 2, closed="right"),
+        "min_area_m2": _NON_NEGATIVE,
+    }
+
+    bandwidth: float = 0.35
+    min_area_m2: float = 0.03**2
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+@dataclass(frozen=True)
+class FreeSpaceConfig:
+    """The free / occupied / unknown voxel map of each frame (``ipr_shapes.perception.free_space``).
+
+    Attributes:
+        voxel_m: grid resolution (m; the paper: 5 mm).
+        surface_margin_m: voxels this close (m) to an observed surface are occupied, not free
+            (depth noise must not carve the objects' own surfaces).
+        workspace_margin_m: the grid extends this far (m) around the objects (room for the
+            hypotheses' hidden parts).
+    """
+
+    CHECKS: ClassVar[Checks] = {
+        "voxel_m": _POSITIVE,
+        "surface_margin_m": _NON_NEGATIVE,
+        "workspace_margin_m": _NON_NEGATIVE,
+    }
+
+    voxel_m: float = 0.005
+    surface_margin_m: float = 0.01
+    workspace_margin_m: float = 0.15
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+@dataclass(frozen=True)
+class OccludedPiecesConfig:
+    """Joining frame 0's pieces of one object cut apart by an occluder
+    (``ipr_shapes.perception.occlusion.join_occluded_pieces``; used by ``ipr-shapes infer``, not by the label
+    images).
+
+    Attributes:
+        enabled: join pieces at all.
+        max_colour: largest Bhattacharyya distance between the pieces' colour histograms (in
+            [0, 1]; pieces of one object look alike).
+        max_gap_m: largest distance (m) between the pieces' nearest observed points (an
+            occluder hides a few centimetres).
+        max_inside_points: other objects' observed points allowed inside the joined hull (a
+            hull through another object is two objects).
+        inside_margin_m: points count as inside only this far (m) within the hull's faces.
+        free_space_tolerance, free_space_tolerance_voxels: the joined hull may have this
+            share, or this count, whichever is larger, of extra voxels in seen-free space or
+            walls (the hypotheses' unary tolerances, ``ipr_shapes.hypotheses.UnaryTolerances``).
+        wall_min_thickness_m: walls without a measured thickness are slabs this thick (m).
+        point_stride: every this-many-th point is used for the gap between pieces (the gap
+            needs no more).
+    """
+
+    CHECKS: ClassVar[Checks] = {
+        "max_colour": _SHARE,
+        "max_gap_m": _NON_NEGATIVE,
+        "max_inside_points": _COUNT,
+        "inside_margin_m": _NON_NEGATIVE,
+        "free_space_tolerance": _SHARE,
+        "free_space_tolerance_voxels": _COUNT,
+        "wall_min_thickness_m": _NON_NEGATIVE,
+        "point_stride": _AT_LEAST_ONE,
+    }
+
+    enabled: bool = True
+    max_colour: float = 0.6
+    max_gap_m: float = 0.10
+    max_inside_points: int = 5
+    inside_margin_m: float = 0.005
+    free_space_tolerance: float = 0.02
+    free_space_tolerance_voxels: int = 20
+    wall_min_thickness_m: float = 0.005
+    point_stride: int = 20
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+@dataclass(frozen=True)
+class PerceptionConfig:
+    """Perception parameters, one group per step (lengths in metres, angles in degrees).
+
+    Attributes:
+        seed: seed of every random choice (RANSAC, k-means), for reproducible runs.
+        planes: RANSAC settings shared by the support and the walls.
+        support: the support (table) plane.
+        walls: walls of containers and drawers.
+        robot: removal of the robot's and the pusher's pixels.
+        supervoxels: pixel normals and supervoxels.
+        segmentation: the supervoxel graph, its clustering and the segments kept.
+        containers: joining an open container's inside to the container.
+        seams: cutting segments along straight colour seams (packed boxes; off by default).
+        temporal: segmenting later frames with the previous frame's help.
+        tracking: matching of segments across frames.
+        denoise: the plane-fitted depth of partial objects' points.
+        facets: facets of the partial objects.
+        free_space: the free / occupied / unknown voxel map of each frame.
+        occluded_pieces: joining frame 0's pieces of one object cut apart by an occluder
+            (used by ``ipr-shapes infer``, not by the label images).
+    """
+
+    CHECKS: ClassVar[Checks] = {"seed": _COUNT}
+
+    seed: int = 0
+    planes: PlanesConfig = field(default_factory=PlanesConfig)
+    support: SupportConfig = field(default_factory=SupportConfig)
+    walls: WallsConfig = field(default_factory=WallsConfig)
+    robot: RobotConfig = field(default_factory=RobotConfig)
+    supervoxels: SupervoxelsConfig = field(default_factory=SupervoxelsConfig)
+    segmentation: SegmentationConfig = field(default_factory=SegmentationConfig)
+    containers: ContainersConfig = field(default_factory=ContainersConfig)
+    seams: SeamsConfig = field(default_factory=SeamsConfig)
+    temporal: TemporalConfig = field(default_factory=TemporalConfig)
+    tracking: TrackingConfig = field(default_factory=TrackingConfig)
+    denoise: DenoiseConfig = field(default_factory=DenoiseConfig)
+    facets: FacetsConfig = field(default_factory=FacetsConfig)
+    free_space: FreeSpaceConfig = field(default_factory=FreeSpaceConfig)
+    occluded_pieces: OccludedPiecesConfig = field(default_factory=OccludedPiecesConfig)
+
+    def __post_init__(self) -> None:
+        check_fields(self)

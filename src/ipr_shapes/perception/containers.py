@@ -1,0 +1,316 @@
+"""Open containers: join the pieces of a mug's, cup's or bowl's inside to the container.
+
+The convexity graph (``segmentation.edge_weights``) cuts at concave edges, and the inside of an
+open container is concave everywhere: a mug seen from above comes out as its outer wall plus
+the inside in several pieces, none of them a well-segmented object alone. A piece P is the
+inside of a larger segment C when, measured on the support plane:
+
+- P meets C: their surfaces touch (4-neighbour pixels whose points are closer than
+  ``containers.contact_gap_m``) or C's near wall hides P's lower part (C nearer by a depth step
+  within ``containers.front_step_m``), along at least ``containers.min_contact_px``
+  pixel pairs in all (a real sensor often loses the thin rim, so the inside only meets the
+  outer wall by occlusion);
+- P does not rise above C (its top at most ``containers.top_tolerance_m`` above C's): an inside is
+  below the rim;
+- P does not reach lower than C (its bottom at most ``containers.bottom_tolerance_m`` below C's):
+  an inside sits on the container's floor, whereas a piece of another object seen under C's
+  overhang stands on the support below C's lowest visible point;
+- P does not stand in front of C: the pixel pairs at which P is nearer than C by such a step are at
+  most ``containers.max_front_ratio`` of those along which they meet (an object resting on a box
+  stands in front of it; an inside meets its container at the rim or behind its wall);
+- P has C's colour: mean chromaticities (r, g, b) / (r + g + b), which shading does not change
+  (an inside is darker than the outside), at most ``containers.max_chroma`` apart (L1);
+- P lies within C's footprint on the support: at least ``containers.footprint_fraction`` of P's
+  points project, with a margin of ``containers.margin_m``, either into the circle fitted to C's
+  footprint, when one fits (RMS at most ``containers.circle_rms_m``, radius at most
+  ``containers.max_radius_m``: a round wall, which surrounds its inside at its full height), or
+  into the convex hull of C's footprint. A camera sees only the front half of a mug's outer
+  wall, whose hull is a crescent that misses the inside; the circle does not. In the hull case
+  C's points within ``containers.rim_radius_m`` of P's on the support must also reach P's top (98th
+  percentile at most ``containers.top_tolerance_m`` below it): a rim surrounds an inside, whereas
+  an object resting on a box rises above the box's face.
+
+Pieces are joined one at a time, the pair that meets along the most pixel pairs first, and the
+container's figures are recomputed after each join, so the inside's pieces that touch only
+each other join in turn. The rules are strict because a looser footprint-only join also
+merged different objects on ordinary scenes (``docs/DESIGN_NOTES.md``, "Open-container insides
+are joined to the container"; measured with ``benchmarks.dev_perception --containers``).
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import ConvexHull, QhullError, cKDTree
+
+from ipr_shapes.perception import kernels
+from ipr_shapes.perception.config import PerceptionConfig
+from ipr_shapes.perception.types import KnownPlane
+
+#: Points of a segment used for its footprint figures (an even subset).
+_MAX_POINTS = 500
+
+
+@dataclass(frozen=True, eq=False)
+class _Segment:
+    """What the rules need of one segment (heights and footprint on the support, metres).
+
+    ``footprint`` (N, 2) and ``heights`` (N,) are an even subset of at most ``_MAX_POINTS`` of
+    its points with depth. ``circle_rms_m`` and ``max_radius_m`` are the config's bounds on
+    the fitted circle.
+    """
+
+    top: float
+    bottom: float
+    footprint: np.ndarray
+    heights: np.ndarray
+    chroma: np.ndarray
+    circle_rms_m: float
+    max_radius_m: float
+
+    @functools.cached_property
+    def hull(self) -> np.ndarray | None:
+        """(F, 3) edge equations (unit normals) of the footprint's convex hull; None when the
+        segment is seen as a line."""
+        try:
+            return ConvexHull(self.footprint).equations
+        except QhullError:
+            return None
+
+    @functools.cached_property
+    def circle(self) -> tuple[np.ndarray, float] | None:
+        """(centre (2,), radius) of the least-squares (Kasa) circle through the footprint, or
+        None when it does not fit (RMS distance above ``circle_rms_m``) or is larger than
+        ``max_radius_m``."""
+        if len(self.footprint) < 10:
+            return None
+        origin = self.footprint.mean(axis=0)
+        local = self.footprint - origin
+        design = np.column_stack([local, np.ones(len(local))])
+        solution, *_ = np.linalg.lstsq(design, (local**2).sum(axis=1), rcond=None)
+        centre = solution[:2] / 2.0
+        squared = solution[2] + centre @ centre
+        if squared <= 0:
+            return None
+        radius = float(np.sqrt(squared))
+        residual = np.linalg.norm(local - centre, axis=1) - radius
+        if radius > self.max_radius_m or np.sqrt(np.mean(residual**2)) > self.circle_rms_m:
+            return None
+        return centre + origin, radius
+
+
+def join_container_insides(
+    labels: np.ndarray,
+    segment_of_supervoxel: np.ndarray,
+    points: np.ndarray,
+    valid: np.ndarray,
+    depth_m: np.ndarray,
+    rgb: np.ndarray,
+    support: KnownPlane,
+    config: PerceptionConfig,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Relabel the pieces of open containers' insides with their container's label.
+
+    Args:
+        labels: (H, W) int segment labels, 0 = none.
+        segment_of_supervoxel: (M,) segment of each supervoxel (relabelled the same way).
+        points: (H*W, 3) world points, metres; valid: (H*W,) pixels with a depth reading.
+        depth_m: (H, W) depth, metres; rgb: (H, W, 3) uint8 colours.
+        support: the support plane (heights and footprints are measured on it).
+
+    Returns:
+        The relabelled (labels, segment_of_supervoxel); the inputs when nothing is joined.
+    """
+    if not config.containers.join_insides or labels.max() < 2:
+        return labels, segment_of_supervoxel
+    height, width = labels.shape
+    contacts, fronts = _borders(
+        labels, points.reshape(height, width, 3), depth_m, valid.reshape(height, width), config
+    )
+    meets = _meetings(contacts, fronts)
+    if not any(count >= config.containers.min_contact_px for count in meets.values()):
+        return labels, segment_of_supervoxel
+    normal = support.normal / np.linalg.norm(support.normal)
+    axis_u = np.cross(normal, [1.0, 0.0, 0.0])
+    if np.linalg.norm(axis_u) < 0.1:
+        axis_u = np.cross(normal, [0.0, 1.0, 0.0])
+    axis_u /= np.linalg.norm(axis_u)
+    axis_v = np.cross(normal, axis_u)
+    frame = (support, axis_u, axis_v)
+
+    # Pixels with depth of every segment, from one sort.
+    flat = labels.reshape(-1)
+    labelled = np.flatnonzero((flat > 0) & valid)
+    order = labelled[np.argsort(flat[labelled], kind="stable")]
+    ids, starts = np.unique(flat[order], return_index=True)
+    members = dict(zip(ids.tolist(), np.split(order, starts[1:]), strict=True))
+    summaries: dict[int, _Segment] = {}
+
+    def summary(segment: int) -> _Segment:
+        if segment not in summaries:
+            summaries[segment] = _summary(members[segment], points, rgb, frame, config)
+        return summaries[segment]
+
+    owner = {segment: segment for segment in members}
+    verdicts: dict[tuple[int, int], bool] = {}
+    joined = False
+    while True:
+        best = None
+        for (a, b), count in meets.items():
+            if count < config.containers.min_contact_px or (best is not None and count <= best[0]):
+                continue
+            piece, container = (a, b) if len(members[a]) < len(members[b]) else (b, a)
+            if len(members[piece]) < 3:
+                continue
+            if fronts.get((piece, container), 0) > config.containers.max_front_ratio * count:
+                continue
+            if (piece, container) not in verdicts:
+                verdicts[piece, container] = _is_inside(summary(piece), summary(container), config)
+            if verdicts[piece, container]:
+                best = (count, piece, container)
+        if best is None:
+            break
+        _, piece, container = best
+        joined = True
+        for segment, target in owner.items():
+            if target == piece:
+                owner[segment] = container
+        members[container] = np.concatenate([members[container], members.pop(piece)])
+        summaries.pop(piece, None)
+        summaries.pop(container, None)
+        verdicts = {pair: v for pair, v in verdicts.items() if container not in pair}
+        contacts = _relabelled(contacts, piece, container, ordered=False)
+        fronts = _relabelled(fronts, piece, container, ordered=True)
+        meets = _meetings(contacts, fronts)
+    if not joined:
+        return labels, segment_of_supervoxel
+    largest = max(int(flat.max()), int(segment_of_supervoxel.max(initial=0)))
+    lookup = np.arange(largest + 1, dtype=labels.dtype)
+    for segment, target in owner.items():
+        lookup[segment] = target
+    return lookup[labels], lookup[segment_of_supervoxel].astype(segment_of_supervoxel.dtype)
+
+
+def _meetings(contacts: dict, fronts: dict) -> dict:
+    """{(a, b): pixel pairs, a < b} along which two segments' surfaces touch or one hides the
+    other."""
+    meets = dict(contacts)
+    for (a, b), count in fronts.items():
+        key = (min(a, b), max(a, b))
+        meets[key] = meets.get(key, 0) + count
+    return meets
+
+
+def _borders(
+    labels: np.ndarray,
+    points: np.ndarray,
+    depth_m: np.ndarray,
+    valid: np.ndarray,
+    config: PerceptionConfig,
+) -> tuple[dict, dict]:
+    """Where segments meet, from the 4-neighbour pixel pairs of two labels, both with depth.
+
+    All pairs of segments at once (``tracking.contact_pixels`` counts one pair's contacts).
+    Returns ``contacts`` {(a, b): count, a < b} of pairs whose world points are less than
+    ``containers.contact_gap_m`` apart (the two surfaces meet there) and ``fronts`` {(nearer,
+    farther): count} of pairs whose depths differ within ``containers.front_step_m`` (one segment
+    stands in front of the other there).
+    """
+    low, high = config.containers.front_step_m
+    # Only the labelled pixels' bounding box can hold borders.
+    rows, cols = np.nonzero(labels > 0)
+    box = (slice(rows.min(), rows.max() + 1), slice(cols.min(), cols.max() + 1))
+    # Compiled (``kernels``): both passes over the pixel pairs without temporaries.
+    contact_counts, front_counts = kernels.border_pair_counts(
+        np.ascontiguousarray(labels[box]),
+        points[box],
+        depth_m[box],
+        valid[box],
+        float(config.containers.contact_gap_m),
+        # The depth step is compared in the depth's own precision, as numpy compared it.
+        depth_m.dtype.type(low),
+        depth_m.dtype.type(high),
+        int(labels.max()) + 1,
+    )
+    # The pairs in the order the dictionaries were built before (each pass's pairs sorted,
+    # horizontal pass first): the joins take the first of equally strong pairs.
+    contacts: dict[tuple[int, int], int] = {}
+    fronts: dict[tuple[int, int], int] = {}
+    for counts, found in ((contact_counts, contacts), (front_counts, fronts)):
+        for direction in range(2):
+            for a, b in zip(*np.nonzero(counts[direction]), strict=True):
+                pair = (int(a), int(b))
+                found[pair] = found.get(pair, 0) + int(counts[direction, a, b])
+    return contacts, fronts
+
+
+def _relabelled(counts: dict, piece: int, container: int, ordered: bool) -> dict:
+    """``counts`` with ``piece`` renamed ``container`` (pairs within one segment dropped)."""
+    merged: dict[tuple[int, int], int] = {}
+    for (a, b), count in counts.items():
+        a, b = (container if a == piece else a), (container if b == piece else b)
+        if a != b:
+            key = (a, b) if ordered else (min(a, b), max(a, b))
+            merged[key] = merged.get(key, 0) + count
+    return merged
+
+
+def _summary(
+    pixels: np.ndarray,
+    points: np.ndarray,
+    rgb: np.ndarray,
+    frame: tuple[KnownPlane, np.ndarray, np.ndarray],
+    config: PerceptionConfig,
+) -> _Segment:
+    """The rules' figures of a segment from its (N,) flat pixel indices with depth (N >= 1)."""
+    support, axis_u, axis_v = frame
+    pixels = pixels[:: -(-pixels.size // _MAX_POINTS)]
+    world = points[pixels]
+    heights = support.signed_distance(world)
+    footprint = np.stack([world @ axis_u, world @ axis_v], axis=1)
+    colour = rgb.reshape(-1, 3)[pixels].astype(np.float64) + 1.0
+    bottom, top = np.percentile(heights, [2, 98])  # one sort for both
+    return _Segment(
+        top=float(top),
+        bottom=float(bottom),
+        footprint=footprint,
+        heights=heights,
+        chroma=(colour / colour.sum(axis=1, keepdims=True)).mean(axis=0),
+        circle_rms_m=config.containers.circle_rms_m,
+        max_radius_m=config.containers.max_radius_m,
+    )
+
+
+def _is_inside(piece: _Segment, container: _Segment, config: PerceptionConfig) -> bool:
+    """Whether ``piece`` is (part of) the inside of ``container`` (module doc)."""
+    if piece.top > container.top + config.containers.top_tolerance_m:
+        return False
+    if piece.bottom < container.bottom - config.containers.bottom_tolerance_m:
+        return False
+    if np.abs(piece.chroma - container.chroma).sum() > config.containers.max_chroma:
+        return False
+    fraction = config.containers.footprint_fraction
+    if container.circle is not None:
+        # A round wall (mug, cup, bowl) surrounds its inside at its full height, which the top
+        # rule has checked.
+        centre, radius = container.circle
+        distance = np.linalg.norm(piece.footprint - centre, axis=1)
+        if np.mean(distance <= radius + config.containers.margin_m) >= fraction:
+            return True
+    if container.hull is None:
+        return False
+    # Distance outside the hull: the largest signed distance to its edge lines.
+    outside = piece.footprint @ container.hull[:, :2].T + container.hull[:, 2]
+    if np.mean(outside.max(axis=1) <= config.containers.margin_m) < fraction:
+        return False
+    # Any other shape: its surface around the piece (a rim) must reach up to the piece's top.
+    distance, _ = cKDTree(piece.footprint).query(
+        container.footprint, distance_upper_bound=config.containers.rim_radius_m
+    )
+    around = container.heights[np.isfinite(distance)]
+    return bool(
+        around.size > 0
+        and np.percentile(around, 98) >= piece.top - config.containers.top_tolerance_m
+    )

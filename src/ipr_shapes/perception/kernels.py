@@ -1,0 +1,1073 @@
+"""Compiled inner loops (numba) for the per-pixel passes of perception.
+
+On the 2-core cloud machines ipr is measured on, numpy's per-pixel arithmetic is bound by memory
+traffic: each operator of an expression makes a full-size temporary, and a 640x480 frame's
+(H, W, 3) float64 points are 7 MB. A loop compiled by numba does the same arithmetic in one pass
+with no temporaries (docs/DESIGN_NOTES.md, "Compiled kernels"). Each kernel here states the
+numpy expression it replaces; ``tests/test_kernels.py`` and ``tests/test_perception_speedups.py``
+pin every one against that expression. The world points and the plane fit's kernels, which the
+scene loader needs too, are in ``ipr_shapes.geometry.kernels``; the kernels here share its helpers
+``_rotated`` (world points in numpy's FMA order), ``_dot`` and ``_columns``.
+
+Kernels are compiled on first use and cached on disk (``cache=True``: a new process loads them
+instead of compiling them again). numba checks a cached kernel against this file only, not
+against the helpers it calls from ``ipr_shapes.geometry.kernels``: after editing those, clear this
+module's cache (``__pycache__/kernels.*.nbi`` and ``.nbc`` here, or the
+``NUMBA_CACHE_DIR``). ``NUMBA_DISABLE_JIT=1`` runs them as plain Python, for debugging.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from ipr_shapes.geometry.kernels import _columns, _dot, _rotated
+
+# nogil: callers may run perception in threads; no fastmath: the same IEEE arithmetic as numpy.
+_jit = numba.njit(cache=True, nogil=True)
+
+
+@_jit
+def organised_normals(
+    padded_depth: np.ndarray,
+    padded_width: int,
+    at: np.ndarray,
+    rows: np.ndarray,
+    cols: np.ndarray,
+    K: np.ndarray,
+    radius_px: int,
+    max_jump_m: float,
+    max_jump_per_px: float,
+) -> np.ndarray:
+    """Unit normals (P, 3) float32, camera frame, towards the camera, of P pixels of an
+    organised depth image; rows of 0 where unknown. The loop of
+    ``supervoxels.organised_normals_at``, which documents the method: ``padded_depth`` is the
+    flat float32 depth image (m) with a border of ``radius_px`` zeros, ``padded_width`` its
+    width, ``at`` (P,) the pixels' flat indices in it and ``rows``, ``cols`` (P,) their image
+    coordinates. All arithmetic in float32, operation by operation as the numpy version."""
+    count = at.shape[0]
+    normals = np.zeros((count, 3), dtype=np.float32)
+    fx, fy = np.float32(K[0, 0]), np.float32(K[1, 1])
+    cx, cy = np.float32(K[0, 2]), np.float32(K[1, 2])
+    r = np.float32(radius_px)
+    jump = np.float32(max_jump_m)
+    jump_per_depth = np.float32(max_jump_per_px * radius_px)
+    tiny = np.float32(1e-12)
+    zero = np.float32(0.0)
+    shifts = (radius_px, -radius_px, radius_px * padded_width, -radius_px * padded_width)
+    neighbour = np.empty(4, dtype=np.float32)
+    usable = np.empty(4, dtype=np.bool_)
+    for p in range(count):
+        z = padded_depth[at[p]]
+        row_f, col_f = np.float32(rows[p]), np.float32(cols[p])
+        x_factor = (col_f - cx) / fx
+        y_factor = (row_f - cy) / fy
+        centre_x, centre_y = x_factor * z, y_factor * z
+        limit = jump + jump_per_depth * z
+        for k in range(4):
+            nz = padded_depth[at[p] + shifts[k]]
+            ok = (nz > zero) and (abs(nz - z) <= limit)
+            usable[k] = ok
+            neighbour[k] = nz if ok else z
+        z_right, z_left, z_down, z_up = neighbour[0], neighbour[1], neighbour[2], neighbour[3]
+        x_right = (col_f + r - cx) / fx * z_right if usable[0] else centre_x
+        x_left = (col_f - r - cx) / fx * z_left if usable[1] else centre_x
+        y_down = (row_f + r - cy) / fy * z_down if usable[2] else centre_y
+        y_up = (row_f - r - cy) / fy * z_up if usable[3] else centre_y
+        a0 = x_factor * z_down - x_factor * z_up
+        a1 = y_down - y_up
+        a2 = z_down - z_up
+        b0 = x_right - x_left
+        b1 = y_factor * z_right - y_factor * z_left
+        b2 = z_right - z_left
+        n0, n1, n2 = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+        squared = n0 * n0
+        squared += n1 * n1
+        squared += n2 * n2
+        norm = np.sqrt(squared)
+        good = (z > zero) and (usable[0] or usable[1]) and (usable[2] or usable[3])
+        if not good or not norm > tiny:
+            continue
+        n0, n1, n2 = n0 / norm, n1 / norm, n2 / norm
+        if n0 * centre_x + n1 * centre_y + n2 * z > zero:
+            n0, n1, n2 = -n0, -n1, -n2
+        normals[p, 0], normals[p, 1], normals[p, 2] = n0, n1, n2
+    return normals
+
+
+@_jit
+def supervoxel_rounds(
+    voxel_centre: np.ndarray,
+    voxel_normal: np.ndarray,
+    voxel_colour: np.ndarray,
+    voxel_count: np.ndarray,
+    candidates: np.ndarray,
+    has_candidate: np.ndarray,
+    seed_centre: np.ndarray,
+    seed_normal: np.ndarray,
+    seed_colour: np.ndarray,
+    iterations: int,
+    seed_size_m: float,
+    normal_weight: float,
+    colour_weight: float,
+) -> np.ndarray:
+    """The k-means rounds of ``supervoxels.compute_supervoxels``: (V,) int64 seed of each of V
+    voxels after ``iterations`` rounds (0 rounds: all 0).
+
+    Each round assigns every voxel to the nearest of its (V, 27) ``candidates`` seeds (where
+    ``has_candidate``; the first of equal distances) in VCCS's distance
+    ``normal_weight * (1 - n_voxel . n_seed) + |c_voxel - c_seed|^2 / seed_size_m^2
+    + colour_weight * |rgb_voxel - rgb_seed|^2``, then moves each seed that kept voxels to the
+    mean of their (V, 3) centres, normals (renormalised) and colours weighted by ``voxel_count``
+    (V,). ``seed_centre``, ``seed_normal`` and ``seed_colour`` (S, 3) are updated in place.
+    The arithmetic and summation order are those of the numpy version (same bits).
+    """
+    n_voxels, n_candidates = candidates.shape
+    n_seeds = seed_centre.shape[0]
+    assignment = np.zeros(n_voxels, dtype=np.int64)
+    spatial = 1.0 / seed_size_m**2
+    totals = np.empty(n_seeds)
+    sums = np.empty((3, n_seeds, 3))
+    for _ in range(iterations):
+        for v in range(n_voxels):
+            best, best_distance = 0, np.inf
+            for k in range(n_candidates):
+                if not has_candidate[v, k]:
+                    continue
+                s = candidates[v, k]
+                distance = normal_weight
+                for axis in range(3):
+                    offset = voxel_centre[v, axis] - seed_centre[s, axis]
+                    distance += offset * spatial * offset
+                    distance -= normal_weight * voxel_normal[v, axis] * seed_normal[s, axis]
+                    if colour_weight > 0:
+                        offset = voxel_colour[v, axis] - seed_colour[s, axis]
+                        distance += offset * colour_weight * offset
+                if distance < best_distance:
+                    best, best_distance = k, distance
+            assignment[v] = candidates[v, best] if has_candidate[v, best] else candidates[v, 0]
+        totals[:] = 0.0
+        sums[:] = 0.0
+        for v in range(n_voxels):
+            s = assignment[v]
+            weight = voxel_count[v]
+            totals[s] += weight
+            for axis in range(3):
+                sums[0, s, axis] += voxel_centre[v, axis] * weight
+                sums[1, s, axis] += voxel_normal[v, axis] * weight
+                sums[2, s, axis] += voxel_colour[v, axis] * weight
+        for s in range(n_seeds):
+            if not totals[s] > 0:
+                continue
+            squared = sums[1, s, 0] * sums[1, s, 0]
+            squared += sums[1, s, 1] * sums[1, s, 1]
+            squared += sums[1, s, 2] * sums[1, s, 2]
+            norm = np.sqrt(squared)
+            for axis in range(3):
+                seed_centre[s, axis] = sums[0, s, axis] / totals[s]
+                seed_normal[s, axis] = sums[1, s, axis] / norm if norm > 1e-12 else 0.0
+                seed_colour[s, axis] = sums[2, s, axis] / totals[s]
+    return assignment
+
+
+@_jit
+def mean_shift_directions(
+    normals: np.ndarray, weights: np.ndarray, bandwidth: float, iterations: int
+) -> np.ndarray:
+    """Mode index (N,) int64 of each unit normal (N, 3) under weighted Gaussian mean shift on
+    the sphere, modes merged heaviest first; ``facets.mean_shift_directions`` documents the
+    method. Equal to numpy's version up to rounding (its matrix products run in BLAS)."""
+    count = normals.shape[0]
+    modes = normals.copy()
+    shifted = np.empty_like(modes)
+    scale = 2 * bandwidth**2
+    for _ in range(iterations):
+        change = 0.0
+        for i in range(count):
+            s0 = s1 = s2 = 0.0
+            for j in range(count):
+                dot = modes[i, 0] * normals[j, 0] + modes[i, 1] * normals[j, 1]
+                dot += modes[i, 2] * normals[j, 2]
+                kernel = np.exp(-max(2.0 - 2.0 * dot, 0.0) / scale) * weights[j]
+                s0 += kernel * normals[j, 0]
+                s1 += kernel * normals[j, 1]
+                s2 += kernel * normals[j, 2]
+            norm = np.sqrt(s0 * s0 + s1 * s1 + s2 * s2) + 1e-12
+            shifted[i, 0], shifted[i, 1], shifted[i, 2] = s0 / norm, s1 / norm, s2 / norm
+            for axis in range(3):
+                change = max(change, abs(shifted[i, axis] - modes[i, axis]))
+        modes[:] = shifted
+        if change < 1e-5:
+            break
+    # Merge modes closer than half a bandwidth, heaviest first (a stable order): each normal
+    # joins the first centre (in creation order) near its mode; a normal near none is a centre.
+    order = np.argsort(-weights, kind="mergesort")
+    label = np.full(count, -1, dtype=np.int64)
+    centres = 0
+    for index in order:
+        if label[index] >= 0:
+            continue
+        for j in range(count):
+            if label[j] >= 0:
+                continue
+            d0 = modes[j, 0] - modes[index, 0]
+            d1 = modes[j, 1] - modes[index, 1]
+            d2 = modes[j, 2] - modes[index, 2]
+            if np.sqrt(d0 * d0 + d1 * d1 + d2 * d2) < bandwidth / 2:
+                label[j] = centres
+        label[index] = centres
+        centres += 1
+    return label
+
+
+@_jit
+def segment_sums(
+    flat_labels: np.ndarray,
+    flat_points: np.ndarray,
+    flat_rgb: np.ndarray,
+    flat_depth: np.ndarray,
+    colour_bins: int,
+):
+    """Per-segment sums of a label image in one pass, for ``tracking.segment_features``.
+
+    ``flat_labels`` (P,) ints (segments k >= 1, 0 = none), ``flat_points`` (P, 3) world points
+    (m), ``flat_rgb`` (P, 3) uint8 and ``flat_depth`` (P,) depth (m, 0 = no reading). Segments
+    are numbered 0..G-1 in increasing label. Returns:
+    ``ids`` (G,) labels; ``order`` (N,) the labelled pixels grouped by segment, in raster order
+    within each (numpy's stable argsort of the labels); ``starts`` (G + 1,) each segment's
+    slice of ``order``; ``with_depth`` (G,) pixels with a reading; ``used`` (G,) pixels whose
+    points are used (those with a reading, or all where none has one); ``point_sums`` (G, 3)
+    sums of the used points in raster order (the order of ``np.bincount`` over ``order``);
+    ``used_z`` (sum of used,) the used points' z grouped by segment; ``histograms`` (G, B^3)
+    int64 counts of colour bins (``B = colour_bins`` per channel, ``(c * B) // 256``);
+    ``footprints`` (G,) sums of depth^2 over the pixels with a reading.
+    """
+    count = flat_labels.shape[0]
+    largest = 0
+    labelled = 0
+    for p in range(count):
+        if flat_labels[p] > 0:
+            labelled += 1
+            if flat_labels[p] > largest:
+                largest = flat_labels[p]
+    size_of_label = np.zeros(largest + 1, dtype=np.int64)
+    for p in range(count):
+        if flat_labels[p] > 0:
+            size_of_label[flat_labels[p]] += 1
+    segment_of_label = np.full(largest + 1, -1, dtype=np.int64)
+    n_segments = 0
+    for label in range(1, largest + 1):
+        if size_of_label[label] > 0:
+            segment_of_label[label] = n_segments
+            n_segments += 1
+    ids = np.empty(n_segments, dtype=np.int64)
+    starts = np.zeros(n_segments + 1, dtype=np.int64)
+    for label in range(1, largest + 1):
+        segment = segment_of_label[label]
+        if segment >= 0:
+            ids[segment] = label
+            starts[segment + 1] = starts[segment] + size_of_label[label]
+    order = np.empty(labelled, dtype=np.int64)
+    fill = starts[:-1].copy()
+    with_depth = np.zeros(n_segments, dtype=np.int64)
+    footprints = np.zeros(n_segments)
+    histograms = np.zeros((n_segments, colour_bins**3), dtype=np.int64)
+    for p in range(count):
+        label = flat_labels[p]
+        if label <= 0:
+            continue
+        segment = segment_of_label[label]
+        order[fill[segment]] = p
+        fill[segment] += 1
+        depth = np.float64(flat_depth[p])
+        if depth > 0:
+            with_depth[segment] += 1
+            footprints[segment] += depth * depth
+        code = 0
+        for channel in range(3):
+            code = code * colour_bins + (np.int64(flat_rgb[p, channel]) * colour_bins) // 256
+        histograms[segment, code] += 1
+    used = np.zeros(n_segments, dtype=np.int64)
+    point_sums = np.zeros((n_segments, 3))
+    used_z = np.empty(labelled)
+    used_at = 0
+    for segment in range(n_segments):
+        everything = with_depth[segment] == 0
+        for k in range(starts[segment], starts[segment + 1]):
+            p = order[k]
+            if everything or flat_depth[p] > 0:
+                used[segment] += 1
+                for axis in range(3):
+                    point_sums[segment, axis] += flat_points[p, axis]
+                used_z[used_at] = flat_points[p, 2]
+                used_at += 1
+    return (
+        ids,
+        order,
+        starts,
+        with_depth,
+        used,
+        point_sums,
+        used_z[:used_at],
+        histograms,
+        footprints,
+    )
+
+
+@_jit
+def facing_plane_inlier_counts(
+    points: np.ndarray,
+    point_normals: np.ndarray,
+    unknown: np.ndarray,
+    normals: np.ndarray,
+    offsets: np.ndarray,
+    threshold_m: float,
+    min_cos: float,
+) -> np.ndarray:
+    """``ipr_shapes.geometry.kernels.plane_inlier_counts`` counting only points whose (N, 3) unit
+    normal is within acos(``min_cos``) of +-the plane's, or ``unknown`` (N,) bool (no normal)."""
+    xs, ys, zs = _columns(points)
+    us, vs, ws = _columns(point_normals)
+    counts = np.zeros(normals.shape[0], dtype=np.int64)
+    for h in range(normals.shape[0]):
+        n0, n1, n2, offset = normals[h, 0], normals[h, 1], normals[h, 2], offsets[h]
+        count = 0
+        for p in range(xs.shape[0]):  # branch-free (& and |): the compiler vectorises it
+            near = abs(xs[p] * n0 + ys[p] * n1 + zs[p] * n2 + offset) < threshold_m
+            facing = abs(us[p] * n0 + vs[p] * n1 + ws[p] * n2) > min_cos
+            count += near & (facing | unknown[p])
+        counts[h] = count
+    return counts
+
+
+@_jit
+def facing_plane_inliers(
+    points: np.ndarray,
+    point_normals: np.ndarray,
+    unknown: np.ndarray,
+    normal: np.ndarray,
+    offset: float,
+    threshold_m: float,
+    min_cos: float,
+) -> np.ndarray:
+    """(K,) int64 ascending indices of the (N, 3) points within ``threshold_m`` of the plane
+    {x : normal . x + offset = 0} whose (N, 3) normal is within acos(``min_cos``) of +-the
+    plane's or ``unknown`` (N,) bool: ``ipr_shapes.geometry.kernels.plane_inliers`` with the facing
+    test of ``facing_plane_inlier_counts``."""
+    found = np.empty(points.shape[0], dtype=np.int64)
+    count = 0
+    for p in range(points.shape[0]):
+        near = abs(_dot(points, p, normal) + offset) < threshold_m
+        if near and (unknown[p] or abs(_dot(point_normals, p, normal)) > min_cos):
+            found[count] = p
+            count += 1
+    return found[:count].copy()
+
+
+@_jit
+def objects_plane_depth(
+    depth_m: np.ndarray, pixels: np.ndarray, starts: np.ndarray, window: int
+) -> np.ndarray:
+    """(N,) float64 depth (m) of objects' flat pixels, each replaced by its object's local
+    plane fit there: ``denoise.object_plane_depth`` (which documents the method) for every
+    object at once. ``pixels`` (N,) holds the objects' pixels (all with a reading) one object
+    after the other, object k at ``pixels[starts[k]:starts[k + 1]]``; ``window`` is odd.
+
+    The window sums are taken directly in float64 (numpy's version used float32 box filters
+    on depths centred at the object's mean): equal to well under a micrometre."""
+    height, width = depth_m.shape
+    result = np.empty(pixels.shape[0])
+    for p in range(pixels.shape[0]):
+        result[p] = depth_m.flat[pixels[p]]
+    margin = window // 2
+    area = window * window
+    for k in range(starts.shape[0] - 1):
+        first, last = starts[k], starts[k + 1]
+        if window < 3 or last - first < 6:
+            continue
+        top, bottom, left, right = height, -1, width, -1
+        reference = 0.0
+        for p in range(first, last):
+            row, col = pixels[p] // width, pixels[p] % width
+            top, bottom = min(top, row), max(bottom, row)
+            left, right = min(left, col), max(right, col)
+            reference += result[p]
+        reference /= last - first
+        # The object's bounding box padded by the margin: every window stays inside.
+        crop_width = right - left + 1 + 2 * margin
+        crop_height = bottom - top + 1 + 2 * margin
+        inside = np.zeros((crop_height, crop_width), dtype=np.bool_)
+        centred = np.zeros((crop_height, crop_width))
+        for p in range(first, last):
+            row = pixels[p] // width - top + margin
+            col = pixels[p] % width - left + margin
+            inside[row, col] = True
+            centred[row, col] = result[p] - reference
+        # Summed-area tables of the mask and of the centred depth (row 0 and column 0 zero):
+        # a window's count and depth sum in four reads; only windows the object does not fill
+        # need the moments of the full fit.
+        filled = np.zeros((crop_height + 1, crop_width + 1))
+        depth_sum = np.zeros((crop_height + 1, crop_width + 1))
+        for row in range(crop_height):
+            for col in range(crop_width):
+                filled[row + 1, col + 1] = (
+                    filled[row, col + 1]
+                    + filled[row + 1, col]
+                    - filled[row, col]
+                    + inside[row, col]
+                )
+                depth_sum[row + 1, col + 1] = (
+                    depth_sum[row, col + 1]
+                    + depth_sum[row + 1, col]
+                    - depth_sum[row, col]
+                    + centred[row, col]
+                )
+        for p in range(first, last):
+            row = pixels[p] // width - top + margin
+            col = pixels[p] % width - left + margin
+            low_row, high_row = row - margin, row + margin + 1
+            low_col, high_col = col - margin, col + margin + 1
+            count = (
+                filled[high_row, high_col]
+                - filled[low_row, high_col]
+                - filled[high_row, low_col]
+                + filled[low_row, low_col]
+            )
+            if count > area - 0.5:
+                # A full window is symmetric about its pixel: the plane's value is the mean.
+                window_sum = (
+                    depth_sum[high_row, high_col]
+                    - depth_sum[low_row, high_col]
+                    - depth_sum[high_row, low_col]
+                    + depth_sum[low_row, low_col]
+                )
+                result[p] = window_sum / area + reference
+                continue
+            if count < 5.5:
+                continue
+            s = cu = cv = cuu = cvv = cuv = sd = cdu = cdv = 0.0
+            for dv in range(-margin, margin + 1):
+                for du in range(-margin, margin + 1):
+                    if inside[row + dv, col + du]:
+                        value = centred[row + dv, col + du]
+                        s += 1.0
+                        cu += du
+                        cv += dv
+                        cuu += du * du
+                        cvv += dv * dv
+                        cuv += du * dv
+                        sd += value
+                        cdu += value * du
+                        cdv += value * dv
+            # Cramer's rule for [[s, cu, cv], [cu, cuu, cuv], [cv, cuv, cvv]] x = [sd, cdu, cdv].
+            minor = cuu * cvv - cuv * cuv
+            det = s * minor - cu * (cu * cvv - cuv * cv) + cv * (cu * cuv - cuu * cv)
+            if abs(det) > 1e-6 * max(s, 1.0) ** 3:  # not all on one line
+                numerator = sd * minor - cu * (cdu * cvv - cuv * cdv) + cv * (cdu * cuv - cuu * cdv)
+                result[p] = numerator / det + reference
+    return result
+
+
+@_jit
+def object_pixel_geometry(
+    pixels: np.ndarray,
+    depth_m: np.ndarray,
+    width: int,
+    K: np.ndarray,
+    world_from_camera: np.ndarray,
+    point_supervoxel: np.ndarray,
+    supervoxel_normals: np.ndarray,
+):
+    """World points (N, 3) (m) and surface areas (N,) (m^2) of N pixels, in one pass.
+
+    ``pixels`` (N,) flat indices in an image ``width`` wide, ``depth_m`` (N,) their depths
+    (m, > 0), ``point_supervoxel`` (N,) their supervoxels (-1 = none: the surface faces the
+    camera) and ``supervoxel_normals`` (M, 3) those's unit normals (world). A pixel at depth z
+    covers z^2 / (fx fy) of the fronto-parallel plane, more by |r_z| / max(|r . n|, 0.25) on a
+    surface tilted away (r the unit ray; ``facets.pixel_areas``); the points are
+    ``backproject_pixels`` moved to the world."""
+    count = pixels.shape[0]
+    world = np.empty((count, 3))
+    areas = np.empty(count)
+    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+    for p in range(count):
+        row, col = pixels[p] // width, pixels[p] % width
+        z = np.float64(depth_m[p])
+        x, y = (col - cx) / fx * z, (row - cy) / fy * z
+        facing = 0.0  # r . n in the camera frame = (R r_camera) . n_world
+        length = np.sqrt(x * x + y * y + z * z)
+        supervoxel = point_supervoxel[p]
+        for axis in range(3):
+            world[p, axis] = _rotated(x, y, z, world_from_camera, axis)
+            if supervoxel >= 0:
+                normal = supervoxel_normals[supervoxel, axis]
+            else:
+                normal = -world_from_camera[axis, 2]
+            facing += (world[p, axis] - world_from_camera[axis, 3]) * normal
+        facing = max(abs(facing / length), 0.25)
+        areas[p] = z * z / (fx * fy) * (abs(z / length) / facing)
+    return world, areas
+
+
+@_jit
+def dominant_face_moments(
+    groups: np.ndarray,
+    points: np.ndarray,
+    pixel_normals: np.ndarray,
+    mean_normals: np.ndarray,
+    min_cos: float,
+):
+    """The dominant face of each of M groups of pixels (``supervoxels._dominant_faces``
+    documents the method): twice, keep each group's pixels whose normal is within
+    acos(``min_cos``) of the group's normal and re-average it; then take the moments of the
+    kept pixels (of all the group's pixels when fewer than 6 were kept).
+
+    ``groups`` (N,) group of each pixel, ``points`` (N, 3) (m), ``pixel_normals`` (N, 3) unit,
+    ``mean_normals`` (M, 3) each group's starting normal. Returns the faces' centres (M, 3),
+    covariances (M, 3, 3) (sums of centred outer products over the pixel count), pixel counts
+    (M,) int64 and re-averaged normals (M, 3). Sums run in pixel order, as numpy's bincounts.
+    """
+    count, n_points = mean_normals.shape[0], groups.shape[0]
+    normal = mean_normals.copy()
+    inlier = np.ones(n_points, dtype=np.bool_)
+    inlier_count = np.zeros(count, dtype=np.int64)
+    summed = np.empty((count, 3))
+    for _ in range(2):
+        summed[:] = 0.0
+        inlier_count[:] = 0
+        for p in range(n_points):
+            g = groups[p]
+            dot = pixel_normals[p, 0] * normal[g, 0] + pixel_normals[p, 1] * normal[g, 1]
+            dot += pixel_normals[p, 2] * normal[g, 2]
+            inlier[p] = dot > min_cos
+            if inlier[p]:
+                inlier_count[g] += 1
+                for axis in range(3):
+                    summed[g, axis] += pixel_normals[p, axis]
+        for g in range(count):
+            squared = summed[g, 0] * summed[g, 0]
+            squared += summed[g, 1] * summed[g, 1]
+            squared += summed[g, 2] * summed[g, 2]
+            norm = np.sqrt(squared)
+            if norm > 1e-12:
+                for axis in range(3):
+                    normal[g, axis] = summed[g, axis] / norm
+    sizes = np.zeros(count, dtype=np.int64)
+    centres = np.zeros((count, 3))
+    for p in range(n_points):
+        g = groups[p]
+        if inlier[p] or inlier_count[g] < 6:  # groups without a clear face use every pixel
+            sizes[g] += 1
+            for axis in range(3):
+                centres[g, axis] += points[p, axis]
+    for g in range(count):
+        for axis in range(3):
+            centres[g, axis] /= max(sizes[g], 1)
+    covariance = np.zeros((count, 3, 3))
+    for p in range(n_points):
+        g = groups[p]
+        if inlier[p] or inlier_count[g] < 6:
+            for i in range(3):
+                local_i = points[p, i] - centres[g, i]
+                for j in range(i, 3):
+                    covariance[g, i, j] += local_i * (points[p, j] - centres[g, j])
+    for g in range(count):
+        for i in range(3):
+            for j in range(i, 3):
+                covariance[g, i, j] /= max(sizes[g], 1)
+                covariance[g, j, i] = covariance[g, i, j]
+    return centres, covariance, sizes, normal
+
+
+@_jit
+def fill_from_nearest(
+    labels: np.ndarray, valid: np.ndarray, offsets: np.ndarray, result: np.ndarray
+) -> None:
+    """Give each pixel of (H, W) ``labels`` that is not ``valid`` the label of the first valid
+    pixel among (P, 2) (row, column) ``offsets`` from it (sorted by length: the nearest), or
+    leave it when none is valid; written into ``result`` (H, W), which starts as a copy of
+    ``labels``. The loop of ``segmentation.fill_label_holes``."""
+    height, width = labels.shape
+    for row in range(height):
+        for col in range(width):
+            if valid[row, col]:
+                continue
+            for k in range(offsets.shape[0]):
+                r, c = row + offsets[k, 0], col + offsets[k, 1]
+                if 0 <= r < height and 0 <= c < width and valid[r, c]:
+                    result[row, col] = labels[r, c]
+                    break
+
+
+@_jit
+def border_pair_counts(
+    labels: np.ndarray,
+    points: np.ndarray,
+    depth_m: np.ndarray,
+    valid: np.ndarray,
+    contact_gap_m: float,
+    front_low_m: float,
+    front_high_m: float,
+    n_labels: int,
+):
+    """Where segments meet, counted over the 4-neighbour pixel pairs of a (H, W) label image
+    (``containers._borders`` documents the rules): a pair counts when both pixels are
+    ``valid`` with labels a != b, both > 0. ``points`` (H, W, 3) world (m), ``depth_m`` (H, W).
+
+    Returns (2, L, L) int64 ``contacts`` [pass, min(a, b), max(a, b)] (world points closer than
+    ``contact_gap_m``) and (2, L, L) ``fronts`` [pass, nearer, farther] (depth step strictly
+    between ``front_low_m`` and ``front_high_m``); pass 0 counts horizontal pairs, pass 1
+    vertical ones, and L = ``n_labels`` exceeds every label."""
+    height, width = labels.shape
+    contacts = np.zeros((2, n_labels, n_labels), dtype=np.int64)
+    fronts = np.zeros((2, n_labels, n_labels), dtype=np.int64)
+    for direction in range(2):
+        d_row, d_col = (0, 1) if direction == 0 else (1, 0)
+        for row in range(height - d_row):
+            for col in range(width - d_col):
+                a = labels[row, col] if valid[row, col] else 0
+                r, c = row + d_row, col + d_col
+                b = labels[r, c] if valid[r, c] else 0
+                if a == b or a <= 0 or b <= 0:
+                    continue
+                dx = points[row, col, 0] - points[r, c, 0]
+                dy = points[row, col, 1] - points[r, c, 1]
+                dz = points[row, col, 2] - points[r, c, 2]
+                if np.sqrt(dx * dx + dy * dy + dz * dz) < contact_gap_m:
+                    contacts[direction, min(a, b), max(a, b)] += 1
+                step = depth_m[r, c] - depth_m[row, col]  # > 0: a is nearer; depth's dtype
+                if front_low_m < abs(step) < front_high_m:
+                    if step > 0:
+                        fronts[direction, a, b] += 1
+                    else:
+                        fronts[direction, b, a] += 1
+    return contacts, fronts
+
+
+@_jit
+def group_sums(groups: np.ndarray, values: np.ndarray, count: int) -> np.ndarray:
+    """(count, C) sums of the rows of (N, C) ``values`` per group id (N,) in [0, count), in row
+    order: ``np.bincount(groups, weights=values[:, c], minlength=count)`` for every column c
+    in one pass (same bits)."""
+    sums = np.zeros((count, values.shape[1]))
+    for p in range(groups.shape[0]):
+        for c in range(values.shape[1]):
+            sums[groups[p], c] += values[p, c]
+    return sums
+
+
+@_jit
+def voxel_keys(points: np.ndarray, pixels: np.ndarray, voxel_m: float):
+    """Voxel keys (N,) int64 of the (P, 3) world points (m) at flat ``pixels`` (N,), and the
+    grid's dims (3,): each point's cell floor(x / ``voxel_m``) shifted so that the smallest is
+    1 on every axis (neighbour offsets never wrap), key (x * dims[1] + y) * dims[2] + z, with
+    dims one more than the largest shifted cell on every axis."""
+    count = pixels.shape[0]
+    cells = np.empty((count, 3), dtype=np.int64)
+    low = np.full(3, np.iinfo(np.int64).max, dtype=np.int64)
+    high = np.full(3, np.iinfo(np.int64).min, dtype=np.int64)
+    for p in range(count):
+        for axis in range(3):
+            cell = np.int64(np.floor(points[pixels[p], axis] / voxel_m))
+            cells[p, axis] = cell
+            low[axis] = min(low[axis], cell)
+            high[axis] = max(high[axis], cell)
+    dims = high - low + 3  # shifted cells run from 1 to high - low + 1
+    keys = np.empty(count, dtype=np.int64)
+    for p in range(count):
+        x = cells[p, 0] - low[0] + 1
+        y = cells[p, 1] - low[1] + 1
+        z = cells[p, 2] - low[2] + 1
+        keys[p] = (x * dims[1] + y) * dims[2] + z
+    return keys, dims
+
+
+@_jit
+def pixel_changes(
+    size: int,
+    valid: np.ndarray,
+    pixel: np.ndarray,
+    z: np.ndarray,
+    inside: np.ndarray,
+    previous_depth: np.ndarray,
+    previous_labels: np.ndarray,
+    tolerance_m,
+    tolerance_quadratic,
+    near_m,
+    states: tuple,
+):
+    """Per-pixel comparison of frame t with frame t-1 (``temporal.compare_frames`` documents
+    it): pixel ``valid[k]`` (flat, of ``size`` pixels) with depth ``z[k]`` lands on flat pixel
+    ``pixel[k]`` of frame t-1 where ``inside[k]``. Returns (size,) int8 states (``states`` =
+    (unchanged, revealed, arrived, not compared); pixels without depth 0), (size,) int32 labels
+    of frame t-1 there (0 where not compared) and (size,) bool "within ``near_m``". The
+    tolerances are scalars of z's dtype, so the arithmetic is numpy's (same bits)."""
+    unchanged, revealed, arrived, not_compared = states
+    state = np.zeros(size, dtype=np.int8)
+    previous_label = np.zeros(size, dtype=np.int32)
+    near = np.zeros(size, dtype=np.bool_)
+    for k in range(valid.shape[0]):
+        before = previous_depth[pixel[k]]
+        depth = z[k]
+        if not (inside[k] and before > 0):
+            state[valid[k]] = not_compared
+            continue
+        tolerance = tolerance_m + tolerance_quadratic * depth**2
+        difference = depth - before
+        if difference < -tolerance:
+            state[valid[k]] = arrived
+        elif difference > tolerance:
+            state[valid[k]] = revealed
+        else:
+            state[valid[k]] = unchanged
+        previous_label[valid[k]] = previous_labels[pixel[k]]
+        near[valid[k]] = abs(difference) <= near_m
+    return state, previous_label, near
+
+
+@_jit
+def grouped_order_statistic(groups: np.ndarray, values: np.ndarray, fraction: float):
+    """The distinct ids (G,) of (N,) ``groups`` (ascending) and, for each, the value at
+    position floor(``fraction`` * (n - 1)) of its n (N,) ``values`` sorted ascending (the
+    lower of numpy's percentile neighbours)."""
+    if groups.shape[0] == 0:
+        return np.zeros(0, dtype=groups.dtype), np.zeros(0)
+    lowest, highest = groups.min(), groups.max()
+    sizes = np.zeros(highest - lowest + 2, dtype=np.int64)
+    for group in groups:
+        sizes[group - lowest + 1] += 1
+    starts = np.cumsum(sizes)
+    fill = starts[:-1].copy()
+    grouped = np.empty(values.shape[0])
+    for p in range(groups.shape[0]):
+        slot = groups[p] - lowest
+        grouped[fill[slot]] = values[p]
+        fill[slot] += 1
+    n_groups = 0
+    for slot in range(highest - lowest + 1):
+        n_groups += starts[slot + 1] > starts[slot]
+    ids = np.empty(n_groups, dtype=groups.dtype)
+    statistic = np.empty(n_groups)
+    found = 0
+    for slot in range(highest - lowest + 1):
+        first, last = starts[slot], starts[slot + 1]
+        if last == first:
+            continue
+        ordered = np.sort(grouped[first:last])
+        ids[found] = slot + lowest
+        statistic[found] = ordered[int(np.floor(fraction * (last - first - 1)))]
+        found += 1
+    return ids, statistic
+
+
+@_jit
+def connected_components(pairs: np.ndarray, count: int) -> np.ndarray:
+    """(count,) int64 connected component of each node of the undirected graph with (E, 2)
+    edges ``pairs``, numbered in the order of each component's smallest node (as scipy's
+    ``connected_components`` numbers them): union-find whose roots are the smallest nodes."""
+    parent = np.arange(count)
+    for e in range(pairs.shape[0]):
+        a, b = pairs[e, 0], pairs[e, 1]
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        while parent[b] != b:
+            parent[b] = parent[parent[b]]
+            b = parent[b]
+        if a < b:
+            parent[b] = a
+        elif b < a:
+            parent[a] = b
+    component = np.empty(count, dtype=np.int64)
+    n_components = 0
+    for node in range(count):  # a root precedes its component's other nodes
+        root = node
+        while parent[root] != root:
+            root = parent[root]
+        if root == node:
+            component[node] = n_components
+            n_components += 1
+        else:
+            component[node] = component[root]
+    return component
+
+
+@_jit
+def region_sums(point_region: np.ndarray, points: np.ndarray, areas: np.ndarray, count: int):
+    """Pixel counts (count,) int64, point sums (count, 3) and area sums (count,) of the (N,)
+    points of each region id in [0, count) (points of region -1 are skipped), in point order."""
+    sizes = np.zeros(count, dtype=np.int64)
+    sums = np.zeros((count, 3))
+    area_sums = np.zeros(count)
+    for p in range(point_region.shape[0]):
+        region = point_region[p]
+        if region < 0:
+            continue
+        sizes[region] += 1
+        area_sums[region] += areas[p]
+        for axis in range(3):
+            sums[region, axis] += points[p, axis]
+    return sizes, sums, area_sums
+
+
+@_jit
+def lloyd_iterations(points: np.ndarray, centres: np.ndarray, max_iterations: int):
+    """Lloyd's k-means from the (k, d) ``centres`` (updated in place) on (m, d) ``points``:
+    assign each point to its nearest centre (the first of equals), move each centre that kept
+    points to their mean, until the assignment stops changing or ``max_iterations``. Returns
+    the (m,) int64 labels and the inertia (sum of squared distances to the assigned centres,
+    as |x|^2 - 2 x.c + |c|^2 clipped at 0, from the last assignment)."""
+    m, d = points.shape
+    k = centres.shape[0]
+    labels = np.full(m, -1, dtype=np.int64)
+    nearest = np.zeros(m)
+    squared = np.zeros(m)
+    for i in range(m):
+        for j in range(d):
+            squared[i] += points[i, j] * points[i, j]
+    centre_squared = np.zeros(k)
+    sums = np.zeros((k, d))
+    counts = np.zeros(k)
+    for _ in range(max_iterations):
+        for c in range(k):
+            centre_squared[c] = 0.0
+            for j in range(d):
+                centre_squared[c] += centres[c, j] * centres[c, j]
+        changed = False
+        for i in range(m):
+            best, best_distance = 0, np.inf
+            for c in range(k):
+                dot = 0.0
+                for j in range(d):
+                    dot += points[i, j] * centres[c, j]
+                distance = squared[i] - 2.0 * dot + centre_squared[c]
+                if distance < best_distance:
+                    best, best_distance = c, distance
+            nearest[i] = best_distance
+            if labels[i] != best:
+                labels[i] = best
+                changed = True
+        if not changed:
+            break
+        sums[:] = 0.0
+        counts[:] = 0.0
+        for i in range(m):
+            counts[labels[i]] += 1.0
+            for j in range(d):
+                sums[labels[i], j] += points[i, j]
+        for c in range(k):
+            if counts[c] > 0:  # an emptied cluster keeps its centre
+                for j in range(d):
+                    centres[c, j] = sums[c, j] / counts[c]
+    inertia = 0.0
+    for i in range(m):
+        inertia += max(nearest[i], 0.0)
+    return labels, inertia
+
+
+@_jit
+def rows_at(values: np.ndarray, indices: np.ndarray) -> np.ndarray:
+    """``values[indices]`` for (N, 3) float64 ``values`` and (K,) indices: numpy's fancy
+    indexing of rows costs several times this loop on hundreds of thousands of rows."""
+    out = np.empty((indices.shape[0], 3))
+    for k in range(indices.shape[0]):
+        for axis in range(3):
+            out[k, axis] = values[indices[k], axis]
+    return out
+
+
+@_jit
+def indices_above(
+    points: np.ndarray, indices: np.ndarray, normal: np.ndarray, offset: float, clearance: float
+) -> np.ndarray:
+    """The (K,) ``indices`` whose (N, 3) points lie at least ``clearance`` (m) above the plane
+    {x : normal . x + offset = 0} (positive side), in order: ``indices[points[indices] @ normal
+    + offset >= clearance]`` in one pass."""
+    found = np.empty(indices.shape[0], dtype=indices.dtype)
+    count = 0
+    for k in range(indices.shape[0]):
+        i = indices[k]
+        if _dot(points, i, normal) + offset >= clearance:
+            found[count] = i
+            count += 1
+    return found[:count].copy()
+
+
+@_jit
+def supervoxel_anchor_counts(
+    flat_supervoxel: np.ndarray,
+    state: np.ndarray,
+    label: np.ndarray,
+    near: np.ndarray,
+    count: int,
+    n_labels: int,
+    states: tuple,
+    min_pixels: int,
+    static_fraction: float,
+):
+    """The pixel counts of ``temporal.supervoxel_anchors`` (which documents the rules) in two
+    passes over the (P,) pixels: ``flat_supervoxel`` (-1 = none), ``state`` (int8 states,
+    ``states`` = (not compared, unchanged, revealed, arrived)), ``label`` (previous segment,
+    0 = none, < ``n_labels``) and ``near`` (bool). Returns, per supervoxel (``count``): the
+    compatible and incompatible pixel counts (int64), the (count, n_labels) table of unchanged
+    pixels of segments that stayed, and the pixel count."""
+    not_compared, unchanged, revealed, arrived = states
+    unchanged_per_label = np.zeros(n_labels, dtype=np.int64)
+    compared_per_label = np.zeros(n_labels, dtype=np.int64)
+    for p in range(state.shape[0]):
+        if state[p] == unchanged:
+            unchanged_per_label[label[p]] += 1
+        if state[p] != not_compared:
+            compared_per_label[label[p]] += 1
+    stayed = np.zeros(n_labels, dtype=np.bool_)
+    for segment in range(1, n_labels):
+        stayed[segment] = (unchanged_per_label[segment] >= min_pixels) and (
+            unchanged_per_label[segment] >= static_fraction * compared_per_label[segment]
+        )
+    compatible = np.zeros(count, dtype=np.int64)
+    incompatible = np.zeros(count, dtype=np.int64)
+    table = np.zeros((count, n_labels), dtype=np.int64)
+    pixels = np.zeros(count, dtype=np.int64)
+    for p in range(state.shape[0]):
+        supervoxel = flat_supervoxel[p]
+        if supervoxel < 0:
+            continue
+        pixels[supervoxel] += 1
+        segment = label[p]
+        segment_stayed = stayed[segment]
+        shifted = state[p] == arrived and near[p] and segment_stayed
+        if state[p] == unchanged:
+            if segment_stayed or segment == 0:
+                compatible[supervoxel] += 1
+            else:
+                incompatible[supervoxel] += 1
+            if segment_stayed:
+                table[supervoxel, segment] += 1
+        elif state[p] == revealed or shifted:
+            compatible[supervoxel] += 1
+        elif state[p] == arrived:
+            incompatible[supervoxel] += 1
+    return compatible, incompatible, table, pixels
+
+
+@_jit
+def vertical_plane_coordinates(
+    points: np.ndarray,
+    point_normals: np.ndarray,
+    unknown: np.ndarray,
+    heights: np.ndarray,
+    normal: np.ndarray,
+    offset: float,
+    along: np.ndarray,
+    threshold_m: float,
+    max_height_m: float,
+    min_cos: float,
+    use_normals: bool,
+):
+    """For (N, 3) points (m) and a vertical plane (unit ``normal``, ``offset``) with the
+    horizontal direction ``along`` it: each point's signed depth (N,) in front of the plane,
+    its position (N,) along it, and whether it lies on the plane's face (N,) bool: within
+    ``threshold_m`` of it, below ``max_height_m`` (``heights`` (N,) above the support) and,
+    with ``use_normals``, facing the plane's way (within acos(``min_cos``) of +-normal) or
+    of ``unknown`` normal (``planes._wall_cues``)."""
+    count = points.shape[0]
+    depth = np.empty(count)
+    position = np.empty(count)
+    on_plane = np.empty(count, dtype=np.bool_)
+    for p in range(count):
+        depth[p] = _dot(points, p, normal) + offset
+        position[p] = _dot(points, p, along)
+        inside = abs(depth[p]) < threshold_m and heights[p] < max_height_m
+        if inside and use_normals and not unknown[p]:
+            inside = abs(_dot(point_normals, p, normal)) > min_cos
+        on_plane[p] = inside
+    return depth, position, on_plane
+
+
+@_jit
+def outside_slab(
+    points: np.ndarray,
+    point_normals: np.ndarray,
+    unknown: np.ndarray,
+    pool: np.ndarray,
+    normal: np.ndarray,
+    offset: float,
+    front_m: float,
+    back_m: float,
+    min_cos: float,
+    use_normals: bool,
+) -> np.ndarray:
+    """The (K,) ``pool`` indices of (N, 3) points that stay in the wall search after a wall
+    (unit ``normal``, ``offset``) was found: those not in its slab (depth in
+    (-``back_m``, ``front_m``)) or, with ``use_normals``, in it but not facing its way
+    (``_facing``: within acos(``min_cos``) of +-normal, or ``unknown``)."""
+    kept = np.empty(pool.shape[0], dtype=pool.dtype)
+    count = 0
+    for k in range(pool.shape[0]):
+        p = pool[k]
+        depth = _dot(points, p, normal) + offset
+        done = depth < front_m and depth > -back_m
+        if done and use_normals and not unknown[p]:
+            done = abs(_dot(point_normals, p, normal)) > min_cos
+        if not done:
+            kept[count] = p
+            count += 1
+    return kept[:count].copy()
+
+
+@_jit
+def project_to_previous(
+    depth_m: np.ndarray,
+    valid: np.ndarray,
+    ray_x: np.ndarray,
+    ray_y: np.ndarray,
+    relative: np.ndarray,
+    previous_K: np.ndarray,
+    previous_height: int,
+    previous_width: int,
+):
+    """Where each ``valid`` pixel (K,) (flat) of a (H, W) float32 depth image lands in the
+    previous camera: its flat pixel there (K,) int64 (0 where not ``inside``), its depth there
+    z (K,) float32 and whether it is inside that image and in front of the camera (K,) bool.
+    ``ray_x`` (W,) and ``ray_y`` (H,) float32 are the pixel grid's (c - cx) / fx, ``relative``
+    (4, 4) float32 the previous camera from this one and ``previous_K`` (3, 3) float32. All in
+    float32, operation by operation as ``temporal.compare_frames``'s numpy version."""
+    height, width = depth_m.shape
+    count = valid.shape[0]
+    pixel = np.zeros(count, dtype=np.int64)
+    z_out = np.empty(count, dtype=np.float32)
+    inside = np.zeros(count, dtype=np.bool_)
+    one = np.float32(1.0)
+    for k in range(count):
+        row, col = valid[k] // width, valid[k] % width
+        z_now = depth_m[row, col]
+        x_now = ray_x[col] * z_now
+        y_now = ray_y[row] * z_now
+        x = (
+            relative[0, 0] * x_now
+            + relative[0, 1] * y_now
+            + relative[0, 2] * z_now
+            + relative[0, 3]
+        )
+        y = (
+            relative[1, 0] * x_now
+            + relative[1, 1] * y_now
+            + relative[1, 2] * z_now
+            + relative[1, 3]
+        )
+        z = (
+            relative[2, 0] * x_now
+            + relative[2, 1] * y_now
+            + relative[2, 2] * z_now
+            + relative[2, 3]
+        )
+        z_out[k] = z
+        if not z > np.float32(1e-6):
+            continue
+        inverse_z = one / z
+        u = np.rint(x * inverse_z * previous_K[0, 0] + previous_K[0, 2])
+        v = np.rint(y * inverse_z * previous_K[1, 1] + previous_K[1, 2])
+        if u >= 0 and u < previous_width and v >= 0 and v < previous_height:
+            inside[k] = True
+            pixel[k] = np.int64(v) * previous_width + np.int64(u)
+    return pixel, z_out, inside

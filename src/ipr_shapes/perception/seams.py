@@ -1,0 +1,366 @@
+"""Cutting segments along straight colour seams where the geometry is silent.
+
+Packed boxes of one height show coplanar tops: the convexity graph (``segmentation``) sees one
+flat surface, and a real depth sensor shows no groove between them. What tells them apart is in
+the colour image: the boxes' outlines are straight lines that cross the merged segment from one
+side of its outline to the other. A seam here is such a line, with three checks that keep an
+object's own lines whole:
+
+- **straight and long**: edge pixels (non-maximum-suppressed colour gradient above
+  ``seams.edge_factor`` times the frame's median) vote in a Hough transform for lines along
+  their own edge direction; a candidate is the longest stretch of the line inside the segment
+  whose pixels lie on edges at least ``seams.coverage`` of the time, and it must be at least
+  ``seams.min_length_m`` long in 3D;
+- **geometry silent**: the surfaces on both sides of it have the same normal (within
+  ``seams.max_normal_deg``) and no step (``seams.max_step_m``): a colour edge along a crease is
+  an object's own edge, a step is already the graph's to cut;
+- **a cut**: removing it splits the segment into pieces of at least ``seams.min_area_m2`` and
+  ``seams.min_width_m`` across.
+
+The best seam (most edge pixels) is cut and both pieces are searched again, up to
+``seams.max_cuts`` cuts per segment. Text and logos do not qualify: their edges are short or
+do not line up across the segment.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import ndimage
+
+from ipr_shapes.perception.config import PerceptionConfig
+
+#: Hough resolution: line directions per half turn, and the candidates tried per search.
+_DIRECTIONS = 180
+_CANDIDATES = 40
+#: An edge pixel votes for line directions within this of its own edge direction (deg).
+_VOTE_SPREAD_DEG = 10.0
+#: Pixels either side of a seam whose normals and points are compared (near, far; px).
+_SIDE_BAND_PX = (2, 10)
+#: Margin (px) around a segment's bounding box, enough for the side bands.
+_MARGIN_PX = 12
+
+
+def cut_colour_seams(
+    labels: np.ndarray,
+    rgb: np.ndarray,
+    points: np.ndarray,
+    normals: np.ndarray,
+    depth_m: np.ndarray,
+    K: np.ndarray,
+    config: PerceptionConfig,
+) -> np.ndarray:
+    """Labels (H, W) int32 with segments cut along colour seams (module doc); new pieces take
+    new ids above the largest one (renumbering is the caller's).
+
+    Args:
+        labels: (H, W) int segment labels, 0 = none; rgb: (H, W, 3) uint8;
+        points: (H, W, 3) world points (m); normals: (H, W, 3) unit normals in the world frame,
+            0 where unknown; depth_m: (H, W) depth (m, 0 = none); K: (3, 3) intrinsics.
+    """
+    seams = config.seams
+    out = labels.astype(np.int32, copy=True)
+    segment_pixels = labels > 0
+    if not seams.enabled or not segment_pixels.any():
+        return out
+    magnitude, direction = _colour_gradient(rgb)
+    noise = float(np.median(magnitude[segment_pixels]))
+    edges = _thin(magnitude, direction) & (magnitude > seams.edge_factor * max(noise, 1e-6))
+    next_id = int(labels.max()) + 1
+    boxes = ndimage.find_objects(labels)
+    for segment, box in enumerate(boxes, start=1):
+        if box is None:
+            continue
+        top = max(box[0].start - _MARGIN_PX, 0)
+        bottom = min(box[0].stop + _MARGIN_PX, labels.shape[0])
+        left = max(box[1].start - _MARGIN_PX, 0)
+        right = min(box[1].stop + _MARGIN_PX, labels.shape[1])
+        crop = (slice(top, bottom), slice(left, right))
+        pieces = _cut_segment(
+            labels[crop] == segment,
+            edges[crop],
+            direction[crop],
+            points[crop],
+            normals[crop],
+            depth_m[crop],
+            float(K[0, 0]),
+            config,
+        )
+        view = out[crop]  # writes go to out
+        for piece in range(2, int(pieces.max()) + 1):
+            view[pieces == piece] = next_id
+            next_id += 1
+    return out
+
+
+def _colour_gradient(rgb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(H, W) gradient magnitude and direction (rad) of the colour channel that changes most
+    at each pixel (RGB in [0, 1], Gaussian sigma 1 px, Sobel)."""
+    image = ndimage.gaussian_filter(rgb.astype(np.float32) / 255.0, sigma=(1.0, 1.0, 0.0))
+    gx = np.stack([ndimage.sobel(image[..., c], axis=1) for c in range(3)], axis=-1)
+    gy = np.stack([ndimage.sobel(image[..., c], axis=0) for c in range(3)], axis=-1)
+    strongest = np.argmax(gx**2 + gy**2, axis=2)[..., None]
+    gx = np.take_along_axis(gx, strongest, axis=2)[..., 0]
+    gy = np.take_along_axis(gy, strongest, axis=2)[..., 0]
+    return np.hypot(gx, gy), np.arctan2(gy, gx)
+
+
+def _thin(magnitude: np.ndarray, direction: np.ndarray) -> np.ndarray:
+    """(H, W) bool: pixels whose gradient magnitude is a maximum across the edge (Canny's
+    non-maximum suppression, directions quantised to 45 degrees)."""
+    sector = (np.round(direction / (np.pi / 4)) % 4).astype(np.int8)
+    padded = np.pad(magnitude, 1)
+    height, width = magnitude.shape
+    keep = np.zeros(magnitude.shape, dtype=bool)
+    for index, (dy, dx) in enumerate(((0, 1), (1, 1), (1, 0), (1, -1))):
+        ahead = padded[1 + dy : 1 + dy + height, 1 + dx : 1 + dx + width]
+        behind = padded[1 - dy : 1 - dy + height, 1 - dx : 1 - dx + width]
+        keep |= (sector == index) & (magnitude >= ahead) & (magnitude >= behind)
+    return keep
+
+
+def _cut_segment(
+    mask: np.ndarray,
+    edges: np.ndarray,
+    direction: np.ndarray,
+    points: np.ndarray,
+    normals: np.ndarray,
+    depth_m: np.ndarray,
+    focal_px: float,
+    config: PerceptionConfig,
+) -> np.ndarray:
+    """(h, w) int pieces of one segment's crop: 0 outside, 1 the first piece, 2.. the cut-off
+    pieces."""
+    pieces = mask.astype(np.int32)
+    near_edge = ndimage.binary_dilation(edges, np.ones((3, 3), dtype=bool))
+    queue = [1]
+    cuts = 0
+    while queue and cuts < config.seams.max_cuts:
+        piece = queue.pop()
+        part = pieces == piece
+        if _area_m2(part, depth_m, focal_px) < 2 * config.seams.min_area_m2:
+            continue
+        split = _best_cut(part, edges, near_edge, direction, points, normals, depth_m,
+                          focal_px, config)  # fmt: skip
+        if split is None:
+            continue
+        new = int(pieces.max()) + 1
+        pieces[split] = new
+        cuts += 1
+        queue.extend((piece, new))
+    return pieces
+
+
+def _best_cut(
+    part: np.ndarray,
+    edges: np.ndarray,
+    near_edge: np.ndarray,
+    direction: np.ndarray,
+    points: np.ndarray,
+    normals: np.ndarray,
+    depth_m: np.ndarray,
+    focal_px: float,
+    config: PerceptionConfig,
+) -> np.ndarray | None:
+    """(h, w) bool: the smaller side of the best seam of ``part``, or None (module doc)."""
+    seams = config.seams
+    inner = ndimage.binary_erosion(part, iterations=2)
+    rows, cols = np.nonzero(edges & inner)
+    if len(rows) < 20:
+        return None
+    height, width = part.shape
+    angles = np.linspace(0.0, np.pi, _DIRECTIONS, endpoint=False)
+    cos_a, sin_a = np.cos(angles), np.sin(angles)
+    reach = int(np.ceil(np.hypot(height, width)))
+    own = np.round((direction[rows, cols] % np.pi) / np.pi * _DIRECTIONS).astype(np.int64)
+    spread = int(np.ceil(_VOTE_SPREAD_DEG / 180.0 * _DIRECTIONS))
+    votes = np.zeros(_DIRECTIONS * (2 * reach + 1), dtype=np.int64)
+    for step in range(-spread, spread + 1):
+        a = (own + step) % _DIRECTIONS
+        rho = np.round(cols * cos_a[a] + rows * sin_a[a]).astype(np.int64) + reach
+        votes += np.bincount(a * (2 * reach + 1) + rho, minlength=votes.size)
+    # Each candidate's densest stretch first (cheap), then the checks from the longest down:
+    # the first that passes them all is the best.
+    stretches = []
+    top = np.argpartition(votes, -_CANDIDATES)[-_CANDIDATES:]
+    for flat in top[np.argsort(-votes[top], kind="stable")]:
+        if votes[flat] < 20:
+            break
+        a, rho = divmod(int(flat), 2 * reach + 1)
+        rho -= reach
+        line = _chord(part, cos_a[a], sin_a[a], rho)
+        if line is None:
+            continue
+        start, stop = _densest_stretch(near_edge[line[0], line[1]], seams.coverage)
+        if stop - start >= 20:
+            stretches.append((stop - start, a, rho, line[0][start:stop], line[1][start:stop]))
+    stretches.sort(key=lambda item: -item[0])  # stable: ties keep the vote order
+    for _, a, rho, line_rows, line_cols in stretches:
+        if not _reaches_outline(part, line_rows, line_cols):
+            continue
+        # Its length between its outermost pixels with depth (label images fill dropouts).
+        measured = np.flatnonzero(depth_m[line_rows, line_cols] > 0)
+        if measured.size < 2:
+            continue
+        ends = measured[[0, -1]]
+        ends_3d = points[line_rows[ends], line_cols[ends]]
+        if np.linalg.norm(ends_3d[0] - ends_3d[1]) < seams.min_length_m:
+            continue
+        if not _coplanar_sides(part, line_rows, line_cols, cos_a[a], sin_a[a], rho, points,
+                               normals, config):  # fmt: skip
+            continue
+        side = _split(part, line_rows, line_cols, depth_m, focal_px, config)
+        if side is not None:
+            return side
+    return None
+
+
+def _chord(
+    part: np.ndarray, cos_a: float, sin_a: float, rho: float
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """(rows, cols) of the pixels of ``part`` on the line x cos a + y sin a = rho, in order
+    along it (one pixel per step along its longer image axis)."""
+    height, width = part.shape
+    if abs(sin_a) > abs(cos_a):
+        cols = np.arange(width)
+        rows = np.round((rho - cols * cos_a) / sin_a).astype(np.int64)
+    else:
+        rows = np.arange(height)
+        cols = np.round((rho - rows * sin_a) / cos_a).astype(np.int64)
+    inside = (rows >= 0) & (rows < height) & (cols >= 0) & (cols < width)
+    rows, cols = rows[inside], cols[inside]
+    on = part[rows, cols]
+    if on.sum() < 20:
+        return None
+    return rows[on], cols[on]
+
+
+def _reaches_outline(part: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> bool:
+    """Whether the stretch (pixels in order along a line) ends at the outline of ``part`` at
+    both ends: within 3 px beyond each end, along the line, lies a pixel outside it (a stretch
+    that stops inside cannot cut)."""
+    height, width = part.shape
+    length = max(len(rows) - 1, 1)
+    # Per-pixel direction along the stretch (one pixel along its longer axis).
+    d_row = (rows[-1] - rows[0]) / length
+    d_col = (cols[-1] - cols[0]) / length
+    for end, sign in ((0, -1.0), (len(rows) - 1, 1.0)):
+        outside = False
+        for k in (1, 2, 3):
+            r = int(round(rows[end] + sign * k * d_row))
+            c = int(round(cols[end] + sign * k * d_col))
+            if not (0 <= r < height and 0 <= c < width) or not part[r, c]:
+                outside = True
+                break
+        if not outside:
+            return False
+    return True
+
+
+def _densest_stretch(on_edge: np.ndarray, density: float) -> tuple[int, int]:
+    """The longest [start, stop) of ``on_edge`` (bool, (n,)) whose mean is at least
+    ``density``: with prefix sums s of (on_edge - density), the longest b - a with
+    s[b] >= s[a]; the prefix minima are non-increasing, so each b finds its first such a by
+    bisection (the first longest wins)."""
+    prefix = np.concatenate([[0.0], np.cumsum(on_edge.astype(np.float64) - density)])
+    lowest = np.minimum.accumulate(prefix)
+    begins = np.searchsorted(-lowest, -prefix[1:], side="left")
+    lengths = np.arange(1, len(on_edge) + 1) - begins
+    end = int(np.argmax(lengths))
+    if lengths[end] <= 0:
+        return 0, 0
+    return int(begins[end]), end + 1
+
+
+def _coplanar_sides(
+    part: np.ndarray,
+    rows: np.ndarray,
+    cols: np.ndarray,
+    cos_a: float,
+    sin_a: float,
+    rho: float,
+    points: np.ndarray,
+    normals: np.ndarray,
+    config: PerceptionConfig,
+) -> bool:
+    """Whether the surfaces along both sides of the seam (``_SIDE_BAND_PX`` away, within its
+    extent) have one normal (``seams.max_normal_deg``) and no step (``seams.max_step_m``)."""
+    near, far = _SIDE_BAND_PX
+    top, bottom = max(rows.min() - far, 0), min(rows.max() + far + 1, part.shape[0])
+    left, right = max(cols.min() - far, 0), min(cols.max() + far + 1, part.shape[1])
+    yy, xx = np.mgrid[top:bottom, left:right]
+    across = xx * cos_a + yy * sin_a - rho
+    along = -xx * sin_a + yy * cos_a
+    seam_along = -cols * sin_a + rows * cos_a
+    box_normals = normals[top:bottom, left:right]
+    usable = (
+        part[top:bottom, left:right]
+        & (along >= seam_along.min())
+        & (along <= seam_along.max())
+        & np.any(box_normals != 0, axis=2)
+    )
+    sides = []
+    for sign in (1.0, -1.0):
+        chosen = usable & (sign * across >= near) & (sign * across <= far)
+        if chosen.sum() < 20:
+            return False
+        mean = box_normals[chosen].astype(np.float64).mean(axis=0)
+        sides.append(
+            (mean / max(np.linalg.norm(mean), 1e-12), points[top:bottom, left:right][chosen])
+        )
+    (normal_a, points_a), (normal_b, points_b) = sides
+    cos_angle = float(np.clip(normal_a @ normal_b, -1.0, 1.0))
+    if np.degrees(np.arccos(cos_angle)) > config.seams.max_normal_deg:
+        return False
+    normal = normal_a + normal_b
+    normal /= max(np.linalg.norm(normal), 1e-12)
+    step = abs(float(np.median(points_a @ normal) - np.median(points_b @ normal)))
+    return step <= config.seams.max_step_m
+
+
+def _split(
+    part: np.ndarray,
+    rows: np.ndarray,
+    cols: np.ndarray,
+    depth_m: np.ndarray,
+    focal_px: float,
+    config: PerceptionConfig,
+) -> np.ndarray | None:
+    """(h, w) bool: the second-largest piece left when the seam (3 px wide) is removed from
+    ``part``, with the seam and crumbs given to the nearest of the two largest pieces; None
+    when the seam does not cut ``part`` into two pieces large and wide enough."""
+    seam = np.zeros(part.shape, dtype=bool)
+    height, width = part.shape
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            seam[np.clip(rows + dy, 0, height - 1), np.clip(cols + dx, 0, width - 1)] = True
+    seam &= part
+    pieces, count = ndimage.label(part & ~seam)
+    if count < 2:
+        return None
+    sizes = np.bincount(pieces.ravel())[1:]
+    largest = np.argsort(sizes)[::-1][:2] + 1
+    # Each piece's largest inscribed radius: the seam and the outside bound every piece.
+    inscribed = ndimage.distance_transform_edt(pieces > 0)
+    for piece in largest:
+        inside = pieces == piece
+        if _area_m2(inside, depth_m, focal_px) < config.seams.min_area_m2:
+            return None
+        depths = depth_m[inside]
+        depths = depths[depths > 0]
+        radius_px = float(inscribed[inside].max())
+        if 2.0 * radius_px * float(np.median(depths)) / focal_px < config.seams.min_width_m:
+            return None
+    two = np.where(pieces == largest[0], 1, np.where(pieces == largest[1], 2, 0))
+    nearest = ndimage.distance_transform_edt(two == 0, return_distances=False, return_indices=True)
+    return part & (two[nearest[0], nearest[1]] == 2)
+
+
+def _area_m2(part: np.ndarray, depth_m: np.ndarray, focal_px: float) -> float:
+    """Area (m^2) of the pixels of ``part``, each a (depth / focal)^2 square (pixels without
+    depth take the median depth of the others)."""
+    depths = depth_m[part]
+    known = depths[depths > 0]
+    if known.size == 0:
+        return 0.0
+    filled = np.where(depths > 0, depths, np.median(known))
+    return float(np.sum(filled**2)) / focal_px**2

@@ -1,0 +1,943 @@
+"""Object identities across frames (paper Sec. III: partial objects O_{i,t} tracked over t).
+
+Between two frames the robot pushes a few objects by some centimetres; everything else stays.
+Each segment of frame t is matched to the objects known from earlier frames by a cost that
+combines cues, each robust where the others fail:
+
+- image overlap (IoU of masks): near 1 for objects that did not move, whatever their colour;
+- colour: a normalised RGB histogram, unchanged by rigid motion (Bhattacharyya distance);
+- proximity: the distance between 3D centroids relative to how far a push can move an object;
+- visible size: the log ratio of the segments' visible areas (a pushed object turns, but a
+  small object does not become a large one: this keeps a revealed small object from taking
+  the id of a large one of the same colour that moved away);
+- top height (weight 0 by default): a pushed object slides or turns but its highest point
+  rarely changes much; with the size cue it no longer helped (``TrackingConfig``).
+
+Assignment runs in two stages (Hungarian, scipy). First the confident matches: every segment
+may also start a new object at cost ``max_match_cost``, so a pair costing more is never used
+(the gate is part of the optimisation rather than applied to its result). Objects that did not
+move, or moved a little, are settled here. Then the objects left without a segment and the
+segments left without an object are matched among themselves with the looser
+``elimination_cost`` gate: an object that was pushed far, or toppled and now shows other faces
+and colours, is usually the one known object still unaccounted for, and the large segment in a
+new place is usually it. Objects that find no segment keep their id for later frames (they may
+reappear). Each object is remembered by its last ``max_sightings`` sightings, and a segment's
+cost to an object is its lowest cost to any of them (an object that was split or partly hidden
+in the last frame is still recognised by an earlier, better view).
+
+Three corrections follow the assignment, all for objects the segmentation splits: an
+unmatched segment clearly larger than the piece that took an object's id, next to it and
+resembling the object, takes the id instead (``prefer_larger_pieces``); an object left
+unmatched whose largest recent sighting was clearly larger than the (earlier) piece whose id a
+segment took, next to it and almost as cheap, takes the segment (``prefer_larger_objects``: an
+object split in an earlier frame and whole again); and touching pieces of similar colour whose
+union resembles one known object better than each alone are joined into one segment with its
+id (``merge_split_pieces``: an object split into comparable pieces in this frame, whose id
+would otherwise land on either piece almost at random). Last, backwards in time: two known
+objects that touched in an earlier frame, of which this frame matched one and not the other,
+and whose union then resembles the matched segment better, were one object split in that frame
+and become one id in every frame (``merge_split_objects``). After tracking, the converse:
+an object first seen in a later frame that explains part of an earlier object's pixels in the
+frame before (two touching objects one segment until a push separated them) takes that part,
+back to frame 0 (``split_merged_objects``); and within one frame, a segment that holds a known
+object left unmatched besides its own (two objects pushed into contact, segmented as one) gives
+that object the pixels its colour singles out (``split_merged_segments``).
+
+The cues' weights, the two-stage assignment, the earlier sightings and each correction were
+chosen on development scenes and checked on held-out ones, never on a benchmark suite; each kept
+ids there that the steps before it lost (docs/DESIGN_NOTES.md, "Tracking cues and the two-stage
+assignment", "Temporal consistency", "Objects split in an earlier frame are joined", "Objects
+merged in frame 0 are split once pushed apart", "Objects pushed into one segment are split
+again"; the defaults' figures are in docs/experiments/perception-config-notes.md).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from itertools import combinations
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from ipr_shapes.perception import kernels
+from ipr_shapes.perception.config import PerceptionConfig, TrackingConfig
+from ipr_shapes.perception.temporal import ARRIVED, UNCHANGED, compare_frames
+
+#: Histogram bins per RGB channel.
+COLOUR_BINS = 6
+
+#: Cost of an impossible pairing in the augmented assignment problem.
+_FORBIDDEN = 1e9
+
+
+@dataclass(frozen=True, eq=False)
+class SegmentFeatures:
+    """What tracking knows of a segment.
+
+    Attributes:
+        pixels: (N,) flat pixel indices, sorted and distinct.
+        centroid: (3,) mean world point (m) of the pixels with depth.
+        histogram: (COLOUR_BINS**3,) colour histogram summing to 1.
+        top_m: top height (world z, m, 98th percentile).
+        area: visible area up to a constant factor: the sum over pixels with depth of depth^2
+            (a pixel's fronto-parallel footprint is depth^2 / (fx fy)); only ratios are used,
+            so the intrinsics cancel. The pixel count when no depth is known.
+    """
+
+    pixels: np.ndarray
+    centroid: np.ndarray
+    histogram: np.ndarray
+    top_m: float
+    area: float
+
+
+def segment_features(
+    labels: np.ndarray, points: np.ndarray, rgb: np.ndarray, depth_m: np.ndarray | None = None
+) -> dict[int, SegmentFeatures]:
+    """Features of every segment k >= 1 in a (H, W) label image with (H, W, 3) world points,
+    (H, W, 3) uint8 colours and the (H, W) depth (m, 0 = no reading; None = all valid)."""
+    flat_points = points.reshape(-1, 3)
+    # A pixel without depth back-projects to the camera centre: labels may cover depth holes, so
+    # geometry comes from pixels with a reading (segments without any use all their pixels,
+    # whose points are all zero). One compiled pass gives every segment's sums (``kernels``;
+    # a frame has a dozen segments of up to tens of thousands of pixels).
+    depth = np.ones(len(flat_points)) if depth_m is None else depth_m.reshape(-1)
+    ids, order, starts, with_depth, used, point_sums, used_z, histograms, footprints = (
+        kernels.segment_sums(
+            labels.reshape(-1), flat_points, rgb.reshape(-1, 3), depth, COLOUR_BINS
+        )
+    )
+    centroids = point_sums / np.maximum(used, 1)[:, None]
+    tops = _grouped_percentile(used_z, used, 98.0)
+    features = {}
+    for index, label in enumerate(ids.tolist()):
+        histogram = histograms[index].astype(np.float64)
+        area = float(footprints[index])
+        features[label] = SegmentFeatures(
+            order[starts[index] : starts[index + 1]],
+            centroids[index],
+            histogram / histogram.sum(),
+            float(tops[index]),
+            area if area > 0 else float(starts[index + 1] - starts[index]),
+        )
+    return features
+
+
+def _grouped_percentile(values: np.ndarray, counts: np.ndarray, percentile: float) -> np.ndarray:
+    """(G,) ``np.percentile`` (linear interpolation) of each of G consecutive runs of (N,)
+    ``values`` whose (G,) lengths are ``counts``; nan for empty runs. One partial sort per
+    group and numpy's own interpolation (``_lerp``), so the values are the same, without
+    ``np.percentile``'s per-call overhead."""
+    result = np.full(len(counts), np.nan)
+    first = 0
+    for group, count in enumerate(counts.tolist()):
+        if count == 0:
+            continue
+        virtual = (count - 1) * (percentile / 100.0)
+        lower = int(np.floor(virtual))
+        upper = min(lower + 1, count - 1)
+        gamma = virtual - lower
+        chosen = np.partition(values[first : first + count], (lower, upper))
+        a, b = chosen[lower], chosen[upper]
+        difference = b - a
+        result[group] = b - difference * (1 - gamma) if gamma >= 0.5 else a + difference * gamma
+        first += count
+    return result
+
+
+def _colour_codes(colours: np.ndarray) -> np.ndarray:
+    """Histogram bin (N,) int64 of (N, 3) uint8 RGB colours, ``COLOUR_BINS`` per channel."""
+    bins = (colours.astype(np.int64) * COLOUR_BINS) // 256
+    return (bins[:, 0] * COLOUR_BINS + bins[:, 1]) * COLOUR_BINS + bins[:, 2]
+
+
+def match_costs(
+    known: dict[int, SegmentFeatures],
+    segments: dict[int, SegmentFeatures],
+    image_size: int,
+    config: TrackingConfig,
+) -> tuple[list[int], list[int], np.ndarray]:
+    """Cost matrix (segments x known objects) of explaining each segment as each known object.
+
+    Mask overlaps come from one map of where each known object was seen (the later entry of
+    ``known`` wins where two overlap), so all of them cost a single pass over the segments'
+    pixels. Returns the segment ids, the known ids (sorted) and the (S, K) costs, each in
+    [0, overlap + colour + distance + size + height weights].
+    """
+    segment_ids, known_ids = sorted(segments), sorted(known)
+    seen = np.zeros(image_size, dtype=np.int64)  # column + 1 of the known object, 0 = none
+    for column, object_id in enumerate(known_ids):
+        seen[known[object_id].pixels] = column + 1
+    shared = np.zeros((len(segment_ids), len(known_ids)))
+    for row, segment_id in enumerate(segment_ids):
+        counts = np.bincount(seen[segments[segment_id].pixels], minlength=len(known_ids) + 1)
+        shared[row] = counts[1:]
+    segment_sizes = np.array([segments[s].pixels.size for s in segment_ids], dtype=float)
+    known_sizes = np.array([known[o].pixels.size for o in known_ids], dtype=float)
+    overlap = shared / (segment_sizes[:, None] + known_sizes[None, :] - shared)
+    # Bhattacharyya distance between colour histograms, in [0, 1].
+    root_segment = np.sqrt(np.stack([segments[s].histogram for s in segment_ids]))
+    root_known = np.sqrt(np.stack([known[o].histogram for o in known_ids]))
+    colour = np.sqrt(np.clip(1.0 - root_segment @ root_known.T, 0.0, None))
+    centroid_segment = np.stack([segments[s].centroid for s in segment_ids])
+    centroid_known = np.stack([known[o].centroid for o in known_ids])
+    distance = np.linalg.norm(centroid_segment[:, None] - centroid_known[None], axis=-1)
+    area_segment = np.array([segments[s].area for s in segment_ids])
+    area_known = np.array([known[o].area for o in known_ids])
+    size_change = np.abs(np.log(area_segment[:, None] / area_known[None, :]))
+    top_segment = np.array([segments[s].top_m for s in segment_ids])
+    top_known = np.array([known[o].top_m for o in known_ids])
+    height = np.abs(top_segment[:, None] - top_known[None, :])
+    cost = _combined_cost(overlap, colour, distance, size_change, height, config)
+    return segment_ids, known_ids, cost
+
+
+def _combined_cost(
+    overlap: np.ndarray,
+    colour: np.ndarray,
+    distance_m: np.ndarray,
+    size_change: np.ndarray,
+    height_m: np.ndarray,
+    config: TrackingConfig,
+) -> np.ndarray:
+    """The matching cost from its cues (arrays of one shape): mask IoU, Bhattacharyya colour
+    distance, centroid distance (m), |log| of the visible-area ratio, top-height change (m)."""
+    cost = (
+        config.overlap_weight * (1.0 - overlap)
+        + config.colour_weight * colour
+        + config.distance_weight * np.minimum(distance_m / config.max_motion_m, 1.0)
+        + config.size_weight * np.minimum(size_change / np.log(config.size_ratio_scale), 1.0)
+    )
+    if config.height_weight > 0:
+        cost = cost + config.height_weight * np.minimum(height_m / config.height_scale_m, 1.0)
+    return cost
+
+
+def colour_distance(first: SegmentFeatures, second: SegmentFeatures) -> float:
+    """Bhattacharyya distance in [0, 1] between two segments' colour histograms."""
+    affinity = float(np.sqrt(first.histogram) @ np.sqrt(second.histogram))
+    return float(np.sqrt(max(1.0 - affinity, 0.0)))
+
+
+def pair_cost(segment: SegmentFeatures, known: SegmentFeatures, config: TrackingConfig) -> float:
+    """``match_costs`` of one segment against one sighting, without the (H*W,) map of where
+    known objects were seen (a segment's pixels are distinct, so its overlap is a set
+    intersection)."""
+    shared = _shared_count(segment.pixels, known.pixels)
+    overlap = shared / (segment.pixels.size + known.pixels.size - shared)
+    cues = (
+        overlap,
+        colour_distance(segment, known),
+        float(np.linalg.norm(segment.centroid - known.centroid)),
+        abs(float(np.log(segment.area / known.area))),
+        abs(segment.top_m - known.top_m),
+    )
+    return float(_combined_cost(*(np.float64(cue) for cue in cues), config))
+
+
+def _shared_count(first: np.ndarray, second: np.ndarray) -> int:
+    """Number of values common to two (N,) and (M,) sorted arrays of distinct flat pixel
+    indices: binary searches of the shorter in the longer, several times faster than
+    ``np.intersect1d`` (which sorts their concatenation) on segments of thousands of pixels."""
+    needles, haystack = (first, second) if first.size <= second.size else (second, first)
+    if needles.size == 0:
+        return 0
+    found = np.searchsorted(haystack, needles)
+    found[found == haystack.size] = 0  # past the end: compare with any value (not equal)
+    return int(np.count_nonzero(haystack[found] == needles))
+
+
+def merged_features(first: SegmentFeatures, second: SegmentFeatures) -> SegmentFeatures:
+    """Features of the union of two disjoint segments of one frame.
+
+    Centroid and histogram are the two's means weighted by pixel count (exact for the
+    histogram; the centroid also weighs pixels without depth, a small bias for a cue scaled by
+    ``max_motion_m``), the top the higher of the two tops (the union's 98th percentile lies
+    between them), the area the sum.
+    """
+    n_first, n_second = first.pixels.size, second.pixels.size
+    total = n_first + n_second
+    return SegmentFeatures(
+        np.sort(np.concatenate([first.pixels, second.pixels])),
+        (n_first * first.centroid + n_second * second.centroid) / total,
+        (n_first * first.histogram + n_second * second.histogram) / total,
+        max(first.top_m, second.top_m),
+        first.area + second.area,
+    )
+
+
+def contact_pixels(
+    first: np.ndarray,
+    second: np.ndarray,
+    width: int,
+    points: np.ndarray,
+    max_gap_m: float,
+    valid: np.ndarray | None = None,
+) -> int:
+    """Number of 4-neighbour pixel pairs between two (N,) flat pixel index sets of an image
+    ``width`` pixels wide whose (H*W, 3) world points (m) are at most ``max_gap_m`` apart: the
+    two surfaces meet there, rather than one occluding the other. With ``valid`` ((H*W,) bool,
+    pixels with a depth reading), pairs with a pixel without depth do not count (labels cover
+    the holes sensors leave at silhouettes, where such pixels would all sit at the camera)."""
+    size = len(points)
+    marked = np.zeros(size, dtype=bool)
+    marked[second] = True
+    column = first % width
+    count = 0
+    for step, inside in (
+        (1, column < width - 1),
+        (-1, column > 0),
+        (width, first < size - width),
+        (-width, first >= width),
+    ):
+        here = first[inside]
+        here = here[marked[here + step]]
+        if valid is not None:
+            here = here[valid[here] & valid[here + step]]
+        gap = np.linalg.norm(points[here] - points[here + step], axis=1)
+        count += int(np.count_nonzero(gap <= max_gap_m))
+    return count
+
+
+def assign_segments(cost: np.ndarray, new_cost: float, elimination_cost: float) -> np.ndarray:
+    """(P, 2) (segment row, known column) pairs of a (S, K) cost matrix, in two stages.
+
+    Stage 1 solves the augmented assignment problem in which every segment may instead start
+    a new object at ``new_cost`` and every known object may stay unmatched at no cost, so no
+    pair dearer than ``new_cost`` is used. Stage 2 matches the segments and objects stage 1 left
+    alone, among themselves, with pairs up to ``elimination_cost`` (module doc).
+    """
+    n_segments, n_known = cost.shape
+    augmented = np.full((n_segments + n_known, n_known + n_segments), _FORBIDDEN)
+    augmented[:n_segments, :n_known] = np.where(cost <= new_cost, cost, _FORBIDDEN)
+    augmented[:n_segments, n_known:][np.eye(n_segments, dtype=bool)] = new_cost
+    augmented[n_segments:, :n_known][np.eye(n_known, dtype=bool)] = 0.0
+    augmented[n_segments:, n_known:] = 0.0
+    rows, cols = linear_sum_assignment(augmented)
+    matched = (rows < n_segments) & (cols < n_known)
+    pairs = [np.stack([rows[matched], cols[matched]], axis=1)]
+    left_rows = np.setdiff1d(np.arange(n_segments), rows[matched])
+    left_cols = np.setdiff1d(np.arange(n_known), cols[matched])
+    if left_rows.size and left_cols.size:
+        rest = cost[np.ix_(left_rows, left_cols)]
+        rows, cols = linear_sum_assignment(rest)
+        keep = rest[rows, cols] <= elimination_cost
+        pairs.append(np.stack([left_rows[rows[keep]], left_cols[cols[keep]]], axis=1))
+    return np.concatenate(pairs).astype(np.int64)
+
+
+def prefer_larger_pieces(
+    assignment: dict[int, int],
+    cost: np.ndarray,
+    segment_ids: list[int],
+    known_ids: list[int],
+    segments: dict[int, SegmentFeatures],
+    config: TrackingConfig,
+) -> dict[int, int]:
+    """Give an object's id to the larger of two pieces it was split into.
+
+    When the segmentation splits an object (usually one that was pushed and shows new faces),
+    the assignment may match its id to a small piece that resembles the earlier view in size
+    and place and leave the larger piece to start a new object. A segment left unmatched whose
+    cheapest known object costs at most ``piece_max_cost``, whose centroid is within
+    ``piece_max_gap_m`` of the segment matched to that object and whose visible area is larger
+    takes the object's id; the smaller piece becomes a new object. Unmatched segments are
+    visited by decreasing area. Returns the new segment -> object assignment.
+
+    Args:
+        assignment: segment id -> object id; cost: (S, K) costs (rows ``segment_ids``,
+            columns ``known_ids``); segments: the frame's segment features.
+    """
+    result = dict(assignment)
+    segment_of = {object_id: segment_id for segment_id, object_id in result.items()}
+    rows = [r for r, s in enumerate(segment_ids) if s not in result]
+    for row in sorted(rows, key=lambda r: -segments[segment_ids[r]].area):
+        column = int(np.argmin(cost[row]))
+        if cost[row, column] > config.piece_max_cost:
+            continue
+        object_id, piece = known_ids[column], segment_ids[row]
+        matched = segment_of.get(object_id)
+        if (
+            matched is None
+            or segments[piece].area < config.piece_area_ratio * segments[matched].area
+        ):
+            continue
+        gap = np.linalg.norm(segments[piece].centroid - segments[matched].centroid)
+        if gap > config.piece_max_gap_m:
+            continue
+        del result[matched]
+        result[piece] = object_id
+        segment_of[object_id] = piece
+    return result
+
+
+def prefer_larger_objects(
+    assignment: dict[int, int],
+    cost: np.ndarray,
+    segment_ids: list[int],
+    known_ids: list[int],
+    latest: dict[int, SegmentFeatures],
+    config: TrackingConfig,
+) -> dict[int, int]:
+    """Give a segment the id of the larger of two known pieces of one object.
+
+    The converse of ``prefer_larger_pieces``: an object split into two pieces in an earlier
+    frame and whole again now matches both pieces' ids almost equally, and the assignment may
+    pick the smaller piece's. A known object left unmatched whose cheapest segment costs at
+    most ``piece_max_cost`` and at most ``piece_cost_margin`` more than the object that segment
+    was matched to, whose reference sighting was larger than that object's and within
+    ``piece_max_gap_m`` of it, takes the segment. Unmatched objects are visited by decreasing
+    area. Returns the new segment -> object assignment.
+
+    Args:
+        assignment: segment id -> object id; cost: (S, K) costs (rows ``segment_ids``,
+            columns ``known_ids``); latest: each known object's reference sighting
+            (``track_segments`` gives its largest of the last ``max_sightings``).
+    """
+    result = dict(assignment)
+    matched_objects = set(result.values())
+    columns = [c for c, o in enumerate(known_ids) if o not in matched_objects]
+    column_of = {o: c for c, o in enumerate(known_ids)}
+    for column in sorted(columns, key=lambda c: -latest[known_ids[c]].area):
+        if cost.shape[0] == 0:
+            break
+        row = int(np.argmin(cost[:, column]))
+        candidate, segment_id = known_ids[column], segment_ids[row]
+        current = result.get(segment_id)
+        if current is None or cost[row, column] > config.piece_max_cost:
+            continue
+        if cost[row, column] > cost[row, column_of[current]] + config.piece_cost_margin:
+            continue
+        if latest[candidate].area < config.piece_area_ratio * latest[current].area:
+            continue
+        gap = np.linalg.norm(latest[candidate].centroid - latest[current].centroid)
+        if gap > config.piece_max_gap_m:
+            continue
+        result[segment_id] = candidate
+    return result
+
+
+def _touching_alike(
+    first: SegmentFeatures,
+    second: SegmentFeatures,
+    width: int,
+    flat_points: np.ndarray,
+    valid: np.ndarray | None,
+    config: TrackingConfig,
+) -> bool:
+    """Whether two segments of one frame may be pieces of one object: colours within
+    ``merge_max_colour`` and at least ``merge_min_contact_px`` touching pixel pairs
+    (``contact_pixels`` on the frame's (H*W, 3) world points, image ``width`` pixels wide, and
+    its (H*W,) depth validity or None)."""
+    if colour_distance(first, second) > config.merge_max_colour:
+        return False
+    contact = contact_pixels(
+        first.pixels, second.pixels, width, flat_points, config.merge_contact_gap_m, valid
+    )
+    return contact >= config.merge_min_contact_px
+
+
+def _free_for(
+    matched: int | None, object_id: int, row_cost: np.ndarray, column_of: dict[int, int]
+) -> bool:
+    """Whether a segment matched to ``matched`` (None: unmatched) may become a piece of
+    ``object_id``: it is unmatched, matched to that object, or matched to another object that
+    it resembles less (a leftover pairing of the assignment's second stage)."""
+    if matched is None or matched == object_id:
+        return True
+    return bool(row_cost[column_of[object_id]] < row_cost[column_of[matched]])
+
+
+def merge_split_pieces(
+    assignment: dict[int, int],
+    cost: np.ndarray,
+    segment_ids: list[int],
+    known_ids: list[int],
+    segments: dict[int, SegmentFeatures],
+    sightings: dict[int, list[SegmentFeatures]],
+    points: np.ndarray,
+    config: TrackingConfig,
+    depth_m: np.ndarray | None = None,
+) -> tuple[dict[int, int], dict[int, int]]:
+    """Join pieces of this frame that together are one known object.
+
+    An object the segmentation splits into comparable pieces (a pushed object showing new
+    faces) hands its id to one of them almost at random, since either resembles the earlier
+    view about as well, and the other piece starts a new object; the metric's best segment is
+    then often the other piece, and neither piece may reach the F-measure the whole would.
+    For each known object, among its ``merge_candidates`` cheapest segments that cost at most
+    ``piece_max_cost`` and are unmatched, matched to that object or matched to another object
+    they resemble less (a leftover pairing of the assignment's second stage, which loses the
+    segment if it is joined; docs/DESIGN_NOTES.md, "Objects split in an earlier frame are
+    joined"), two that touch (``merge_min_contact_px`` neighbouring pixel pairs whose points are
+    within ``merge_contact_gap_m``: surfaces that meet, not one in front of the other) and whose
+    colours are within ``merge_max_colour`` are joined when the union's cost (lowest over the
+    object's sightings) is below both pieces' by more than ``merge_margin``; the cheapest such
+    union wins, and joining repeats with the union as a piece (an object cut in three).
+
+    Args:
+        assignment: segment id -> object id; cost: (S, K) costs (rows ``segment_ids``,
+            columns ``known_ids``); segments: the frame's segment features, updated in place
+            (the kept segment's become the union's, absorbed segments are removed);
+            sightings: each known object's sightings; points: the frame's (H, W, 3) world
+            points (m); depth_m: its (H, W) depth (m, 0 = no reading; None = all valid).
+
+    Returns:
+        The new segment -> object assignment and the joins {absorbed segment: kept segment}.
+    """
+    result = dict(assignment)
+    joins: dict[int, int] = {}
+    column_of = {o: c for c, o in enumerate(known_ids)}
+    width = points.shape[1]
+    flat_points = points.reshape(-1, 3)
+    valid = None if depth_m is None else depth_m.reshape(-1) > 0
+    for column, object_id in enumerate(known_ids):
+        # Cost of each candidate row to this object (a joined row costs what its union does).
+        row_cost = {
+            int(row): float(cost[row, column])
+            for row in np.argsort(cost[:, column])[: config.merge_candidates]
+            if cost[row, column] <= config.piece_max_cost
+            and segment_ids[row] in segments
+            and _free_for(result.get(segment_ids[row]), object_id, cost[row], column_of)
+        }
+        while len(row_cost) >= 2:
+            best = None
+            for first, second in combinations(sorted(row_cost, key=row_cost.get), 2):
+                a, b = segments[segment_ids[first]], segments[segment_ids[second]]
+                if not _touching_alike(a, b, width, flat_points, valid, config):
+                    continue
+                union = merged_features(a, b)
+                union_cost = min(pair_cost(union, seen, config) for seen in sightings[object_id])
+                if union_cost >= min(row_cost[first], row_cost[second]) - config.merge_margin:
+                    continue
+                if best is None or union_cost < best[0]:
+                    best = (union_cost, first, second, union)
+            if best is None:
+                break
+            union_cost, first, second, union = best
+            kept, absorbed = segment_ids[first], segment_ids[second]
+            segments[kept] = union
+            del segments[absorbed]
+            result.pop(absorbed, None)
+            result[kept] = object_id
+            joins[absorbed] = kept
+            del row_cost[second]
+            row_cost[first] = union_cost
+    return result, joins
+
+
+def merge_split_objects(
+    assignment: dict[int, int],
+    segments: dict[int, SegmentFeatures],
+    sightings: dict[int, list[SegmentFeatures]],
+    sighting_frames: dict[int, list[int]],
+    frames_points: list[np.ndarray],
+    frames_depth: list[np.ndarray | None],
+    config: TrackingConfig,
+) -> list[tuple[int, int]]:
+    """Known objects that were pieces of one object in an earlier frame, and that this frame
+    sees whole: pairs (kept id, absorbed id) to join in every frame.
+
+    The converse of ``merge_split_pieces``, backwards in time: an object the segmentation
+    split in an earlier frame (often frame 0, before any push) gave each piece an id, and when
+    a later frame shows it whole its segment takes one of the ids almost at random, since each
+    piece resembles part of it; the other id is lost for good. For a segment matched to object
+    ``a`` and a known object ``b`` left unmatched in this frame, seen in a frame where ``a``
+    was seen too, touching it there (as in ``merge_split_pieces``) and of similar colour
+    (``merge_max_colour``): when the union of the two sightings resembles the segment better
+    than ``a``'s own best sighting by more than ``object_merge_margin``, ``b`` joins ``a``.
+
+    Args:
+        assignment: segment id -> object id of this frame; segments: its segment features;
+            sightings, sighting_frames: each object's recent sightings and the frame index of
+            each (updated in place: ``a``'s sighting in the shared frame becomes the union,
+            ``b`` is removed); frames_points, frames_depth: every frame's (H, W, 3) world points
+            (m) and (H, W) depth (m, 0 = no reading; None = all valid).
+    """
+    joins: list[tuple[int, int]] = []
+    matched = set(assignment.values())
+    valid_of_frame: dict[int, np.ndarray | None] = {}  # each frame's depth validity, once
+    for segment_id, kept in sorted(assignment.items()):
+        if kept not in sightings:
+            continue
+        segment = segments[segment_id]
+        own = None  # the segment's cost to its object, when a candidate needs it
+        best = None
+        for other in sorted(sightings):
+            if other == kept or other in matched:
+                continue
+            for frame in set(sighting_frames[kept]) & set(sighting_frames[other]):
+                a = sightings[kept][sighting_frames[kept].index(frame)]
+                b = sightings[other][sighting_frames[other].index(frame)]
+                if colour_distance(a, b) > config.merge_max_colour:
+                    continue  # _touching_alike's first test, before any per-pixel work
+                if frame not in valid_of_frame:
+                    depth = frames_depth[frame]
+                    valid_of_frame[frame] = None if depth is None else depth.reshape(-1) > 0
+                points = frames_points[frame]
+                if not _touching_alike(
+                    a, b, points.shape[1], points.reshape(-1, 3), valid_of_frame[frame], config
+                ):
+                    continue
+                if own is None:
+                    own = min(pair_cost(segment, seen, config) for seen in sightings[kept])
+                union = merged_features(a, b)
+                union_cost = pair_cost(segment, union, config)
+                if union_cost >= own - config.object_merge_margin:
+                    continue
+                if best is None or union_cost < best[0]:
+                    best = (union_cost, other, frame, union)
+        if best is None:
+            continue
+        _, other, frame, union = best
+        sightings[kept][sighting_frames[kept].index(frame)] = union
+        del sightings[other], sighting_frames[other]
+        matched.add(other)
+        joins.append((kept, other))
+    return joins
+
+
+def split_merged_segments(
+    assignment: dict[int, int],
+    segments: dict[int, SegmentFeatures],
+    sightings: dict[int, list[SegmentFeatures]],
+    shape: tuple[int, int],
+    points: np.ndarray,
+    rgb: np.ndarray,
+    depth_m: np.ndarray | None,
+    config: TrackingConfig,
+) -> dict[int, int]:
+    """Split a segment that holds a known object left unmatched in this frame and the object it
+    was matched to.
+
+    A push often leaves two objects touching, and the segmentation may then give them one
+    segment for a frame: the segment takes one object's id and the other object finds no segment
+    (most of the pairs lost for lack of a segment were such unions: docs/DESIGN_NOTES.md,
+    "Objects pushed into one segment are split again"). For a known object ``b`` left unmatched
+    and a segment matched to object ``a``, each pixel of the segment whose colour is
+    ``segment_split_ratio`` times likelier under ``b``'s colour histogram than under ``a``'s
+    (their latest sightings) votes for ``b``; the largest 8-connected region of such pixels (at
+    least ``segment_split_min_px``) is the candidate part of ``b``. The split is made when that
+    part costs at most ``max_match_cost`` as ``b`` and the rest costs less as ``a`` than the
+    whole segment did, by more than ``segment_split_margin`` (a real union resembles neither
+    object as well as its parts do). The part becomes a new segment (``segments`` updated in
+    place) assigned to ``b``; of the candidate segments for one object, the one whose part costs
+    least. Returns the new segment -> object assignment.
+
+    Args:
+        shape: (H, W) of the frame; points: (H, W, 3) world points (m); rgb: (H, W, 3) uint8;
+            depth_m: (H, W) depth (m, 0 = no reading) or None (all valid).
+    """
+    from scipy.ndimage import label as connected_regions
+
+    result = dict(assignment)
+    matched = set(result.values())
+    width = shape[1]
+    codes_of: dict[int, np.ndarray] = {}  # colour codes of each segment's pixels, once
+    for object_id in sorted(sightings):
+        if object_id in matched:
+            continue
+        known = sightings[object_id]
+        b_histogram = known[-1].histogram
+        best = None
+        for segment_id, kept in sorted(result.items()):
+            if kept not in sightings:
+                continue
+            segment = segments[segment_id]
+            likelier = b_histogram > config.segment_split_ratio * sightings[kept][-1].histogram
+            # The votes counted from the segment's histogram first (the same count up to
+            # rounding): most pairs stop here, before any per-pixel work.
+            votes_from_histogram = segment.histogram @ likelier * segment.pixels.size
+            if votes_from_histogram < config.segment_split_min_px - 0.5:
+                continue
+            if segment_id not in codes_of:
+                codes_of[segment_id] = _colour_codes(rgb.reshape(-1, 3)[segment.pixels])
+            votes = likelier[codes_of[segment_id]]
+            if np.count_nonzero(votes) < config.segment_split_min_px:
+                continue
+            rows, cols = np.divmod(segment.pixels[votes], width)
+            top, left = rows.min(), cols.min()
+            mask = np.zeros((rows.max() - top + 1, cols.max() - left + 1), dtype=bool)
+            mask[rows - top, cols - left] = True
+            regions, _ = connected_regions(mask, structure=np.ones((3, 3), dtype=bool))
+            region_of_vote = regions[rows - top, cols - left]
+            largest = int(np.argmax(np.bincount(region_of_vote)[1:])) + 1
+            part = segment.pixels[votes][region_of_vote == largest]
+            if part.size < config.segment_split_min_px or part.size >= segment.pixels.size:
+                continue
+            part_features = _pixel_features(part, points, rgb, depth_m)
+            part_cost = min(pair_cost(part_features, seen, config) for seen in known)
+            if part_cost > config.max_match_cost or (best is not None and part_cost >= best[0]):
+                continue
+            rest = np.setdiff1d(segment.pixels, part, assume_unique=True)
+            rest_features = _pixel_features(rest, points, rgb, depth_m)
+            whole_cost = min(pair_cost(segment, seen, config) for seen in sightings[kept])
+            rest_cost = min(pair_cost(rest_features, seen, config) for seen in sightings[kept])
+            if rest_cost >= whole_cost - config.segment_split_margin:
+                continue
+            if best is None or part_cost < best[0]:
+                best = (part_cost, segment_id, part_features, rest_features)
+        if best is None:
+            continue
+        _, segment_id, part_features, rest_features = best
+        new_segment = max(segments) + 1
+        segments[segment_id] = rest_features
+        segments[new_segment] = part_features
+        codes_of.pop(segment_id, None)
+        result[new_segment] = object_id
+        matched.add(object_id)
+    return result
+
+
+def track_segments(
+    frames_labels: list[np.ndarray],
+    frames_points: list[np.ndarray],
+    frames_rgb: list[np.ndarray],
+    config: TrackingConfig | None = None,
+    frames_depth: list[np.ndarray] | None = None,
+) -> list[np.ndarray]:
+    """Relabel per-frame segments (H, W) int so that one object keeps one id in every frame.
+
+    Frame 0's segments get ids 1..k in their own order; later segments take the id of the known
+    object they match (``assign_segments`` on ``match_costs``, each object's cost the lowest
+    over its last ``max_sightings`` sightings), or the next unused id; objects found to be
+    pieces of one (``merge_split_objects``) end with one id in every frame. Returns new (H, W)
+    int32 label images.
+
+    Args:
+        frames_labels: per frame, (H, W) int segment labels (0 = none); frames_points: (H, W, 3)
+            world points (m); frames_rgb: (H, W, 3) uint8; frames_depth: (H, W) depth (m, 0 =
+            no reading), or None (all valid).
+    """
+    config = config or TrackingConfig()
+    tracked: list[np.ndarray] = []
+    sightings: dict[int, list[SegmentFeatures]] = {}  # oldest first
+    sighting_frames: dict[int, list[int]] = {}  # the frame index of each sighting
+    joined: dict[int, int] = {}  # absorbed id -> the id it joined (merge_split_objects)
+    next_id = 1
+    depths = frames_depth if frames_depth is not None else [None] * len(frames_labels)
+    for frame_index, (labels, points, rgb, depth) in enumerate(
+        zip(frames_labels, frames_points, frames_rgb, depths, strict=True)
+    ):
+        segments = segment_features(labels, points, rgb, depth)
+        assignment: dict[int, int] = {}
+        if sightings and segments:
+            segment_ids, known_ids = sorted(segments), sorted(sightings)
+            cost = np.full((len(segment_ids), len(known_ids)), np.inf)
+            for back in range(1, max(len(seen) for seen in sightings.values()) + 1):
+                # The back-th latest sighting of every object seen at least back times.
+                layer = {o: seen[-back] for o, seen in sightings.items() if len(seen) >= back}
+                _, layer_ids, layer_cost = match_costs(layer, segments, labels.size, config)
+                columns = np.searchsorted(known_ids, layer_ids)
+                cost[:, columns] = np.minimum(cost[:, columns], layer_cost)
+            for row, col in assign_segments(cost, config.max_match_cost, config.elimination_cost):
+                assignment[segment_ids[row]] = known_ids[col]
+            if config.larger_piece_takes_id:
+                assignment = prefer_larger_pieces(
+                    assignment, cost, segment_ids, known_ids, segments, config
+                )
+            if config.larger_object_takes_segment:
+                # Each object's largest recent view: its latest may be half hidden.
+                latest = {o: max(seen, key=lambda f: f.area) for o, seen in sightings.items()}
+                assignment = prefer_larger_objects(
+                    assignment, cost, segment_ids, known_ids, latest, config
+                )
+            if config.merge_split_pieces:
+                assignment, _ = merge_split_pieces(
+                    assignment,
+                    cost,
+                    segment_ids,
+                    known_ids,
+                    segments,
+                    sightings,
+                    points,
+                    config,
+                    depth,
+                )
+            if config.merge_split_objects:
+                for kept, absorbed in merge_split_objects(
+                    assignment,
+                    segments,
+                    sightings,
+                    sighting_frames,
+                    frames_points,
+                    depths,
+                    config,
+                ):
+                    joined[absorbed] = kept
+            if config.split_merged_segments:
+                assignment = split_merged_segments(
+                    assignment, segments, sightings, labels.shape, points, rgb, depth, config
+                )
+        relabelled = np.zeros(labels.size, dtype=np.int32)
+        for segment_id in sorted(segments):
+            object_id = assignment.get(segment_id)
+            if object_id is None:
+                object_id = next_id
+                next_id += 1
+            next_id = max(next_id, object_id + 1)
+            relabelled[segments[segment_id].pixels] = object_id
+            seen = sightings.setdefault(object_id, [])
+            seen.append(segments[segment_id])
+            del seen[: -config.max_sightings]
+            frames_seen = sighting_frames.setdefault(object_id, [])
+            frames_seen.append(frame_index)
+            del frames_seen[: -config.max_sightings]
+        tracked.append(relabelled.reshape(labels.shape))
+    if joined:
+        # Every frame shows a joined object under the id it finally joined (joins may chain).
+        final = np.arange(next_id, dtype=np.int32)
+        for absorbed in joined:
+            target = joined[absorbed]
+            while target in joined:
+                target = joined[target]
+            final[absorbed] = target
+        tracked = [final[labels] for labels in tracked]
+    return tracked
+
+
+def split_merged_objects(
+    tracked: list[np.ndarray],
+    frames_points: list[np.ndarray],
+    frames_rgb: list[np.ndarray],
+    frames_depth: list[np.ndarray],
+    frames_K: list[np.ndarray],
+    frames_world_from_camera: list[np.ndarray],
+    config: PerceptionConfig,
+) -> list[np.ndarray]:
+    """Split, in earlier frames, an object that a later frame shows to be two.
+
+    The converse of ``merge_split_objects``: frame 0 (before any push) often gives two
+    touching objects one segment, and when a push separates them the later frame's tracker
+    keeps the id for one and starts a new object for the other, whose frame-0 pixels then stay
+    under the wrong id for good. For an object ``z`` first seen in frame t and an object ``x``
+    seen in frames t-1 and t, the pixels of ``x`` in frame t-1 are followed into frame t
+    (``temporal.compare_frames`` with the frames swapped): those now seen as ``z`` in place,
+    or also those whose surface is gone (frame t sees through them), are the candidate part
+    ``g`` of ``z``. The split is made when both parts hold at least ``split_min_share`` of
+    ``x``'s pixels with depth (and ``split_min_px``), and it explains frame t better:
+    ``pair_cost(x_t, rest) + pair_cost(z_t, g)`` is below ``pair_cost(x_t, x_{t-1}) +
+    max_match_cost`` (``z`` as a new object) by more than ``split_margin``. Frames run from the
+    last back to the first, so a split carries back to frame 0 (``z`` is then first seen in
+    t-1). Pixels of ``x`` without depth go to the part of their nearest pixel with depth.
+
+    Args:
+        tracked: per frame, (H, W) int tracked labels (``track_segments``), not modified;
+            frames_points: (H, W, 3) world points (m); frames_rgb: (H, W, 3) uint8;
+            frames_depth: (H, W) depth (m, 0 = no reading); frames_K: (3, 3) intrinsics (px);
+            frames_world_from_camera: (4, 4) camera poses (world from OpenCV camera, m).
+
+    Returns:
+        (H, W) int32 label images (new arrays for the frames changed).
+    """
+    tracking = config.tracking
+    result = [np.asarray(labels, dtype=np.int32) for labels in tracked]  # copied on change
+    # Ids present in each frame (np.unique over whole images would cost more than the rest).
+    sizes = [np.bincount(labels.reshape(-1)) for labels in result]
+    present = [{int(i) for i in np.flatnonzero(size)} - {0} for size in sizes]
+    for t in range(len(result) - 1, 0, -1):
+        new_ids = sorted(
+            i for i in present[t].difference(*present[:t]) if sizes[t][i] >= tracking.split_min_px
+        )
+        if not new_ids:
+            continue
+        previous_ids = sorted(present[t - 1] & present[t])
+        # Frame t-1 against frame t: ARRIVED here means frame t's surface lies behind (gone).
+        change = compare_frames(
+            frames_points[t - 1],
+            frames_depth[t - 1],
+            frames_depth[t],
+            result[t],
+            frames_K[t],
+            frames_world_from_camera[t],
+            config,
+            K=frames_K[t - 1],
+            world_from_camera=frames_world_from_camera[t - 1],
+        )
+        state, label_in_t = change.state.reshape(-1), change.previous_label.reshape(-1)
+        segments_t = segment_features(result[t], frames_points[t], frames_rgb[t], frames_depth[t])
+        previous_flat = result[t - 1].reshape(-1)
+        with_depth = frames_depth[t - 1].reshape(-1) > 0
+        best: tuple[float, int, int, np.ndarray] | None = None
+        previous_frame = (frames_points[t - 1], frames_rgb[t - 1], frames_depth[t - 1])
+        for new_id in new_ids:
+            z_t = segments_t[new_id]
+            for object_id in previous_ids:
+                pixels = np.flatnonzero((previous_flat == object_id) & with_depth)
+                least = max(tracking.split_min_share * pixels.size, tracking.split_min_px)
+                seen_as_new = (state[pixels] == UNCHANGED) & (label_in_t[pixels] == new_id)
+                gone = state[pixels] == ARRIVED
+                parts = [
+                    part
+                    for part in (seen_as_new | gone, seen_as_new)
+                    if least <= np.count_nonzero(part) <= pixels.size - least
+                ]
+                if not parts:
+                    continue
+                x_t = segments_t[object_id]
+                unsplit = (
+                    pair_cost(x_t, _pixel_features(pixels, *previous_frame), tracking)
+                    + tracking.max_match_cost
+                )
+                for part in parts:
+                    split = pair_cost(
+                        x_t, _pixel_features(pixels[~part], *previous_frame), tracking
+                    ) + pair_cost(z_t, _pixel_features(pixels[part], *previous_frame), tracking)
+                    gain = unsplit - split
+                    if gain > tracking.split_margin and (best is None or gain > best[0]):
+                        best = (gain, object_id, new_id, pixels[part])
+            if best is not None:
+                _, object_id, new_id, part = best
+                result[t - 1] = _relabel_part(result[t - 1], object_id, new_id, part, with_depth)
+                present[t - 1].add(new_id)
+                sizes[t - 1] = np.bincount(result[t - 1].reshape(-1))
+                previous_flat = result[t - 1].reshape(-1)
+                best = None
+    return result
+
+
+def _pixel_features(
+    pixels: np.ndarray, points: np.ndarray, rgb: np.ndarray, depth_m: np.ndarray | None
+) -> SegmentFeatures:
+    """``segment_features`` of one set of (N,) sorted flat pixel indices of a frame with
+    (H, W, 3) world points (m), (H, W, 3) uint8 colours and (H, W) depth (m, 0 = no reading;
+    None = all valid). The pixels may include some without depth (labels cover depth holes):
+    colour from all of them, geometry from those with a reading (all when none has one)."""
+    histogram = np.bincount(
+        _colour_codes(rgb.reshape(-1, 3)[pixels]), minlength=COLOUR_BINS**3
+    ).astype(np.float64)
+    if depth_m is None:
+        readings = np.ones(pixels.size)
+    else:
+        readings = depth_m.reshape(-1)[pixels].astype(np.float64)
+    with_depth = readings > 0
+    geometry = pixels[with_depth] if with_depth.any() else pixels
+    points_k = points.reshape(-1, 3)[geometry]
+    area = float((readings[with_depth] ** 2).sum())
+    return SegmentFeatures(
+        pixels,
+        points_k.mean(axis=0),
+        histogram / histogram.sum(),
+        float(np.percentile(points_k[:, 2], 98)),
+        area if area > 0 else float(pixels.size),
+    )
+
+
+def _relabel_part(
+    labels: np.ndarray, object_id: int, new_id: int, part: np.ndarray, with_depth: np.ndarray
+) -> np.ndarray:
+    """(H, W) labels with the (N,) flat pixels ``part`` of ``object_id`` given ``new_id``, and
+    its pixels without depth ((H*W,) ``with_depth`` False) given the id of the nearest of its
+    pixels with depth."""
+    from scipy.ndimage import distance_transform_edt
+
+    result = labels.copy()
+    flat = result.reshape(-1)
+    flat[part] = new_id
+    holes = (flat == object_id) & ~with_depth
+    if holes.any():
+        seeds = ((flat == object_id) | (flat == new_id)) & with_depth
+        _, (rows, cols) = distance_transform_edt(~seeds.reshape(labels.shape), return_indices=True)
+        nearest = flat[rows.reshape(-1) * labels.shape[1] + cols.reshape(-1)]
+        flat[holes] = nearest[holes]
+    return result
