@@ -42,7 +42,7 @@ from ipr_shapes.perception.temporal import (
     consistent_walls,
     supervoxel_anchors,
 )
-from ipr_shapes.perception.types import FrameSegmentation, KnownPlane, Supervoxels
+from ipr_shapes.perception.types import DepthView, FrameSegmentation, KnownPlane, Supervoxels
 from ipr_shapes.scene import Frame, Push, Pusher
 
 
@@ -138,6 +138,7 @@ def segment_frame(
         normals=wall_normals @ frame.world_from_camera[:3, :3].T.astype(np.float32),
         viewpoint=frame.world_from_camera[:3, 3],
         edge_on=previous is None,
+        view=DepthView(frame.depth_m, frame.K, frame.world_from_camera),
     )
     if frame_change is not None and config.temporal.walls and previous[1].planes:
         walls = consistent_walls(
