@@ -319,6 +319,9 @@ class SegmentationConfig:
         singular_weight: graph weight of convex edges that fail the sanity check.
         dense_eigen_limit: components up to this many supervoxels use a dense eigensolver
             (faster than the sparse one on small graphs).
+        eigen_tolerance: relative accuracy of the sparse eigensolver (ARPACK ``tol``; 0 =
+            machine precision); the embedding only feeds k-means, which needs no more
+            (docs/experiments/2026-11-26-bin-walls.md).
         eigengap_floor: noise floor added to the eigenvalues of L_sym before their ratios are
             compared (the eigengap is the largest ratio of consecutive eigenvalues), so that
             near-zero eigenvalues do not make huge ratios.
@@ -341,6 +344,7 @@ class SegmentationConfig:
         "concave_weight": _NON_NEGATIVE,
         "singular_weight": _NON_NEGATIVE,
         "dense_eigen_limit": _COUNT,
+        "eigen_tolerance": _NON_NEGATIVE,
         "eigengap_floor": _POSITIVE,
         "kmeans_restarts": _AT_LEAST_ONE,
         "max_objects": _AT_LEAST_ONE,
@@ -358,6 +362,7 @@ class SegmentationConfig:
     concave_weight: float = 0.001
     singular_weight: float = 0.001
     dense_eigen_limit: int = 400
+    eigen_tolerance: float = 1e-6
     eigengap_floor: float = 0.001
     kmeans_restarts: int = 4
     max_objects: int = 20

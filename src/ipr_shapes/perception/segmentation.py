@@ -522,7 +522,9 @@ def spectral_clusters(weights: csr_matrix, config: PerceptionConfig) -> np.ndarr
         normalised = csr_matrix(weights.multiply(scale[:, None]).multiply(scale[None, :]))
         # Largest eigenvalues of D^-1/2 W D^-1/2 are the smallest of L_sym (1 - value).
         start = np.full(m, 1.0 / np.sqrt(m))
-        values, vectors = eigsh(normalised, k=wanted, which="LA", v0=start)
+        values, vectors = eigsh(
+            normalised, k=wanted, which="LA", v0=start, tol=config.segmentation.eigen_tolerance
+        )
         values = 1.0 - values
         order = np.argsort(values)
         values, vectors = values[order], vectors[:, order]
