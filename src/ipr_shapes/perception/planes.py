@@ -492,14 +492,14 @@ def _select_walls(candidates: list[dict], config: PerceptionConfig) -> list[dict
 
     - *standing, long and thin*: its lowest inliers (2nd percentile) are within
       ``walls.support_gap_m`` of the support, or its face below them is hidden behind nearer
-      surfaces (``bottom_hidden``, ``_bottom_hidden``), it is at least ``walls.min_length_m`` long, and it
-      is not capped: at most ``walls.max_capped_fraction`` of its length has an upward-facing
-      surface at the height of its top just behind it, past a wall's thickness (a box has its
-      top face there; a wall has a 1-1.5 cm rim and then nothing at that height, or objects at
-      other heights); and it looks like one solid face with a straight top: its top edge at its
-      top height over ``walls.min_top_agreement`` of its length and its face (bottom to top)
-      ``walls.min_face_fill`` covered (the faces of a row of objects standing side by side line
-      up in a plane but are of many heights, with gaps between them);
+      surfaces (``bottom_hidden``, ``_bottom_hidden``), it is at least ``walls.min_length_m``
+      long, and it is not capped: at most ``walls.max_capped_fraction`` of its length has an
+      upward-facing surface at the height of its top just behind it, past a wall's thickness (a
+      box has its top face there; a wall has a 1-1.5 cm rim and then nothing at that height, or
+      objects at other heights); and it looks like one solid face with a straight top: its top
+      edge at its top height over ``walls.min_top_agreement`` of its length and its face (bottom
+      to top) ``walls.min_face_fill`` covered (the faces of a row of objects standing side by
+      side line up in a plane but are of many heights, with gaps between them);
 
     or be part of a container frame with another candidate, at least one of the two standing:
 
@@ -693,7 +693,8 @@ def _wall_cues(
     ``frame``: the frame's ``DepthView`` and the support; with it, a column whose highest inlier
     is where the image ends (a point 1 cm above it on the plane projects outside the image) does
     not tell the wall's top, and the top and its agreement are measured over the other
-    columns (the far wall of a bin often leaves the image at the top).
+    columns (the far wall of a bin often leaves the image at the top); and upward-facing points
+    more than 2 cm below that top are not the wall's rim (the tops of objects against its face).
     """
     threshold = config.planes.threshold_m
     along = _cross_rows(up, normal[None])[0]
