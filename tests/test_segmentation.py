@@ -455,6 +455,42 @@ def test_a_wall_cut_in_two_by_an_object_in_front_of_it_is_static_on_both_sides()
     assert np.mean(only_the_run.labels[short_run] > 0) > 0.5
 
 
+def test_a_far_wall_whose_foot_is_hidden_behind_the_contents_is_a_wall():
+    # A bin's far wall (30 x 12 cm) behind a row of 6 cm boxes pressed against it: from the
+    # front the boxes hide its lower half, so its lowest visible points are 6 cm above the
+    # table. Below them its plane is hidden by the nearer boxes, not seen through: it stands.
+    thin = 0.015
+    wall = box(0.0, 0.1, (0.30, thin, 0.12))
+    row = [box(x, 0.05, (0.1, 0.07, 0.06)) for x in (-0.1, 0.0, 0.1)]
+    eye = look_at(np.array([0.0, -0.55, 0.5]), np.array([0.0, 0.02, 0.0]))
+    frame = render(eye, [wall, *row])
+    points = frame.points_world()
+    face = (frame.depth_m > 0) & (np.abs(points[..., 1] - (0.1 - thin / 2)) < 0.004)
+    face &= points[..., 2] > 0.01
+    assert face.sum() > 1000
+    assert np.percentile(points[face][:, 2], 2) > 0.055  # its foot is hidden
+    result = segment_frame(frame)
+    walls = [p for p in result.planes if p.kind == "wall"]
+    assert len(walls) == 1 and abs(walls[0].normal[1]) > 0.99
+    assert np.mean(result.labels[face] > 0) < 0.02  # no object covers the wall
+    assert len(result.segment_ids) >= 1  # the boxes stay
+    # Without the visibility test its foot is not on the table: the wall becomes an object.
+    no_test = segment_frame(frame, config=PerceptionConfig(walls=WallsConfig(hidden_bottom=False)))
+    assert not any(p.kind == "wall" for p in no_test.planes)
+    assert np.mean(no_test.labels[face] > 0) > 0.5
+    # The same face held 6 cm above the table (a board on a box set back behind it), nothing
+    # in front: under it the camera sees the box beyond its plane, so it does not stand on the
+    # table and is no wall (a looser support gap would take it).
+    lifted = [
+        (np.array([0.0, 0.1, 0.09]), np.array([0.15, thin / 2, 0.03]), 0.0),
+        box(0.0, 0.14, (0.30, 0.06, 0.06)),
+    ]
+    lifted_frame = render(eye, lifted)
+    assert not any(p.kind == "wall" for p in segment_frame(lifted_frame).planes)
+    loose = PerceptionConfig(walls=WallsConfig(support_gap_m=0.07))
+    assert any(p.kind == "wall" for p in segment_frame(lifted_frame, config=loose).planes)
+
+
 def test_label_holes_take_the_label_of_the_nearest_valid_pixel_within_reach():
     rng = np.random.default_rng(5)
     labels = np.zeros((40, 50), np.int32)

@@ -124,6 +124,13 @@ class WallsConfig:
             taller than a rim and lower than the scene's tall objects).
         support_gap_m: a wall's lowest visible points are within this (m) of the support (a
             wall stands on the table; a box's face lifted by what is below it does not).
+        hidden_bottom: a wall whose lowest visible points are higher also stands when the
+            plane's face below them is hidden from the camera by nearer surfaces (the far wall
+            of a bin behind its contents), not seen through (``planes._bottom_hidden``).
+        frame_cut_tops: columns of a wall's face whose top edge is the image's border do not
+            tell its top (``planes._wall_cues``).
+        max_seen_through: ... at most this share of the face points probed below the visible
+            bottom may show a surface beyond the plane (depth noise at the occluders' edges).
         max_thickness_m: walls are thinner than this (m); it is also the slab removed behind a
             wall's visible face (its hidden inner face).
         cap_depth_m: how far (m) behind a wall's face points "capping" it (a box's top) count.
@@ -164,6 +171,7 @@ class WallsConfig:
         "max_gap_m": _NON_NEGATIVE,
         ("min_height_m", "max_height_m"): Pair(_NON_NEGATIVE),
         "support_gap_m": _NON_NEGATIVE,
+        "max_seen_through": _SHARE,
         "max_thickness_m": _POSITIVE,
         "cap_depth_m": _NON_NEGATIVE,
         "max_capped_fraction": _SHARE,
@@ -190,6 +198,9 @@ class WallsConfig:
     min_height_m: float = 0.05
     max_height_m: float = 0.25
     support_gap_m: float = 0.03
+    hidden_bottom: bool = True
+    max_seen_through: float = 0.05
+    frame_cut_tops: bool = True
     max_thickness_m: float = 0.018
     cap_depth_m: float = 0.10
     max_capped_fraction: float = 0.5
@@ -308,6 +319,9 @@ class SegmentationConfig:
         singular_weight: graph weight of convex edges that fail the sanity check.
         dense_eigen_limit: components up to this many supervoxels use a dense eigensolver
             (faster than the sparse one on small graphs).
+        eigen_tolerance: relative accuracy of the sparse eigensolver (ARPACK ``tol``; 0 =
+            machine precision); the embedding only feeds k-means, which needs no more
+            (docs/experiments/2026-11-26-bin-walls.md).
         eigengap_floor: noise floor added to the eigenvalues of L_sym before their ratios are
             compared (the eigengap is the largest ratio of consecutive eigenvalues), so that
             near-zero eigenvalues do not make huge ratios.
@@ -330,6 +344,7 @@ class SegmentationConfig:
         "concave_weight": _NON_NEGATIVE,
         "singular_weight": _NON_NEGATIVE,
         "dense_eigen_limit": _COUNT,
+        "eigen_tolerance": _NON_NEGATIVE,
         "eigengap_floor": _POSITIVE,
         "kmeans_restarts": _AT_LEAST_ONE,
         "max_objects": _AT_LEAST_ONE,
@@ -347,6 +362,7 @@ class SegmentationConfig:
     concave_weight: float = 0.001
     singular_weight: float = 0.001
     dense_eigen_limit: int = 400
+    eigen_tolerance: float = 1e-6
     eigengap_floor: float = 0.001
     kmeans_restarts: int = 4
     max_objects: int = 20

@@ -14,7 +14,7 @@ from ipr_shapes.geometry.planes import Plane, fit_plane_ransac
 from ipr_shapes.geometry.support import SupportChoiceConfig, choose_support
 from ipr_shapes.perception import kernels
 from ipr_shapes.perception.config import PerceptionConfig
-from ipr_shapes.perception.types import KnownPlane
+from ipr_shapes.perception.types import DepthView, KnownPlane
 
 
 def find_known_planes(
@@ -235,6 +235,7 @@ def find_walls(
     normals: np.ndarray | None,
     viewpoint: np.ndarray,
     edge_on: bool = True,
+    view: DepthView | None = None,
 ) -> tuple[KnownPlane, ...]:
     """Walls of containers and drawer fronts among (N, 3) world points (m) above ``support``.
 
@@ -246,7 +247,10 @@ def find_walls(
     Vertical planes are extracted one after the other by RANSAC (``walls.iterations``), at most
     ``walls.max_candidates`` of them; after each, the points of its slab (the face and a wall's
     thickness behind it) that face its way leave the pool so that the same wall is not found
-    twice. Candidates are accepted by the rules of ``_select_walls``. A wall's normal points to
+    twice. Candidates are accepted by the rules of ``_select_walls``; with ``view`` (the frame's
+    depth image and pose) and ``walls.hidden_bottom``, a candidate whose lowest visible points
+    are above ``walls.support_gap_m`` still stands on the support when its face below them is
+    hidden by nearer surfaces (``_bottom_hidden``). A wall's normal points to
     the side the camera sees; its ``thickness_m`` is the depth of the static slab behind the
     visible face (``static_geometry_mask``), estimated from its rim. Objects pressed against a
     wall or lying across its rim lose those pixels with it. A lone wall must also have a
@@ -306,7 +310,18 @@ def find_walls(
         normal, offset = plane
         if normal @ viewpoint + offset < 0:  # face the camera
             normal, offset = -normal, -offset
-        cues = _wall_cues(points, normals, height, normal, offset, up, config, unknown, normals_up)
+        cues = _wall_cues(
+            points,
+            normals,
+            height,
+            normal,
+            offset,
+            up,
+            config,
+            unknown,
+            normals_up,
+            frame=None if view is None or not config.walls.frame_cut_tops else (view, support),
+        )
         if cues is not None:
             candidates.append(cues)
         # Surfaces crossing the slab stay in the pool (compiled: ``kernels``).
@@ -322,6 +337,10 @@ def find_walls(
             _FACING_COS,
             normals is not None,
         )
+    if view is not None and config.walls.hidden_bottom:
+        for cues in candidates:
+            if cues["bottom"] > config.walls.support_gap_m:
+                cues["bottom_hidden"] = _bottom_hidden(cues, support, view, config)
     walls = _select_walls(candidates, config)
     if edge_on and config.walls.complete_corners:
         walls += _edge_on_walls(points, normals, height, walls, up, viewpoint, config)
@@ -472,14 +491,15 @@ def _select_walls(candidates: list[dict], config: PerceptionConfig) -> list[dict
     and then either stand alone as a wall:
 
     - *standing, long and thin*: its lowest inliers (2nd percentile) are within
-      ``walls.support_gap_m`` of the support, it is at least ``walls.min_length_m`` long, and it
-      is not capped: at most ``walls.max_capped_fraction`` of its length has an upward-facing
-      surface at the height of its top just behind it, past a wall's thickness (a box has its
-      top face there; a wall has a 1-1.5 cm rim and then nothing at that height, or objects at
-      other heights); and it looks like one solid face with a straight top: its top edge at its
-      top height over ``walls.min_top_agreement`` of its length and its face (bottom to top)
-      ``walls.min_face_fill`` covered (the faces of a row of objects standing side by side line
-      up in a plane but are of many heights, with gaps between them);
+      ``walls.support_gap_m`` of the support, or its face below them is hidden behind nearer
+      surfaces (``bottom_hidden``, ``_bottom_hidden``), it is at least ``walls.min_length_m``
+      long, and it is not capped: at most ``walls.max_capped_fraction`` of its length has an
+      upward-facing surface at the height of its top just behind it, past a wall's thickness (a
+      box has its top face there; a wall has a 1-1.5 cm rim and then nothing at that height, or
+      objects at other heights); and it looks like one solid face with a straight top: its top
+      edge at its top height over ``walls.min_top_agreement`` of its length and its face (bottom
+      to top) ``walls.min_face_fill`` covered (the faces of a row of objects standing side by
+      side line up in a plane but are of many heights, with gaps between them);
 
     or be part of a container frame with another candidate, at least one of the two standing:
 
@@ -506,7 +526,7 @@ def _select_walls(candidates: list[dict], config: PerceptionConfig) -> list[dict
         and c["length"] >= config.walls.partner_min_length_m
     ]
     for c in basic:
-        c["standing"] = c["bottom"] <= config.walls.support_gap_m
+        c["standing"] = c["bottom"] <= config.walls.support_gap_m or c.get("bottom_hidden", False)
     accepted = {
         i
         for i, c in enumerate(basic)
@@ -655,6 +675,7 @@ def _wall_cues(
     unknown: np.ndarray | None = None,
     normals_up: np.ndarray | None = None,
     edge_on: bool = False,
+    frame: tuple[DepthView, KnownPlane] | None = None,
 ) -> dict | None:
     """Measurements of the vertical plane (normal, offset) used by ``_select_walls``.
 
@@ -669,6 +690,11 @@ def _wall_cues(
     rejects anyway; most candidates are faces of objects, and this spares their costly cues).
     ``edge_on``: every point in the plane's slab is an inlier whatever its normal (a wall seen
     along its length shows its rim, which faces up; ``_edge_on_walls``).
+    ``frame``: the frame's ``DepthView`` and the support; with it, a column whose highest inlier
+    is where the image ends (a point 1 cm above it on the plane projects outside the image) does
+    not tell the wall's top, and the top and its agreement are measured over the other
+    columns (the far wall of a bin often leaves the image at the top); and upward-facing points
+    more than 2 cm below that top are not the wall's rim (the tops of objects against its face).
     """
     threshold = config.planes.threshold_m
     along = _cross_rows(up, normal[None])[0]
@@ -720,7 +746,21 @@ def _wall_cues(
     column = ((s_in[in_run] - s_lo) / 0.02).astype(np.int64)
     column_top = np.full(int(column.max()) + 1, -np.inf)
     np.maximum.at(column_top, column, heights)
-    top = float(np.median(column_top[np.isfinite(column_top)]))
+    column_bottom = np.full(column_top.size, np.inf)
+    np.minimum.at(column_bottom, column, heights)
+    column_s = s_lo + 0.02 * (np.arange(column_top.size) + 0.5)
+    telling = np.isfinite(column_top)  # columns whose highest inlier is the wall's top edge
+    if frame is not None:
+        view, support = frame
+        above_top = (
+            -offset * normal
+            + np.outer(column_s[telling], along)
+            + np.outer(column_top[telling] + 0.01 - support.offset, up)
+        )
+        cut = ~view.in_image(above_top)
+        if not cut.all():
+            telling[np.flatnonzero(telling)[cut]] = False
+    top = float(np.median(column_top[telling]))
     thickness = config.walls.max_thickness_m
     if normals is not None:
         rim = (
@@ -732,7 +772,11 @@ def _wall_cues(
             & (h > config.walls.min_height_m - threshold)
         )
         rim_bins = np.unique(((s[rim] - s_lo) / 0.02).astype(np.int64))
-        if rim_bins.size >= max(2, 0.2 * np.isfinite(column_top).sum()):
+        # A face does not rise above its own rim: upward-facing points well below the top
+        # edges of the face (objects' tops against it) are not the rim.
+        if rim_bins.size >= max(2, 0.2 * np.isfinite(column_top).sum()) and (
+            frame is None or float(np.median(h[rim])) >= top - 0.02
+        ):
             top = float(np.median(h[rim]))
             # Thickness: twice the median depth of the rim behind the face (its points spread
             # evenly over the thickness; objects just behind the wall barely move the median),
@@ -746,8 +790,7 @@ def _wall_cues(
     bottom = float(np.percentile(heights, 2))
     # Straight top and solid face (the lone-wall rule): the share of columns whose top edge is
     # at the wall's top, and of the face's 2 cm cells from its bottom to its top with inliers.
-    seen = np.isfinite(column_top)
-    top_agreement = float(np.mean(np.abs(column_top[seen] - top) < 0.02))
+    top_agreement = float(np.mean(np.abs(column_top[telling] - top) < 0.02))
     floor = max(bottom, 0.0)
     rows = max(1, int(np.ceil((top - floor) / 0.02)))
     on_face = heights <= top
@@ -818,4 +861,50 @@ def _wall_cues(
         "extra_points": pts[on_plane][extra],
         # The extent along the wall of the run and the extra runs (m).
         "span": span,
+        # The run's 2 cm columns: centres along the wall and lowest inlier heights (m; inf =
+        # no inlier), for ``_bottom_hidden``.
+        "column_s": column_s,
+        "column_bottom": column_bottom,
+        "column_top": column_top,
     }
+
+
+def _bottom_hidden(
+    cues: dict, support: KnownPlane, view: DepthView, config: PerceptionConfig
+) -> bool:
+    """Whether the face of the candidate wall ``cues`` (``_wall_cues``) below its lowest visible
+    points is hidden from the camera by nearer surfaces, rather than seen through.
+
+    The far wall of a bin shows only its upper part: the bin's contents, nearer to the camera,
+    hide its foot, so its lowest visible points are the contents' top edge, not the support.
+    The plane is vertical (perpendicular to the support) by construction; below each 2 cm
+    column of its run, points of its face are probed every 1 cm from the column's lowest inlier
+    down to the support and projected into ``view``. Where the wall goes on down, each probe's
+    pixel shows the wall itself or a surface in front of it; where the face ends in the air (a
+    box's face lifted by what is under it, set back), the pixel shows a surface beyond the
+    plane. The bottom is hidden when at most ``walls.max_seen_through`` of the probes with a
+    reading show a surface more than ``planes.threshold_m`` beyond the plane (and some probe
+    has a reading). Probes outside the image or without a reading tell nothing.
+    """
+    bottoms = cues["column_bottom"]
+    seen = np.isfinite(bottoms) & (bottoms > config.walls.support_gap_m)
+    if not seen.any():
+        return False
+    step = 0.01
+    counts = np.floor(bottoms[seen] / step).astype(np.int64)  # probes below each bottom
+    column = np.repeat(np.flatnonzero(seen), counts)
+    first = np.repeat(np.cumsum(counts) - counts, counts)
+    heights = np.repeat(bottoms[seen], counts) - step * (np.arange(column.size) - first + 1)
+    heights = np.maximum(heights, 0.0)
+    up = support.normal
+    probes = (
+        -cues["offset"] * cues["normal"]
+        + np.outer(cues["column_s"][column], cues["along"])
+        + np.outer(heights - support.offset, up)
+    )
+    predicted, observed = view.depths(probes)
+    known = np.isfinite(observed)
+    if not known.any():
+        return False
+    beyond = observed[known] > predicted[known] + config.planes.threshold_m
+    return bool(np.mean(beyond) <= config.walls.max_seen_through)

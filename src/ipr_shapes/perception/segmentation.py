@@ -42,7 +42,7 @@ from ipr_shapes.perception.temporal import (
     consistent_walls,
     supervoxel_anchors,
 )
-from ipr_shapes.perception.types import FrameSegmentation, KnownPlane, Supervoxels
+from ipr_shapes.perception.types import DepthView, FrameSegmentation, KnownPlane, Supervoxels
 from ipr_shapes.scene import Frame, Push, Pusher
 
 
@@ -138,6 +138,7 @@ def segment_frame(
         normals=wall_normals @ frame.world_from_camera[:3, :3].T.astype(np.float32),
         viewpoint=frame.world_from_camera[:3, 3],
         edge_on=previous is None,
+        view=DepthView(frame.depth_m, frame.K, frame.world_from_camera),
     )
     if frame_change is not None and config.temporal.walls and previous[1].planes:
         walls = consistent_walls(
@@ -521,7 +522,9 @@ def spectral_clusters(weights: csr_matrix, config: PerceptionConfig) -> np.ndarr
         normalised = csr_matrix(weights.multiply(scale[:, None]).multiply(scale[None, :]))
         # Largest eigenvalues of D^-1/2 W D^-1/2 are the smallest of L_sym (1 - value).
         start = np.full(m, 1.0 / np.sqrt(m))
-        values, vectors = eigsh(normalised, k=wanted, which="LA", v0=start)
+        values, vectors = eigsh(
+            normalised, k=wanted, which="LA", v0=start, tol=config.segmentation.eigen_tolerance
+        )
         values = 1.0 - values
         order = np.argsort(values)
         values, vectors = values[order], vectors[:, order]

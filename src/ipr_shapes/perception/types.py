@@ -39,6 +39,50 @@ class KnownPlane:
 
 
 @dataclass(frozen=True, eq=False)
+class DepthView:
+    """What one camera saw: its depth image and pose, to ask whether a 3D point is visible.
+
+    Attributes:
+        depth_m: (H, W) float depth along the optical axis (m), 0 = no reading.
+        K: (3, 3) intrinsics (pixels).
+        world_from_camera: (4, 4) OpenCV camera frame to world frame (m).
+    """
+
+    depth_m: np.ndarray
+    K: np.ndarray
+    world_from_camera: np.ndarray
+
+    def depths(self, points_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(N,) depth of (N, 3) world points from the camera and (N,) depth observed at the
+        pixel each projects to (m); NaN observed where the point is behind the camera, outside
+        the image or its pixel has no reading (nothing known)."""
+        z, observed, _ = self._look(points_world)
+        return z, observed
+
+    def in_image(self, points_world: np.ndarray) -> np.ndarray:
+        """(N,) bool: the (N, 3) world points are in front of the camera and project into the
+        image."""
+        return self._look(points_world)[2]
+
+    def _look(self, points_world: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``depths`` and ``in_image`` together."""
+        rotation, centre = self.world_from_camera[:3, :3], self.world_from_camera[:3, 3]
+        camera = (np.asarray(points_world, dtype=np.float64) - centre) @ rotation
+        z = camera[:, 2]
+        observed = np.full(len(camera), np.nan)
+        front = z > 1e-6
+        u = np.full(len(camera), -1, dtype=np.int64)
+        v = np.full(len(camera), -1, dtype=np.int64)
+        u[front] = np.round(self.K[0, 0] * camera[front, 0] / z[front] + self.K[0, 2])
+        v[front] = np.round(self.K[1, 1] * camera[front, 1] / z[front] + self.K[1, 2])
+        height, width = self.depth_m.shape
+        inside = front & (u >= 0) & (u < width) & (v >= 0) & (v < height)
+        reading = self.depth_m[v[inside], u[inside]].astype(np.float64)
+        observed[np.flatnonzero(inside)[reading > 0]] = reading[reading > 0]
+        return z, observed, inside
+
+
+@dataclass(frozen=True, eq=False)
 class Supervoxels:
     """Small surface patches of one frame (paper Sec. III-A), the nodes of the segmentation graph.
 
