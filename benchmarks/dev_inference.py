@@ -1,7 +1,9 @@
 """Development measurements of IPR inference (docs/DESIGN_NOTES.md, "Physics and inference";
 figures in docs/experiments/2026-11-21-likelihood-and-weighting.md and the files beside it).
 
-Usage: ``python -m benchmarks.dev_inference [--seed 9100] [--count 10] [--samples 40]``.
+Usage: ``python -m benchmarks.dev_inference [--seed 9100] [--count 10] [--samples 40]
+[--config FILE]`` (``--config``: a TOML whose ``[inference]`` section replaces the default
+``InferenceConfig``'s settings).
 
 Generates (or reuses) development dynamic scenes with ``ipr-shapes synth`` seeds from 9100 (never the
 benchmark suites), samples ``--samples`` joint models per scene with the full method in one
@@ -39,8 +41,9 @@ def _iou(a: np.ndarray, b: np.ndarray) -> float:
     return common / union if union else 0.0
 
 
-def measure_scene(path: Path, samples: int) -> dict:
-    """Samples of one scene and the IoU of every candidate of every matched object."""
+def measure_scene(path: Path, samples: int, config=None) -> dict:
+    """Samples of one scene and the IoU of every candidate of every matched object, under
+    ``config`` (an ``InferenceConfig``; None: the default)."""
     from scipy.optimize import linear_sum_assignment
 
     from ipr_shapes import voxels
@@ -55,7 +58,7 @@ def measure_scene(path: Path, samples: int) -> dict:
 
     scene = load_scene(path)
     perception = perceive_scene(scene)
-    config = InferenceConfig()
+    config = config or InferenceConfig()
     prepared = prepare_hypotheses(
         perception.objects[0], perception.free_space[0], perception.planes[0],
         rng=np.random.default_rng(0),
@@ -146,12 +149,22 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--count", type=int, default=10)
     parser.add_argument("--samples", type=int, default=40)
     parser.add_argument("--scenes", type=Path, default=Path("/tmp/ipr-dev-inference"))
+    parser.add_argument("--config", type=Path, help="a TOML configuration (ipr-shapes config show)")
     args = parser.parse_args(argv)
     from benchmarks.common import development_scenes
 
+    config = None
+    if args.config is not None:
+        from ipr_shapes.config import read_config
+        from ipr_shapes.errors import IprError
+
+        try:
+            config = read_config(args.config).inference
+        except IprError as error:
+            parser.exit(2, f"error: {error}\n")
     scenes = []
     for path in development_scenes(args.scenes, args.seed, args.count):
-        scenes.append(measure_scene(path, args.samples))
+        scenes.append(measure_scene(path, args.samples, config))
         print(f"{path.name}: {len(scenes[-1]['candidate_iou'])} matched objects", flush=True)
     rows = [
         ("Collision Checker", mean_over_truths(scenes, [s["checker"] for s in scenes])),

@@ -19,23 +19,34 @@ ladder (``benchmarks.replay``) runs this as its last rung, at the default ``Phys
 from __future__ import annotations
 
 import argparse
+import functools
 import sys
 from pathlib import Path
 
 import numpy as np
 
 
-def replay_errors(path: Path, friction: float, timestep_s: float) -> list[tuple[float, float]]:
-    """(simulated-motion error, true motion) in metres per (object, later frame) of one scene."""
+@functools.lru_cache(maxsize=4)
+def _support_and_walls(path: Path) -> tuple:
+    """The frame-0 planes perception finds in scene ``path`` (cached: several worlds replay
+    one scene)."""
+    from ipr_shapes.perception import perceive_scene
+    from ipr_shapes.scene import load_scene
+
+    return tuple(perceive_scene(load_scene(path)).planes[0])
+
+
+def replay_errors(path: Path, config) -> list[tuple[float, float]]:
+    """(simulated-motion error, true motion) in metres per (object, later frame) of one scene
+    replayed in ``ipr_shapes.physics``'s world with ``config`` (a ``PhysicsConfig``)."""
     import trimesh
 
-    from ipr_shapes.perception import perceive_scene
-    from ipr_shapes.physics import Body, PhysicsConfig, build_world
+    from ipr_shapes.physics import Body, build_world
     from ipr_shapes.scene import default_models_dir, load_ground_truth, load_model, load_scene
 
     scene = load_scene(path)
     truth = load_ground_truth(path)
-    perception = perceive_scene(scene)
+    planes = _support_and_walls(Path(path))
     world_from_camera = {f.index: f.world_from_camera for f in scene.frames}
     bodies, start_poses = [], []
     for entry in truth[0]:
@@ -45,8 +56,7 @@ def replay_errors(path: Path, friction: float, timestep_s: float) -> list[tuple[
         vertices = np.asarray(hull.vertices) @ pose[:3, :3].T + pose[:3, 3]
         bodies.append(Body(vertices, np.asarray(hull.faces)))
         start_poses.append(pose)
-    config = PhysicsConfig(friction=friction, timestep_s=timestep_s)
-    world = build_world(bodies, perception.planes[0], config, pusher=scene.pusher)
+    world = build_world(bodies, planes, config, pusher=scene.pusher)
     world.settle()
     settled = world.poses()
     rows = []
@@ -85,10 +95,12 @@ def main(argv: list[str] | None = None) -> int:
     if not (args.friction > 0 and args.timestep > 0 and args.count >= 1):
         parser.error("--friction and --timestep must be positive and --count at least 1")
     from benchmarks.common import development_scenes
+    from ipr_shapes.physics import PhysicsConfig
 
+    config = PhysicsConfig(friction=args.friction, timestep_s=args.timestep)
     rows = []
     for path in development_scenes(args.scenes, args.seed, args.count):
-        rows += replay_errors(path, args.friction, args.timestep)
+        rows += replay_errors(path, config)
     errors, motions = np.array(rows).reshape(-1, 2).T
     moved = motions > 0.005
     print(

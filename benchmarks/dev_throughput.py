@@ -4,9 +4,10 @@ stepping rate (docs/experiments/2026-11-26-sampling-throughput.md).
 Usage::
 
     python -m benchmarks.dev_throughput SCENE [SCENE ...] [--samples 20] [--workers 1]
+        [--config FILE]
 
-Per scene: perception, fusion and hypotheses as ``ipr-shapes infer`` runs them (default configuration,
-``ipr+action+uniform``), then ``--samples`` tree samples with their likelihoods in one run of
+Per scene: perception, fusion and hypotheses as ``ipr-shapes infer`` runs them (default configuration
+or ``--config``'s TOML, ``ipr+action+uniform``), then ``--samples`` tree samples with their likelihoods in one run of
 ``ipr_shapes.inference.run_samples``. Reported: CPU seconds of the sampling (``time.process_time``:
 the machine is shared, so wall time says little), the CPU seconds inside ``mujoco.mj_step``
 and the steps taken (MuJoCo's raw stepping rate is steps / stepping CPU; if sampling did
@@ -26,8 +27,9 @@ import time
 from pathlib import Path
 
 
-def measure(path: Path, samples: int, workers: int) -> dict:
-    """One scene's sampling throughput (module doc)."""
+def measure(path: Path, samples: int, workers: int, config=None) -> dict:
+    """One scene's sampling throughput (module doc) under ``config`` (a ``Config``; None: the
+    default)."""
     import mujoco
     import numpy as np
 
@@ -44,7 +46,7 @@ def measure(path: Path, samples: int, workers: int) -> dict:
     from ipr_shapes.scene import load_scene
 
     scene = load_scene(path)
-    config = Config()
+    config = config or Config()
     method = METHODS["ipr+action+uniform"]
     perception = perceive(scene, config)
     fused = fuse(scene, perception, method, config)
@@ -125,9 +127,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("scenes", type=Path, nargs="+", help="scene folders")
     parser.add_argument("--samples", type=int, default=20)
     parser.add_argument("--workers", type=int, default=1)
+    parser.add_argument("--config", type=Path, help="a TOML configuration (ipr-shapes config show)")
     args = parser.parse_args(argv)
+    config = None
+    if args.config is not None:
+        from ipr_shapes.config import read_config
+        from ipr_shapes.errors import IprError
+
+        try:
+            config = read_config(args.config)
+        except IprError as error:
+            parser.exit(2, f"error: {error}\n")
     for path in args.scenes:
-        print(json.dumps(measure(path, args.samples, args.workers)), flush=True)
+        print(json.dumps(measure(path, args.samples, args.workers, config)), flush=True)
     return 0
 
 

@@ -23,7 +23,10 @@ e. (d) with masses from ``PhysicsConfig().density_kg_m3`` times the mesh volume 
 f. (e) with each object's convex hull as its mesh (and mass from the hull's volume);
 g. the inference world as it is: ``ipr_shapes.physics.build_world`` with the true shapes' hulls at the
    true frame-0 poses on the support perception found, default ``PhysicsConfig``
-   (``benchmarks.dev_push_replay.replay_errors``).
+   (``benchmarks.dev_push_replay.replay_errors``);
+h. (g) with a stiff, position-controlled pusher (``ipr_shapes.physics.STIFF_PUSHER``: contact
+   time constant 4 ms at a 2 ms push step, where (g) has MuJoCo's soft default at 4 ms), the
+   generator's pusher contact: whether the pusher's model matters in the inference world.
 
 The generator's world is rebuilt by replaying the accepted attempt's draws up to the settled
 pile (the same order as ``ipr_shapes.synth.generate._attempt``), and the rebuilt pile is checked
@@ -68,6 +71,7 @@ RUNGS = {
     "e": "(d) + masses from a uniform density",
     "f": "(e) + convex hulls",
     "g": "the inference world as it is (`ipr_shapes.physics`)",
+    "h": "(g) + a stiff pusher at a 2 ms push step",
 }
 
 
@@ -280,19 +284,20 @@ def generator_rungs(scene: GeneratorScene, seed: int = 0) -> dict[str, list[tupl
     return rows
 
 
-def inference_rung(path: Path) -> list[tuple[float, float]]:
-    """Rung (g): the inference world as it is (default ``PhysicsConfig``)."""
+def inference_rung(path: Path, stiff_pusher: bool = False) -> list[tuple[float, float]]:
+    """Rung (g): the inference world as it is (default ``PhysicsConfig``); (h) with
+    ``stiff_pusher``."""
     from benchmarks.dev_push_replay import replay_errors
-    from ipr_shapes.physics import PhysicsConfig
+    from ipr_shapes.physics import STIFF_PUSHER, PhysicsConfig
 
-    physics = PhysicsConfig()
-    return replay_errors(path, physics.friction, physics.timestep_s)
+    return replay_errors(path, PhysicsConfig(**(STIFF_PUSHER if stiff_pusher else {})))
 
 
 def scene_ladder(path: Path) -> dict[str, list[tuple[float, float]]]:
     """Every rung of one scene: rung key -> (error, true motion) pairs (m)."""
     rows = generator_rungs(rebuild_generator_scene(Path(path)))
     rows["g"] = inference_rung(Path(path))
+    rows["h"] = inference_rung(Path(path), stiff_pusher=True)
     return rows
 
 
@@ -384,7 +389,7 @@ def section(scenes: Sequence[Path], suite: str = "ycb-dynamic") -> str:
         f"Figures over the (object, frame) pairs that truly moved more than {MOVED_M * 1e3:g} "
         f"mm (median true motion {motion:.1f} mm); `still objects`: the median error of the "
         "pairs that did not move. Rungs (c)-(f) start from the scene files' true poses at "
-        "rest; (g) from them on the support perception found, settled first. Errors far above "
+        "rest; (g) and (h) from them on the support perception found, settled first. Errors far above "
         "zero in (b) mean the pushes are chaotic: a likelihood must expect that much noise.",
         "",
         ladder_table(pooled),

@@ -8,6 +8,7 @@ import pytest
 from ipr_shapes.camera import look_at
 from ipr_shapes.perception.types import KnownPlane
 from ipr_shapes.physics import (
+    STIFF_PUSHER,
     Body,
     PhysicsConfig,
     build_world,
@@ -231,3 +232,52 @@ def test_a_push_into_a_world_at_rest_skips_the_steps_before_the_pusher_arrives()
     before = settled.data.time
     settled.push(miss)
     assert round((settled.data.time - before) / 0.004) <= 12  # one settle check
+
+
+def test_the_stiff_pusher_moves_a_box_as_far_as_it_travels_past_the_contact():
+    # The capsule (r = 1 cm) meets the box face after 9 cm of a 12 cm push at 5 cm/s: a
+    # position-controlled robot moves the box 3 cm. A force limit of 0.7 mm of intrusion
+    # stops a pusher that yields: MuJoCo's default sinks about 2.5 mm into the box, the stiff
+    # contact at a 4 ms step (its time constant raised to 8 ms) 0.9 mm, at its 2 ms push step
+    # 0.5 mm.
+    push = Push(0, 1, np.array([-0.15, 0.0, 0.03]), np.array([1.0, 0.0, 0.0]), 0.12, 0.05)
+    variants = {
+        "stiff": STIFF_PUSHER,
+        "stiff at 4 ms": {**STIFF_PUSHER, "push_timestep_s": 0.004},
+        "soft": {},
+    }
+    shifts = {}
+    for name, settings in variants.items():
+        for limit in (0.0007, 0.01):
+            config = PhysicsConfig(push_stop_intrusion_m=limit, **settings)
+            world = build_world([Body(*STANDING)], [SUPPORT], config, pusher=Pusher())
+            world.settle()
+            world.step(0.004)  # not known to be at rest: every push step simulated
+            before = world.data.time
+            travelled = world.push(push)
+            shifts[name, limit] = (travelled, world.poses()[0][0, 3])
+            # The pusher moves at its speed whatever the step; settling returns to its own.
+            pushing = world.data.time - before - travelled / push.speed_m_s
+            assert -1e-6 < pushing < config.settle_max_s + 0.05
+            assert world.model.opt.timestep == config.timestep_s
+    assert shifts["stiff", 0.0007][0] == pytest.approx(0.12)
+    assert shifts["stiff at 4 ms", 0.0007][0] < 0.11  # stopped by its own intrusion
+    assert shifts["soft", 0.0007][0] < 0.11
+    # Without the limit all travel the whole way; the stiff pusher's box ends within 0.5 mm
+    # of 3 cm, the soft one's over 1 mm short (the pusher sank into it).
+    assert shifts["stiff", 0.01][1] == pytest.approx(0.03, abs=0.0005)
+    assert shifts["soft", 0.01][1] < 0.029
+
+
+def test_pusher_contact_settings_reach_mujoco_and_are_checked():
+    config = PhysicsConfig(pusher_timeconst_s=0.006, pusher_dampratio=0.8)
+    world = build_world([Body(*STANDING)], [SUPPORT], config, pusher=Pusher())
+    geom = world.pusher_geom
+    assert world.model.geom_solref[geom] == pytest.approx([0.006, 0.8])
+    assert world.model.geom_solimp[geom][:3] == pytest.approx([0.9, 0.95, 0.001])
+    # Its contacts take the pusher's settings, not a mix with the object's.
+    assert world.model.geom_priority[geom] > world.model.geom_priority[world.shape_geoms[0]]
+    with pytest.raises(ValueError, match="pusher_impedance"):
+        PhysicsConfig(pusher_impedance=(0.99, 0.9))
+    with pytest.raises(ValueError, match="push_timestep_s"):
+        PhysicsConfig(push_timestep_s=0.0)

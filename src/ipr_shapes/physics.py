@@ -21,7 +21,9 @@ frame-0 poses (``ShapeHypothesis`` vertices/faces).
 - The pusher is a mocap capsule (``ipr_shapes.scene.Pusher``) parked far away; a push moves its centre
   from ``start_m`` along ``direction`` at ``speed_m_s`` for ``distance_m``, stopping early like a
   force-limited robot when it sinks more than ``push_stop_intrusion_m`` into an object (the
-  object is jammed), is withdrawn, and the objects settle.
+  object is jammed), is withdrawn, and the objects settle. The pusher's contacts have their own
+  stiffness (``PhysicsConfig.pusher_timeconst_s``, MuJoCo's soft default unless set), and the
+  push its own step (``push_timestep_s``).
 - A simulation *explodes* when a state becomes non-finite or MuJoCo reports an instability; an
   object is *flung* when it moves more than ``flung_m``. Callers score such a joint model (or
   such a stability candidate) as impossible.
@@ -39,7 +41,7 @@ import mujoco
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
-from ipr_shapes.checks import Checks, Interval, check_fields
+from ipr_shapes.checks import Checks, Interval, Pair, check_fields
 from ipr_shapes.perception.types import KnownPlane
 from ipr_shapes.rendering import (
     PinholeCamera,
@@ -77,6 +79,20 @@ class PhysicsConfig:
         stability_s: simulated time of a stability test (Algorithm 2's exploration step, s):
             long enough for an unsupported shape to fall ~0.4 m or start toppling visibly.
         push_stop_intrusion_m: the pusher stops when it sinks deeper than this into an object.
+        push_timestep_s: integration step while the pusher moves (s); settling after the
+            push returns to ``timestep_s``. MuJoCo raises a contact time constant below two
+            steps to two steps, so this bounds how stiff the pusher's contact can be.
+        pusher_timeconst_s: time constant (s) of the pusher's contacts (MuJoCo ``solref``'s
+            first number). 0.02 is MuJoCo's soft default, the objects' own; a position-
+            controlled robot's tool does not yield, which ``STIFF_PUSHER`` models (0.004 s at
+            a 0.002 s push step, the generator's). The default stays soft: the stiff pusher
+            did not bring replayed pushes closer to the data (docs/DESIGN_NOTES.md, "The
+            pusher's contact").
+        pusher_dampratio: damping ratio of the pusher's contacts (``solref``'s second number;
+            1: critically damped, no bounce).
+        pusher_impedance: (dmin, dmax) of the pusher's contacts (``solimp``, its width 1 mm as
+            MuJoCo's default): the share of the contact force the constraint delivers at zero
+            and at 1 mm of intrusion; nearer 1 yields less.
         push_max_s: longest simulated push (s): a slower push is replayed at distance /
             push_max_s, so that any push costs a bounded number of steps (the pusher is
             position-controlled and the objects quasi-static at either speed).
@@ -97,6 +113,10 @@ class PhysicsConfig:
         "settle_angular_rad_s": Interval(0, None),
         "stability_s": Interval(0, None, closed="neither"),
         "push_stop_intrusion_m": Interval(0, None),
+        "push_timestep_s": Interval(0, None, closed="neither"),
+        "pusher_timeconst_s": Interval(0, None, closed="neither"),
+        "pusher_dampratio": Interval(0, None, closed="neither"),
+        "pusher_impedance": Pair(Interval(0.0001, 0.9999)),
         "push_max_s": Interval(0, 600, closed="right"),
         "flung_m": Interval(0, None, closed="neither"),
         "support_half_extent_m": Interval(0, None, closed="neither"),
@@ -114,6 +134,10 @@ class PhysicsConfig:
     settle_angular_rad_s: float = 0.05
     stability_s: float = 0.3
     push_stop_intrusion_m: float = 0.01
+    push_timestep_s: float = 0.004
+    pusher_timeconst_s: float = 0.02
+    pusher_dampratio: float = 1.0
+    pusher_impedance: tuple[float, float] = (0.9, 0.95)
     push_max_s: float = 20.0
     flung_m: float = 0.5
     support_half_extent_m: float = 2.0
@@ -121,6 +145,15 @@ class PhysicsConfig:
 
     def __post_init__(self) -> None:
         check_fields(self)
+
+
+#: ``PhysicsConfig`` settings of a stiff, position-controlled pusher (the generator's pusher
+#: contact at its 2 ms step): ``dataclasses.replace(config, **STIFF_PUSHER)``.
+STIFF_PUSHER = {
+    "push_timestep_s": 0.002,
+    "pusher_timeconst_s": 0.004,
+    "pusher_impedance": (0.95, 0.99),
+}
 
 
 @dataclass(frozen=True, eq=False)
@@ -385,26 +418,32 @@ class World:
         direction = np.asarray(push.direction, float)
         data.mocap_pos[self.pusher_mocap] = start
         speed = max(push.speed_m_s, push.distance_m / config.push_max_s)
-        steps = max(1, int(np.ceil(push.distance_m / speed / config.timestep_s)))
-        step_m = config.timestep_s * speed
+        timestep = config.push_timestep_s
+        steps = max(1, int(np.ceil(push.distance_m / speed / timestep)))
+        step_m = timestep * speed
         skipped = self._steps_before_contact(start, direction, steps, step_m)
         travelled = min(skipped * step_m, push.distance_m)
         if skipped < steps:
             self.at_rest = False
-        for step in range(skipped + 1, steps + 1):
-            travelled = min(step * config.timestep_s * speed, push.distance_m)
-            data.mocap_pos[self.pusher_mocap] = start + direction * travelled
-            mujoco.mj_step(self.model, data)
-            if step % 25 == 0 and not self._check():
-                return travelled
-            count = data.ncon
-            if count:
-                touching = (data.contact.geom[:count] == self.pusher_geom).any(axis=1)
-                if touching.any() and -data.contact.dist[:count][touching].min() > (
-                    config.push_stop_intrusion_m
-                ):
-                    break
-        data.mocap_pos[self.pusher_mocap] = PUSHER_PARK_M
+        check_every = max(1, int(round(0.1 / timestep)))
+        self.model.opt.timestep = timestep
+        try:
+            for step in range(skipped + 1, steps + 1):
+                travelled = min(step * timestep * speed, push.distance_m)
+                data.mocap_pos[self.pusher_mocap] = start + direction * travelled
+                mujoco.mj_step(self.model, data)
+                if step % check_every == 0 and not self._check():
+                    return travelled
+                count = data.ncon
+                if count:
+                    touching = (data.contact.geom[:count] == self.pusher_geom).any(axis=1)
+                    if touching.any() and -data.contact.dist[:count][touching].min() > (
+                        config.push_stop_intrusion_m
+                    ):
+                        break
+        finally:
+            self.model.opt.timestep = config.timestep_s
+            data.mocap_pos[self.pusher_mocap] = PUSHER_PARK_M
         if self._check():
             self.settle()
         return travelled
@@ -588,6 +627,10 @@ def build_world(
             friction=friction,
             condim=6,
             group=HIDDEN_GROUP,
+            # A higher priority: the pusher's contacts take its solref/solimp, not a mix.
+            priority=1,
+            solref=[config.pusher_timeconst_s, config.pusher_dampratio],
+            solimp=[*config.pusher_impedance, 0.001, 0.5, 2.0],
         )
     names = []
     for number, camera in enumerate(cameras):
