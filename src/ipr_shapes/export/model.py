@@ -26,8 +26,8 @@ convex collision pieces (the support and the start poses: ``ipr_shapes.export.pl
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
 from collections.abc import Sequence
+from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np

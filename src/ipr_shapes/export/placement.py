@@ -163,7 +163,10 @@ def _settle_once(
     while steps < limit and not at_rest:
         mujoco.mj_step(model, data, check)
         steps += check
-        if not np.isfinite(data.qpos).all() or data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number:
+        if (
+            not np.isfinite(data.qpos).all()
+            or data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number
+        ):
             log.warning("the exported scene exploded while settling; exporting it unsettled")
             return objects, steps * float(model.opt.timestep), False, (np.inf, np.inf)
         history.append((data.xpos[bodies].copy(), data.xquat[bodies].copy()))
