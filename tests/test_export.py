@@ -365,7 +365,12 @@ def test_the_command_writes_the_default_folder_and_reports_it(result_dir, tmp_pa
     assert main(["export", str(result), "--format", "mjcf", "--density", "250"]) == 0
     out = capsys.readouterr().out
     assert str(result / "export" / "mjcf") in out and "1 objects as mjcf" in out
-    assert load_export_manifest(result / "export" / "mjcf")["density_kg_m3"] == 250.0
+    assert "settled in" in out
+    manifest = load_export_manifest(result / "export" / "mjcf")
+    assert manifest["density_kg_m3"] == 250.0 and manifest["settling"]["enabled"]
+    assert main(["export", str(result), "--format", "glb", "--no-settle"]) == 0
+    assert "not settled" in capsys.readouterr().out
+    assert not load_export_manifest(result / "export" / "glb")["settling"]["enabled"]
 
 
 def test_the_command_offers_every_format_and_collision_method():
