@@ -193,6 +193,39 @@ def test_objects_that_interpenetrate_are_separated(tmp_path):
     assert scene.objects[1].displacement_m[2] == pytest.approx(0.004, abs=3e-4)
 
 
+def test_an_object_that_cannot_rest_where_it_is_settles_and_its_move_is_recorded(tmp_path):
+    """A bar lying on a cube with its centre of mass beyond the cube's edge tips onto the
+    support while settling: exported where it came to rest (turned meshes, same body), with
+    its move recorded; unsettled it starts falling as soon as it is loaded."""
+    cube = trimesh.creation.box(extents=(0.02, 0.02, 0.02))
+    cube.apply_translation((0.0, 0.0, 0.01))
+    bar = trimesh.creation.box(extents=(0.10, 0.02, 0.02))
+    bar.apply_translation((0.035, 0.0, 0.03))  # 4.5 cm of its 10 beyond the edge: it leans
+    result = make_result(tmp_path / "result", [cube, bar])
+    raw = build_scene(result, UNSETTLED)
+    scene = build_scene(result)
+    assert scene.at_rest and scene.settle_s >= 2 * ExportConfig().settle_window_s
+    before, after = raw.objects[1], scene.objects[1]
+    assert after.rotation_deg > 10 and np.linalg.norm(after.displacement_m) > 0.005
+    assert after.position_m[2] < before.position_m[2] - 0.005  # fell towards the support
+    assert np.linalg.norm(scene.objects[0].displacement_m) < 0.003  # the cube stays
+    # The same body, turned: mass, moments, centre of mass at the origin, world-axes frame.
+    assert after.mass_kg == pytest.approx(before.mass_kg)
+    assert np.allclose(after.principal_moments_kg_m2, before.principal_moments_kg_m2)
+    solid = trimesh.util.concatenate(list(after.collision))
+    assert np.allclose(solid.center_mass, 0.0, atol=1e-9)
+    tensor = solid.moment_inertia * after.mass_kg / solid.mass
+    assert np.allclose(tensor, after.inertia_kg_m2, rtol=1e-6, atol=1e-12)
+    exported = export_result(result, tmp_path / "settled")
+    moved, turned = rest_motion(exported / "scene.xml")
+    assert moved.max() < 0.002 and turned.max() < 2.0
+    item = load_export_manifest(exported)["objects"][1]
+    assert item["rotation_deg"] == pytest.approx(after.rotation_deg, abs=1e-6)
+    unsettled = export_result(result, tmp_path / "unsettled", settle=False)
+    moved, turned = rest_motion(unsettled / "scene.xml")
+    assert moved.max() > 0.005 and turned.max() > 5.0
+
+
 def test_the_support_follows_objects_far_from_z0(tmp_path):
     box = trimesh.creation.box(extents=(0.04, 0.04, 0.04))
     box.apply_translation((0.0, 0.0, 0.75 + 0.02))  # on a table 75 cm up
