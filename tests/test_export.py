@@ -169,6 +169,11 @@ def test_bodies_have_the_mass_and_inertia_of_their_collision_pieces_at_the_densi
             assert piece.volume >= body.volume_m3 * 0.999  # the hull holds the surface
         # Lifted off the rounding of faces that touch (the stacked box: 1 + 2.7 mm), no more.
         assert np.linalg.norm(body.displacement_m) < 0.005
+    # At rest as separated: settling keeps those poses (a fresh start stayed put).
+    settled = build_scene(result_dir, ExportConfig(density_kg_m3=700.0))
+    assert settled.at_rest
+    for body, kept in zip(scene.objects, settled.objects, strict=True):
+        assert np.array_equal(body.position_m, kept.position_m) and kept.rotation_deg == 0.0
 
 
 def test_an_object_sunk_into_the_support_is_lifted_by_its_depth(tmp_path):

@@ -19,8 +19,9 @@ starts interpenetrating.
   MuJoCo, exactly as exported (collision pieces, masses, friction, timestep), until no
   object moved more than ``settle_distance_m`` or turned more than ``settle_angle_deg`` over
   the last ``settle_window_s`` (at least two windows, at most ``settle_max_s``; poses, not
-  speeds, because resting mesh contacts keep a jitter of a few mm/s that goes nowhere), and
-  the poses it came to rest in are
+  speeds, because resting mesh contacts keep a jitter of a few mm/s that goes nowhere); then
+  from those poses afresh (zero speeds, no contact history), until a fresh start stays within
+  those bounds all the way; the poses of that fresh start are
   exported: the meshes and the inertia are turned in the object frame, whose axes stay the
   world's. Each object's displacement and rotation are recorded (``displacement_m``,
   ``rotation_deg``; the manifest's ``settling``). This is a last resort, not a correction of
@@ -105,31 +106,34 @@ def settle(
     """The objects at the poses the scene settles in (module doc), the simulated time (s) and
     whether it came to rest within ``config.settle_max_s``.
 
-    Settled poses are loaded afresh (zero speeds, no contact history, the meshes turned) and
-    simulated again until a fresh start stays within the bounds: that is the scene a simulator
-    loads from the files, and its first steps are not the continuation of the settling run.
+    Each round starts afresh (zero speeds, no contact history, the meshes turned): the scene
+    a simulator loads from the files. The poses exported are those of the first round that
+    stayed within the bounds all the way (a scene at rest as the result put it keeps its
+    poses); a round that did not hands its end poses to the next.
     """
     start = tuple(objects)
     current = start
     seconds = 0.0
-    while seconds < config.settle_max_s - 1e-9:
-        settled, spent, at_rest, excursion = _settle_once(
+    at_rest = False
+    while not at_rest and seconds < config.settle_max_s - 1e-9:
+        settled, spent, quiet, farthest = _settle_once(
             current, support_z_m, config, config.settle_max_s - seconds
         )
         seconds += spent
-        if settled is current:  # exploded
-            return current, seconds, False
-        still = excursion[0] < config.settle_distance_m and excursion[1] < config.settle_angle_deg
-        current = settled
-        if at_rest and still:
+        if settled is current:  # exploded: keep the last poses
             break
-    else:
-        at_rest = False
+        at_rest = bool(
+            quiet
+            and farthest[0] < config.settle_distance_m
+            and farthest[1] < config.settle_angle_deg
+        )
+        if not at_rest:
+            current = settled
     total = tuple(
         replace(body, rotation_deg=_angle_deg(body.principal_axes @ first.principal_axes.T))
         for first, body in zip(start, current, strict=True)
     )
-    return total, seconds, bool(at_rest and still)
+    return total, seconds, at_rest
 
 
 def _angle_deg(rotation: np.ndarray) -> float:
