@@ -20,7 +20,7 @@ from ipr_shapes.errors import IprError
 from ipr_shapes.pipeline import infer, run_pipeline
 from ipr_shapes.progress import ProgressEvent
 from ipr_shapes.result import load_result
-from ipr_shapes.scene import load_scene
+from ipr_shapes.scene import frames_digest, load_scene
 
 
 def test_a_result_records_what_produced_it(scene_dir: Path, tmp_path: Path):
@@ -41,6 +41,7 @@ def test_a_result_records_what_produced_it(scene_dir: Path, tmp_path: Path):
     assert provenance["budget"] == {"time_budget_s": 60.0, "samples": None, "workers": None}
     assert provenance["scene"] == str(scene_dir.resolve())
     assert provenance["frames"] == [0, 1]
+    assert provenance["frames_digest"] == frames_digest(load_scene(scene_dir).frames)
     assert set(provenance["software"]) == {"python", "numpy", "mujoco"}
     assert provenance["created_utc"].endswith("+00:00")
     # The whole configuration is beside it, and is the one its digest names.

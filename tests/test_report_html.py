@@ -22,7 +22,7 @@ from ipr_shapes.errors import ResultError
 from ipr_shapes.perception.output import label_png, palette
 from ipr_shapes.report_html import REPORT_FILE, result_labels, write_report
 from ipr_shapes.result import load_occupancy, load_result, write_result
-from ipr_shapes.scene import load_scene
+from ipr_shapes.scene import frames_digest, load_scene
 
 BOX = ((-0.03, -0.03, 0.0), (0.03, 0.03, 0.03))  # the conftest scene's bump, metres
 
@@ -57,9 +57,11 @@ def _seen(scene_dir: Path) -> np.ndarray:
     return _sorted(frame.points_world()[labels == 5].astype(np.float32))
 
 
-def _result(scene_dir: Path, out: Path, shift=(0.0, 0.0, 0.0), labels=True) -> Path:
+def _result(
+    scene_dir: Path, out: Path, shift=(0.0, 0.0, 0.0), labels=True, recorded: dict | None = None
+) -> Path:
     """A result of the conftest scene: object 5 (the bump, two hypotheses), written in a world
-    frame moved by ``shift`` (m) from the scene's."""
+    frame moved by ``shift`` (m) from the scene's; ``recorded`` adds provenance keys."""
     scene = load_scene(scene_dir)
     moved = np.eye(4)
     moved[:3, 3] = shift
@@ -72,7 +74,8 @@ def _result(scene_dir: Path, out: Path, shift=(0.0, 0.0, 0.0), labels=True) -> P
         [(best, [(best, 0.7), (taller, 0.3)], 0.7)],
         {"segmentation": 1.5, "total": 2.0},
         {
-            "provenance": {"scene": str(scene_dir), "config_file": "config.toml", "seed": 3},
+            "provenance": {"scene": str(scene_dir), "config_file": "config.toml", "seed": 3}
+            | (recorded or {}),
             "objects_summary": [{"object_id": 5, "inference": "exact", "carved": False}],
         },
         extra_files={"config.toml": b"[inference]\nbudget_per_object_s = 1.75\n"}
@@ -237,6 +240,46 @@ def test_a_result_of_another_writer_needs_its_scene_named(scene_dir: Path, tmp_p
     data = _page_data(result / REPORT_FILE)
     assert data["provenance"] == {} and data["inference"] == {} and data["config_toml"] is None
     assert data["objects"][0]["id"] == 0 and data["objects"][0]["inference"] is None
+
+
+def test_report_finds_the_scene_its_result_records_and_refuses_another(
+    scene_dir: Path, tmp_path: Path, capsys
+):
+    """result.json records its scene's folder, frames and their digest (as ``ipr-shapes infer``
+    does, tests/test_provenance.py): ``ipr-shapes report RESULT`` uses that folder when it
+    holds those frames, ``--scene`` names a copy elsewhere, and a folder holding other
+    captures or lacking the frames is refused in one line naming the fix, nothing written."""
+    frames = load_scene(scene_dir).frames
+    recorded = {"frames": [0, 1], "frames_digest": frames_digest(frames)}
+    result = _result(scene_dir, tmp_path / "result", recorded=recorded)
+    copy = shutil.copytree(scene_dir, tmp_path / "copy")
+    assert main(["report", str(result)]) == 0  # the recorded folder
+    assert (result / REPORT_FILE).is_file()
+    assert main(["report", str(result), "--scene", str(copy), "-o", str(tmp_path / "a.html")]) == 0
+    # Another capture in the recorded folder: frame 1's depth changed.
+    depth = scene_dir / "depth" / "000001.png"
+    image = np.array(Image.open(depth))
+    image[image > 0] += 7
+    Image.fromarray(image).save(depth)
+    for scene in ([], ["--scene", str(scene_dir)]):
+        assert main(["report", str(result), *scene, "-o", str(tmp_path / "b.html")]) == 2
+        error = capsys.readouterr().err.strip()
+        assert "is not the scene" in error and "--scene" in error and len(error.splitlines()) == 1
+        assert not (tmp_path / "b.html").exists()
+    # A folder without the recorded frame 1.
+    shutil.rmtree(scene_dir)
+    cameras = json.loads((copy / "scene_camera.json").read_text())
+    lacking = shutil.copytree(copy, tmp_path / "lacking")
+    (lacking / "scene_camera.json").write_text(json.dumps({"0": cameras["0"]}))
+    for name in ("rgb", "depth"):
+        next((lacking / name).glob("000001.*")).unlink()
+    assert main(["report", str(result), "--scene", str(lacking)]) == 2
+    error = capsys.readouterr().err.strip()
+    assert "lacks frames [0, 1]" in error and "--scene" in error
+    # The recorded folder is gone: the error says to name where it is now.
+    assert main(["report", str(result)]) == 2
+    assert "is not there" in capsys.readouterr().err
+    assert main(["report", str(result), "--scene", str(copy), "-o", str(tmp_path / "c.html")]) == 0
 
 
 # --------------------------------------------------------------------------------------------

@@ -390,15 +390,25 @@ def _cmd_export(args: argparse.Namespace) -> int:
             format=args.format,
             density_kg_m3=args.density,
             collision=args.collision,
+            settle=not args.no_settle,
             overwrite=args.overwrite,
         )
     except ValueError as error:  # a bad --density, reported like any input error
         raise IprError(str(error)) from error
     manifest = load_export_manifest(out)
     files = ", ".join(manifest["files"]) or "meshes/"
+    settling = manifest["settling"]
+    settled = (
+        f"settled in {settling['simulated_s']:.1f} s simulated, objects moved up to "
+        f"{1000 * settling['max_displacement_m']:.0f} mm and {settling['max_rotation_deg']:.0f} deg"
+        + ("" if settling["at_rest"] else ", NOT at rest")
+        if settling["enabled"]
+        else "not settled"
+    )
     print(
         f"{out}: {len(manifest['objects'])} objects as {args.format} ({files}; "
-        f"{manifest['density_kg_m3']:g} kg/m^3, collision {manifest['collision_method']})"
+        f"{manifest['density_kg_m3']:g} kg/m^3, collision {manifest['collision_method']}; "
+        f"{settled})"
     )
     return 0
 
@@ -677,11 +687,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="export a result for robot stacks (MJCF, URDF, SDF, OBJ, GLB)",
         description="Write a result's objects as models robot software loads directly: per "
         "object a smooth closed surface rebuilt from its 5 mm voxels, in an object frame at "
-        "its centre of mass (axes as the world's), its pose, mass and inertia at a uniform "
-        "density, and convex collision pieces; the support plane and the objects as free "
-        "bodies (mjcf: scene.xml for MuJoCo; urdf: one per object, pybullet/MoveIt; sdf: "
-        "scene.sdf for Gazebo; obj: meshes only; glb: scene.glb for viewers). Every format "
-        "also writes export.json (poses, masses, inertias, volumes). See docs/FORMATS.md.",
+        "its centre of mass (axes as the world's), its pose, convex collision pieces and "
+        "their mass and inertia at a uniform density; the support plane and the objects as "
+        "free bodies (mjcf: scene.xml for MuJoCo; urdf: one per object, pybullet/MoveIt; sdf: "
+        "scene.sdf for Gazebo; obj: meshes only; glb: scene.glb for viewers), at the poses "
+        "the scene settles in when simulated in MuJoCo (inferred shapes are not a scene at "
+        "rest on their own; how far each object moved is recorded). Every format also writes "
+        "export.json (poses, moves, masses, inertias, volumes). See docs/FORMATS.md.",
     )
     export.add_argument("result", metavar="RESULT")
     export.add_argument("--format", required=True, choices=["mjcf", "urdf", "sdf", "obj", "glb"])
@@ -699,6 +711,12 @@ def build_parser() -> argparse.ArgumentParser:
         choices=["hull", "coacd"],
         help="collision geometry: the convex hull (default) or CoACD's convex decomposition "
         "(needs the coacd package; seconds to minutes per object)",
+    )
+    export.add_argument(
+        "--no-settle",
+        action="store_true",
+        help="export the result's poses (only separated where objects interpenetrate) "
+        "instead of the poses the scene settles in",
     )
     export.add_argument("--overwrite", action="store_true", help="replace DIR if it exists")
     export.set_defaults(handler=_cmd_export)

@@ -57,7 +57,7 @@ from ipr_shapes.progress import ProgressCallback, report
 from ipr_shapes.report import completion_png
 from ipr_shapes.report_html import result_label_files, result_labels, write_report_into
 from ipr_shapes.result import write_posterior_result
-from ipr_shapes.scene import Scene, load_scene
+from ipr_shapes.scene import Scene, frames_digest, load_scene
 
 log = logging.getLogger(__name__)
 
@@ -553,7 +553,8 @@ def run_provenance(
 ) -> dict:
     """What produced a result (``result.json``'s ``provenance``; docs/FORMATS.md): the ipr
     version, method, seed, budget as asked (None: the default), the configuration's digest and
-    file, the scene and the frames read, the main libraries' versions and the time."""
+    file, the scene, the frames read and their digest, the main libraries' versions and the
+    time."""
     import mujoco
 
     import ipr_shapes
@@ -573,6 +574,7 @@ def run_provenance(
         # A scene from arrays (ipr_shapes.from_arrays) has a name, not a folder.
         "scene": str(Path(scene.path).resolve() if Path(scene.path).exists() else scene.path),
         "frames": [int(frame.index) for frame in scene.frames],
+        "frames_digest": frames_digest(scene.frames),
         "software": {
             "python": platform.python_version(),
             "numpy": np.__version__,

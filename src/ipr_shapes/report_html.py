@@ -37,10 +37,10 @@ from typing import Any
 
 import numpy as np
 
-from ipr_shapes.errors import IprError, ResultError
+from ipr_shapes.errors import IprError, ResultError, SceneError
 from ipr_shapes.perception.output import label_png, overlay_image, palette
 from ipr_shapes.result import Result, load_result
-from ipr_shapes.scene import Frame, Scene, load_scene
+from ipr_shapes.scene import Frame, Scene, frames_digest, load_scene
 
 REPORT_FILE = "report.html"
 #: The result's label images: per frame, 0 = nothing of the result, k = result object k.
@@ -391,15 +391,18 @@ def write_report_into(folder: Path, scene: Scene) -> Path:
 
 
 def scene_of_result(result: Result, scene_path: Path | str | None = None, up_camera=None):
-    """The scene a result was made from: ``scene_path``, else the one its provenance names;
-    IprError (one line, with the fix) when there is none or it is gone."""
+    """The scene a result was made from: ``scene_path``, else the folder its provenance names;
+    read on the frames its provenance lists (all when it lists none). IprError (one line,
+    with the fix) when it names none, the folder is gone, or the folder's frames are not the
+    ones the result was made from (missing, or another ``frames_digest``)."""
+    provenance = result.extra.get("provenance")
+    provenance = provenance if isinstance(provenance, dict) else {}
+    source = result.path / "result.json"
     if scene_path is None:
-        provenance = result.extra.get("provenance")
-        named = provenance.get("scene") if isinstance(provenance, dict) else None
+        named = provenance.get("scene")
         if not isinstance(named, str) or not named:
             raise IprError(
-                f"{result.path / 'result.json'}: names no scene (no provenance) "
-                "(fix: pass the scene with --scene SCENE)"
+                f"{source}: names no scene (no provenance) (fix: pass the scene with --scene SCENE)"
             )
         scene_path = Path(named)
         if not scene_path.is_dir():
@@ -407,7 +410,26 @@ def scene_of_result(result: Result, scene_path: Path | str | None = None, up_cam
                 f"{scene_path}: the scene of result {result.path} is not there "
                 "(fix: pass where it is now with --scene SCENE)"
             )
-    return load_scene(scene_path, up_camera=up_camera)
+    listed = provenance.get("frames")
+    frames = None
+    if isinstance(listed, list) and listed and all(type(i) is int and i >= 0 for i in listed):
+        frames = listed
+    mismatch = (
+        f"{scene_path}: is not the scene result {result.path} was made from"
+        " ({}) (fix: pass the scene it was made from with --scene SCENE)"
+    )
+    try:
+        scene = load_scene(scene_path, up_camera=up_camera, frames=frames)
+    except SceneError as error:
+        if frames is None or "chosen frames" not in error.problem:
+            raise
+        raise IprError(
+            mismatch.format(f"it lacks frames {frames} the result was made from")
+        ) from None
+    recorded = provenance.get("frames_digest")
+    if isinstance(recorded, str) and recorded != frames_digest(scene.frames):
+        raise IprError(mismatch.format(f"its frames differ from the ones {source} records"))
+    return scene
 
 
 def write_report(

@@ -177,6 +177,20 @@ class ObjectPose:
 # Reading helpers
 
 
+def frames_digest(frames: Sequence[Frame]) -> str:
+    """A fingerprint of the frames read (ids, colour and depth pixels, intrinsics): equal for
+    the same captures wherever the folder is, so a result can tell its scene from another
+    (``result.json``'s ``provenance.frames_digest``). 16 hex digits of SHA-256."""
+    import hashlib
+
+    digest = hashlib.sha256()
+    for frame in frames:
+        digest.update(str(int(frame.index)).encode())
+        for array in (frame.rgb, frame.depth_m, frame.K):
+            digest.update(np.ascontiguousarray(array).tobytes())
+    return digest.hexdigest()[:16]
+
+
 def file_kind(path: Path) -> str | None:
     """None when ``path`` is a regular file (through symlinks), else what it is instead:
     "missing", "a folder", "a named pipe (FIFO)", "a symlink loop", ... (for error messages;

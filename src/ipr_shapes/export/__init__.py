@@ -3,10 +3,10 @@
 
 Per object (``ipr_shapes.export.model``): a smooth closed surface rebuilt from the result's 5 mm voxel
 shape (``ipr_shapes.export.surface``), in an object frame at its centre of mass with the world's
-axes; its pose; its mass and inertia at a uniform density (400 kg/m^3 by default, the
-inference's); convex collision pieces (its convex hull, or CoACD's decomposition). The scene
+axes; its pose; convex collision pieces (its convex hull, or CoACD's decomposition) and
+their mass and inertia at a uniform density (400 kg/m^3 by default, the inference's). The scene
 (``ipr_shapes.export.placement``): the support plane and the objects' start poses, separated where
-the rounding made them interpenetrate. Files and frames: ``ipr_shapes.export.formats`` and
+they interpenetrate, then settled in MuJoCo. Files and frames: ``ipr_shapes.export.formats`` and
 docs/FORMATS.md.
 
     from ipr_shapes.export import export_result
@@ -106,13 +106,15 @@ def export_result(
     *,
     density_kg_m3: float | None = None,
     collision: str | None = None,
+    settle: bool | None = None,
     config: ExportConfig | None = None,
     overwrite: bool = False,
 ) -> Path:
     """Export the result folder ``result_path`` as ``format`` (``FORMATS``) into ``out_dir``
     (default ``RESULT/export/<format>``); returns ``out_dir``.
 
-    ``density_kg_m3`` and ``collision`` (``"hull"`` or ``"coacd"``) override ``config``'s.
+    ``density_kg_m3``, ``collision`` (``"hull"`` or ``"coacd"``) and ``settle`` override
+    ``config``'s.
     The folder is written beside its place and renamed into it, so it is either complete or
     absent. Raises ValueError for a bad argument, ResultError for a bad result or an output
     folder that exists (without ``overwrite``) or would replace the result, IprError when the
@@ -126,6 +128,8 @@ def export_result(
         changes["density_kg_m3"] = density_kg_m3
     if collision is not None:
         changes["collision"] = collision
+    if settle is not None:
+        changes["settle"] = bool(settle)
     config = dataclasses.replace(config, **changes)  # ValueError for a bad value
     source = Path(result_path)
     target = Path(out_dir) if out_dir is not None else default_out_dir(source, format)

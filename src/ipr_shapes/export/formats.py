@@ -271,6 +271,7 @@ def manifest(
                 "quaternion_xyzw": [0.0, 0.0, 0.0, 1.0],
                 "world_from_object": body.world_from_object.tolist(),
                 "displacement_m": body.displacement_m.tolist(),
+                "rotation_deg": body.rotation_deg,
                 "mass_kg": body.mass_kg,
                 "inertia_kg_m2": body.inertia_kg_m2.tolist(),
                 "principal_moments_kg_m2": body.principal_moments_kg_m2.tolist(),
@@ -305,6 +306,15 @@ def manifest(
             "source": scene.support_source,
         },
         "max_penetration_m": scene.max_penetration_m,
+        "settling": {
+            "enabled": config.settle,
+            "simulated_s": scene.settle_s,
+            "at_rest": scene.at_rest,
+            "max_displacement_m": max(
+                (float(np.linalg.norm(body.displacement_m)) for body in scene.objects), default=0.0
+            ),
+            "max_rotation_deg": max((body.rotation_deg for body in scene.objects), default=0.0),
+        },
         "objects": objects,
         "timing_s": timing_s,
     }
