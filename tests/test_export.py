@@ -241,6 +241,120 @@ def test_the_support_follows_objects_far_from_z0(tmp_path):
     assert given.support_z_m == 0.7 and given.support_source == "given"
 
 
+#: A wall slab 1 cm thick at x in [0.05, 0.06], 20 cm wide and 20 cm high, on the support.
+WALL = np.array(
+    [[x, y, z] for x in (0.05, 0.06) for y in (-0.1, 0.1) for z in (0.0, 0.2)], dtype=float
+)
+
+
+def leaning_board() -> trimesh.Trimesh:
+    """A 1 x 6 x 15 cm board leaning 10 degrees towards +x, its foot on the support and its top
+    edge 0.5 mm short of ``WALL``: it rests on the wall, and topples without it."""
+    board = trimesh.creation.box(extents=(0.01, 0.06, 0.15))
+    board.apply_transform(trimesh.transformations.rotation_matrix(np.radians(10), (0, 1, 0)))
+    low = board.bounds[0]
+    board.apply_translation((0.0495 - board.bounds[1][0], 0.0, -low[2]))
+    return board
+
+
+def result_with_walls(path: Path, meshes: list, walls: list) -> Path:
+    return write_result(
+        path,
+        "collision-checker",
+        np.eye(4),
+        [(mesh, []) for mesh in meshes],
+        extra={"walls": walls},
+    )
+
+
+def test_the_walls_a_result_records_are_exported_and_hold_what_leans_on_them(tmp_path):
+    """A board leaning on a wall the result records stays where it is in every simulated
+    export; the same board in a result without walls topples while settling."""
+    walled = result_with_walls(
+        tmp_path / "walled", [leaning_board()], [{"vertices_m": WALL.tolist()}]
+    )
+    scene = build_scene(walled)
+    assert len(scene.walls) == 1 and np.allclose(scene.walls[0], WALL)
+    board = scene.objects[0]
+    assert np.linalg.norm(board.displacement_m) < 0.003 and board.rotation_deg < 2.0
+    exported = export_result(walled, tmp_path / "mjcf")
+    model = mujoco.MjModel.from_xml_path(str(exported / "scene.xml"))
+    assert model.geom("wall_0").bodyid == 0  # static: part of the world body
+    moved, turned = rest_motion(exported / "scene.xml")
+    assert moved.max() < 0.002 and turned.max() < 2.0
+    manifest = load_export_manifest(exported)
+    assert np.allclose(manifest["walls"][0]["vertices_m"], WALL)
+    wall_obj = trimesh.load(exported / manifest["walls"][0]["mesh"], force="mesh")
+    assert wall_obj.is_watertight and wall_obj.volume == pytest.approx(0.01 * 0.2 * 0.2)
+    urdf = export_result(walled, tmp_path / "urdf", format="urdf")
+    assert (urdf / "walls.urdf").is_file()
+    sdf = (export_result(walled, tmp_path / "sdf", format="sdf") / "scene.sdf").read_text()
+    assert 'model name="walls"' in sdf and "meshes/wall_0.obj" in sdf
+    glb = trimesh.load(export_result(walled, tmp_path / "glb", format="glb") / "scene.glb")
+    assert "wall_0" in glb.graph.nodes
+    bare = build_scene(make_result(tmp_path / "bare", [leaning_board()]))
+    assert bare.walls == () and bare.objects[0].rotation_deg > 20.0
+
+
+def test_an_object_pressed_into_a_wall_is_moved_out_of_it(tmp_path):
+    box = trimesh.creation.box(extents=(0.04, 0.04, 0.04))
+    box.apply_translation((0.05 - 0.02 + 0.003, 0.0, 0.02))  # 3 mm into the wall
+    scene = build_scene(
+        result_with_walls(tmp_path / "result", [box], [{"vertices_m": WALL.tolist()}]),
+        UNSETTLED,
+    )
+    assert scene.objects[0].displacement_m[0] == pytest.approx(-0.003, abs=3e-4)
+    assert abs(scene.objects[0].displacement_m[2]) < 1e-4
+
+
+@pytest.mark.slow
+def test_a_run_on_a_container_records_its_walls_and_the_export_has_them(tmp_path):
+    """``ipr-shapes infer`` on a generated container writes the walls the physics simulated
+    (``result.json``'s ``walls``, each inside the generator's wall box), and the export
+    carries them as static geometry."""
+    from ipr_shapes.synth import SynthConfig, generate_scene
+
+    scene = generate_scene(
+        tmp_path / "scenes",
+        kind="static",
+        seed=4242,
+        arrangement="container",
+        config=SynthConfig(width=320, height=240, write_preview=False),
+    )
+    out = tmp_path / "result"
+    assert main(["infer", str(scene), "-o", str(out), "--method", "collision-checker"]) == 0
+    recorded = json.loads((out / "result.json").read_text())["walls"]
+    truth = json.loads((scene / "synth.json").read_text())["support"]["walls"]
+    assert len(recorded) >= 2
+    for wall in recorded:
+        vertices = np.array(wall["vertices_m"])
+        assert any(
+            (np.abs(vertices - box["centre_m"]) <= np.array(box["half_size_m"]) + 0.03).all()
+            for box in truth
+        ), vertices
+    exported = export_result(out, tmp_path / "mjcf")
+    model = mujoco.MjModel.from_xml_path(str(exported / "scene.xml"))
+    assert all(model.geom(f"wall_{k}").bodyid == 0 for k in range(len(recorded)))
+
+
+@pytest.mark.parametrize(
+    "walls, words",
+    [
+        ("a wall", "'walls' must be a list"),
+        ([{"vertices_m": [[0, 0, 0]] * 3}], "at least 4"),
+        ([{"vertices_m": (WALL * 1000).tolist()}], "more than 100 m"),
+        ([{"vertices_m": WALL[WALL[:, 0] == 0.05].tolist()}], "flat"),
+    ],
+)
+def test_malformed_walls_are_refused_in_one_line(tmp_path, capsys, walls, words):
+    box = trimesh.creation.box(extents=(0.04, 0.04, 0.04))
+    box.apply_translation((0.0, 0.0, 0.02))
+    result = result_with_walls(tmp_path / "result", [box], walls)
+    out = tmp_path / "out"
+    assert_refused(capsys, ["export", str(result), "--format", "mjcf", "-o", str(out)], words)
+    assert not out.exists()
+
+
 # --------------------------------------------------------------------------------------------
 # Each format in its engine or reader
 
@@ -625,6 +739,8 @@ def test_every_object_of_real_inferred_results_stays_at_rest_in_the_export(
         out = export_result(result, tmp_path / result.name, format="mjcf")
         manifest = load_export_manifest(out)
         assert manifest["settling"]["enabled"] and manifest["settling"]["at_rest"], result
+        recorded = json.loads((result / "result.json").read_text())["walls"]
+        assert len(manifest["walls"]) == len(recorded)  # the walls the physics simulated
         moved, turned = rest_motion(out / "scene.xml")
         assert len(moved) == len(manifest["objects"])
         assert moved.max() < 0.005 and turned.max() < 5.0, (result.name, moved, turned)

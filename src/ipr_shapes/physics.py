@@ -737,16 +737,22 @@ def resting_drop(
     return max(lowest, 0.0)
 
 
-def wall_boxes(planes: Sequence[KnownPlane], config: PhysicsConfig) -> list[np.ndarray]:
-    """(2, 3) axis-aligned boxes (m, world) of the walls' slabs as ``build_world`` makes them."""
-    boxes = []
+def wall_slabs(planes: Sequence[KnownPlane], config: PhysicsConfig) -> list[np.ndarray]:
+    """(2P, 3) vertices (m, world) of each wall's convex slab as ``build_world`` makes it (walls
+    with a degenerate outline left out): the static geometry a result records for exports."""
+    slabs = []
     for plane in planes:
         if plane.kind != "wall":
             continue
         slab = _wall_slab(plane, config.wall_min_thickness_m)
         if slab is not None:
-            boxes.append(np.stack([slab.min(axis=0), slab.max(axis=0)]))
-    return boxes
+            slabs.append(slab)
+    return slabs
+
+
+def wall_boxes(planes: Sequence[KnownPlane], config: PhysicsConfig) -> list[np.ndarray]:
+    """(2, 3) axis-aligned boxes (m, world) of the walls' slabs as ``build_world`` makes them."""
+    return [np.stack([slab.min(axis=0), slab.max(axis=0)]) for slab in wall_slabs(planes, config)]
 
 
 def decimated_camera(

@@ -52,6 +52,7 @@ from ipr_shapes.methods import DEFAULT_METHOD, Method, get_method
 from ipr_shapes.perception import Perception, check_objects_found, perceive_scene
 from ipr_shapes.perception.occlusion import join_first_frame_pieces
 from ipr_shapes.perception.types import PartialObject
+from ipr_shapes.physics import wall_slabs
 from ipr_shapes.products import ObjectPosterior, RunSummary, StageTimings
 from ipr_shapes.progress import ProgressCallback, report
 from ipr_shapes.report import completion_png
@@ -517,6 +518,11 @@ def save_result(result: PipelineResult, out_dir: Path | str, *, overwrite: bool 
         scene, config, method=result.method, seed=run.seed,
         time_budget_s=run.time_budget_s, workers=run.workers, samples=run.samples,
     )  # fmt: skip
+    # The walls as the physics simulated them, for exports (docs/FORMATS.md, "walls").
+    extra["walls"] = [
+        {"vertices_m": np.round(slab, 6).tolist()}
+        for slab in wall_slabs(result.perception.planes[0], config.inference.physics)
+    ] if result.perception.planes else []  # fmt: skip
     # The segmentation with the result's ids, and report.html made from the written result
     # before it is renamed into place (one atomic step with the rest).
     labels = result_labels(

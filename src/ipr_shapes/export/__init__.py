@@ -5,8 +5,9 @@ Per object (``ipr_shapes.export.model``): a smooth closed surface rebuilt from t
 shape (``ipr_shapes.export.surface``), in an object frame at its centre of mass with the world's
 axes; its pose; convex collision pieces (its convex hull, or CoACD's decomposition) and
 their mass and inertia at a uniform density (400 kg/m^3 by default, the inference's). The scene
-(``ipr_shapes.export.placement``): the support plane and the objects' start poses, separated where
-they interpenetrate, then settled in MuJoCo. Files and frames: ``ipr_shapes.export.formats`` and
+(``ipr_shapes.export.placement``): the support plane, the walls the result records (static convex
+slabs) and the objects' start poses, separated where they interpenetrate, then settled in
+MuJoCo. Files and frames: ``ipr_shapes.export.formats`` and
 docs/FORMATS.md.
 
     from ipr_shapes.export import export_result
@@ -19,6 +20,8 @@ import dataclasses
 import logging
 import time
 from pathlib import Path
+
+import numpy as np
 
 from ipr_shapes.atomic import staged_directory, write_json
 from ipr_shapes.errors import IprError, ResultError
@@ -96,7 +99,50 @@ def build_scene(result: Result | Path | str, config: ExportConfig | None = None)
             body.timing_s["collision"],
         )
         bodies.append(body)
-    return scene_bodies(bodies, config)
+    return scene_bodies(bodies, config, walls=result_walls(result))
+
+
+#: Walls farther than this from the world origin (m) are taken for a unit error.
+MAX_WALL_REACH_M = 100.0
+
+
+def result_walls(result: Result) -> tuple[np.ndarray, ...]:
+    """The walls a result records (``result.json``'s ``walls``: per wall the (V, 3) vertices, m,
+    world frame, of the convex slab the inference simulated); () when it records none (results
+    from before, or from other tools). ResultError names a malformed entry."""
+    raw = result.extra.get("walls", [])
+    where = result.path / "result.json"
+    if not isinstance(raw, list):
+        raise ResultError(where, f"'walls' must be a list, got {type(raw).__name__}")
+    walls = []
+    for k, entry in enumerate(raw):
+        vertices = entry.get("vertices_m") if isinstance(entry, dict) else None
+        try:
+            array = np.asarray(vertices, dtype=np.float64)
+        except (TypeError, ValueError):
+            array = np.zeros((0,))
+        if array.ndim != 2 or array.shape[1:] != (3,) or len(array) < 4:
+            raise ResultError(
+                where,
+                f"walls[{k}].vertices_m must be a list of at least 4 [x, y, z] points",
+                "write each wall's slab vertices in metres, or leave 'walls' out",
+            )
+        if not np.isfinite(array).all() or np.abs(array).max() > MAX_WALL_REACH_M:
+            raise ResultError(
+                where,
+                f"walls[{k}].vertices_m holds a non-finite value or a point more than "
+                f"{MAX_WALL_REACH_M:g} m from the origin",
+                "write the vertices in metres in the result's world frame",
+            )
+        spread = np.linalg.svd(array - array.mean(axis=0), compute_uv=False)
+        if spread[-1] < 1e-6:
+            raise ResultError(
+                where,
+                f"walls[{k}] is flat or a line (its vertices enclose no volume)",
+                "give the slab's back face too (the wall's thickness)",
+            )
+        walls.append(array)
+    return tuple(walls)
 
 
 def export_result(

@@ -7,15 +7,20 @@ object its pose, mass, inertia, volumes and files). Besides it:
 - ``urdf``: ``object_<id>.urdf`` per object (one link: inertial, visual surface, collision
   pieces; URDF has no world pose, see the manifest) and ``meshes/``. Each carries MuJoCo's
   ``<mujoco><compiler discardvisual="false" fusestatic="false"/></mujoco>`` extension, which
-  other readers ignore, so that MuJoCo keeps the visual mesh and the link.
-- ``sdf``: ``scene.sdf`` (SDF 1.7 world: a static support plane model and one model per
-  object at its pose) and ``object_<id>.sdf`` (the model alone, at the origin), ``meshes/``.
-- ``obj``: ``meshes/`` only (surfaces and collision pieces, object frames).
-- ``glb``: ``scene.glb``, one node per object (its surface, coloured) at its pose; the
-  scene's root node turns the z-up world into glTF's y-up (glTF x, y, z = world x, z, -y).
+  other readers ignore, so that MuJoCo keeps the visual mesh and the link. With walls,
+  ``walls.urdf``: one massless link holding every wall's slab in world coordinates (load it
+  with a fixed base).
+- ``sdf``: ``scene.sdf`` (SDF 1.7 world: a static support plane model, a static ``walls``
+  model when the result has walls, and one model per object at its pose) and
+  ``object_<id>.sdf`` (the model alone, at the origin), ``meshes/``.
+- ``obj``: ``meshes/`` only (surfaces and collision pieces, object frames; walls, world).
+- ``glb``: ``scene.glb``, one node per object (its surface, coloured) at its pose and one per
+  wall; the scene's root node turns the z-up world into glTF's y-up (glTF x, y, z = world x,
+  z, -y).
 
 Meshes are Wavefront OBJ in metres, in each object's frame: ``meshes/object_<id>.obj`` (the
-smooth surface, with vertex normals) and ``meshes/object_<id>_collision_<n>.obj`` (convex).
+smooth surface, with vertex normals) and ``meshes/object_<id>_collision_<n>.obj`` (convex);
+each wall's convex slab in the world frame: ``meshes/wall_<k>.obj``.
 Mesh paths in URDF and SDF are relative to the file that names them.
 """
 
@@ -36,7 +41,10 @@ from ipr_shapes.export.mjcf import (
     mjcf_document,
     number,
     numbers,
+    obj_bytes,
     surface_file,
+    wall_file,
+    wall_mesh,
 )
 from ipr_shapes.export.model import ExportConfig, ObjectBody
 from ipr_shapes.export.placement import SceneBodies
@@ -65,11 +73,13 @@ def write_meshes(folder: Path, scene: SceneBodies) -> None:
     (folder / MESH_DIR).mkdir(parents=True, exist_ok=True)
     for name, content in mesh_files(scene.objects).items():
         (folder / MESH_DIR / name).write_bytes(content)
+    for k, wall in enumerate(scene.walls):
+        (folder / MESH_DIR / wall_file(k)).write_bytes(obj_bytes(wall_mesh(wall), normals=False))
 
 
 def write_mjcf(folder: Path, scene: SceneBodies, config: ExportConfig) -> list[str]:
     write_meshes(folder, scene)
-    text, _ = mjcf_document(scene.objects, scene.support_z_m, config)
+    text, _ = mjcf_document(scene.objects, scene.support_z_m, config, walls=scene.walls)
     (folder / "scene.xml").write_text(text, encoding="utf-8")
     return ["scene.xml"]
 
@@ -127,12 +137,32 @@ def urdf_document(body: ObjectBody) -> str:
     return '<?xml version="1.0"?>\n' + ET.tostring(robot, encoding="unicode") + "\n"
 
 
+def walls_urdf_document(count: int) -> str:
+    """The URDF text of the walls: one link without inertia (static when loaded with a fixed
+    base) holding each wall's slab (``meshes/wall_<k>.obj``, world coordinates)."""
+    robot = ET.Element("robot", name="walls")
+    mujoco = ET.SubElement(robot, "mujoco")
+    ET.SubElement(mujoco, "compiler", discardvisual="false", fusestatic="false")
+    link = ET.SubElement(robot, "link", name="walls")
+    for k in range(count):
+        for kind in ("visual", "collision"):
+            element = ET.SubElement(link, kind)
+            ET.SubElement(element, "origin", xyz="0 0 0", rpy="0 0 0")
+            geometry = ET.SubElement(element, "geometry")
+            ET.SubElement(geometry, "mesh", filename=f"{MESH_DIR}/{wall_file(k)}")
+    ET.indent(robot)
+    return '<?xml version="1.0"?>\n' + ET.tostring(robot, encoding="unicode") + "\n"
+
+
 def write_urdf(folder: Path, scene: SceneBodies, config: ExportConfig) -> list[str]:
     write_meshes(folder, scene)
     names = []
     for body in scene.objects:
         names.append(f"{body.name}.urdf")
         (folder / names[-1]).write_text(urdf_document(body), encoding="utf-8")
+    if scene.walls:
+        names.append("walls.urdf")
+        (folder / names[-1]).write_text(walls_urdf_document(len(scene.walls)), encoding="utf-8")
     return names
 
 
@@ -182,6 +212,17 @@ def sdf_world(scene: SceneBodies, config: ExportConfig) -> str:
         ET.SubElement(plane, "size").text = "2 2"
         if kind == "collision":
             _sdf_friction(element, config)
+    if scene.walls:
+        walls = ET.SubElement(world, "model", name="walls")
+        ET.SubElement(walls, "static").text = "true"
+        link = ET.SubElement(walls, "link", name="walls")
+        for k in range(len(scene.walls)):
+            for kind in ("collision", "visual"):
+                element = ET.SubElement(link, kind, name=f"wall_{k}_{kind}")
+                mesh = ET.SubElement(ET.SubElement(element, "geometry"), "mesh")
+                ET.SubElement(mesh, "uri").text = f"{MESH_DIR}/{wall_file(k)}"
+                if kind == "collision":
+                    _sdf_friction(element, config)
     for body in scene.objects:
         world.append(_sdf_model(body, config, pose=True))
     ET.indent(root)
@@ -227,6 +268,14 @@ def glb_scene(scene: SceneBodies) -> Any:
             node_name=body.name,
             geom_name=body.name,
             transform=GLTF_FROM_WORLD @ body.world_from_object,
+        )
+    for k, wall in enumerate(scene.walls):
+        mesh = wall_mesh(wall)
+        mesh.visual = trimesh.visual.ColorVisuals(
+            mesh, face_colors=np.tile([178, 178, 173, 128], (len(mesh.faces), 1)).astype(np.uint8)
+        )
+        result.add_geometry(
+            mesh, node_name=f"wall_{k}", geom_name=f"wall_{k}", transform=GLTF_FROM_WORLD
         )
     return result
 
@@ -305,6 +354,14 @@ def manifest(
             "height_m": scene.support_z_m,
             "source": scene.support_source,
         },
+        "walls": [
+            {
+                "name": f"wall_{k}",
+                "vertices_m": np.asarray(wall).tolist(),
+                "mesh": f"{MESH_DIR}/{wall_file(k)}" if meshes else None,
+            }
+            for k, wall in enumerate(scene.walls)
+        ],
         "max_penetration_m": scene.max_penetration_m,
         "settling": {
             "enabled": config.settle,

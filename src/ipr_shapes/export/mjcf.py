@@ -1,7 +1,9 @@
 """The MJCF document of an exported scene (MuJoCo's own format), and the mesh files every format
 shares.
 
-One model: the support as a plane geom at z = ``support_z_m``; each object a body at its pose
+One model: the support as a plane geom at z = ``support_z_m``; each wall the result records a
+static geom (``wall_<k>``: a mesh whose vertices are written inline, its slab's convex hull);
+each object a body at its pose
 with a free joint, an explicit ``<inertial>`` (mass, principal moments, principal axes as the
 inertial frame's quaternion), its smooth surface as a visual geom (group 2, no contacts, no
 mass) and its convex pieces as collision geoms (group 3, hidden by default, friction as the
@@ -58,6 +60,18 @@ def obj_bytes(mesh: Any, normals: bool) -> bytes:
     return export_obj(mesh, include_normals=normals, include_texture=False, header=None).encode()
 
 
+def wall_file(k: int) -> str:
+    """The OBJ file name of wall ``k``'s slab (under ``MESH_DIR`` beside URDF and SDF files)."""
+    return f"wall_{k}.obj"
+
+
+def wall_mesh(vertices: np.ndarray) -> Any:
+    """The closed convex mesh (trimesh, m, world) of a wall slab's (V, 3) vertices."""
+    import trimesh
+
+    return trimesh.convex.convex_hull(np.asarray(vertices, dtype=np.float64))
+
+
 def mesh_files(objects: Sequence[ObjectBody], collision_only: bool = False) -> dict[str, bytes]:
     """File name -> OBJ bytes of every object's surface (unless ``collision_only``) and pieces."""
     files = {}
@@ -84,8 +98,11 @@ def mjcf_document(
     collision_only: bool = False,
     embed: bool = False,
     model_name: str = "ipr_export",
+    walls: Sequence[np.ndarray] = (),
 ) -> tuple[str, dict[str, bytes]]:
-    """The MJCF text of the scene (module doc) and its mesh files (name -> bytes).
+    """The MJCF text of the scene (module doc) and its mesh files (name -> bytes). ``walls``:
+    per wall the (V, 3) vertices (m, world) of a static convex slab, written inline as a mesh
+    (MuJoCo takes the convex hull of a mesh's vertices for collisions).
 
     With ``embed`` the meshes are named without a folder, for
     ``mujoco.MjModel.from_xml_string(text, files)``; otherwise they are read from ``meshes/``
@@ -117,6 +134,8 @@ def mjcf_document(
             ET.SubElement(assets, "mesh", name=body.name, file=surface_file(body))
         for n, name in enumerate(collision_files(body)):
             ET.SubElement(assets, "mesh", name=f"{body.name}_collision_{n}", file=name)
+    for k, wall in enumerate(walls):
+        ET.SubElement(assets, "mesh", name=f"wall_{k}", vertex=numbers(np.ravel(wall)))
     world = ET.SubElement(root, "worldbody")
     ET.SubElement(
         world,
@@ -139,6 +158,17 @@ def mjcf_document(
         friction=numbers(config.friction),
         rgba="0.8 0.8 0.78 1",
     )
+    for k in range(len(walls)):
+        ET.SubElement(
+            world,
+            "geom",
+            name=f"wall_{k}",
+            type="mesh",
+            mesh=f"wall_{k}",
+            condim="6",
+            friction=numbers(config.friction),
+            rgba="0.7 0.7 0.68 0.5",
+        )
     for body in objects:
         element = ET.SubElement(world, "body", name=body.name, pos=numbers(body.position_m))
         ET.SubElement(element, "freejoint", name=body.name)

@@ -5,7 +5,8 @@ starts interpenetrating.
   world frame was built from), unless the lowest object point lies more than
   ``ExportConfig.support_search_m`` from it (a world from camera poses with the table
   elsewhere): then the plane through the lowest object point. ``ExportConfig.support_z_m``
-  sets it. Results carry no walls, so none is exported.
+  sets it.
+- **Walls**: the convex slabs the inference simulated (``result.json``'s ``walls``), static.
 - **Separation**: MuJoCo computes the contacts of the collision pieces at the start poses; an
   object that penetrates the support is lifted by its depth, and of two objects that
   penetrate each other the one whose centre of mass is higher moves out along the contact
@@ -51,7 +52,8 @@ SETTLE_CHECK_S = 0.01
 
 @dataclass(frozen=True, eq=False)
 class SceneBodies:
-    """The exported scene: the support plane z = ``support_z_m`` (normal +z) and the objects.
+    """The exported scene: the support plane z = ``support_z_m`` (normal +z), the objects and
+    the static walls (``walls``: per wall the (V, 3) vertices of its convex slab, m, world).
 
     ``support_source`` says how the height was chosen; ``max_penetration_m`` is the deepest
     contact left after separation (0 when every start pose is clear); ``settle_s`` how long
@@ -65,11 +67,19 @@ class SceneBodies:
     max_penetration_m: float
     settle_s: float = 0.0
     at_rest: bool = True
+    walls: tuple[np.ndarray, ...] = ()
 
 
-def scene_bodies(objects: Sequence[ObjectBody], config: ExportConfig | None = None) -> SceneBodies:
-    """The support plane and the objects with separated start poses (module doc)."""
+def scene_bodies(
+    objects: Sequence[ObjectBody],
+    config: ExportConfig | None = None,
+    *,
+    walls: Sequence[np.ndarray] = (),
+) -> SceneBodies:
+    """The support plane, the walls ((V, 3) slab vertices each, m, world) and the objects with
+    separated start poses (module doc)."""
     config = config or ExportConfig()
+    walls = tuple(np.asarray(wall, dtype=np.float64) for wall in walls)
     lowest = min(
         (float(body.surface.vertices[:, 2].min() + body.position_m[2]) for body in objects),
         default=0.0,
@@ -80,7 +90,7 @@ def scene_bodies(objects: Sequence[ObjectBody], config: ExportConfig | None = No
         support_z, source = 0.0, "world z = 0"
     else:
         support_z, source = lowest, "lowest object point"
-    positions, depth = separate(objects, support_z, config)
+    positions, depth = separate(objects, support_z, config, walls=walls)
     moved = tuple(
         replace(
             body,
@@ -90,18 +100,22 @@ def scene_bodies(objects: Sequence[ObjectBody], config: ExportConfig | None = No
         for body, position in zip(objects, positions, strict=True)
     )
     if not config.settle or not moved:
-        return SceneBodies(support_z, source, moved, depth)
-    settled, seconds, at_rest = settle(moved, support_z, config)
+        return SceneBodies(support_z, source, moved, depth, walls=walls)
+    settled, seconds, at_rest = settle(moved, support_z, config, walls=walls)
     if not at_rest:
         log.warning(
             "the exported scene did not come to rest within %.1f s; exporting where it was",
             config.settle_max_s,
         )
-    return SceneBodies(support_z, source, settled, depth, seconds, at_rest)
+    return SceneBodies(support_z, source, settled, depth, seconds, at_rest, walls)
 
 
 def settle(
-    objects: Sequence[ObjectBody], support_z_m: float, config: ExportConfig
+    objects: Sequence[ObjectBody],
+    support_z_m: float,
+    config: ExportConfig,
+    *,
+    walls: Sequence[np.ndarray] = (),
 ) -> tuple[tuple[ObjectBody, ...], float, bool]:
     """The objects at the poses the scene settles in (module doc), the simulated time (s) and
     whether it came to rest within ``config.settle_max_s``.
@@ -117,7 +131,7 @@ def settle(
     at_rest = False
     while not at_rest and seconds < config.settle_max_s - 1e-9:
         settled, spent, quiet, farthest = _settle_once(
-            current, support_z_m, config, config.settle_max_s - seconds
+            current, support_z_m, config, config.settle_max_s - seconds, walls
         )
         seconds += spent
         if settled is current:  # exploded: keep the last poses
@@ -142,7 +156,11 @@ def _angle_deg(rotation: np.ndarray) -> float:
 
 
 def _settle_once(
-    objects: tuple[ObjectBody, ...], support_z_m: float, config: ExportConfig, max_s: float
+    objects: tuple[ObjectBody, ...],
+    support_z_m: float,
+    config: ExportConfig,
+    max_s: float,
+    walls: Sequence[np.ndarray] = (),
 ) -> tuple[tuple[ObjectBody, ...], float, bool, tuple[float, float]]:
     """Simulate the objects from rest until the window criterion holds (module doc) or
     ``max_s``; the turned objects (``objects`` itself when the simulation exploded), the
@@ -150,7 +168,9 @@ def _settle_once(
     start (m, degrees) on the way."""
     import mujoco
 
-    xml, assets = mjcf_document(objects, support_z_m, config, collision_only=True, embed=True)
+    xml, assets = mjcf_document(
+        objects, support_z_m, config, collision_only=True, embed=True, walls=walls
+    )
     model = mujoco.MjModel.from_xml_string(xml, assets)
     data = mujoco.MjData(model)
     bodies = [model.body(body.name).id for body in objects]
@@ -222,7 +242,11 @@ def turned(body: ObjectBody, rotation: np.ndarray, position: np.ndarray) -> Obje
 
 
 def separate(
-    objects: Sequence[ObjectBody], support_z_m: float, config: ExportConfig
+    objects: Sequence[ObjectBody],
+    support_z_m: float,
+    config: ExportConfig,
+    *,
+    walls: Sequence[np.ndarray] = (),
 ) -> tuple[np.ndarray, float]:
     """Start positions (N, 3) with no contact deeper than the tolerance (module doc), and the
     deepest contact left (m, 0 if none)."""
@@ -231,7 +255,9 @@ def separate(
     positions = np.array([body.position_m for body in objects], dtype=np.float64).reshape(-1, 3)
     if not objects:
         return positions, 0.0
-    xml, assets = mjcf_document(objects, support_z_m, config, collision_only=True, embed=True)
+    xml, assets = mjcf_document(
+        objects, support_z_m, config, collision_only=True, embed=True, walls=walls
+    )
     model = mujoco.MjModel.from_xml_string(xml, assets)
     data = mujoco.MjData(model)
     body_of_geom = np.full(model.ngeom, -1, dtype=np.int64)
