@@ -2,7 +2,9 @@
 non-convex candidates decomposed into convex pieces (issue 28 item 2; docs/DESIGN_NOTES.md,
 "Convex physics, then carving"; figures in docs/experiments/2026-11-26-nonconvex-physics.md)?
 
-Usage: ``python -m benchmarks.dev_nonconvex_physics [--seed 7200] [--count 12] [--scenes DIR]``.
+Usage: ``python -m benchmarks.dev_nonconvex_physics [--seed 7200] [--count 12] [--scenes DIR]
+[--only NAMES] [--containers-only] [--threshold 0.05] [--out FILE]`` (one JSON line per scene),
+then ``--summarise FILE...`` for the tables.
 
 Development dynamic scenes whose pool holds the bowl, the mug and four cups
 (``benchmarks.common.development_scenes(containers=True)``; seed 7200, never a benchmark
