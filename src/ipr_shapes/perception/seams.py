@@ -3,7 +3,7 @@
 Packed boxes of one height show coplanar tops: the convexity graph (``segmentation``) sees one
 flat surface, and a real depth sensor shows no groove between them. What tells them apart is in
 the colour image: the boxes' outlines are straight lines that cross the merged segment from one
-side of its outline to the other. A seam here is such a line, with three checks that keep an
+side of its outline to the other. A seam here is such a line, with five checks that keep an
 object's own lines whole:
 
 - **straight and long**: edge pixels (non-maximum-suppressed colour gradient above
@@ -14,12 +14,20 @@ object's own lines whole:
 - **geometry silent**: the surfaces on both sides of it have the same normal (within
   ``seams.max_normal_deg``) and no step (``seams.max_step_m``): a colour edge along a crease is
   an object's own edge, a step is already the graph's to cut;
+- **straight in 3D**: its points lie within ``seams.max_bend_m`` of one 3D line (a straight
+  image line on a ball, a can or a bottle is a curve in 3D);
 - **a cut**: removing it splits the segment into pieces of at least ``seams.min_area_m2`` and
-  ``seams.min_width_m`` across.
+  ``seams.min_width_m`` across;
+- **repeated**: once the segment is cut, each seam must lie midway between its neighbours (the
+  nearest parallel seams on the same surface, or the segment's outline), within
+  ``seams.strip_tolerance``: packed boxes of one size repeat at one spacing, a printed border
+  (a box's end panel) lies where the print puts it. Cuts that fail are undone.
 
 The best seam (most edge pixels) is cut and both pieces are searched again, up to
 ``seams.max_cuts`` cuts per segment. Text and logos do not qualify: their edges are short or
-do not line up across the segment.
+do not line up across the segment. What no check here tells apart: a printed line through
+the middle of one box from a seam between two boxes of half its size
+(docs/experiments/2026-11-26-colour-seams.md).
 """
 
 from __future__ import annotations
@@ -189,25 +197,27 @@ def _unrepeated(
 
 
 def _repeated(seam: _Seam, found: list[_Seam], cloud: np.ndarray, config: PerceptionConfig) -> bool:
-    """Whether ``seam`` lies midway between its neighbours: on each side, the strip to the
-    nearest parallel seam (``_neighbours``) or else to the segment's far outline (its points
-    ``cloud`` (N, 3), m, within the seam's length, 98th percentile), measured in 3D across the
-    seam; the narrower strip is at least 1 - ``seams.strip_tolerance`` of the wider. Packed
-    boxes of one size repeat at one spacing; a printed border lies where the print puts it."""
+    """Whether ``seam`` lies midway between two bounds, one on each side: a parallel seam on
+    the same surface (``_neighbours``, at least ``seams.min_width_m`` away) or the segment's
+    far outline (its points ``cloud`` (N, 3), m, within the seam's length, 98th percentile),
+    measured in 3D across the seam; the narrower strip is at least 1 - ``seams.strip_tolerance``
+    of the wider. Packed boxes of one size repeat at one spacing, a printed border lies where
+    the print puts it; a bound may lie beyond a nearer seam (a printed line on a box in the
+    row)."""
     relative = cloud - seam.middle
     along = relative @ seam.direction
     across = (relative @ seam.across)[np.abs(along) <= seam.half_length_m]
     offsets = [
         float((other.middle - seam.middle) @ seam.across) for other in _neighbours(seam, found)
     ]
-    widths = []
+    bounds = []
     for sign in (1.0, -1.0):
         side = sign * across[sign * across > 0]
         widest = float(np.percentile(side, 98)) if side.size else 0.0
         nearer = [sign * offset for offset in offsets if sign * offset >= config.seams.min_width_m]
-        widths.append(min([widest, *nearer]))
-    narrow, wide = sorted(widths)
-    return wide > 0 and narrow >= (1.0 - config.seams.strip_tolerance) * wide
+        bounds.append(np.array([widest, *nearer]))
+    ratio = np.minimum.outer(*bounds) / np.maximum(np.maximum.outer(*bounds), 1e-9)
+    return bool(np.any(ratio >= 1.0 - config.seams.strip_tolerance))
 
 
 def _neighbours(seam: _Seam, found: list[_Seam]) -> list[_Seam]:
