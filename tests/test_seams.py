@@ -157,6 +157,7 @@ def test_a_printed_border_across_one_box_is_not_a_seam():
     )
 
 
+@pytest.mark.slow
 def test_a_straight_line_on_a_ball_is_not_a_seam():
     # A 30 cm ball with a dark band in a plane through the camera: a straight line in the
     # image through the ball's middle, splitting it in two halves, but a curve in 3D.
