@@ -18,10 +18,12 @@ object's own lines whole:
   image line on a ball, a can or a bottle is a curve in 3D);
 - **a cut**: removing it splits the segment into pieces of at least ``seams.min_area_m2`` and
   ``seams.min_width_m`` across;
-- **repeated**: once the segment is cut, each seam must lie midway between its neighbours (the
-  nearest parallel seams on the same surface, or the segment's outline), within
-  ``seams.strip_tolerance``: packed boxes of one size repeat at one spacing, a printed border
-  (a box's end panel) lies where the print puts it. Cuts that fail are undone.
+- **flat and repeated**: once the segment is cut, the strips on both sides of each seam must
+  lie on its plane (a crease shows over a strip, not always in the side bands), and the seam
+  must lie midway between a bound on each side (a parallel seam on the same surface, or the
+  segment's outline), within ``seams.strip_tolerance``: packed boxes of one size repeat at one
+  spacing, a printed border (a box's end panel) lies where the print puts it. Cuts that fail
+  are undone.
 
 The best seam (most edge pixels) is cut and both pieces are searched again, up to
 ``seams.max_cuts`` cuts per segment. Text and logos do not qualify: their edges are short or
@@ -190,10 +192,34 @@ def _unrepeated(
     depth_m: np.ndarray,
     config: PerceptionConfig,
 ) -> list[_Seam]:
-    """The seams of one segment that do not repeat (``_repeated``)."""
+    """The seams of one segment whose strips are not flat (``_flat_strips``) or that do not
+    repeat (``_repeated``)."""
     usable = mask & (depth_m > 0)
     cloud = points[usable].astype(np.float64)
-    return [seam for seam in found if not _repeated(seam, found, cloud, config)]
+    return [
+        seam
+        for seam in found
+        if not (_flat_strips(seam, cloud, config) and _repeated(seam, found, cloud, config))
+    ]
+
+
+def _flat_strips(seam: _Seam, cloud: np.ndarray, config: PerceptionConfig) -> bool:
+    """Whether the segment's points ``cloud`` ((N, 3), m) on each side of ``seam``, within its
+    length, lie on its surface: their median height over the seam's plane is at most
+    tan(``seams.max_normal_deg``) times their median distance across the seam. The side bands
+    of ``_coplanar_sides`` are narrow; over a whole strip a crease shows (a box's top and front
+    face, whose colour edge at the crease runs straight from outline to outline)."""
+    relative = cloud - seam.middle
+    near = np.abs(relative @ seam.direction) <= seam.half_length_m
+    across = relative[near] @ seam.across
+    height = relative[near] @ seam.normal
+    slope = np.tan(np.radians(config.seams.max_normal_deg))
+    for side in (across > 0, across < 0):
+        if not side.any():
+            return False
+        if abs(float(np.median(height[side]))) > slope * float(np.median(np.abs(across[side]))):
+            return False
+    return True
 
 
 def _repeated(seam: _Seam, found: list[_Seam], cloud: np.ndarray, config: PerceptionConfig) -> bool:
