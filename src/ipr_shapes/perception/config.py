@@ -448,8 +448,9 @@ class SeamsConfig:
             a can) bends in 3D.
         strip_tolerance: a seam is kept when the strips on its two sides (to a parallel seam
             or the segment's outline, in 3D) differ by at most this share of the wider: packed
-            boxes of one size repeat at one spacing, a printed border lies anywhere (1: no such
-            test; bins-real 44.5 % instead of 37.9 %, and the generated boxes' end panels cut).
+            boxes of one size repeat at one spacing, a printed border lies anywhere (1: neither
+            this test nor the strips' flatness; bins-real 44.5 % instead of 37.9 %, and the
+            generated boxes' end panels cut).
         max_cuts: most cuts per segment (bounds the time on a textured segment).
     """
 
