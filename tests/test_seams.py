@@ -1,9 +1,10 @@
 """Cutting segments along straight colour seams (``ipr_shapes.perception.seams``, opt-in).
 
 Two boxes of one height touching side by side have coplanar tops: the convexity graph sees one
-surface. Painted like real packed boxes (a thin dark gap between them), the seam setting cuts
-them apart, and leaves alone a box's own edge (a crease), a stripe that ends inside a face, and
-everything when it is off.
+surface. Painted like real packed boxes (a thin dark gap between them, or boxes of different
+colours), the seam setting cuts them apart, and a row of three at both seams; it leaves alone a
+box's own edge (a crease), a stripe that ends inside a face, a printed end panel (its strips
+are not one box size), a straight line on a ball (a curve in 3D), and everything when it is off.
 """
 
 from __future__ import annotations
