@@ -1,9 +1,10 @@
 """Cutting segments along straight colour seams (``ipr_shapes.perception.seams``, opt-in).
 
 Two boxes of one height touching side by side have coplanar tops: the convexity graph sees one
-surface. Painted like real packed boxes (a thin dark gap between them), the seam setting cuts
-them apart, and leaves alone a box's own edge (a crease), a stripe that ends inside a face, and
-everything when it is off.
+surface. Painted like real packed boxes (a thin dark gap between them, or boxes of different
+colours), the seam setting cuts them apart, and a row of three at both seams; it leaves alone a
+box's own edge (a crease), a stripe that ends inside a face, a printed end panel (its strips
+are not one box size), a straight line on a ball (a curve in 3D), and everything when it is off.
 """
 
 from __future__ import annotations
@@ -103,8 +104,85 @@ def test_a_short_seam_is_not_a_seam():
 
 @pytest.mark.parametrize(
     "field, value",
-    [("coverage", 1.5), ("edge_factor", 0.0), ("max_cuts", -1), ("max_normal_deg", 200.0)],
+    [
+        ("coverage", 1.5),
+        ("edge_factor", 0.0),
+        ("max_cuts", -1),
+        ("max_normal_deg", 200.0),
+        ("max_bend_m", -0.001),
+        ("strip_tolerance", 1.5),
+    ],
 )
 def test_seam_settings_are_checked(field, value):
     with pytest.raises(ValueError, match=field):
         SeamsConfig(**{field: value})
+
+
+def three_boxes(dark) -> Frame:
+    """Three 10 cm boxes, 6 cm high, in a row along y, touching at y = -0.05 and y = 0.05."""
+    boxes = [box(0.0, y, (0.1, 0.1, TOP)) for y in (-0.1, 0.0, 0.1)]
+    return painted(render(camera(), boxes, noise_m=0.0005), dark)
+
+
+def test_touching_boxes_of_different_colours_are_cut_apart():
+    # No gap line: the seam is the step from a dark box to a light one.
+    frame = two_boxes(lambda points: points[:, 1] < 0.0)
+    a, b = centres(segment_frame(frame, config=ON).labels, frame)
+    assert a > 0 and b > 0 and a != b
+
+
+def test_a_row_of_boxes_of_one_size_is_cut_at_every_seam():
+    frame = three_boxes(lambda points: (np.abs(np.abs(points[:, 1]) - 0.05) < 0.002)
+                        & (points[:, 2] > TOP - 0.004))  # fmt: skip
+    labels = segment_frame(frame, config=ON).labels
+    ids = [segment_of_point(frame, labels, [0.0, y, TOP]) for y in (-0.1, 0.0, 0.1)]
+    assert min(ids) > 0 and len(set(ids)) == 3
+
+
+def test_a_printed_border_across_one_box_is_not_a_seam():
+    # One 20 cm box whose last quarter is printed dark: the border crosses the top from
+    # outline to outline like a seam, but it leaves strips of 15 and 5 cm, not one box size.
+    frame = painted(
+        render(camera(), [box(0.0, 0.0, (0.1, 0.2, TOP))], noise_m=0.0005),
+        lambda points: points[:, 1] > 0.05,
+    )
+    labels = segment_frame(frame, config=ON).labels
+    assert segment_of_point(frame, labels, [0.0, -0.06, TOP]) == segment_of_point(
+        frame, labels, [0.0, 0.08, TOP]
+    )
+    # Without the strip test the border is cut (the test above can fail).
+    loose = replace(ON, seams=replace(ON.seams, strip_tolerance=1.0))
+    labels = segment_frame(frame, config=loose).labels
+    assert segment_of_point(frame, labels, [0.0, -0.06, TOP]) != segment_of_point(
+        frame, labels, [0.0, 0.08, TOP]
+    )
+
+
+@pytest.mark.slow
+def test_a_straight_line_on_a_ball_is_not_a_seam():
+    # A 30 cm ball with a dark band in a plane through the camera: a straight line in the
+    # image through the ball's middle, splitting it in two halves, but a curve in 3D, and
+    # the halves are not flat.
+    radius = 0.15
+    world_from_camera = camera(distance=0.9)
+    eye = world_from_camera[:3, 3]
+    centre = np.array([0.0, 0.0, radius])
+    sight = centre - eye
+    band_normal = np.cross(sight, [0.0, 0.0, 1.0])
+    band_normal /= np.linalg.norm(band_normal)
+    frame = painted(
+        render(world_from_camera, spheres=[(centre, radius)], noise_m=0.0005),
+        lambda points: np.abs((points - eye) @ band_normal) < 0.003,
+    )
+    left = centre + 0.08 * band_normal
+    right = centre - 0.08 * band_normal
+    labels = segment_frame(frame, config=ON).labels
+    assert segment_of_point(frame, labels, left) == segment_of_point(frame, labels, right)
+    # The bend test alone keeps it whole (strip_tolerance = 1: no strip tests after the cuts),
+    # and without it the band is cut (the tests above can fail).
+    no_strips = replace(ON, seams=replace(ON.seams, strip_tolerance=1.0))
+    labels = segment_frame(frame, config=no_strips).labels
+    assert segment_of_point(frame, labels, left) == segment_of_point(frame, labels, right)
+    loose = replace(no_strips, seams=replace(no_strips.seams, max_bend_m=1.0))
+    labels = segment_frame(frame, config=loose).labels
+    assert segment_of_point(frame, labels, left) != segment_of_point(frame, labels, right)

@@ -3,7 +3,7 @@
 Packed boxes of one height show coplanar tops: the convexity graph (``segmentation``) sees one
 flat surface, and a real depth sensor shows no groove between them. What tells them apart is in
 the colour image: the boxes' outlines are straight lines that cross the merged segment from one
-side of its outline to the other. A seam here is such a line, with three checks that keep an
+side of its outline to the other. A seam here is such a line, with five checks that keep an
 object's own lines whole:
 
 - **straight and long**: edge pixels (non-maximum-suppressed colour gradient above
@@ -14,15 +14,27 @@ object's own lines whole:
 - **geometry silent**: the surfaces on both sides of it have the same normal (within
   ``seams.max_normal_deg``) and no step (``seams.max_step_m``): a colour edge along a crease is
   an object's own edge, a step is already the graph's to cut;
+- **straight in 3D**: its points lie within ``seams.max_bend_m`` of one 3D line (a straight
+  image line on a ball, a can or a bottle is a curve in 3D);
 - **a cut**: removing it splits the segment into pieces of at least ``seams.min_area_m2`` and
-  ``seams.min_width_m`` across.
+  ``seams.min_width_m`` across;
+- **flat and repeated**: once the segment is cut, the strips on both sides of each seam must
+  lie on its plane (a crease shows over a strip, not always in the side bands), and the seam
+  must lie midway between a bound on each side (a parallel seam on the same surface, or the
+  segment's outline), within ``seams.strip_tolerance``: packed boxes of one size repeat at one
+  spacing, a printed border (a box's end panel) lies where the print puts it. Cuts that fail
+  are undone.
 
 The best seam (most edge pixels) is cut and both pieces are searched again, up to
 ``seams.max_cuts`` cuts per segment. Text and logos do not qualify: their edges are short or
-do not line up across the segment.
+do not line up across the segment. What no check here tells apart: a printed line through
+the middle of one box from a seam between two boxes of half its size
+(docs/experiments/2026-11-26-colour-seams.md).
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import ndimage
@@ -38,6 +50,25 @@ _VOTE_SPREAD_DEG = 10.0
 _SIDE_BAND_PX = (2, 10)
 #: Margin (px) around a segment's bounding box, enough for the side bands.
 _MARGIN_PX = 12
+#: Seams within this of one direction (deg) are parallel: neighbours in one row of boxes.
+_PARALLEL_DEG = 10.0
+
+
+@dataclass(frozen=True)
+class _Seam:
+    """One cut: its pixels in the crop (in order along it), its image line's unit normal
+    (cos_a, sin_a), and in 3D (world frame, m) its middle, unit direction, the unit direction
+    across it in the surface, the surface's unit normal, and half its length."""
+
+    rows: np.ndarray
+    cols: np.ndarray
+    cos_a: float
+    sin_a: float
+    middle: np.ndarray
+    direction: np.ndarray
+    across: np.ndarray
+    normal: np.ndarray
+    half_length_m: float
 
 
 def cut_colour_seams(
@@ -129,25 +160,130 @@ def _cut_segment(
     config: PerceptionConfig,
 ) -> np.ndarray:
     """(h, w) int pieces of one segment's crop: 0 outside, 1 the first piece, 2.. the cut-off
-    pieces."""
+    pieces (cuts whose strips do not repeat are undone, ``_unrepeated``)."""
     pieces = mask.astype(np.int32)
     near_edge = ndimage.binary_dilation(edges, np.ones((3, 3), dtype=bool))
     queue = [1]
-    cuts = 0
-    while queue and cuts < config.seams.max_cuts:
+    found: list[_Seam] = []
+    while queue and len(found) < config.seams.max_cuts:
         piece = queue.pop()
         part = pieces == piece
         if _area_m2(part, depth_m, focal_px) < 2 * config.seams.min_area_m2:
             continue
-        split = _best_cut(part, edges, near_edge, direction, points, normals, depth_m,
-                          focal_px, config)  # fmt: skip
-        if split is None:
+        cut = _best_cut(part, edges, near_edge, direction, points, normals, depth_m,
+                        focal_px, config)  # fmt: skip
+        if cut is None:
             continue
+        side, seam = cut
         new = int(pieces.max()) + 1
-        pieces[split] = new
-        cuts += 1
+        pieces[side] = new
+        found.append(seam)
         queue.extend((piece, new))
+    if config.seams.strip_tolerance < 1.0:
+        for seam in _unrepeated(found, mask, points, depth_m, config):
+            pieces = _undo(pieces, seam)
     return pieces
+
+
+def _unrepeated(
+    found: list[_Seam],
+    mask: np.ndarray,
+    points: np.ndarray,
+    depth_m: np.ndarray,
+    config: PerceptionConfig,
+) -> list[_Seam]:
+    """The seams of one segment whose strips are not flat (``_flat_strips``) or that do not
+    repeat (``_repeated``)."""
+    usable = mask & (depth_m > 0)
+    cloud = points[usable].astype(np.float64)
+    return [
+        seam
+        for seam in found
+        if not (_flat_strips(seam, cloud, config) and _repeated(seam, found, cloud, config))
+    ]
+
+
+def _flat_strips(seam: _Seam, cloud: np.ndarray, config: PerceptionConfig) -> bool:
+    """Whether the segment's points ``cloud`` ((N, 3), m) on each side of ``seam``, within its
+    length, lie on its surface: their median height over the seam's plane is at most
+    tan(``seams.max_normal_deg``) times their median distance across the seam. The side bands
+    of ``_coplanar_sides`` are narrow; over a whole strip a crease shows (a box's top and front
+    face, whose colour edge at the crease runs straight from outline to outline)."""
+    relative = cloud - seam.middle
+    near = np.abs(relative @ seam.direction) <= seam.half_length_m
+    across = relative[near] @ seam.across
+    height = relative[near] @ seam.normal
+    slope = np.tan(np.radians(config.seams.max_normal_deg))
+    for side in (across > 0, across < 0):
+        if not side.any():
+            return False
+        if abs(float(np.median(height[side]))) > slope * float(np.median(np.abs(across[side]))):
+            return False
+    return True
+
+
+def _repeated(seam: _Seam, found: list[_Seam], cloud: np.ndarray, config: PerceptionConfig) -> bool:
+    """Whether ``seam`` lies midway between two bounds, one on each side: a parallel seam on
+    the same surface (``_neighbours``, at least ``seams.min_width_m`` away) or the segment's
+    far outline (its points ``cloud`` (N, 3), m, within the seam's length, 98th percentile),
+    measured in 3D across the seam; the narrower strip is at least 1 - ``seams.strip_tolerance``
+    of the wider. Packed boxes of one size repeat at one spacing, a printed border lies where
+    the print puts it; a bound may lie beyond a nearer seam (a printed line on a box in the
+    row)."""
+    relative = cloud - seam.middle
+    along = relative @ seam.direction
+    across = (relative @ seam.across)[np.abs(along) <= seam.half_length_m]
+    offsets = [
+        float((other.middle - seam.middle) @ seam.across) for other in _neighbours(seam, found)
+    ]
+    bounds = []
+    for sign in (1.0, -1.0):
+        side = sign * across[sign * across > 0]
+        widest = float(np.percentile(side, 98)) if side.size else 0.0
+        nearer = [sign * offset for offset in offsets if sign * offset >= config.seams.min_width_m]
+        bounds.append(np.array([widest, *nearer]))
+    ratio = np.minimum.outer(*bounds) / np.maximum(np.maximum.outer(*bounds), 1e-9)
+    return bool(np.any(ratio >= 1.0 - config.seams.strip_tolerance))
+
+
+def _neighbours(seam: _Seam, found: list[_Seam]) -> list[_Seam]:
+    """The seams of ``found`` in one row of boxes with ``seam``: parallel to it (within
+    ``_PARALLEL_DEG``), on one surface (normals within ``_PARALLEL_DEG``) and beside it along
+    its length."""
+    parallel = np.cos(np.radians(_PARALLEL_DEG))
+    return [
+        other
+        for other in found
+        if other is not seam
+        and abs(float(other.direction @ seam.direction)) >= parallel
+        and float(other.normal @ seam.normal) >= parallel
+        and abs(float((other.middle - seam.middle) @ seam.direction))
+        <= seam.half_length_m + other.half_length_m
+    ]
+
+
+def _undo(pieces: np.ndarray, seam: _Seam) -> np.ndarray:
+    """``pieces`` with the pieces that face each other across ``seam`` (3 px either side of it,
+    along its length) merged into one (the lower id)."""
+    height, width = pieces.shape
+    pairs = []
+    for k in (3, 4, 5):
+        rows_a = np.clip(np.round(seam.rows + k * seam.sin_a).astype(np.int64), 0, height - 1)
+        cols_a = np.clip(np.round(seam.cols + k * seam.cos_a).astype(np.int64), 0, width - 1)
+        rows_b = np.clip(np.round(seam.rows - k * seam.sin_a).astype(np.int64), 0, height - 1)
+        cols_b = np.clip(np.round(seam.cols - k * seam.cos_a).astype(np.int64), 0, width - 1)
+        a, b = pieces[rows_a, cols_a], pieces[rows_b, cols_b]
+        keep = (a > 0) & (b > 0) & (a != b)
+        pairs.extend(zip(a[keep].tolist(), b[keep].tolist(), strict=True))
+    if not pairs:
+        return pieces
+    # Union the pairs (few pieces: a plain relabel loop).
+    relabel = np.arange(int(pieces.max()) + 1)
+    for a, b in set(pairs):
+        root_a, root_b = relabel[a], relabel[b]
+        low, high = min(root_a, root_b), max(root_a, root_b)
+        relabel[relabel == high] = low
+    return relabel[pieces].astype(np.int32)
 
 
 def _best_cut(
@@ -160,8 +296,9 @@ def _best_cut(
     depth_m: np.ndarray,
     focal_px: float,
     config: PerceptionConfig,
-) -> np.ndarray | None:
-    """(h, w) bool: the smaller side of the best seam of ``part``, or None (module doc)."""
+) -> tuple[np.ndarray, _Seam] | None:
+    """(h, w) bool: the smaller side of the best seam of ``part`` and the seam, or None
+    (module doc)."""
     seams = config.seams
     inner = ndimage.binary_erosion(part, iterations=2)
     rows, cols = np.nonzero(edges & inner)
@@ -205,13 +342,60 @@ def _best_cut(
         ends_3d = points[line_rows[ends], line_cols[ends]]
         if np.linalg.norm(ends_3d[0] - ends_3d[1]) < seams.min_length_m:
             continue
-        if not _coplanar_sides(part, line_rows, line_cols, cos_a[a], sin_a[a], rho, points,
-                               normals, config):  # fmt: skip
+        normal = _coplanar_sides(part, line_rows, line_cols, cos_a[a], sin_a[a], rho, points,
+                                 normals, config)  # fmt: skip
+        if normal is None:
+            continue
+        seam = _straight_seam(line_rows[measured], line_cols[measured], points, normal,
+                              cos_a[a], sin_a[a], config)  # fmt: skip
+        if seam is None:
             continue
         side = _split(part, line_rows, line_cols, depth_m, focal_px, config)
         if side is not None:
-            return side
+            return side, seam
     return None
+
+
+def _straight_seam(
+    rows: np.ndarray,
+    cols: np.ndarray,
+    points: np.ndarray,
+    normal: np.ndarray,
+    cos_a: float,
+    sin_a: float,
+    config: PerceptionConfig,
+) -> _Seam | None:
+    """The seam through the pixels (rows, cols) with depth, or None when its 3D points bend:
+    a straight image line on a plane is a straight 3D line, on a ball, a can or a bottle it is
+    a curve. Its middle 80 % (its ends may run onto the boxes' sides) must lie within
+    ``seams.max_bend_m`` of one 3D line at the 90th percentile (depth noise and ripples)."""
+    seam_points = points[rows, cols].astype(np.float64)
+    count = len(seam_points)
+    middle = seam_points[int(0.1 * count) : int(np.ceil(0.9 * count))]
+    if len(middle) < 2:
+        return None
+    centre = middle.mean(axis=0)
+    direction = np.linalg.svd(middle - centre, full_matrices=False)[2][0]
+    offsets = middle - centre
+    bend = np.linalg.norm(offsets - np.outer(offsets @ direction, direction), axis=1)
+    if float(np.percentile(bend, 90)) > config.seams.max_bend_m:
+        return None
+    across = np.cross(normal, direction)
+    across_norm = float(np.linalg.norm(across))
+    if across_norm < 1e-9:
+        return None
+    extent = (seam_points - centre) @ direction
+    return _Seam(
+        rows=rows,
+        cols=cols,
+        cos_a=float(cos_a),
+        sin_a=float(sin_a),
+        middle=centre,
+        direction=direction,
+        across=across / across_norm,
+        normal=normal,
+        half_length_m=float(extent.max() - extent.min()) / 2.0,
+    )
 
 
 def _chord(
@@ -281,9 +465,10 @@ def _coplanar_sides(
     points: np.ndarray,
     normals: np.ndarray,
     config: PerceptionConfig,
-) -> bool:
-    """Whether the surfaces along both sides of the seam (``_SIDE_BAND_PX`` away, within its
-    extent) have one normal (``seams.max_normal_deg``) and no step (``seams.max_step_m``)."""
+) -> np.ndarray | None:
+    """The surfaces' unit normal (3,) when the surfaces along both sides of the seam
+    (``_SIDE_BAND_PX`` away, within its extent) have one normal (``seams.max_normal_deg``) and
+    no step (``seams.max_step_m``), else None."""
     near, far = _SIDE_BAND_PX
     top, bottom = max(rows.min() - far, 0), min(rows.max() + far + 1, part.shape[0])
     left, right = max(cols.min() - far, 0), min(cols.max() + far + 1, part.shape[1])
@@ -302,7 +487,7 @@ def _coplanar_sides(
     for sign in (1.0, -1.0):
         chosen = usable & (sign * across >= near) & (sign * across <= far)
         if chosen.sum() < 20:
-            return False
+            return None
         mean = box_normals[chosen].astype(np.float64).mean(axis=0)
         sides.append(
             (mean / max(np.linalg.norm(mean), 1e-12), points[top:bottom, left:right][chosen])
@@ -310,11 +495,11 @@ def _coplanar_sides(
     (normal_a, points_a), (normal_b, points_b) = sides
     cos_angle = float(np.clip(normal_a @ normal_b, -1.0, 1.0))
     if np.degrees(np.arccos(cos_angle)) > config.seams.max_normal_deg:
-        return False
+        return None
     normal = normal_a + normal_b
     normal /= max(np.linalg.norm(normal), 1e-12)
     step = abs(float(np.median(points_a @ normal) - np.median(points_b @ normal)))
-    return step <= config.seams.max_step_m
+    return normal if step <= config.seams.max_step_m else None
 
 
 def _split(
