@@ -1,7 +1,8 @@
 """Development measurements of IPR inference (docs/DESIGN_NOTES.md, "Physics and inference";
 figures in docs/experiments/2026-11-21-likelihood-and-weighting.md and the files beside it).
 
-Usage: ``python -m benchmarks.dev_inference [--seed 9100] [--count 10] [--samples 40]``.
+Usage: ``python -m benchmarks.dev_inference [--seed 9100] [--count 10] [--samples 40]
+[--frictions 0.25 0.35 0.5 0.7 1.0]``.
 
 Generates (or reuses) development dynamic scenes with ``ipr-shapes synth`` seeds from 9100 (never the
 benchmark suites), samples ``--samples`` joint models per scene with the full method in one
@@ -12,7 +13,13 @@ inference never does):
 - the IPR estimate per weighting (``InferenceConfig.weighting``) and alpha, with every frame
   (the full method) and with frame 0 only (the gravity-only variants), from the same samples
   (alpha and the weighting only weigh them);
-- the best of each object's candidates (oracle) and of the candidates the sampler visited.
+- the best of each object's candidates (oracle) and of the candidates the sampler visited;
+- the friction search (``InferenceConfig.frictions``): the same samples scored under
+  ``physics.friction`` alone (no search, when it is one of ``--frictions``) against the
+  marginal over the searched frictions, the same with the samples the search's cost allows
+  in the time the single friction takes (each sample's likelihood timed again under the single
+  friction), and per scene the friction posterior beside the generator's per-object frictions
+  (``synth.json``).
 
 Figures are mean object IoU over the visible ground-truth objects (unmatched objects count 0),
 the convention of ``ipr-shapes eval``'s object space, of the convex candidates as inferred: what the
@@ -39,7 +46,7 @@ def _iou(a: np.ndarray, b: np.ndarray) -> float:
     return common / union if union else 0.0
 
 
-def measure_scene(path: Path, samples: int) -> dict:
+def measure_scene(path: Path, samples: int, frictions: tuple[float, ...] | None = None) -> dict:
     """Samples of one scene and the IoU of every candidate of every matched object."""
     from scipy.optimize import linear_sum_assignment
 
@@ -55,7 +62,7 @@ def measure_scene(path: Path, samples: int) -> dict:
 
     scene = load_scene(path)
     perception = perceive_scene(scene)
-    config = InferenceConfig()
+    config = InferenceConfig() if frictions is None else InferenceConfig(frictions=frictions)
     prepared = prepare_hypotheses(
         perception.objects[0], perception.free_space[0], perception.planes[0],
         rng=np.random.default_rng(0),
@@ -68,6 +75,7 @@ def measure_scene(path: Path, samples: int) -> dict:
         config=config, seed=0,
     )  # fmt: skip
     results = run_samples(problem, ((i, None) for i in range(samples)), workers=1, deadline=np.inf)
+    timing = _likelihood_seconds(problem, results)
     poses, models, _ = frame0_ground_truth(path)
     counts, _ = visible_pixel_counts(path, poses, models)
     world_from_camera = scene.frames[0].world_from_camera
@@ -94,7 +102,39 @@ def measure_scene(path: Path, samples: int) -> dict:
         "truths": len(truths),
         "checker": {k: checker[k, t] for k, t in matched.items()},
         "candidate_iou": candidate_iou,
+        "timing": timing,
+        "true_frictions": _true_frictions(path),
     }
+
+
+def _likelihood_seconds(problem, results, count: int = 6) -> tuple[float, float]:
+    """CPU seconds of the likelihood of the first ``count`` sampled joint models under the
+    problem's frictions and under ``physics.friction`` alone (fresh samplers, one thread)."""
+    import dataclasses
+    import time
+
+    from ipr_shapes.inference import Sampler
+
+    seconds = []
+    for frictions in (problem.frictions, ()):
+        sampler = Sampler(dataclasses.replace(problem, frictions=frictions))
+        started = time.process_time()
+        for result in results[:count]:
+            sampler.depth_norms(result.choice)
+        seconds.append(time.process_time() - started)
+        sampler.close()
+    return seconds[0], seconds[1]
+
+
+def _true_frictions(path: Path) -> list[float]:
+    """The generator's per-object sliding frictions (``synth.json``; [] when absent)."""
+    import json
+
+    try:
+        objects = json.loads((path / "synth.json").read_text())["objects"]
+    except (OSError, KeyError, ValueError):
+        return []
+    return [float(o["friction"]) for o in objects]
 
 
 def estimate_iou(
@@ -103,13 +143,17 @@ def estimate_iou(
     frames: int | None,
     weighting: str = "hypothesis",
     prior: str = "uniform",
+    friction: float | None = None,
+    count: int | None = None,
 ) -> dict[int, float]:
     """IoU of the IPR output per matched object with ``alpha``, the first ``frames``,
-    ``weighting`` (``InferenceConfig.weighting``) and ``prior`` ("uniform" or "size")."""
+    ``weighting`` (``InferenceConfig.weighting``), ``prior`` ("uniform" or "size"), the
+    samples scored under ``friction`` alone (None: marginalised over the searched frictions)
+    and the first ``count`` samples (None: all)."""
     import dataclasses
 
     from ipr_shapes.factor_graph import posterior_medoid
-    from ipr_shapes.inference import marginals, size_log_prior
+    from ipr_shapes.inference import at_friction, marginals, size_log_prior
 
     problem = scene["problem"]
     if prior == "size":
@@ -123,9 +167,14 @@ def estimate_iou(
         likelihood=dataclasses.replace(problem.config.likelihood, alpha_per_m=alpha),
     )
     problem = dataclasses.replace(problem, config=config)
+    results = scene["results"][:count]
+    if friction is not None:
+        index = problem.friction_values.index(friction)
+        results = at_friction(results, problem, index)
+        problem = dataclasses.replace(problem, frictions=())
     results = [
-        dataclasses.replace(r, norms=None if r.norms is None else r.norms[:frames])
-        for r in scene["results"]
+        dataclasses.replace(r, norms=None if r.norms is None else r.norms[:, :frames])
+        for r in results
     ]
     estimate = marginals(results, problem)
     output = {}
@@ -146,13 +195,26 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--count", type=int, default=10)
     parser.add_argument("--samples", type=int, default=40)
     parser.add_argument("--scenes", type=Path, default=Path("/tmp/ipr-dev-inference"))
+    parser.add_argument("--frictions", type=float, nargs="*", default=None)
     args = parser.parse_args(argv)
     from benchmarks.common import development_scenes
+    from ipr_shapes.inference import InferenceConfig, friction_posterior
 
+    frictions = tuple(args.frictions) if args.frictions is not None else None
     scenes = []
     for path in development_scenes(args.scenes, args.seed, args.count):
-        scenes.append(measure_scene(path, args.samples))
-        print(f"{path.name}: {len(scenes[-1]['candidate_iou'])} matched objects", flush=True)
+        scenes.append(measure_scene(path, args.samples, frictions))
+        scene = scenes[-1]
+        problem = scene["problem"]
+        posterior = friction_posterior(scene["results"], problem)
+        searched, single = scene["timing"]
+        print(
+            f"{path.name}: {len(scene['candidate_iou'])} matched objects; friction posterior "
+            f"{np.round(posterior, 3).tolist() if posterior is not None else None} over "
+            f"{list(problem.friction_values)}; true {np.round(scene['true_frictions'], 2).tolist()}"
+            f"; likelihood CPU s {searched:.2f} searched / {single:.2f} single",
+            flush=True,
+        )
     rows = [
         ("Collision Checker", mean_over_truths(scenes, [s["checker"] for s in scenes])),
         ("oracle (best candidate)", mean_over_truths(
@@ -177,6 +239,28 @@ def main(argv: list[str] | None = None) -> int:
                 rows.append(
                     (f"IPR {weighting}, {label}, alpha {alpha:g}", mean_over_truths(scenes, values))
                 )
+    default = InferenceConfig().physics.friction
+    if all(default in s["problem"].friction_values for s in scenes) and any(
+        len(s["problem"].friction_values) > 1 for s in scenes
+    ):
+        # Equal time: per scene, the samples the search affords in the single friction's time
+        # (tree sampling included: each sample's seconds less the likelihood's difference).
+        affordable = []
+        for s in scenes:
+            searched, single = s["timing"]
+            extra = (searched - single) / min(len(s["results"]), 6)
+            mean = float(np.mean([r.seconds for r in s["results"]]))
+            affordable.append(max(1, int(args.samples * max(mean - extra, 1e-3) / mean)))
+        for alpha in (0.2,):
+            rows.append((f"IPR hypothesis, alpha {alpha:g}, friction {default:g} alone",
+                         mean_over_truths(scenes, [estimate_iou(s, alpha, None, friction=default)
+                                                   for s in scenes])))  # fmt: skip
+            rows.append((f"IPR hypothesis, alpha {alpha:g}, friction searched",
+                         mean_over_truths(scenes, [estimate_iou(s, alpha, None) for s in scenes])))  # fmt: skip
+            rows.append((f"IPR hypothesis, alpha {alpha:g}, searched, equal time",
+                         mean_over_truths(scenes, [estimate_iou(s, alpha, None, count=c)
+                                                   for s, c in zip(scenes, affordable, strict=True)])))  # fmt: skip
+        print(f"samples affordable in equal time: {affordable}")
     truths = sum(s["truths"] for s in scenes)
     print(f"\n{len(scenes)} scenes, {truths} visible objects, {args.samples} samples per scene")
     for label, value in rows:

@@ -63,11 +63,14 @@ marginals), ``exhaustive`` (the exact posterior), ``infer`` (``infer_shapes``).
 
 from ipr_shapes.inference.config import WEIGHTINGS, InferenceConfig
 from ipr_shapes.inference.estimators import (
+    at_friction,
     effective_sample_size,
     factor_marginals,
+    friction_posterior,
     hypothesis_log_likelihoods,
     marginals,
     object_log_weights,
+    own_log_likelihoods,
     sample_log_weights,
 )
 from ipr_shapes.inference.exhaustive import exhaustive_models
@@ -83,6 +86,7 @@ from ipr_shapes.inference.sampler import Sampler
 
 __all__ = [
     "WEIGHTINGS",
+    "at_friction",
     "InferenceConfig",
     "InferenceOutcome",
     "InferenceProblem",
@@ -93,10 +97,12 @@ __all__ = [
     "effective_sample_size",
     "exhaustive_models",
     "factor_marginals",
+    "friction_posterior",
     "hypothesis_log_likelihoods",
     "infer_shapes",
     "marginals",
     "object_log_weights",
+    "own_log_likelihoods",
     "run_samples",
     "sample_log_weights",
     "size_log_prior",
