@@ -2,7 +2,11 @@
 figures in docs/experiments/2026-11-21-likelihood-and-weighting.md and the files beside it).
 
 Usage: ``python -m benchmarks.dev_inference [--seed 9100] [--count 10] [--samples 40]
-[--frictions 0.25 0.35 0.5 0.7 1.0]``.
+[--frictions 0.25 0.35 0.5 0.7 1.0] [--cache DIR] [--select 0 1 ...]``.
+
+``--cache DIR`` keeps each scene's measurement (pickled, keyed by scene, samples and
+frictions), so that processes with disjoint ``--select`` (scene positions) measure in parallel
+and a last run without ``--select`` reports over all of them from the cache.
 
 Generates (or reuses) development dynamic scenes with ``ipr-shapes synth`` seeds from 9100 (never the
 benchmark suites), samples ``--samples`` joint models per scene with the full method in one
@@ -107,6 +111,28 @@ def measure_scene(path: Path, samples: int, frictions: tuple[float, ...] | None 
     }
 
 
+def _cached_measurement(
+    path: Path, samples: int, frictions: tuple[float, ...] | None, cache: Path | None
+) -> dict:
+    """``measure_scene``, read from / written to ``cache`` when given."""
+    import pickle
+
+    if cache is None:
+        return measure_scene(path, samples, frictions)
+    key = (
+        f"{path.parent.name}-{path.name}-{samples}-{'default' if frictions is None else frictions}"
+    )
+    file = cache / f"{key}.pkl"
+    if file.exists():
+        return pickle.loads(file.read_bytes())
+    scene = measure_scene(path, samples, frictions)
+    cache.mkdir(parents=True, exist_ok=True)
+    partial = file.with_suffix(".part")
+    partial.write_bytes(pickle.dumps(scene))
+    partial.rename(file)
+    return scene
+
+
 def _likelihood_seconds(problem, results, count: int = 6) -> tuple[float, float]:
     """CPU seconds of the likelihood of the first ``count`` sampled joint models under the
     problem's frictions and under ``physics.friction`` alone (fresh samplers, one thread)."""
@@ -196,14 +222,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--samples", type=int, default=40)
     parser.add_argument("--scenes", type=Path, default=Path("/tmp/ipr-dev-inference"))
     parser.add_argument("--frictions", type=float, nargs="*", default=None)
+    parser.add_argument("--cache", type=Path, default=None)
+    parser.add_argument("--select", type=int, nargs="*", default=None)
     args = parser.parse_args(argv)
     from benchmarks.common import development_scenes
     from ipr_shapes.inference import InferenceConfig, friction_posterior
 
     frictions = tuple(args.frictions) if args.frictions is not None else None
     scenes = []
-    for path in development_scenes(args.scenes, args.seed, args.count):
-        scenes.append(measure_scene(path, args.samples, frictions))
+    paths = development_scenes(args.scenes, args.seed, args.count)
+    if args.select is not None:
+        paths = [paths[i] for i in args.select]
+    for path in paths:
+        scenes.append(_cached_measurement(path, args.samples, frictions, args.cache))
         scene = scenes[-1]
         problem = scene["problem"]
         posterior = friction_posterior(scene["results"], problem)

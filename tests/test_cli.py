@@ -264,6 +264,7 @@ def test_ground_truth_of_a_scene_without_ground_truth_fails_clearly(
 def test_infer_default_method_writes_the_full_result_and_is_reproducible(tmp_path: Path, capsys):
     from PIL import Image
 
+    from ipr_shapes.inference import InferenceConfig
     from ipr_shapes.result import load_result
     from ipr_shapes.synth import SynthConfig, generate_scene
 
@@ -285,6 +286,10 @@ def test_infer_default_method_writes_the_full_result_and_is_reproducible(tmp_pat
         details = result.extra["inference"]
         assert details["samples"] == 3 and details["fallback"] is None
         assert details["pushes_replayed"] >= 1 and details["frames_compared"] >= 2
+        # The scene's friction is searched with the shapes; its posterior is reported.
+        assert details["frictions"] == list(InferenceConfig().frictions)
+        assert sum(details["friction_posterior"]) == pytest.approx(1.0)
+        assert len(details["friction_posterior"]) == len(details["frictions"])
         assert set(result.timing_s) >= {
             "segmentation",
             "fusion",
@@ -319,6 +324,7 @@ def test_infer_with_a_budget_too_small_for_one_sample_falls_back_and_says_so(
     assert main(["infer", str(scene), "-o", str(out), "--time-budget", "0.05"]) == 0
     assert "Collision Checker" in capsys.readouterr().out
     assert load_result(out).extra["inference"]["fallback"]
+    assert load_result(out).extra["inference"]["friction_posterior"] is None
 
 
 def test_infer_rejects_bad_worker_and_sample_counts(scene_dir: Path, tmp_path: Path, capsys):

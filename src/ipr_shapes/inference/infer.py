@@ -196,4 +196,9 @@ def infer_shapes(
         method, len(samples), summary.impossible_samples, summary.effective_sample_size,
         timing["sampling"], workers,
     )  # fmt: skip
+    if posterior_mu is not None and len(frictions) > 1:
+        logger.info(
+            "%s: friction posterior %s over %s",
+            method, np.round(posterior_mu, 3).tolist(), list(frictions),
+        )  # fmt: skip
     return InferenceOutcome(method, posteriors, samples, fallback, timing, summary)
