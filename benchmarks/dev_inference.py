@@ -312,12 +312,21 @@ def main(argv: list[str] | None = None) -> int:
         for s in scenes:
             searched, single = (t / min(len(s["results"]), 6) for t in s["timing"])
             tree = _tree_seconds(s["problem"], len(s["results"])) / len(s["results"])
-            affordable.append(max(1, int(args.samples * (tree + single) / (tree + searched))))
+            affordable.append((tree + single) / (tree + searched))
             print(
                 f"CPU s per sample: tree sampling {tree:.2f}, likelihood {single:.2f} single / "
                 f"{searched:.2f} searched"
             )
+        budget = 12  # about what the default budget affords (docs/DESIGN_NOTES.md)
+        small = [max(1, int(budget * ratio)) for ratio in affordable]
+        affordable = [max(1, int(args.samples * ratio)) for ratio in affordable]
         for alpha in (0.2, 2.0):
+            rows.append((f"IPR hypothesis, alpha {alpha:g}, friction {default:g} alone, {budget} samples",
+                         mean_over_truths(scenes, [estimate_iou(s, alpha, None, friction=default, count=budget)
+                                                   for s in scenes])))  # fmt: skip
+            rows.append((f"IPR hypothesis, alpha {alpha:g}, searched, equal time to {budget} samples",
+                         mean_over_truths(scenes, [estimate_iou(s, alpha, None, count=c)
+                                                   for s, c in zip(scenes, small, strict=True)])))  # fmt: skip
             rows.append((f"IPR hypothesis, alpha {alpha:g}, friction {default:g} alone",
                          mean_over_truths(scenes, [estimate_iou(s, alpha, None, friction=default)
                                                    for s in scenes])))  # fmt: skip
@@ -336,7 +345,18 @@ def main(argv: list[str] | None = None) -> int:
             ]  # fmt: skip
             rows.append((f"IPR hypothesis, alpha {alpha:g}, one friction drawn per sample "
                          f"(5 draws: {min(sampled):.3f}-{max(sampled):.3f})", float(np.mean(sampled))))  # fmt: skip
-        print(f"samples affordable in equal time: {affordable}")
+        print(f"samples affordable in equal time: {affordable} (to {budget}: {small})")
+        means = []
+        for s in scenes:
+            posterior = friction_posterior(s["results"], s["problem"])
+            if posterior is not None and s["true_frictions"]:
+                means.append((float(posterior @ s["problem"].friction_values),
+                              float(np.mean(s["true_frictions"]))))  # fmt: skip
+        if len(means) > 2:
+            from scipy.stats import spearmanr
+
+            rho = spearmanr(*zip(*means, strict=True)).statistic
+            print(f"posterior mean friction vs the scene's mean true friction: Spearman {rho:.2f}")
     truths = sum(s["truths"] for s in scenes)
     print(f"\n{len(scenes)} scenes, {truths} visible objects, {args.samples} samples per scene")
     for label, value in rows:

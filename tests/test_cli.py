@@ -286,10 +286,9 @@ def test_infer_default_method_writes_the_full_result_and_is_reproducible(tmp_pat
         details = result.extra["inference"]
         assert details["samples"] == 3 and details["fallback"] is None
         assert details["pushes_replayed"] >= 1 and details["frames_compared"] >= 2
-        # The scene's friction is searched with the shapes; its posterior is reported.
-        assert details["frictions"] == list(InferenceConfig().frictions)
-        assert sum(details["friction_posterior"]) == pytest.approx(1.0)
-        assert len(details["friction_posterior"]) == len(details["frictions"])
+        # The friction posterior is reported (by default over the one friction, not searched).
+        assert details["frictions"] == [InferenceConfig().physics.friction]
+        assert details["friction_posterior"] == [1.0]
         assert set(result.timing_s) >= {
             "segmentation",
             "fusion",
@@ -308,6 +307,27 @@ def test_infer_default_method_writes_the_full_result_and_is_reproducible(tmp_pat
         assert (out / "report.html").is_file() and (out / "labels" / "000000.png").is_file()
         runs.append([o.load_mesh().volume for o in result.objects])
     assert np.allclose(runs[0], runs[1])  # same seed and samples, any number of workers
+
+
+@pytest.mark.slow  # an end-to-end run of several seconds
+def test_infer_with_the_friction_searched_reports_its_posterior(tmp_path: Path, capsys):
+    from ipr_shapes.result import load_result
+    from ipr_shapes.synth import SynthConfig, generate_scene
+
+    scene = generate_scene(
+        tmp_path / "scenes", kind="dynamic", seed=4, arrangement="table",
+        config=SynthConfig(width=320, height=240),
+    )  # fmt: skip
+    config = tmp_path / "friction.toml"
+    config.write_text("[inference]\nfrictions = [0.25, 0.5, 1.0]\n")
+    out = tmp_path / "result"
+    args = ["infer", str(scene), "-o", str(out), "--samples", "2", "--config", str(config)]
+    assert main(args) == 0
+    details = load_result(out).extra["inference"]
+    assert details["frictions"] == [0.25, 0.5, 1.0]
+    assert len(details["friction_posterior"]) == 3
+    assert sum(details["friction_posterior"]) == pytest.approx(1.0)
+    assert "frictions = [" in (out / "config.toml").read_text()
 
 
 @pytest.mark.slow  # an end-to-end run of several seconds

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from ipr_shapes.camera import look_at
-from ipr_shapes.inference import InferenceConfig, infer_shapes
+from ipr_shapes.inference import FRICTION_GRID, InferenceConfig, infer_shapes
 from ipr_shapes.likelihood import LikelihoodConfig, observed_frames
 from ipr_shapes.physics import Body, PhysicsConfig, build_world
 from ipr_shapes.products import PreparedHypotheses, ShapeHypothesis
@@ -357,7 +357,9 @@ def test_the_friction_posterior_favours_the_friction_the_push_showed(true_fricti
     observed, _ = _pushed_scene(true_friction)
     # The true shape alone, so the friction is all that differs; a strict alpha, since 5 mm
     # of slide is little evidence at the default one.
-    config = InferenceConfig(max_samples=1, likelihood=LikelihoodConfig(alpha_per_m=8.0))
+    config = InferenceConfig(
+        max_samples=1, likelihood=LikelihoodConfig(alpha_per_m=8.0), frictions=FRICTION_GRID
+    )
     outcome = infer_shapes(
         _prepared(TRUE_BOX), (SUPPORT,), observed,
         pusher=Pusher(), pushes=(FAST,), config=config, workers=1,
@@ -365,7 +367,7 @@ def test_the_friction_posterior_favours_the_friction_the_push_showed(true_fricti
     summary = outcome.summary
     frictions = np.array(summary.frictions)
     posterior = np.array(summary.friction_posterior)
-    assert list(frictions) == list(InferenceConfig().frictions)
+    assert list(frictions) == list(FRICTION_GRID)
     assert posterior.sum() == pytest.approx(1.0) and (posterior >= 0).all()
     assert posterior[list(frictions).index(true_friction)] > 0.9
     # The sample's likelihood is the mean over the frictions (their uniform prior).
@@ -375,11 +377,17 @@ def test_the_friction_posterior_favours_the_friction_the_push_showed(true_fricti
     )
 
 
-def test_without_pushes_no_friction_is_searched():
+def test_without_pushes_or_by_default_no_friction_is_searched():
     observed, _ = _pushed_scene(1.0)
-    outcome = infer_shapes(
-        _prepared(TRUE_BOX), (SUPPORT,), observed.only(1),
-        pusher=Pusher(), pushes=(), config=InferenceConfig(max_samples=1), workers=1,
-    )  # fmt: skip
-    assert outcome.summary.frictions == (PhysicsConfig().friction,)
-    assert outcome.summary.friction_posterior == (1.0,)
+    searching = InferenceConfig(max_samples=1, frictions=FRICTION_GRID)
+    for frames, pushes, config in [
+        (1, (), searching),  # nothing to replay
+        (2, (FAST,), InferenceConfig(max_samples=1)),  # the default
+    ]:
+        outcome = infer_shapes(
+            _prepared(TRUE_BOX), (SUPPORT,), observed.only(frames),
+            pusher=Pusher(), pushes=pushes, config=config, workers=1,
+        )  # fmt: skip
+        assert outcome.summary.frictions == (PhysicsConfig().friction,)
+        assert outcome.summary.friction_posterior == (1.0,)
+        assert outcome.samples[0].norms.shape[0] == 1

@@ -19,6 +19,7 @@ from ipr_shapes.collision_checker import uniform_posteriors
 from ipr_shapes.factor_graph import posterior_medoid
 from ipr_shapes.hypotheses import ConstraintConfig, OverlapCache, overlap_threshold
 from ipr_shapes.inference import (
+    FRICTION_GRID,
     InferenceConfig,
     InferenceProblem,
     Sampler,
@@ -311,9 +312,9 @@ def push_scene():
     return _prepared({1: FRONT, 2: BACK}, PUSH_MINIMA), observed, rendered
 
 
-def _push_infer(push_scene, method, pushes=(PUSH_FRONT, PUSH_BACK), samples=12):
+def _push_infer(push_scene, method, pushes=(PUSH_FRONT, PUSH_BACK), samples=12, frictions=()):
     prepared, observed, _ = push_scene
-    config = InferenceConfig(max_samples=samples, likelihood=STRICT)
+    config = InferenceConfig(max_samples=samples, likelihood=STRICT, frictions=frictions)
     return infer_shapes(
         prepared, (SUPPORT,), observed, method=method, pusher=Pusher(), pushes=pushes,
         config=config, workers=1,
@@ -350,10 +351,12 @@ def test_gravity_only_variants_compare_only_the_frames_before_the_first_push(
     outcome = _push_infer(push_scene, method, pushes, samples=2)
     assert outcome.summary.frames_compared == compared
     replayed = len(pushes) if method.startswith("ipr+action") else 0
-    # Friction only matters to the pushes: searched when they are replayed.
-    frictions = len(InferenceConfig().frictions) if replayed else 1
-    assert all(s.norms.shape == (frictions, compared, 2) for s in outcome.samples)
-    assert len(outcome.summary.frictions) == frictions
+    assert all(s.norms.shape == (1, compared, 2) for s in outcome.samples)
+    # Friction only matters to the pushes: searched (when asked) only if they are replayed.
+    searched = _push_infer(push_scene, method, pushes, samples=1, frictions=FRICTION_GRID)
+    frictions = len(FRICTION_GRID) if replayed else 1
+    assert all(s.norms.shape == (frictions, compared, 2) for s in searched.samples)
+    assert len(searched.summary.frictions) == frictions
     assert outcome.summary.pushes_replayed == replayed
     if compared == 1:
         # Frame 0 alone cannot tell the hidden depths apart: every model fits it.

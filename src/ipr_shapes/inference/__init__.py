@@ -28,8 +28,9 @@ of some jointly feasible model) are candidates. Then, repeated until the time bu
    the recorded pushes; the depth images rendered from each frame's camera give the likelihood
    (``ipr_shapes.likelihood``, Eq. 2). A simulation that explodes or flings an object scores 0.
    - Friction (paper Sec. IV-E: "mechanical properties ... can be searched along with the
-     geometric model"): the scene's sliding friction mu is one more unknown with a uniform
-     prior over ``InferenceConfig.frictions``, marginalised rather than sampled: each joint
+     geometric model"; off by default, ``InferenceConfig.frictions``): the scene's sliding
+     friction mu is one more unknown with a uniform prior over ``InferenceConfig.frictions``,
+     marginalised rather than sampled: each joint
      model settles once (at ``physics.friction``; a scene at rest says little about friction)
      and its frames before the first push are rendered once, then its pushes and the frames
      after them are replayed under every friction from a copy of that state. Scoring every
@@ -75,7 +76,7 @@ and likelihood), ``pool`` (sampling threads and deadlines), ``estimators`` (samp
 marginals), ``exhaustive`` (the exact posterior), ``infer`` (``infer_shapes``).
 """
 
-from ipr_shapes.inference.config import WEIGHTINGS, InferenceConfig
+from ipr_shapes.inference.config import FRICTION_GRID, WEIGHTINGS, InferenceConfig
 from ipr_shapes.inference.estimators import (
     at_friction,
     effective_sample_size,
@@ -99,6 +100,7 @@ from ipr_shapes.inference.problem import (
 from ipr_shapes.inference.sampler import Sampler
 
 __all__ = [
+    "FRICTION_GRID",
     "WEIGHTINGS",
     "at_friction",
     "InferenceConfig",

@@ -13,6 +13,9 @@ from ipr_shapes.physics import PhysicsConfig
 #: How samples become marginals (``InferenceConfig.weighting``).
 Weighting = Literal["hypothesis", "object", "joint"]
 WEIGHTINGS: tuple[str, ...] = get_args(Weighting)
+#: Scene frictions to search (``InferenceConfig.frictions``): ratio sqrt(2) from 0.25 to 1.0,
+#: the range of everyday objects sliding on a table.
+FRICTION_GRID: tuple[float, ...] = (0.25, 0.35, 0.5, 0.7, 1.0)
 #: What a stability test measures per hypothesis (``InferenceConfig.stability_measure``).
 StabilityMeasure = Literal["drop", "displacement"]
 STABILITY_MEASURES: tuple[str, ...] = get_args(StabilityMeasure)
@@ -55,10 +58,12 @@ class InferenceConfig:
             footprint, and no other shape or wall comes this close to its box (m).
         frictions: the sliding frictions of the scene searched with the shapes (module doc,
             step 2), a uniform prior over them: each joint model's pushes are replayed under
-            each, from one settled start; empty: ``physics.friction`` alone. Why: a push's
-            outcome depends on friction as much as on the hidden shape, and the scene's
-            friction is unknown. A grid of ratio sqrt(2) from 0.25 to 1.0, the range of
-            everyday objects on a table.
+            each, from one settled start; empty (default): ``physics.friction`` alone. Why: a
+            push's outcome depends on friction as much as on the hidden shape, and the scene's
+            friction is unknown; off by default because the pushes then cost F times as much
+            and at the default budget the fewer samples lost more than the search gained
+            (docs/DESIGN_NOTES.md, "Friction search (off)"). ``FRICTION_GRID`` is the
+            suggested set.
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -101,7 +106,7 @@ class InferenceConfig:
     screen_resting: bool = True
     screen_gap_m: float = 0.002
     screen_margin_m: float = 0.005
-    frictions: tuple[float, ...] = (0.25, 0.35, 0.5, 0.7, 1.0)
+    frictions: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
         check_fields(self)
