@@ -18,12 +18,15 @@ inference never does):
   (the full method) and with frame 0 only (the gravity-only variants), from the same samples
   (alpha and the weighting only weigh them);
 - the best of each object's candidates (oracle) and of the candidates the sampler visited;
-- the friction search (``InferenceConfig.frictions``): the same samples scored under
+- with ``--frictions`` (off by default, as ``InferenceConfig.frictions``; include
+  ``physics.friction``, 1.0) the friction search: the same samples scored under
   ``physics.friction`` alone (no search, when it is one of ``--frictions``) against the
-  marginal over the searched frictions, the same with the samples the search's cost allows
-  in the time the single friction takes (each sample's likelihood timed again under the single
-  friction), and per scene the friction posterior beside the generator's per-object frictions
-  (``synth.json``).
+  marginal over the searched frictions; the same with the samples the search affords in the
+  CPU time the single friction takes for all of them and for 12 (about the default budget;
+  tree sampling and the likelihood under each timed again, one thread); two cheap
+  alternatives on the same samples (each candidate's likelihood averaged over the frictions;
+  one friction drawn per sample); and per scene the friction posterior beside the generator's
+  per-object frictions (``synth.json``), with their rank correlation.
 
 Figures are mean object IoU over the visible ground-truth objects (unmatched objects count 0),
 the convention of ``ipr-shapes eval``'s object space, of the convex candidates as inferred: what the
