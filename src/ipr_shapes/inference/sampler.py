@@ -323,7 +323,9 @@ class Sampler:
         start = (world.data, world.at_rest)
         for f, friction in enumerate(frictions):
             if problem.frictions:
+                # A copy of the settled state (the world had not exploded: it rendered).
                 world.data, world.at_rest = copy.copy(start[0]), start[1]
+                world.exploded = False
                 world.set_friction(friction)
             for position in range(first, len(observed.frames)):
                 for push in problem.pushes:
