@@ -286,9 +286,10 @@ def test_infer_default_method_writes_the_full_result_and_is_reproducible(tmp_pat
         details = result.extra["inference"]
         assert details["samples"] == 3 and details["fallback"] is None
         assert details["pushes_replayed"] >= 1 and details["frames_compared"] >= 2
-        # The friction posterior is reported (by default over the one friction, not searched).
-        assert details["frictions"] == [InferenceConfig().physics.friction]
-        assert details["friction_posterior"] == [1.0]
+        # The scene's friction is searched with the shapes; its posterior is reported.
+        assert details["frictions"] == list(InferenceConfig().frictions)
+        assert sum(details["friction_posterior"]) == pytest.approx(1.0)
+        assert len(details["friction_posterior"]) == len(details["frictions"])
         assert set(result.timing_s) >= {
             "segmentation",
             "fusion",

@@ -377,12 +377,12 @@ def test_the_friction_posterior_favours_the_friction_the_push_showed(true_fricti
     )
 
 
-def test_without_pushes_or_by_default_no_friction_is_searched():
+def test_without_pushes_or_when_off_no_friction_is_searched():
     observed, _ = _pushed_scene(1.0)
-    searching = InferenceConfig(max_samples=1, frictions=FRICTION_GRID)
+    assert InferenceConfig().frictions == FRICTION_GRID  # on by default
     for frames, pushes, config in [
-        (1, (), searching),  # nothing to replay
-        (2, (FAST,), InferenceConfig(max_samples=1)),  # the default
+        (1, (), InferenceConfig(max_samples=1)),  # nothing to replay
+        (2, (FAST,), InferenceConfig(max_samples=1, frictions=())),  # off
     ]:
         outcome = infer_shapes(
             _prepared(TRUE_BOX), (SUPPORT,), observed.only(frames),

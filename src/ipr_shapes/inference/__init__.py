@@ -28,7 +28,7 @@ of some jointly feasible model) are candidates. Then, repeated until the time bu
    the recorded pushes; the depth images rendered from each frame's camera give the likelihood
    (``ipr_shapes.likelihood``, Eq. 2). A simulation that explodes or flings an object scores 0.
    - Friction (paper Sec. IV-E: "mechanical properties ... can be searched along with the
-     geometric model"; off by default, ``InferenceConfig.frictions``): the scene's sliding
+     geometric model"; on by default, ``InferenceConfig.frictions``): the scene's sliding
      friction mu is one more unknown with a uniform prior over ``InferenceConfig.frictions``,
      marginalised rather than sampled: each joint
      model settles once (at ``physics.friction``; a scene at rest says little about friction)

@@ -58,12 +58,10 @@ class InferenceConfig:
             footprint, and no other shape or wall comes this close to its box (m).
         frictions: the sliding frictions of the scene searched with the shapes (module doc,
             step 2), a uniform prior over them: each joint model's pushes are replayed under
-            each, from one settled start; empty (default): ``physics.friction`` alone. Why: a
-            push's outcome depends on friction as much as on the hidden shape, and the scene's
-            friction is unknown; off by default because the pushes then cost F times as much
-            and at the default budget the fewer samples lost more than the search gained
-            (docs/DESIGN_NOTES.md, "Friction search (off)"). ``FRICTION_GRID`` is the
-            suggested set.
+            each, from one settled start; empty: ``physics.friction`` alone. Why: a push's
+            outcome depends on friction as much as on the hidden shape, and the scene's
+            friction is unknown (docs/DESIGN_NOTES.md, "Friction search (on)": the pushes cost
+            F times as much, and at equal time the search did not lose).
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -106,7 +104,7 @@ class InferenceConfig:
     screen_resting: bool = True
     screen_gap_m: float = 0.002
     screen_margin_m: float = 0.005
-    frictions: tuple[float, ...] = ()
+    frictions: tuple[float, ...] = FRICTION_GRID
 
     def __post_init__(self) -> None:
         check_fields(self)
