@@ -264,6 +264,7 @@ def test_ground_truth_of_a_scene_without_ground_truth_fails_clearly(
 def test_infer_default_method_writes_the_full_result_and_is_reproducible(tmp_path: Path, capsys):
     from PIL import Image
 
+    from ipr_shapes.inference import InferenceConfig
     from ipr_shapes.result import load_result
     from ipr_shapes.synth import SynthConfig, generate_scene
 
@@ -285,6 +286,10 @@ def test_infer_default_method_writes_the_full_result_and_is_reproducible(tmp_pat
         details = result.extra["inference"]
         assert details["samples"] == 3 and details["fallback"] is None
         assert details["pushes_replayed"] >= 1 and details["frames_compared"] >= 2
+        # The scene's friction is searched with the shapes; its posterior is reported.
+        assert details["frictions"] == list(InferenceConfig().frictions)
+        assert sum(details["friction_posterior"]) == pytest.approx(1.0)
+        assert len(details["friction_posterior"]) == len(details["frictions"])
         assert set(result.timing_s) >= {
             "segmentation",
             "fusion",
@@ -306,6 +311,27 @@ def test_infer_default_method_writes_the_full_result_and_is_reproducible(tmp_pat
 
 
 @pytest.mark.slow  # an end-to-end run of several seconds
+def test_infer_with_the_friction_searched_reports_its_posterior(tmp_path: Path, capsys):
+    from ipr_shapes.result import load_result
+    from ipr_shapes.synth import SynthConfig, generate_scene
+
+    scene = generate_scene(
+        tmp_path / "scenes", kind="dynamic", seed=4, arrangement="table",
+        config=SynthConfig(width=320, height=240),
+    )  # fmt: skip
+    config = tmp_path / "friction.toml"
+    config.write_text("[inference]\nfrictions = [0.25, 0.5, 1.0]\n")
+    out = tmp_path / "result"
+    args = ["infer", str(scene), "-o", str(out), "--samples", "2", "--config", str(config)]
+    assert main(args) == 0
+    details = load_result(out).extra["inference"]
+    assert details["frictions"] == [0.25, 0.5, 1.0]
+    assert len(details["friction_posterior"]) == 3
+    assert sum(details["friction_posterior"]) == pytest.approx(1.0)
+    assert "frictions = [" in (out / "config.toml").read_text()
+
+
+@pytest.mark.slow  # an end-to-end run of several seconds
 def test_infer_with_a_budget_too_small_for_one_sample_falls_back_and_says_so(
     tmp_path: Path, capsys
 ):
@@ -319,6 +345,7 @@ def test_infer_with_a_budget_too_small_for_one_sample_falls_back_and_says_so(
     assert main(["infer", str(scene), "-o", str(out), "--time-budget", "0.05"]) == 0
     assert "Collision Checker" in capsys.readouterr().out
     assert load_result(out).extra["inference"]["fallback"]
+    assert load_result(out).extra["inference"]["friction_posterior"] is None
 
 
 def test_infer_rejects_bad_worker_and_sample_counts(scene_dir: Path, tmp_path: Path, capsys):

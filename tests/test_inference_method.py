@@ -19,12 +19,14 @@ from ipr_shapes.collision_checker import uniform_posteriors
 from ipr_shapes.factor_graph import posterior_medoid
 from ipr_shapes.hypotheses import ConstraintConfig, OverlapCache, overlap_threshold
 from ipr_shapes.inference import (
+    FRICTION_GRID,
     InferenceConfig,
     InferenceProblem,
     Sampler,
     SampleResult,
     build_problem,
     effective_sample_size,
+    friction_posterior,
     infer_shapes,
     marginals,
 )
@@ -310,9 +312,9 @@ def push_scene():
     return _prepared({1: FRONT, 2: BACK}, PUSH_MINIMA), observed, rendered
 
 
-def _push_infer(push_scene, method, pushes=(PUSH_FRONT, PUSH_BACK), samples=12):
+def _push_infer(push_scene, method, pushes=(PUSH_FRONT, PUSH_BACK), samples=12, frictions=()):
     prepared, observed, _ = push_scene
-    config = InferenceConfig(max_samples=samples, likelihood=STRICT)
+    config = InferenceConfig(max_samples=samples, likelihood=STRICT, frictions=frictions)
     return infer_shapes(
         prepared, (SUPPORT,), observed, method=method, pusher=Pusher(), pushes=pushes,
         config=config, workers=1,
@@ -348,8 +350,13 @@ def test_gravity_only_variants_compare_only_the_frames_before_the_first_push(
 ):
     outcome = _push_infer(push_scene, method, pushes, samples=2)
     assert outcome.summary.frames_compared == compared
-    assert all(s.norms.shape == (compared, 2) for s in outcome.samples)
     replayed = len(pushes) if method.startswith("ipr+action") else 0
+    assert all(s.norms.shape == (1, compared, 2) for s in outcome.samples)
+    # Friction only matters to the pushes: searched (when asked) only if they are replayed.
+    searched = _push_infer(push_scene, method, pushes, samples=1, frictions=FRICTION_GRID)
+    frictions = len(FRICTION_GRID) if replayed else 1
+    assert all(s.norms.shape == (frictions, compared, 2) for s in searched.samples)
+    assert len(searched.summary.frictions) == frictions
     assert outcome.summary.pushes_replayed == replayed
     if compared == 1:
         # Frame 0 alone cannot tell the hidden depths apart: every model fits it.
@@ -403,9 +410,9 @@ def test_pixels_under_the_robot_mask_are_no_evidence(push_scene):
     without_mask, _ = norms(unmasked)
     for choice, value in with_mask.items():
         assert np.array_equal(value, without_reading[choice])
-        assert value[0, 0] < 1e-3  # the true front fits the rest of its pixels
-        assert without_mask[choice][0, 0] > 0.2  # the robot's depth, were it evidence
-        assert value[0, 1] == without_mask[choice][0, 1]  # object 2 is not under the mask
+        assert value[0, 0, 0] < 1e-3  # the true front fits the rest of its pixels
+        assert without_mask[choice][0, 0, 0] > 0.2  # the robot's depth, were it evidence
+        assert value[0, 0, 1] == without_mask[choice][0, 0, 1]  # object 2 is not under the mask
 
 
 # --------------------------------------------------------------------------------------------
@@ -451,7 +458,7 @@ def _constructed_samples() -> list[SampleResult]:
     for index, (choice, norms, q) in enumerate(rows):
         log_q = tuple(math.log(p) for p in q)
         log_l = -sum(norms) if norms is not None else -math.inf
-        norms = np.array([norms]) if norms is not None else None
+        norms = np.array([[norms]]) if norms is not None else None
         samples.append(
             SampleResult(index, choice, sum(log_q), log_l, math.log(1 / 4), 0.0, 0, norms, log_q)
         )
@@ -486,6 +493,41 @@ def test_hypothesis_weighting_averages_each_candidates_own_likelihood():
     estimate = marginals(_constructed_samples(), _constructed_problem("hypothesis"))
     assert estimate[0] == pytest.approx(first / first.sum())
     assert estimate[1] == pytest.approx(second / second.sum())
+
+
+def _two_friction_samples() -> list[SampleResult]:
+    """Object 1's candidate 0 fits under the first friction only (norms 0 then 2), candidate
+    1 as well under both (1 and 1); object 2 fits equally everywhere."""
+    samples = []
+    for index, (choice, first, second) in enumerate([((0, 0), 0.0, 2.0), ((1, 0), 1.0, 1.0)]):
+        norms = np.array([[[first, 0.0]], [[second, 0.0]]])  # (F, T, n)
+        log_l = float(np.logaddexp(-first, -second) - math.log(2))
+        log_q = (math.log(1 / 2), 0.0)
+        samples.append(
+            SampleResult(index, choice, sum(log_q), log_l, math.log(1 / 4), 0.0, 0, norms, log_q)
+        )
+    return samples
+
+
+@pytest.mark.parametrize("weighting", ["hypothesis", "object", "joint"])
+def test_shape_marginals_are_mixed_over_the_friction_posterior(weighting):
+    e = math.exp
+    problem = dataclasses.replace(_constructed_problem(weighting), frictions=(0.5, 1.0))
+    samples = _two_friction_samples()
+    # Evidence per friction: (1 + e^-1) / 2 under the first, (e^-2 + e^-1) / 2 under the second
+    # (the proposal's 1/2 and the prior's 1/4 cancel the same way for both).
+    evidence = np.array([1 + e(-1), e(-2) + e(-1)])
+    posterior = friction_posterior(samples, problem)
+    assert posterior == pytest.approx(evidence / evidence.sum())
+    # P(X | O) = sum_mu P(mu | O) P(X | O, mu): candidate likelihoods averaged over frictions.
+    estimate = marginals(samples, problem)
+    first = np.array([1 + e(-2), 2 * e(-1)])
+    assert estimate[0] == pytest.approx(first / first.sum())
+    assert estimate[1] == pytest.approx([1.0, 0.0])
+    # Without the search (the first friction alone) candidate 0 would win by e.
+    alone = dataclasses.replace(problem, frictions=(0.5,))
+    single = [dataclasses.replace(s, norms=s.norms[:1]) for s in samples]
+    assert marginals(single, alone)[0] == pytest.approx(np.array([1, e(-1)]) / (1 + e(-1)))
 
 
 def test_every_weighting_gives_up_when_every_simulation_failed():

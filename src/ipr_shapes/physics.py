@@ -223,6 +223,13 @@ class World:
         self.model.geom_contype[geom] = contype
         self.model.geom_conaffinity[geom] = conaffinity
 
+    def set_friction(self, sliding: float) -> None:
+        """Give every geom (shapes, support, walls, pusher) the sliding friction ``sliding``,
+        so every contact has it (MuJoCo takes the larger of two geoms'): a joint model
+        replayed under another friction without recompiling (``ipr_shapes.inference``'s
+        friction search)."""
+        self.model.geom_friction[:, 0] = sliding
+
     def hold(self, k: int, held: bool = True) -> None:
         """Take ``switchable`` body k out of the simulation where it is (no collisions, gravity
         compensated, at rest) or put it back (``held`` False). A held body moves no further

@@ -249,6 +249,9 @@ class SamplingSummary:
         pushes_replayed: pushes simulated per joint model.
         frames_compared: observed frames compared with the simulation.
         fallback: why the Collision Checker's answer was returned instead (None: it was not).
+        frictions: the scene frictions searched with the shapes (one value: not searched).
+        friction_posterior: P(friction | O) over ``frictions`` (sums to 1; None with the
+            fallback).
     """
 
     samples: int
@@ -259,6 +262,8 @@ class SamplingSummary:
     pushes_replayed: int
     frames_compared: int
     fallback: str | None
+    frictions: tuple[float, ...] = ()
+    friction_posterior: tuple[float, ...] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The fields as a JSON-ready dict, in declaration order."""

@@ -27,6 +27,15 @@ of some jointly feasible model) are candidates. Then, repeated until the time bu
 2. **Simulation of the full model** under gravity (settling) and, for the ``+action`` variants,
    the recorded pushes; the depth images rendered from each frame's camera give the likelihood
    (``ipr_shapes.likelihood``, Eq. 2). A simulation that explodes or flings an object scores 0.
+   - Friction (paper Sec. IV-E: "mechanical properties ... can be searched along with the
+     geometric model"; on by default, ``InferenceConfig.frictions``): the scene's sliding
+     friction mu is one more unknown with a uniform prior over ``InferenceConfig.frictions``,
+     marginalised rather than sampled: each joint
+     model settles once (at ``physics.friction``; a scene at rest says little about friction)
+     and its frames before the first push are rendered once, then its pushes and the frames
+     after them are replayed under every friction from a copy of that state. Scoring every
+     friction costs the pushes F times but compares the frictions on the same shapes, where
+     sampling mu would leave a few samples per friction, each with other shapes.
 3. **From samples to marginals** (``InferenceConfig.weighting``). Eq. 2's exponent is a sum over
    objects, so each object's evidence is its own term. Default ``"hypothesis"``: each
    candidate's likelihood is the mean over the samples that chose it of exp(its own term);
@@ -42,6 +51,12 @@ of some jointly feasible model) are candidates. Then, repeated until the time bu
    for the joint posterior, but at the sample counts a budget allows the proposal correction
    1/q(X) sets its weights and its shapes were worse (docs/DESIGN_NOTES.md, 'Weighting:
    "hypothesis" (default), "object", "joint"').
+   With friction searched, each weighting gives P(X_k | O, mu) under each friction and the
+   marginals are sum_mu P(mu | O) P(X_k | O, mu). P(mu | O) is proportional to the evidence
+   of the same samples under mu, as each weighting models it: the product over objects of
+   sum_j P(X_k^j) times candidate j's mean likelihood ("hypothesis"), of the per-object
+   importance weights' sums ("object"), or the sum of the joint weights ("joint", exact for
+   ``exhaustive``); ``result.json`` reports it (``SamplingSummary.friction_posterior``).
 
 Priors: ``uniform``, or ``size``: P(X_i^j) proportional to volume(X_i^j)^-size_prior_exponent
 (smaller models are more probable, the paper's informed prior), normalised per object.
@@ -61,13 +76,16 @@ and likelihood), ``pool`` (sampling threads and deadlines), ``estimators`` (samp
 marginals), ``exhaustive`` (the exact posterior), ``infer`` (``infer_shapes``).
 """
 
-from ipr_shapes.inference.config import WEIGHTINGS, InferenceConfig
+from ipr_shapes.inference.config import FRICTION_GRID, WEIGHTINGS, InferenceConfig
 from ipr_shapes.inference.estimators import (
+    at_friction,
     effective_sample_size,
     factor_marginals,
+    friction_posterior,
     hypothesis_log_likelihoods,
     marginals,
     object_log_weights,
+    own_log_likelihoods,
     sample_log_weights,
 )
 from ipr_shapes.inference.exhaustive import exhaustive_models
@@ -82,7 +100,9 @@ from ipr_shapes.inference.problem import (
 from ipr_shapes.inference.sampler import Sampler
 
 __all__ = [
+    "FRICTION_GRID",
     "WEIGHTINGS",
+    "at_friction",
     "InferenceConfig",
     "InferenceOutcome",
     "InferenceProblem",
@@ -93,10 +113,12 @@ __all__ = [
     "effective_sample_size",
     "exhaustive_models",
     "factor_marginals",
+    "friction_posterior",
     "hypothesis_log_likelihoods",
     "infer_shapes",
     "marginals",
     "object_log_weights",
+    "own_log_likelihoods",
     "run_samples",
     "sample_log_weights",
     "size_log_prior",

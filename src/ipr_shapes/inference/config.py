@@ -6,13 +6,16 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import ClassVar, Literal, get_args
 
-from ipr_shapes.checks import Checks, Interval, Options, OrNone, check_fields
+from ipr_shapes.checks import Checks, Interval, Options, OrNone, Predicate, check_fields
 from ipr_shapes.likelihood import LikelihoodConfig
 from ipr_shapes.physics import PhysicsConfig
 
 #: How samples become marginals (``InferenceConfig.weighting``).
 Weighting = Literal["hypothesis", "object", "joint"]
 WEIGHTINGS: tuple[str, ...] = get_args(Weighting)
+#: Scene frictions to search (``InferenceConfig.frictions``): ratio sqrt(2) from 0.25 to 1.0,
+#: the range of everyday objects sliding on a table.
+FRICTION_GRID: tuple[float, ...] = (0.25, 0.35, 0.5, 0.7, 1.0)
 #: What a stability test measures per hypothesis (``InferenceConfig.stability_measure``).
 StabilityMeasure = Literal["drop", "displacement"]
 STABILITY_MEASURES: tuple[str, ...] = get_args(StabilityMeasure)
@@ -53,6 +56,12 @@ class InferenceConfig:
             support (m), above or below.
         screen_margin_m: a screened candidate's centre of mass is this far inside its
             footprint, and no other shape or wall comes this close to its box (m).
+        frictions: the sliding frictions of the scene searched with the shapes (module doc,
+            step 2), a uniform prior over them: each joint model's pushes are replayed under
+            each, from one settled start; empty: ``physics.friction`` alone. Why: a push's
+            outcome depends on friction as much as on the hidden shape, and the scene's
+            friction is unknown (docs/DESIGN_NOTES.md, "Friction search (on)": the pushes cost
+            F times as much, and at equal time the search did not lose).
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -69,6 +78,14 @@ class InferenceConfig:
         "max_factor_table": Interval(1, None),
         "screen_gap_m": Interval(0, None),
         "screen_margin_m": Interval(0, None),
+        "frictions": Predicate(
+            lambda v: (
+                isinstance(v, tuple)
+                and all(isinstance(f, int | float) and 0 < f <= 5 for f in v)
+                and len(set(v)) == len(v)
+            ),
+            "a tuple of distinct frictions in (0, 5]",
+        ),
     }
 
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)
@@ -87,6 +104,7 @@ class InferenceConfig:
     screen_resting: bool = True
     screen_gap_m: float = 0.002
     screen_margin_m: float = 0.005
+    frictions: tuple[float, ...] = FRICTION_GRID
 
     def __post_init__(self) -> None:
         check_fields(self)

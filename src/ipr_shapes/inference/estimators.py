@@ -1,9 +1,11 @@
 """From evaluated samples to each object's marginal over its candidates (``InferenceConfig.weighting``):
 per-hypothesis likelihoods combined by exact elimination, or per-object / joint importance
-weights; and the effective sample size diagnostic."""
+weights; the posterior over the scene's friction, over which the marginals are mixed; and the
+effective sample size diagnostic."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 
@@ -13,21 +15,50 @@ from ipr_shapes.factor_graph import TableTooLarge, exact_marginals, interaction_
 from ipr_shapes.inference.problem import InferenceProblem, SampleResult
 
 
+def own_log_likelihoods(result: SampleResult, problem: InferenceProblem) -> np.ndarray | None:
+    """(F, n) each object's own term of Eq. 2 (log) per friction of ``result``: -alpha *
+    decimation * its norms summed over the frames; -inf under a friction whose simulation
+    failed; None when it failed under every friction."""
+    if result.norms is None:
+        return None
+    scale = problem.config.likelihood.alpha_per_m * problem.observed.decimation
+    sums = np.asarray(result.norms, float).sum(axis=1)
+    failed = ~np.isfinite(sums).all(axis=1)
+    own = -scale * np.where(np.isfinite(sums), sums, 0.0)
+    own[failed] = -np.inf
+    return own
+
+
+def at_friction(
+    results: Sequence[SampleResult], problem: InferenceProblem, f: int
+) -> list[SampleResult]:
+    """The samples as scored under friction number ``f`` alone: norms (1, T, n) and that
+    friction's log likelihood (norms None and -inf where its simulation failed)."""
+    out = []
+    for result in results:
+        own = own_log_likelihoods(result, problem)
+        if own is None or not np.isfinite(own[f]).all():
+            out.append(dataclasses.replace(result, norms=None, log_likelihood=-math.inf))
+        else:
+            norms = result.norms[f : f + 1]
+            out.append(dataclasses.replace(result, norms=norms, log_likelihood=float(own[f].sum())))
+    return out
+
+
 def object_log_weights(results: Sequence[SampleResult], problem: InferenceProblem) -> np.ndarray:
     """(S, n) per-object log importance weights of the samples (module doc):
-    log P(O_i | X, mu) + log P(X_i) - log q_i, with object i's own term of Eq. 2 and its own
-    exploration probability; -inf for failed simulations."""
-    config = problem.config.likelihood
-    scale = config.alpha_per_m * problem.observed.decimation
+    log P(O_i | X, mu) + log P(X_i) - log q_i, with object i's own term of Eq. 2 (averaged over
+    the frictions, their uniform prior) and its own exploration probability; -inf for failed
+    simulations."""
     weights = np.full((len(results), problem.count), -np.inf)
     for row, result in enumerate(results):
-        if result.norms is None:
+        own = own_log_likelihoods(result, problem)
+        if own is None:
             continue
+        own = np.logaddexp.reduce(own, axis=0) - math.log(len(own))
         for k, j in enumerate(result.choice):
             weights[row, k] = (
-                -scale * float(result.norms[:, k].sum())
-                + float(problem.log_prior[k][j])
-                - float(result.object_log_proposal[k])
+                own[k] + float(problem.log_prior[k][j]) - float(result.object_log_proposal[k])
             )
     return weights
 
@@ -36,14 +67,14 @@ def hypothesis_log_likelihoods(
     results: Sequence[SampleResult], problem: InferenceProblem
 ) -> list[np.ndarray]:
     """Per object, (m_k,) the log of the mean over the samples that chose each candidate of
-    exp(its own Eq. 2 term) (module doc, step 3); NaN for candidates no sample chose."""
-    config = problem.config.likelihood
-    scale = config.alpha_per_m * problem.observed.decimation
+    exp(its own Eq. 2 term) (module doc, step 3); NaN for candidates no sample chose. Samples
+    scored under several frictions take their first (``at_friction`` picks another)."""
     terms: list[list[list[float]]] = [[[] for _ in c] for c in problem.candidates]
     for result in results:
-        if result.norms is None:
+        scored = own_log_likelihoods(result, problem)
+        if scored is None:
             continue
-        own = -scale * result.norms.sum(axis=0)
+        own = scored[0]
         for k, j in enumerate(result.choice):
             terms[k][j].append(float(own[k]))
     return [
@@ -82,13 +113,52 @@ def factor_marginals(
     return [estimates[k] for k in nodes]
 
 
-def marginals(
+def friction_posterior(
     results: Sequence[SampleResult], problem: InferenceProblem, *, joint: bool = False
+) -> np.ndarray | None:
+    """(F,) P(mu | O) over ``problem.friction_values`` (uniform prior), from the evidence each
+    friction gives the same samples (module doc): with the joint weight (``joint`` or "joint"
+    weighting), sum_s P(O | X_s, mu) P(X_s) / q(X_s); otherwise the product over objects of
+    each object's evidence, as its marginal has it: for "hypothesis" weighting sum_j P(X_k^j)
+    times candidate j's mean likelihood, over the candidates sampled; for "object" the sum of its
+    per-object importance weights. None when no sample has a positive weight."""
+    count = len(problem.friction_values)
+    evidence = np.zeros(count)
+    weighting = "joint" if joint else problem.config.weighting
+    # The candidates sampled under any friction: each object's evidence sums over them.
+    sampled = [np.zeros(len(c), dtype=bool) for c in problem.candidates]
+    for result in results:
+        if result.norms is not None:
+            for k, j in enumerate(result.choice):
+                sampled[k][j] = True
+    for f in range(count):
+        results_f = at_friction(results, problem, f)
+        if not any(r.norms is not None for r in results_f):
+            evidence[f] = -np.inf
+        elif weighting == "joint":
+            evidence[f] = np.logaddexp.reduce([r.log_weight for r in results_f])
+        elif weighting == "object":
+            weights = object_log_weights(results_f, problem)
+            evidence[f] = float(np.logaddexp.reduce(weights, axis=0).sum())
+        else:
+            total = 0.0
+            for k, means in enumerate(hypothesis_log_likelihoods(results_f, problem)):
+                keep = sampled[k]
+                prior = problem.log_prior[k][keep]
+                mean = np.nan_to_num(means[keep], nan=-np.inf)  # no success under f: 0
+                total += float(np.logaddexp.reduce(mean + prior - np.logaddexp.reduce(prior)))
+            evidence[f] = total
+    if not np.isfinite(evidence).any():
+        return None
+    posterior = np.exp(evidence - evidence.max())
+    return posterior / posterior.sum()
+
+
+def _single_friction_marginals(
+    results: Sequence[SampleResult], problem: InferenceProblem, joint: bool
 ) -> list[np.ndarray] | None:
-    """Each object's marginal over its candidates (``InferenceConfig.weighting``; the joint
-    weight when ``joint``: exact marginals for an exhaustive enumeration); None when no
-    sample has a positive weight."""
-    if not any(math.isfinite(r.log_likelihood) for r in results):
+    """``marginals`` of samples scored under one friction."""
+    if not any(r.norms is not None for r in results):
         return None
     if not joint and problem.config.weighting == "hypothesis":
         unary = []
@@ -109,6 +179,33 @@ def marginals(
         np.add.at(estimate, [r.choice[k] for r in results], weights)
         estimates.append(estimate / estimate.sum())
     return estimates
+
+
+def marginals(
+    results: Sequence[SampleResult], problem: InferenceProblem, *, joint: bool = False
+) -> list[np.ndarray] | None:
+    """Each object's marginal over its candidates (``InferenceConfig.weighting``; the joint
+    weight when ``joint``: exact marginals for an exhaustive enumeration), summed over the
+    frictions weighted by ``friction_posterior``: P(X_k | O) = sum_mu P(mu | O) P(X_k | O, mu);
+    None when no sample has a positive weight."""
+    if not any(math.isfinite(r.log_likelihood) for r in results):
+        return None
+    count = len(problem.friction_values)
+    if count == 1:
+        return _single_friction_marginals(at_friction(results, problem, 0), problem, joint)
+    posterior = friction_posterior(results, problem, joint=joint)
+    if posterior is None:
+        return None
+    mixed = [np.zeros(len(c)) for c in problem.candidates]
+    for f in range(count):
+        if posterior[f] == 0:
+            continue
+        estimate = _single_friction_marginals(at_friction(results, problem, f), problem, joint)
+        if estimate is None:
+            continue
+        for k, values in enumerate(estimate):
+            mixed[k] += posterior[f] * values
+    return [m / m.sum() for m in mixed]
 
 
 def sample_log_weights(

@@ -15,7 +15,12 @@ from ipr_shapes.collision_checker import CollisionCheckerConfig, uniform_posteri
 from ipr_shapes.errors import IprError
 from ipr_shapes.factor_graph import posterior_medoid
 from ipr_shapes.inference.config import InferenceConfig
-from ipr_shapes.inference.estimators import effective_sample_size, marginals, sample_log_weights
+from ipr_shapes.inference.estimators import (
+    effective_sample_size,
+    friction_posterior,
+    marginals,
+    sample_log_weights,
+)
 from ipr_shapes.inference.exhaustive import exhaustive_models
 from ipr_shapes.inference.pool import default_workers, run_samples
 from ipr_shapes.inference.problem import SampleResult, build_problem
@@ -161,6 +166,10 @@ def infer_shapes(
                 )
             )
     finite = [r for r in samples if math.isfinite(r.log_likelihood)]
+    frictions = problem.friction_values
+    posterior_mu = None
+    if not fallback:
+        posterior_mu = friction_posterior(samples, problem, joint=variant.exhaustive)
     summary = SamplingSummary(
         samples=len(samples),
         impossible_samples=len(samples) - len(finite),
@@ -179,10 +188,17 @@ def infer_shapes(
         pushes_replayed=len(problem.pushes),
         frames_compared=len(problem.observed.frames),
         fallback=fallback,
+        frictions=tuple(float(f) for f in frictions),
+        friction_posterior=None if posterior_mu is None else tuple(float(p) for p in posterior_mu),
     )
     logger.info(
         "%s: %d samples (%d impossible, ESS %.1f) in %.2f s with %d workers",
         method, len(samples), summary.impossible_samples, summary.effective_sample_size,
         timing["sampling"], workers,
     )  # fmt: skip
+    if posterior_mu is not None and len(frictions) > 1:
+        logger.info(
+            "%s: friction posterior %s over %s",
+            method, np.round(posterior_mu, 3).tolist(), list(frictions),
+        )  # fmt: skip
     return InferenceOutcome(method, posteriors, samples, fallback, timing, summary)

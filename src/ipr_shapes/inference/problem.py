@@ -37,6 +37,8 @@ class InferenceProblem:
         observed: the observed frames compared (frame 0 first).
         config: settings.
         seed: samples draw from ``default_rng([seed, index])``.
+        frictions: the sliding frictions the pushes are replayed under (uniform prior; empty:
+            ``config.physics.friction`` alone, as without pushes).
     """
 
     ids: tuple[int, ...]
@@ -51,11 +53,18 @@ class InferenceProblem:
     observed: ObservedFrames
     config: InferenceConfig
     seed: int
+    frictions: tuple[float, ...] = ()
 
     @property
     def count(self) -> int:
         """Number of objects n."""
         return len(self.ids)
+
+    @property
+    def friction_values(self) -> tuple[float, ...]:
+        """(F,) the frictions every joint model is scored under (``frictions``, or the
+        physics' one)."""
+        return self.frictions or (self.config.physics.friction,)
 
     def compatibility(self, i: int, k: int) -> np.ndarray:
         """(m_i, m_k) bool: candidates of i that may coexist with each candidate of k."""
@@ -73,9 +82,11 @@ class SampleResult:
     ``choice`` (n,) candidate positions; ``log_proposal`` log q(X) (0 for exhaustive);
     ``log_likelihood`` log P(O | X, mu) (-inf: exploded or flung); ``log_prior`` log P(X);
     ``seconds`` wall time spent; ``stability_tests`` simulations run for exploration;
-    ``norms`` (T, n) the depth error norms per compared frame and object (at the comparison
-    resolution; None when the simulation failed); ``object_log_proposal`` (n,) each object's
-    own log exploration probability.
+    ``norms`` (F, T, n) the depth error norms per friction (``InferenceProblem.friction_values``),
+    compared frame and object (at the comparison resolution; inf under a friction whose
+    simulation failed; None when it failed under every one); ``object_log_proposal`` (n,) each
+    object's own log exploration probability. ``log_likelihood`` is averaged over the
+    frictions (their uniform prior).
     """
 
     index: int
@@ -156,6 +167,8 @@ def build_problem(
         log_prior = tuple(size_log_prior(c, config.size_prior_exponent) for c in candidates)
     else:
         log_prior = tuple(np.full(len(c), -math.log(len(c))) for c in candidates)
+    # Friction only changes what the pushes do: without them, one value scores the same.
+    frictions = tuple(config.frictions) if variant.actions and pushes else ()
     problem = InferenceProblem(
         ids,
         tuple(candidates),
@@ -169,5 +182,6 @@ def build_problem(
         observed,
         config,
         seed,
+        frictions,
     )
     return problem, indices

@@ -270,8 +270,12 @@ class Sampler:
         return renderer
 
     def depth_norms(self, choice: Sequence[int], deadline: float = math.inf) -> np.ndarray | None:
-        """(T, n) depth error norms of the joint model ``choice`` per compared frame and object
-        (module doc, step 2); None when the simulation exploded or flung an object."""
+        """(F, T, n) depth error norms of the joint model ``choice`` per friction
+        (``InferenceProblem.friction_values``), compared frame and object (module doc, step 2);
+        inf under a friction whose simulation exploded or flung an object, None when every one
+        did. The model settles once (at ``physics.friction``) and the frames before the first
+        push are rendered once; only the pushes and the frames after them are simulated per
+        friction, each from a copy of that state."""
         problem = self.problem
         observed = problem.observed
         shapes = [problem.candidates[k][j] for k, j in enumerate(choice)]
@@ -288,29 +292,53 @@ class Sampler:
         height = max(c.height for c in observed.cameras)
         renderer = self._renderer_for(width, height)
         ids = np.asarray(problem.ids, dtype=np.int32)
-        norms = []
-        for position, frame in enumerate(observed.frames):
-            for push in problem.pushes:
-                if push.after_frame == frame:
-                    if time.perf_counter() > deadline:
-                        raise _Deadline
-                    world.push(push)
+        frictions = problem.friction_values
+        norms = np.full((len(frictions), len(observed.frames), problem.count), np.inf)
+
+        def render(position: int) -> np.ndarray | None:
             if world.exploded or world.flung().any():
                 return None
             depth, index = world.render(renderer, world.cameras[position])
             predicted_ids = np.where(index >= 0, ids[np.maximum(index, 0)], 0)
-            norms.append(
-                depth_error_norms(
-                    observed.depth_m[position],
-                    observed.labels[position],
-                    observed.ignore[position],
-                    depth,
-                    predicted_ids,
-                    problem.ids,
-                    problem.config.likelihood,
-                )
+            return depth_error_norms(
+                observed.depth_m[position],
+                observed.labels[position],
+                observed.ignore[position],
+                depth,
+                predicted_ids,
+                problem.ids,
+                problem.config.likelihood,
             )
-        return np.array(norms)
+
+        pushed_frames = {push.after_frame for push in problem.pushes}
+        first = 0  # the frames before the first replayed push are the same under any friction
+        while first < len(observed.frames) and observed.frames[first] not in pushed_frames:
+            row = render(first)
+            if row is None:
+                return None
+            norms[:, first] = row
+            first += 1
+        if first == len(observed.frames):
+            return norms
+        start = (world.data, world.at_rest)
+        for f, friction in enumerate(frictions):
+            if problem.frictions:
+                # A copy of the settled state (the world had not exploded: it rendered).
+                world.data, world.at_rest = copy.copy(start[0]), start[1]
+                world.exploded = False
+                world.set_friction(friction)
+            for position in range(first, len(observed.frames)):
+                for push in problem.pushes:
+                    if push.after_frame == observed.frames[position]:
+                        if time.perf_counter() > deadline:
+                            raise _Deadline
+                        world.push(push)
+                row = render(position)
+                if row is None:
+                    norms[f] = np.inf
+                    break
+                norms[f, position] = row
+        return None if np.isinf(norms).all(axis=(1, 2)).all() else norms
 
     def _norms_of(self, choice: tuple[int, ...], deadline: float) -> np.ndarray | None:
         """``depth_norms`` of ``choice``, simulated once per sampler."""
@@ -319,12 +347,18 @@ class Sampler:
         return self.evaluated[choice]
 
     def log_likelihood_of(self, norms: np.ndarray | None) -> float:
-        """log P(O | X, mu) from ``depth_norms`` (-inf for a failed simulation)."""
+        """log P(O | X, mu) from ``depth_norms``, averaged over the frictions (their uniform
+        prior; -inf for a failed simulation)."""
         if norms is None:
             return -math.inf
-        return log_likelihood(
-            norms, self.problem.observed.decimation, self.problem.config.likelihood
-        )
+        problem = self.problem
+        per_friction = [
+            log_likelihood(n, problem.observed.decimation, problem.config.likelihood)
+            if np.isfinite(n).all()
+            else -math.inf
+            for n in norms
+        ]
+        return float(np.logaddexp.reduce(per_friction) - math.log(len(per_friction)))
 
     def log_prior(self, choice: Sequence[int]) -> float:
         """log P(X) of a joint model (product of the objects' priors)."""
