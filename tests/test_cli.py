@@ -286,8 +286,8 @@ def test_infer_default_method_writes_the_full_result_and_is_reproducible(tmp_pat
         details = result.extra["inference"]
         assert details["samples"] == 3 and details["fallback"] is None
         assert details["pushes_replayed"] >= 1 and details["frames_compared"] >= 2
-        # The scene's friction is searched with the shapes; its posterior is reported.
-        assert details["frictions"] == list(InferenceConfig().frictions)
+        # By default one friction, the physics' (the search is opt-in), with posterior 1.
+        assert details["frictions"] == [InferenceConfig().physics.friction]
         assert sum(details["friction_posterior"]) == pytest.approx(1.0)
         assert len(details["friction_posterior"]) == len(details["frictions"])
         assert set(result.timing_s) >= {

@@ -379,7 +379,7 @@ def test_the_friction_posterior_favours_the_friction_the_push_showed(true_fricti
 
 def test_without_pushes_or_when_off_no_friction_is_searched():
     observed, _ = _pushed_scene(1.0)
-    assert InferenceConfig().frictions == FRICTION_GRID  # on by default
+    assert InferenceConfig().frictions == ()  # off by default (opt-in)
     for frames, pushes, config in [
         (1, (), InferenceConfig(max_samples=1)),  # nothing to replay
         (2, (FAST,), InferenceConfig(max_samples=1, frictions=())),  # off
