@@ -40,8 +40,12 @@ of some jointly feasible model) are candidates. Then, repeated until the time bu
    objects, so each object's evidence is its own term. Default ``"hypothesis"``: each
    candidate's likelihood is the mean over the samples that chose it of exp(its own term);
    with the priors as unary factors and the pairwise constraints as 0/1 factors, the marginals
-   follow by exact variable elimination (as the Collision Checker's do). Candidates no sample
-   chose get no probability, as with importance weights. The exploration probabilities decide what is visited,
+   follow by exact variable elimination (as the Collision Checker's do). A candidate no sample
+   chose has no likelihood of its own: it takes the mean likelihood of its object's sampled
+   candidates times its mean exploration probability over theirs (the stability tests are
+   the evidence there is of it), so that a few samples tilt the Collision Checker's
+   marginals instead of replacing them with the handful of candidates drawn, and a
+   candidate that falls is still unlikely. The exploration probabilities decide what is visited,
    not how much it weighs, so rare draws do not carry huge weights. ``"object"``: Algorithm
    2's per-object update, w_i = P(O_i | X, mu) P(X_i) / q_i with q_i the exploration
    probability with which X_i was drawn; the estimate of P(X_i^j | O, mu) is the

@@ -67,7 +67,8 @@ def hypothesis_log_likelihoods(
     results: Sequence[SampleResult], problem: InferenceProblem
 ) -> list[np.ndarray]:
     """Per object, (m_k,) the log of the mean over the samples that chose each candidate of
-    exp(its own Eq. 2 term) (module doc, step 3); NaN for candidates no sample chose. Samples
+    exp(its own Eq. 2 term) (module doc, step 3); NaN for candidates no sample chose (the
+    marginals give them the object's mean). Samples
     scored under several frictions take their first (``at_friction`` picks another)."""
     terms: list[list[list[float]]] = [[[] for _ in c] for c in problem.candidates]
     for result in results:
@@ -154,6 +155,21 @@ def friction_posterior(
     return posterior / posterior.sum()
 
 
+def _exploration_ratio(results: Sequence[SampleResult], k: int, chosen: np.ndarray) -> np.ndarray:
+    """(m_k,) log of object k's mean exploration probability per candidate over the samples,
+    over the mean of the ``chosen`` candidates' (0 where the samples carry none: the
+    stability tests' verdict on the candidates no sample chose, relative to those it did)."""
+    rows = [r.exploration[k] for r in results if len(r.exploration) > k and r.exploration[k].size]
+    if not rows:
+        return np.zeros(chosen.size)
+    explored = np.mean(rows, axis=0)
+    reference = float(explored[chosen].mean())
+    if reference <= 0:
+        return np.zeros(chosen.size)
+    with np.errstate(divide="ignore"):
+        return np.log(explored / reference)
+
+
 def _single_friction_marginals(
     results: Sequence[SampleResult], problem: InferenceProblem, joint: bool
 ) -> list[np.ndarray] | None:
@@ -163,11 +179,14 @@ def _single_friction_marginals(
     if not joint and problem.config.weighting == "hypothesis":
         unary = []
         for k, means in enumerate(hypothesis_log_likelihoods(results, problem)):
-            # Candidates no sample chose get no probability, as with importance weights (every
-            # sample's own choice is jointly feasible, so the constraints stay satisfiable); an
-            # object whose samples all failed keeps its prior.
+            # An object whose samples all failed keeps its prior; a candidate no sample
+            # chose takes the mean likelihood of its object's sampled candidates, scaled by
+            # its mean exploration probability against theirs (module doc, step 3).
+            evidence = np.zeros(len(means))
             chosen = np.isfinite(means)
-            evidence = np.where(chosen, means, -np.inf) if chosen.any() else np.zeros(len(means))
+            if chosen.any():
+                mean = np.logaddexp.reduce(means[chosen]) - math.log(int(chosen.sum()))
+                evidence = np.where(chosen, means, mean + _exploration_ratio(results, k, chosen))
             unary.append(evidence + problem.log_prior[k])
         return factor_marginals(unary, problem)
     log_weights = sample_log_weights(results, problem, joint=joint)

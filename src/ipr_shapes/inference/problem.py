@@ -85,8 +85,10 @@ class SampleResult:
     ``norms`` (F, T, n) the depth error norms per friction (``InferenceProblem.friction_values``),
     compared frame and object (at the comparison resolution; inf under a friction whose
     simulation failed; None when it failed under every one); ``object_log_proposal`` (n,) each
-    object's own log exploration probability. ``log_likelihood`` is averaged over the
-    frictions (their uniform prior).
+    object's own log exploration probability; ``exploration`` per object (m_k,) the
+    normalised exploration probabilities it was drawn from (empty for exhaustive): what the
+    stability tests said of the candidates the sample did not choose. ``log_likelihood`` is
+    averaged over the frictions (their uniform prior).
     """
 
     index: int
@@ -98,6 +100,7 @@ class SampleResult:
     stability_tests: int
     norms: np.ndarray | None = None
     object_log_proposal: tuple[float, ...] = ()
+    exploration: tuple[np.ndarray, ...] = ()
 
     @property
     def log_weight(self) -> float:

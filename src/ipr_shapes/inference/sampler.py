@@ -228,9 +228,18 @@ class Sampler:
     ) -> tuple[tuple[int, ...], tuple[float, ...]]:
         """Draw one joint model (candidate positions) and each object's log exploration
         probability (their sum is log q(X))."""
+        choice, log_proposal, _ = self.tree_sample_explored(rng, deadline)
+        return choice, log_proposal
+
+    def tree_sample_explored(
+        self, rng: np.random.Generator, deadline: float = math.inf
+    ) -> tuple[tuple[int, ...], tuple[float, ...], tuple[np.ndarray, ...]]:
+        """``tree_sample`` and, per object, the (m_k,) normalised exploration probabilities
+        its candidate was drawn from."""
         n = self.problem.count
         placed: dict[int, int] = {}
         log_proposal = [0.0] * n
+        explored: list[np.ndarray] = [np.zeros(0)] * n
         for _ in range(n):
             best, best_mass, best_probabilities = -1, -1.0, None
             for i in range(n):
@@ -248,7 +257,8 @@ class Sampler:
             j = int(rng.choice(distribution.size, p=distribution))
             placed[best] = j
             log_proposal[best] = math.log(distribution[j])
-        return tuple(placed[i] for i in range(n)), tuple(log_proposal)
+            explored[best] = distribution
+        return tuple(placed[i] for i in range(n)), tuple(log_proposal), tuple(explored)
 
     # ----------------------------------------------------------------------------------------
     # Likelihood
@@ -369,7 +379,7 @@ class Sampler:
         started = time.perf_counter()
         tests = self._thread_state().tests
         rng = np.random.default_rng([self.problem.seed, index])
-        choice, object_log_proposal = self.tree_sample(rng, deadline)
+        choice, object_log_proposal, explored = self.tree_sample_explored(rng, deadline)
         norms = self._norms_of(choice, deadline)
         return SampleResult(
             index,
@@ -381,6 +391,7 @@ class Sampler:
             self._thread_state().tests - tests,
             norms,
             object_log_proposal,
+            explored,
         )
 
     def score(self, index: int, choice: Sequence[int], deadline: float = math.inf):
