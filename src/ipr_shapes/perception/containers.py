@@ -140,11 +140,9 @@ def join_container_insides(
     axis_v = np.cross(normal, axis_u)
     frame = (support, axis_u, axis_v)
 
-    # Pixels with depth of every segment, from one sort.
+    # Pixels with depth of every segment, from one compiled counting sort.
     flat = labels.reshape(-1)
-    labelled = np.flatnonzero((flat > 0) & valid)
-    order = labelled[np.argsort(flat[labelled], kind="stable")]
-    ids, starts = np.unique(flat[order], return_index=True)
+    order, ids, starts = kernels.labelled_order(flat, valid)
     members = dict(zip(ids.tolist(), np.split(order, starts[1:]), strict=True))
     summaries: dict[int, _Segment] = {}
 
