@@ -48,3 +48,19 @@ def test_plane_kernels_match_the_numpy_expressions():
     centred = points[inliers] - points[inliers].mean(axis=0)
     np.testing.assert_allclose(centroid, points[inliers].mean(axis=0), atol=1e-15)
     np.testing.assert_allclose(scatter, centred.T @ centred, rtol=1e-10, atol=1e-15)
+
+
+def test_inside_lines_is_the_hull_mask_of_numpy():
+    from scipy.spatial import ConvexHull
+
+    rng = np.random.default_rng(8)
+    for _ in range(5):
+        pixels = rng.uniform([5, 3], [150, 110], size=(40, 2))  # (column, row)
+        hull = ConvexHull(np.round(pixels))
+        yy, xx = np.mgrid[0:120, 0:160]
+        expected = np.ones((120, 160), dtype=bool)
+        for a, b, c in hull.equations:
+            expected &= a * xx + b * yy + c <= 0.5
+        found = kernels.inside_lines(np.ascontiguousarray(hull.equations), 120, 160)
+        assert found.shape == (120, 160) and 0 < found.sum() < found.size
+        np.testing.assert_array_equal(found, expected)

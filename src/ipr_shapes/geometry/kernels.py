@@ -156,3 +156,21 @@ def centred_scatter(points: np.ndarray, indices: np.ndarray):
         scatter[2, 2] += d2 * d2
     scatter[1, 0], scatter[2, 0], scatter[2, 1] = scatter[0, 1], scatter[0, 2], scatter[1, 2]
     return centroid, scatter
+
+
+@_jit
+def inside_lines(equations: np.ndarray, height: int, width: int) -> np.ndarray:
+    """(height, width) bool: the pixels (column x, row y) with ``a * x + b * y + c <= 0.5``
+    for every row (a, b, c, ...) of ``equations`` (a convex hull's edges in image coordinates):
+    numpy's ``inside &= a * xx + b * yy + c <= 0.5`` over ``np.mgrid`` for each edge, with the
+    same arithmetic, in one pass that stops at a pixel's first failed edge."""
+    inside = np.zeros((height, width), dtype=np.bool_)
+    for y in range(height):
+        for x in range(width):
+            keep = True
+            for e in range(equations.shape[0]):
+                if not (equations[e, 0] * x + equations[e, 1] * y + equations[e, 2] <= 0.5):
+                    keep = False
+                    break
+            inside[y, x] = keep
+    return inside

@@ -386,11 +386,12 @@ def _hull_mask(mask: np.ndarray) -> np.ndarray:
         hull = ConvexHull(np.column_stack([columns, rows]).astype(np.float64))
     except (QhullError, ValueError):
         return mask.copy()
-    yy, xx = np.mgrid[0 : mask.shape[0], 0 : mask.shape[1]]
-    inside = np.ones(mask.shape, dtype=bool)
-    for a, b, c in hull.equations:
-        inside &= a * xx + b * yy + c <= 0.5
-    return inside
+    from ipr_shapes.geometry import kernels  # numba: only where it is needed
+
+    # Compiled: every edge's test of every pixel, without a full-grid pass per edge.
+    return kernels.inside_lines(
+        np.ascontiguousarray(hull.equations, dtype=np.float64), mask.shape[0], mask.shape[1]
+    )
 
 
 def _walls_around(

@@ -753,9 +753,10 @@ def grouped_order_statistic(groups: np.ndarray, values: np.ndarray, fraction: fl
         first, last = starts[slot], starts[slot + 1]
         if last == first:
             continue
-        ordered = np.sort(grouped[first:last])
+        # A selection, not a sort: the value at that position of the sorted group.
+        position = int(np.floor(fraction * (last - first - 1)))
         ids[found] = slot + lowest
-        statistic[found] = ordered[int(np.floor(fraction * (last - first - 1)))]
+        statistic[found] = np.partition(grouped[first:last], position)[position]
         found += 1
     return ids, statistic
 
