@@ -6,11 +6,12 @@ in alternating child processes on the same scenes:
 - ``labels``: each version writes every frame's tracked labels, untracked segment labels and
   facet labels to an ``.npz``; the two files are compared pixel for pixel and every frame that
   differs is listed.
-- ``time``: each version perceives the scenes in one child process per round (the rounds
-  alternate old, new, old, new, ...), after one untimed pass that loads the compiled kernels;
-  each frame's time is the CPU time of that process (``time.process_time``, BLAS limited to one
-  thread), not wall time, so that other work on a shared machine counts little. Reported: the
-  median over rounds of each set's median ms per frame, and the ratio new / old.
+- ``time``: each version runs in its own child process, after one untimed pass that loads
+  the compiled kernels; scene by scene, one version perceives it and then the other (the
+  first alternates between rounds). Each frame's time is the perception's own per-frame
+  figure measured in CPU time of that process (``time.process_time``, BLAS limited to one
+  thread), not wall time, so that other work on a shared machine counts less. Reported per
+  set: the median ms per frame of each version and the median of the per-scene ratios.
 
 ``python -m benchmarks.dev_perception_speed labels --old-src A/src --new-src B/src SCENE...``
 and ``... time --rounds 3 ...``; scenes are folders (``--set NAME=DIR,DIR`` groups them).
@@ -40,33 +41,39 @@ mode, out, scenes = sys.argv[1], sys.argv[2], json.loads(sys.argv[3])
 # The perception's own per-frame figures, measured in this process's CPU time.
 perception.time = type("CpuClock", (), {"perf_counter": staticmethod(time.process_time)})
 loaded = {scene: load_scene(Path(scene)) for scene in scenes}
-arrays, times = {}, {}
+arrays = {}
 with one_thread():
-    if mode == "time":
+    if mode == "serve":
         for scene in loaded.values():  # load the compiled kernels of every path first
             perception.perceive_scene(scene, with_free_space=False)
+        print("ready", flush=True)
+        for line in sys.stdin:  # one scene per request: its CPU seconds per frame
+            result = perception.perceive_scene(loaded[line.strip()], with_free_space=False)
+            print(json.dumps(result.timing_s["per_frame"]), flush=True)
+        sys.exit(0)
     for name, scene in loaded.items():
         result = perception.perceive_scene(scene, with_free_space=False)
-        times[name] = [float(s) for s in result.timing_s["per_frame"]]
-        if mode == "labels":
-            for index, labels in enumerate(result.labels):
-                arrays[f"{name}|{index}|labels"] = labels
-                arrays[f"{name}|{index}|segments"] = result.segmentations[index].labels
-                arrays[f"{name}|{index}|facets"] = result.facet_labels[index]
-if mode == "labels":
-    np.savez_compressed(out, **arrays)
-else:
-    Path(out).write_text(json.dumps(times))
+        for index, labels in enumerate(result.labels):
+            arrays[f"{name}|{index}|labels"] = labels
+            arrays[f"{name}|{index}|segments"] = result.segmentations[index].labels
+            arrays[f"{name}|{index}|facets"] = result.facet_labels[index]
+np.savez_compressed(out, **arrays)
 """
 
 
-def _run(src: Path, mode: str, out: Path, scenes: list[str]) -> None:
-    """One child process on the code under ``src`` (the repository root is on the path for
-    ``benchmarks.common``)."""
+def _environment(src: Path) -> dict:
+    """The environment of a child on the code under ``src`` (the repository root is on the
+    path for ``benchmarks.common``)."""
     root = Path(__file__).resolve().parents[1]
-    env = dict(os.environ, PYTHONPATH=f"{src}{os.pathsep}{root}")
+    return dict(os.environ, PYTHONPATH=f"{src}{os.pathsep}{root}")
+
+
+def _run(src: Path, mode: str, out: Path, scenes: list[str]) -> None:
+    """One child process on the code under ``src``."""
     subprocess.run(
-        [sys.executable, "-c", _CHILD, mode, str(out), json.dumps(scenes)], env=env, check=True
+        [sys.executable, "-c", _CHILD, mode, str(out), json.dumps(scenes)],
+        env=_environment(src),
+        check=True,
     )
 
 
@@ -93,22 +100,50 @@ def compare_labels(old: Path, new: Path, scenes: list[str]) -> list[str]:
 
 def time_versions(
     old: Path, new: Path, sets: dict[str, list[str]], rounds: int
-) -> dict[str, tuple[float, float]]:
-    """{set: (old, new) median over rounds of the set's median CPU ms per frame}."""
+) -> dict[str, tuple[float, float, float]]:
+    """{set: (old, new, ratio)}: the median CPU ms per frame of each version over the set's
+    frames and rounds, and the median over the set's scenes and rounds of the per-scene ratio
+    new / old. Both versions stay loaded in their own process; scene by scene, one perceives
+    and then the other (the first alternates between rounds), so that each pair of figures
+    is taken under the same load."""
     scenes = [scene for members in sets.values() for scene in members]
-    per_round: dict[str, dict[str, list[float]]] = {"old": {}, "new": {}}
-    with tempfile.TemporaryDirectory() as folder:
+    servers = {}
+    for tag, src in (("old", old), ("new", new)):
+        servers[tag] = subprocess.Popen(
+            [sys.executable, "-c", _CHILD, "serve", "-", json.dumps(scenes)],
+            env=_environment(src),
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+        )
+        if servers[tag].stdout.readline().strip() != "ready":
+            raise RuntimeError(f"the {tag} version did not start")
+    frames: dict[str, dict[str, list[float]]] = {"old": {}, "new": {}}
+    ratios: dict[str, list[float]] = {}
+    try:
         for number in range(rounds):
-            for tag, src in (("old", old), ("new", new)):
-                path = Path(folder) / f"{tag}{number}.json"
-                _run(src, "time", path, scenes)
-                times = json.loads(path.read_text())
-                for name, members in sets.items():
-                    frames = [1000 * s for scene in members for s in times[scene]]
-                    per_round[tag].setdefault(name, []).append(float(np.median(frames)))
-                    print(f"round {number} {tag} {name}: {np.median(frames):.1f} ms", flush=True)
+            for name, members in sets.items():
+                for scene in members:
+                    seconds = {}
+                    for tag in ("old", "new") if number % 2 == 0 else ("new", "old"):
+                        servers[tag].stdin.write(scene + "\n")
+                        servers[tag].stdin.flush()
+                        seconds[tag] = json.loads(servers[tag].stdout.readline())
+                        frames[tag].setdefault(name, []).extend(1000 * s for s in seconds[tag])
+                    ratios.setdefault(name, []).append(
+                        float(np.median(seconds["new"]) / np.median(seconds["old"]))
+                    )
+            print(f"round {number} done", flush=True)
+    finally:
+        for server in servers.values():
+            server.stdin.close()
+            server.wait()
     return {
-        name: (float(np.median(per_round["old"][name])), float(np.median(per_round["new"][name])))
+        name: (
+            float(np.median(frames["old"][name])),
+            float(np.median(frames["new"][name])),
+            float(np.median(ratios[name])),
+        )
         for name in sets
     }
 
@@ -145,9 +180,10 @@ def main(argv: list[str] | None = None) -> int:
             print(line)
         return 1 if differ else 0
     figures = time_versions(args.old_src, args.new_src, sets, args.rounds)
-    print("| set | old ms/frame | new ms/frame | new/old |\n|---|---|---|---|")
-    for name, (before, after) in figures.items():
-        print(f"| {name} | {before:.1f} | {after:.1f} | {after / before:.3f} |")
+    print("| set | old ms/frame | new ms/frame | new/old (median of scene ratios) |")
+    print("|---|---|---|---|")
+    for name, (before, after, ratio) in figures.items():
+        print(f"| {name} | {before:.1f} | {after:.1f} | {ratio:.3f} |")
     return 0
 
 

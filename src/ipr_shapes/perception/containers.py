@@ -218,8 +218,9 @@ def _borders(
     """
     low, high = config.containers.front_step_m
     # Only the labelled pixels' bounding box can hold borders.
-    rows, cols = np.nonzero(labels > 0)
-    box = (slice(rows.min(), rows.max() + 1), slice(cols.min(), cols.max() + 1))
+    rows = np.flatnonzero(labels.any(axis=1))  # labels >= 0: any() is "some label > 0"
+    cols = np.flatnonzero(labels.any(axis=0))
+    box = (slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1))
     # Compiled (``kernels``): both passes over the pixel pairs without temporaries.
     contact_counts, front_counts = kernels.border_pair_counts(
         np.ascontiguousarray(labels[box]),
