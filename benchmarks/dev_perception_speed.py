@@ -166,13 +166,20 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--set", action="append", help="NAME=SCENE,SCENE,... (repeatable)")
     parser.add_argument("--rounds", type=int, default=3, help="alternating rounds (time)")
     parser.add_argument("scenes", nargs="*", help="scene folders")
-    args = parser.parse_args(argv)
+    args = parser.parse_intermixed_args(argv)
     sets = _sets(args)
     if not sets:
         parser.error("give scene folders or --set NAME=DIR,DIR")
+    if any(not name or not members for name, members in sets.items()):
+        parser.error("each --set is NAME=DIR,DIR,... (a name and at least one scene folder)")
+    if args.rounds < 1:
+        parser.error(f"--rounds must be at least 1, got {args.rounds}")
     for src in (args.old_src, args.new_src):
         if not (src / "ipr_shapes").is_dir():
             parser.error(f"{src} holds no ipr_shapes package; pass the src folder")
+    for scene in (scene for members in sets.values() for scene in members):
+        if not (Path(scene) / "scene_camera.json").is_file():
+            parser.error(f"{scene} is not a scene folder (no scene_camera.json)")
     if args.mode == "labels":
         scenes = [scene for members in sets.values() for scene in members]
         differ = compare_labels(args.old_src, args.new_src, scenes)
