@@ -48,3 +48,47 @@ def test_plane_kernels_match_the_numpy_expressions():
     centred = points[inliers] - points[inliers].mean(axis=0)
     np.testing.assert_allclose(centroid, points[inliers].mean(axis=0), atol=1e-15)
     np.testing.assert_allclose(scatter, centred.T @ centred, rtol=1e-10, atol=1e-15)
+
+
+def test_inside_lines_is_the_hull_mask_of_numpy():
+    from scipy.spatial import ConvexHull
+
+    rng = np.random.default_rng(8)
+    for _ in range(5):
+        pixels = rng.uniform([5, 3], [150, 110], size=(40, 2))  # (column, row)
+        hull = ConvexHull(np.round(pixels))
+        yy, xx = np.mgrid[0:120, 0:160]
+        expected = np.ones((120, 160), dtype=bool)
+        for a, b, c in hull.equations:
+            expected &= a * xx + b * yy + c <= 0.5
+        found = kernels.inside_lines(np.ascontiguousarray(hull.equations), 120, 160)
+        assert found.shape == (120, 160) and 0 < found.sum() < found.size
+        np.testing.assert_array_equal(found, expected)
+
+
+def test_positions_in_sorted_is_searchsorted_where_found():
+    rng = np.random.default_rng(9)
+    values = np.flatnonzero(rng.random(5000) < 0.6)
+    targets = np.flatnonzero(rng.random(5200) < 0.3)  # some beyond the last value
+    position = np.minimum(np.searchsorted(values, targets), len(values) - 1)
+    expected = position[values[position] == targets]
+    np.testing.assert_array_equal(kernels.positions_in_sorted(values, targets), expected)
+    assert len(kernels.positions_in_sorted(values[:0], targets)) == 0
+
+
+def test_large_pieces_are_the_closed_mask_pieces_of_scipy():
+    from scipy import ndimage
+
+    rng = np.random.default_rng(10)
+    eight = np.ones((3, 3), dtype=bool)
+    for density in (0.05, 0.3, 0.6):
+        mask = ndimage.binary_opening(rng.random((60, 80)) < density * 2, structure=eight)
+        mask |= rng.random((60, 80)) < density / 4  # specks and one-pixel gaps
+        mask[0, :5] = mask[-1, -5:] = True  # pieces on the border
+        for share in (0.0, 0.3, 1.0):
+            closed = mask | ndimage.binary_closing(mask, structure=eight)
+            labels, count = ndimage.label(closed, structure=eight)
+            sizes = np.bincount(labels[mask], minlength=count + 1)
+            sizes[0] = 0
+            expected = mask & np.isin(labels, np.flatnonzero(sizes >= share * sizes.max()))
+            np.testing.assert_array_equal(kernels.large_pieces(mask, share), expected)

@@ -531,14 +531,52 @@ def test_facing_plane_and_row_kernels_match_the_numpy_expressions():
     )
 
 
-def test_region_sums_skip_points_of_no_region():
+def test_region_groups_sort_stably_and_skip_points_of_no_region():
     rng = np.random.default_rng(2)
     region = rng.integers(-1, 5, 500)
+    region[region == 3] = -1  # a region without points
     points = rng.normal(size=(500, 3))
     areas = rng.random(500)
-    sizes, sums, area_sums = kernels.region_sums(region, points, areas, 5)
+    by_region, bounds, grouped, sizes, sums, area_sums = kernels.region_groups(
+        region, points, areas, 5
+    )
+    reference = np.argsort(region, kind="stable")
+    np.testing.assert_array_equal(by_region, reference)
+    np.testing.assert_array_equal(bounds, np.searchsorted(region[reference], np.arange(6)))
+    np.testing.assert_array_equal(grouped, points[reference])
     for number in range(5):
         members = region == number
         assert sizes[number] == members.sum()
         np.testing.assert_allclose(sums[number], points[members].sum(axis=0), atol=1e-12)
         assert area_sums[number] == pytest.approx(areas[members].sum(), rel=1e-12)
+
+
+def test_labelled_order_is_the_stable_sort_by_label():
+    rng = np.random.default_rng(5)
+    labels = rng.integers(0, 9, 3000).astype(np.int32)
+    labels[labels == 4] = 0  # a missing label
+    valid = rng.random(3000) < 0.8
+    order, ids, starts = kernels.labelled_order(labels, valid)
+    labelled = np.flatnonzero((labels > 0) & valid)
+    reference = labelled[np.argsort(labels[labelled], kind="stable")]
+    reference_ids, reference_starts = np.unique(labels[reference], return_index=True)
+    np.testing.assert_array_equal(order, reference)
+    np.testing.assert_array_equal(ids, reference_ids)
+    assert ids.dtype == reference_ids.dtype
+    np.testing.assert_array_equal(starts, reference_starts)
+    empty = kernels.labelled_order(np.zeros(10, dtype=np.int32), np.ones(10, dtype=bool))
+    assert [len(part) for part in empty] == [0, 0, 0]
+
+
+def test_distinct_per_slice_is_each_slice_unique():
+    rng = np.random.default_rng(6)
+    values = rng.integers(-1, 40, 2000).astype(np.int32)
+    starts = np.array([0, 300, 300, 1200])
+    ends = np.array([300, 300, 1200, 2000])
+    distinct, bounds = kernels.distinct_per_slice(values, starts, ends, 40)
+    assert distinct.dtype == values.dtype
+    for k, (start, end) in enumerate(zip(starts, ends, strict=True)):
+        part = values[start:end]
+        np.testing.assert_array_equal(
+            distinct[bounds[k] : bounds[k + 1]], np.unique(part[part >= 0])
+        )

@@ -156,3 +156,102 @@ def centred_scatter(points: np.ndarray, indices: np.ndarray):
         scatter[2, 2] += d2 * d2
     scatter[1, 0], scatter[2, 0], scatter[2, 1] = scatter[0, 1], scatter[0, 2], scatter[1, 2]
     return centroid, scatter
+
+
+@_jit
+def inside_lines(equations: np.ndarray, height: int, width: int) -> np.ndarray:
+    """(height, width) bool: the pixels (column x, row y) with ``a * x + b * y + c <= 0.5``
+    for every row (a, b, c, ...) of ``equations`` (a convex hull's edges in image coordinates):
+    numpy's ``inside &= a * xx + b * yy + c <= 0.5`` over ``np.mgrid`` for each edge, with the
+    same arithmetic, in one pass that stops at a pixel's first failed edge."""
+    inside = np.zeros((height, width), dtype=np.bool_)
+    for y in range(height):
+        for x in range(width):
+            keep = True
+            for e in range(equations.shape[0]):
+                if not (equations[e, 0] * x + equations[e, 1] * y + equations[e, 2] <= 0.5):
+                    keep = False
+                    break
+            inside[y, x] = keep
+    return inside
+
+
+@_jit
+def positions_in_sorted(values: np.ndarray, targets: np.ndarray) -> np.ndarray:
+    """(K,) int64 positions in ``values`` (N,) of the ``targets`` (M,) found there, both
+    ascending and without repeats: ``position = np.searchsorted(values, targets)``, kept where
+    ``values[position] == targets``, by one merge of the two lists instead of a binary search
+    per target."""
+    found = np.empty(min(values.shape[0], targets.shape[0]), dtype=np.int64)
+    count = 0
+    j = 0
+    for t in range(targets.shape[0]):
+        target = targets[t]
+        while j < values.shape[0] and values[j] < target:
+            j += 1
+        if j == values.shape[0]:
+            break
+        if values[j] == target:
+            found[count] = j
+            count += 1
+    return found[:count].copy()
+
+
+@_jit
+def large_pieces(mask: np.ndarray, share: float) -> np.ndarray:
+    """(h, w) bool: the pixels of ``mask`` in the large 8-connected pieces of ``mask |
+    binary_closing(mask)`` (3 x 3 structure, scipy's border value 0), those holding at least
+    ``share`` of the largest piece's ``mask`` pixels: ``support._largest_piece``'s
+    ``ndimage.binary_closing``, ``ndimage.label``, ``np.bincount`` and ``np.isin`` in a few
+    passes (a piece's number does not matter, only which pixels are kept)."""
+    height, width = mask.shape
+    dilated = np.zeros((height, width), dtype=np.bool_)
+    for y in range(height):
+        for x in range(width):
+            if mask[y, x]:
+                for dy in range(max(y - 1, 0), min(y + 2, height)):
+                    for dx in range(max(x - 1, 0), min(x + 2, width)):
+                        dilated[dy, dx] = True
+    closed = mask.copy()
+    for y in range(1, height - 1):  # the erosion's border value 0: border pixels erode
+        for x in range(1, width - 1):
+            if closed[y, x]:
+                continue
+            full = True
+            for dy in range(y - 1, y + 2):
+                for dx in range(x - 1, x + 2):
+                    if not dilated[dy, dx]:
+                        full = False
+            closed[y, x] = full
+    piece = np.full((height, width), -1, dtype=np.int64)
+    sizes = np.zeros(height * width + 1, dtype=np.int64)
+    stack = np.empty(height * width, dtype=np.int64)
+    count = 0
+    for y in range(height):
+        for x in range(width):
+            if not closed[y, x] or piece[y, x] >= 0:
+                continue
+            piece[y, x] = count
+            top = 0
+            stack[top] = y * width + x
+            top += 1
+            while top > 0:
+                top -= 1
+                cy, cx = stack[top] // width, stack[top] % width
+                sizes[count] += mask[cy, cx]
+                for dy in range(max(cy - 1, 0), min(cy + 2, height)):
+                    for dx in range(max(cx - 1, 0), min(cx + 2, width)):
+                        if closed[dy, dx] and piece[dy, dx] < 0:
+                            piece[dy, dx] = count
+                            stack[top] = dy * width + dx
+                            top += 1
+            count += 1
+    largest = 0
+    for number in range(count):
+        largest = max(largest, sizes[number])
+    kept = np.zeros((height, width), dtype=np.bool_)
+    for y in range(height):
+        for x in range(width):
+            if mask[y, x] and sizes[piece[y, x]] >= share * largest:
+                kept[y, x] = True
+    return kept

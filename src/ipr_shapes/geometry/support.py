@@ -291,9 +291,8 @@ def _usable_inliers(
     hits = kernels.plane_inliers(
         flat, np.asarray(normal, dtype=np.float64), float(offset), threshold_m
     )
-    position = np.minimum(np.searchsorted(usable, hits), max(len(usable) - 1, 0))
-    keep = usable[position] == hits if len(usable) else np.zeros(len(hits), dtype=bool)
-    return position[keep]
+    # Both lists ascending: one merge finds the hits among the usable pixels.
+    return kernels.positions_in_sorted(usable, hits)
 
 
 def _refit(
@@ -365,14 +364,12 @@ def _largest_piece(mask: np.ndarray, share: float) -> np.ndarray:
     closed: the largest and those with at least ``share`` of its inliers (the tops of boxes
     packed in a bin are several pieces apart by a few pixels of gap; a plane's far-away
     coincidental inliers are small pieces)."""
+    from ipr_shapes.geometry import kernels  # numba: only where it is needed
+
     if not mask.any():
         return mask
-    closed = mask | ndimage.binary_closing(mask, structure=_EIGHT)
-    labels, count = ndimage.label(closed, structure=_EIGHT)
-    sizes = np.bincount(labels[mask], minlength=count + 1)
-    sizes[0] = 0
-    large = np.flatnonzero(sizes >= share * sizes.max())
-    return mask & np.isin(labels, large)
+    # Compiled: the closing, the pieces and their sizes in a few passes.
+    return kernels.large_pieces(np.ascontiguousarray(mask), float(share))
 
 
 def _hull_mask(mask: np.ndarray) -> np.ndarray:
@@ -386,11 +383,12 @@ def _hull_mask(mask: np.ndarray) -> np.ndarray:
         hull = ConvexHull(np.column_stack([columns, rows]).astype(np.float64))
     except (QhullError, ValueError):
         return mask.copy()
-    yy, xx = np.mgrid[0 : mask.shape[0], 0 : mask.shape[1]]
-    inside = np.ones(mask.shape, dtype=bool)
-    for a, b, c in hull.equations:
-        inside &= a * xx + b * yy + c <= 0.5
-    return inside
+    from ipr_shapes.geometry import kernels  # numba: only where it is needed
+
+    # Compiled: every edge's test of every pixel, without a full-grid pass per edge.
+    return kernels.inside_lines(
+        np.ascontiguousarray(hull.equations, dtype=np.float64), mask.shape[0], mask.shape[1]
+    )
 
 
 def _walls_around(

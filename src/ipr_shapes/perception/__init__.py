@@ -17,7 +17,11 @@ from ipr_shapes.perception.config import PerceptionConfig
 from ipr_shapes.perception.denoise import objects_plane_depth
 from ipr_shapes.perception.facets import object_facets
 from ipr_shapes.perception.free_space import SpaceMap, VoxelGrid, observe_space
-from ipr_shapes.perception.kernels import object_pixel_geometry
+from ipr_shapes.perception.kernels import (
+    distinct_per_slice,
+    labelled_order,
+    object_pixel_geometry,
+)
 from ipr_shapes.perception.robot import robot_pixels
 from ipr_shapes.perception.segmentation import segment_frame
 from ipr_shapes.perception.tracking import split_merged_objects, track_segments
@@ -195,9 +199,8 @@ def _partial_objects(
     next_facet = 1
     objects = []
     # Labels may cover depth holes inside an object; its points come from valid readings.
-    labelled = np.flatnonzero((flat_labels > 0) & valid)
-    order = labelled[np.argsort(flat_labels[labelled], kind="stable")]
-    object_ids, starts = np.unique(flat_labels[order], return_index=True)
+    # Grouped by label in one compiled counting sort (``kernels.labelled_order``).
+    order, object_ids, starts = labelled_order(flat_labels, valid)
     ends = np.append(starts[1:], len(order))[: len(starts)]  # no segments: no ends
     # Per-pixel quantities of all objects in one pass each (objects are slices of ``order``):
     # real frames have a dozen small segments besides the objects, and per-object calls cost.
@@ -221,11 +224,17 @@ def _partial_objects(
     )
     rgb_all = flat_rgb[order]
     border_all = border[order]
-    for object_id, start, end in zip(object_ids.tolist(), starts, ends, strict=True):
+    # Each object's distinct supervoxels (sorted), all objects in one compiled pass.
+    distinct, distinct_bounds = distinct_per_slice(
+        supervoxel_all, starts, ends, max(supervoxels.count, 1)
+    )
+    for number, (object_id, start, end) in enumerate(
+        zip(object_ids.tolist(), starts, ends, strict=True)
+    ):
         pixels = order[start:end]
         point_supervoxel = supervoxel_all[start:end]
         has_supervoxel = has_all[start:end]
-        object_supervoxels = np.unique(point_supervoxel[has_supervoxel])
+        object_supervoxels = distinct[distinct_bounds[number] : distinct_bounds[number + 1]]
         world = world_all[start:end]
         areas = areas_all[start:end]
         facets, facet_of_point = object_facets(

@@ -317,8 +317,9 @@ class SegmentationConfig:
         concave_weight: graph weight of concave (or not smooth) edges; convex and flat edges
             weigh 1, so the clustering cuts at concavities.
         singular_weight: graph weight of convex edges that fail the sanity check.
-        dense_eigen_limit: components up to this many supervoxels use a dense eigensolver
-            (faster than the sparse one on small graphs).
+        dense_eigen_limit: components up to this many supervoxels use a dense eigensolver,
+            larger ones the sparse one in shift-invert mode (the dense one is faster below
+            about 300 supervoxels, docs/experiments/2026-11-26-perception-speed.md).
         eigen_tolerance: relative accuracy of the sparse eigensolver (ARPACK ``tol``; 0 =
             machine precision); the embedding only feeds k-means, which needs no more
             (docs/experiments/2026-11-26-bin-walls.md).
@@ -361,7 +362,7 @@ class SegmentationConfig:
     concave_join_colour: float = 0.02
     concave_weight: float = 0.001
     singular_weight: float = 0.001
-    dense_eigen_limit: int = 400
+    dense_eigen_limit: int = 300
     eigen_tolerance: float = 1e-6
     eigengap_floor: float = 0.001
     kmeans_restarts: int = 4

@@ -140,11 +140,9 @@ def join_container_insides(
     axis_v = np.cross(normal, axis_u)
     frame = (support, axis_u, axis_v)
 
-    # Pixels with depth of every segment, from one sort.
+    # Pixels with depth of every segment, from one compiled counting sort.
     flat = labels.reshape(-1)
-    labelled = np.flatnonzero((flat > 0) & valid)
-    order = labelled[np.argsort(flat[labelled], kind="stable")]
-    ids, starts = np.unique(flat[order], return_index=True)
+    order, ids, starts = kernels.labelled_order(flat, valid)
     members = dict(zip(ids.tolist(), np.split(order, starts[1:]), strict=True))
     summaries: dict[int, _Segment] = {}
 
@@ -220,8 +218,9 @@ def _borders(
     """
     low, high = config.containers.front_step_m
     # Only the labelled pixels' bounding box can hold borders.
-    rows, cols = np.nonzero(labels > 0)
-    box = (slice(rows.min(), rows.max() + 1), slice(cols.min(), cols.max() + 1))
+    rows = np.flatnonzero(labels.any(axis=1))  # labels >= 0: any() is "some label > 0"
+    cols = np.flatnonzero(labels.any(axis=0))
+    box = (slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1))
     # Compiled (``kernels``): both passes over the pixel pairs without temporaries.
     contact_counts, front_counts = kernels.border_pair_counts(
         np.ascontiguousarray(labels[box]),

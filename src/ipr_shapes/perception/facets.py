@@ -112,10 +112,7 @@ def object_facets(
     # The points of every region from one sort and one gather (regions are numbered from 0;
     # points of no supervoxel of the object, region -1, come first and are skipped); their
     # counts, centres and areas from one compiled pass.
-    by_region = np.argsort(point_region, kind="stable")
-    bounds = np.searchsorted(point_region[by_region], np.arange(n_regions + 1))
-    grouped = points_world[by_region]
-    sizes, sums, area_sums = kernels.region_sums(
+    by_region, bounds, grouped, sizes, sums, area_sums = kernels.region_groups(
         point_region, np.ascontiguousarray(points_world, dtype=np.float64), point_areas, n_regions
     )
     summed_normals = kernels.group_sums(region, region_normals * region_weights[:, None], n_regions)

@@ -753,9 +753,10 @@ def grouped_order_statistic(groups: np.ndarray, values: np.ndarray, fraction: fl
         first, last = starts[slot], starts[slot + 1]
         if last == first:
             continue
-        ordered = np.sort(grouped[first:last])
+        # A selection, not a sort: the value at that position of the sorted group.
+        position = int(np.floor(fraction * (last - first - 1)))
         ids[found] = slot + lowest
-        statistic[found] = ordered[int(np.floor(fraction * (last - first - 1)))]
+        statistic[found] = np.partition(grouped[first:last], position)[position]
         found += 1
     return ids, statistic
 
@@ -790,24 +791,6 @@ def connected_components(pairs: np.ndarray, count: int) -> np.ndarray:
         else:
             component[node] = component[root]
     return component
-
-
-@_jit
-def region_sums(point_region: np.ndarray, points: np.ndarray, areas: np.ndarray, count: int):
-    """Pixel counts (count,) int64, point sums (count, 3) and area sums (count,) of the (N,)
-    points of each region id in [0, count) (points of region -1 are skipped), in point order."""
-    sizes = np.zeros(count, dtype=np.int64)
-    sums = np.zeros((count, 3))
-    area_sums = np.zeros(count)
-    for p in range(point_region.shape[0]):
-        region = point_region[p]
-        if region < 0:
-            continue
-        sizes[region] += 1
-        area_sums[region] += areas[p]
-        for axis in range(3):
-            sums[region, axis] += points[p, axis]
-    return sizes, sums, area_sums
 
 
 @_jit
@@ -1071,3 +1054,104 @@ def project_to_previous(
             inside[k] = True
             pixel[k] = np.int64(v) * previous_width + np.int64(u)
     return pixel, z_out, inside
+
+
+@_jit
+def labelled_order(flat_labels: np.ndarray, valid: np.ndarray):
+    """The pixels with a label > 0 and a reading, grouped by label: ``order`` (N,) int64 flat
+    indices, ``ids`` (K,) the distinct labels ascending and ``starts`` (K,) int64 where each
+    label's pixels begin in ``order``. A counting sort, stable: the same as
+    ``labelled = np.flatnonzero((flat_labels > 0) & valid)``, ``order =
+    labelled[np.argsort(flat_labels[labelled], kind="stable")]`` and ``ids, starts =
+    np.unique(flat_labels[order], return_index=True)`` without the sort."""
+    highest = 0
+    for p in range(flat_labels.shape[0]):
+        if flat_labels[p] > highest and valid[p]:
+            highest = flat_labels[p]
+    counts = np.zeros(highest + 1, dtype=np.int64)
+    for p in range(flat_labels.shape[0]):
+        label = flat_labels[p]
+        if label > 0 and valid[p]:
+            counts[label] += 1
+    n_ids = 0
+    for label in range(1, highest + 1):
+        n_ids += counts[label] > 0
+    ids = np.empty(n_ids, dtype=flat_labels.dtype)
+    starts = np.empty(n_ids, dtype=np.int64)
+    fill = np.zeros(highest + 1, dtype=np.int64)
+    total = 0
+    found = 0
+    for label in range(1, highest + 1):
+        if counts[label] > 0:
+            ids[found] = label
+            starts[found] = total
+            found += 1
+        fill[label] = total
+        total += counts[label]
+    order = np.empty(total, dtype=np.int64)
+    for p in range(flat_labels.shape[0]):
+        label = flat_labels[p]
+        if label > 0 and valid[p]:
+            order[fill[label]] = p
+            fill[label] += 1
+    return order, ids, starts
+
+
+@_jit
+def distinct_per_slice(values: np.ndarray, starts: np.ndarray, ends: np.ndarray, count: int):
+    """The distinct values >= 0 (ascending) of each slice ``values[starts[k]:ends[k]]`` of
+    (N,) int ``values`` in [-1, ``count``): ``np.unique(part[part >= 0])`` of every slice, as
+    one (D,) array of their dtype and (K + 1,) int64 bounds (slice k's at ``bounds[k]:bounds[k + 1]``).
+    A mark per value instead of a sort of every slice."""
+    seen = np.zeros(count, dtype=np.bool_)
+    distinct = np.empty(values.shape[0], dtype=values.dtype)
+    bounds = np.zeros(starts.shape[0] + 1, dtype=np.int64)
+    total = 0
+    for k in range(starts.shape[0]):
+        first = total
+        for p in range(starts[k], ends[k]):
+            value = values[p]
+            if value >= 0 and not seen[value]:
+                seen[value] = True
+                distinct[total] = value
+                total += 1
+        distinct[first:total].sort()
+        for d in range(first, total):
+            seen[distinct[d]] = False
+        bounds[k + 1] = total
+    return distinct[:total].copy(), bounds
+
+
+@_jit
+def region_groups(point_region: np.ndarray, points: np.ndarray, areas: np.ndarray, count: int):
+    """The (N,) points grouped by region id in [-1, ``count``): ``by_region`` (N,) int64 as
+    ``np.argsort(point_region, kind="stable")`` (a counting sort: region -1 first), ``bounds``
+    (count + 1,) int64 where region r's points begin in it (``np.searchsorted`` of the sorted
+    regions), ``grouped`` (N, 3) ``points[by_region]``, and ``region_sums``'s counts, point
+    sums and area sums of the points of each region id >= 0, added in point order."""
+    n = point_region.shape[0]
+    starts = np.zeros(count + 2, dtype=np.int64)  # slot 0: region -1
+    for p in range(n):
+        starts[point_region[p] + 2] += 1
+    for slot in range(1, count + 2):
+        starts[slot] += starts[slot - 1]
+    fill = starts[: count + 1].copy()
+    by_region = np.empty(n, dtype=np.int64)
+    grouped = np.empty((n, 3))
+    sizes = np.zeros(count, dtype=np.int64)
+    sums = np.zeros((count, 3))
+    area_sums = np.zeros(count)
+    for p in range(n):
+        region = point_region[p]
+        slot = fill[region + 1]
+        fill[region + 1] += 1
+        by_region[slot] = p
+        for axis in range(3):
+            grouped[slot, axis] = points[p, axis]
+        if region < 0:
+            continue
+        sizes[region] += 1
+        area_sums[region] += areas[p]
+        for axis in range(3):
+            sums[region, axis] += points[p, axis]
+    return by_region, starts[1:].copy(), grouped, sizes, sums, area_sums
