@@ -446,3 +446,35 @@ def test_up_is_refused_for_a_scene_with_camera_poses(scene_dir: Path, tmp_path: 
     command = ["infer", str(scene_dir), "-o", str(tmp_path / "r"), "--up", "0", "0", "1"]
     assert main(command) == EXIT_INPUT_ERROR
     assert "camera poses, which fix gravity" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_collision_checker_with_views_fuses_the_later_frames_without_physics(
+    tmp_path: Path, capsys
+) -> None:
+    from ipr_shapes.result import load_result
+    from ipr_shapes.synth import SynthConfig, generate_scene
+
+    scene = generate_scene(
+        tmp_path / "scenes",
+        kind="dynamic",
+        seed=4,
+        arrangement="table",
+        config=SynthConfig(width=320, height=240),
+    )
+    volumes = {}
+    for method in ("collision-checker", "collision-checker+views"):
+        out = tmp_path / method
+        assert main(["infer", str(scene), "-o", str(out), "--method", method]) == 0
+        result = load_result(out)
+        assert result.method == method
+        details = result.extra.get("inference", {})
+        assert "samples" not in details  # no physics: nothing sampled
+        if method == "collision-checker":
+            assert "fusion" not in result.timing_s and not details.get("fused_views")
+        else:
+            # The pushes moved objects: the later frames that saw them are fused into frame 0.
+            assert "fusion" in result.timing_s and details["fused_views"]
+        volumes[method] = sorted(o.load_mesh().volume for o in result.objects)
+    # The views carve and bound the hidden parts: the shapes are not those of frame 0 alone.
+    assert volumes["collision-checker"] != volumes["collision-checker+views"]

@@ -24,8 +24,9 @@ class Method:
     Attributes:
         name: the name ``ipr-shapes infer --method`` takes and results record.
         physics: scored by simulation (False: the Collision Checker, constraints only).
-        actions: replays the recorded pushes and compares the later frames; also registers
-            the later frames' views into frame 0 before the hypotheses (``ipr_shapes.fusion``).
+        actions: registers the later frames' views into frame 0 before the hypotheses
+            (``ipr_shapes.fusion``); with ``physics``, also replays the recorded pushes and
+            compares the later frames.
         prior: the shape prior, uniform or favouring smaller shapes (paper Sec. IV-F).
         exhaustive: scores every jointly feasible joint model instead of sampling.
         description: one line for ``--help`` and the docs.
@@ -49,6 +50,14 @@ METHODS: dict[str, Method] = {
             actions=False,
             prior="uniform",
             description="no physics: uniform over jointly feasible shapes (the paper's baseline)",
+        ),
+        Method(
+            "collision-checker+views",
+            physics=False,
+            actions=True,
+            prior="uniform",
+            description="no physics, with the later frames' views fused as the full method "
+            "fuses them (what the physics adds is the full method's lead over this)",
         ),
         Method(
             "zheng2013",

@@ -376,6 +376,7 @@ def run_pipeline(
             config.collision_checker,
             rng=rng,
             time_budget_s=remaining,
+            object_spaces=fused.object_spaces,
             hypotheses=config.hypotheses,
             constraints=config.constraints,
             progress=progress,
@@ -383,8 +384,9 @@ def run_pipeline(
         generation = float(sum(p.generation_s for p in posteriors))
         timing = StageTimings(
             segmentation=perceived - budget.started,
+            fusion=fused_at - perceived if fused.fused_views is not None else None,
             hypotheses=generation,
-            inference=max(time.perf_counter() - perceived - generation, 0.0),
+            inference=max(time.perf_counter() - fused_at - generation, 0.0),
         )
     else:
         outcome, hypotheses_s = infer_with_physics(
