@@ -467,6 +467,10 @@ class SeamsConfig:
             boxes of one size repeat at one spacing, a printed border lies anywhere (1: neither
             this test nor the strips' flatness; bins-real 44.5 % instead of 37.9 %, and the
             generated boxes' end panels cut).
+        pair_needs_grid: a seam bounded by the segment's outline on both sides (one seam
+            midway across it: two boxes, or one box with a printed line through its middle)
+            is kept only where it meets a seam bounded by another seam (a grid of packed
+            boxes); False keeps it whenever it lies midway.
         max_cuts: most cuts per segment (bounds the time on a textured segment).
     """
 
@@ -493,6 +497,7 @@ class SeamsConfig:
     max_step_m: float = 0.005
     max_bend_m: float = 0.005
     strip_tolerance: float = 0.25
+    pair_needs_grid: bool = True
     max_cuts: int = 32
 
     def __post_init__(self) -> None:

@@ -52,6 +52,8 @@ _SIDE_BAND_PX = (2, 10)
 _MARGIN_PX = 12
 #: Seams within this of one direction (deg) are parallel: neighbours in one row of boxes.
 _PARALLEL_DEG = 10.0
+#: How a seam is bounded (``_repeated``).
+_UNBOUNDED, _BY_OUTLINE, _BY_SEAM = 0, 1, 2
 
 
 @dataclass(frozen=True)
@@ -94,7 +96,10 @@ def cut_colour_seams(
     if not seams.enabled or not segment_pixels.any():
         return out
     magnitude, direction = _colour_gradient(rgb)
-    noise = float(np.median(magnitude[segment_pixels]))
+    # The frame's own scale, over every pixel with depth: not over the segments, whose
+    # share of smooth surfaces depends on what the earlier steps removed (a bin's walls).
+    measured = depth_m > 0
+    noise = float(np.median(magnitude[measured if measured.any() else segment_pixels]))
     edges = _thin(magnitude, direction) & (magnitude > seams.edge_factor * max(noise, 1e-6))
     next_id = int(labels.max()) + 1
     boxes = ndimage.find_objects(labels)
@@ -193,14 +198,30 @@ def _unrepeated(
     config: PerceptionConfig,
 ) -> list[_Seam]:
     """The seams of one segment whose strips are not flat (``_flat_strips``) or that do not
-    repeat (``_repeated``)."""
+    repeat (``_repeated``). Repetition is judged among the seams still kept, until no more
+    drop out: a seam dropped is no bound for its neighbours. With ``seams.pair_needs_grid``
+    a seam bounded only by the outline on both sides (one seam midway across the segment:
+    two boxes, or one box with a printed line through its middle) is kept only when it meets
+    a seam that repeats between seams (a grid of packed boxes)."""
     usable = mask & (depth_m > 0)
     cloud = points[usable].astype(np.float64)
-    return [
-        seam
-        for seam in found
-        if not (_flat_strips(seam, cloud, config) and _repeated(seam, found, cloud, config))
-    ]
+    kept = [seam for seam in found if _flat_strips(seam, cloud, config)]
+    while True:
+        bound = [_repeated(seam, kept, cloud, config) for seam in kept]
+        in_row = [seam for seam, by in zip(kept, bound, strict=True) if by == _BY_SEAM]
+        still = [
+            seam
+            for seam, by in zip(kept, bound, strict=True)
+            if by == _BY_SEAM
+            or (
+                by == _BY_OUTLINE
+                and (not config.seams.pair_needs_grid or _meets_any(seam, in_row, config))
+            )
+        ]
+        if len(still) == len(kept):
+            break
+        kept = still
+    return [seam for seam in found if not any(seam is other for other in kept)]
 
 
 def _flat_strips(seam: _Seam, cloud: np.ndarray, config: PerceptionConfig) -> bool:
@@ -222,14 +243,15 @@ def _flat_strips(seam: _Seam, cloud: np.ndarray, config: PerceptionConfig) -> bo
     return True
 
 
-def _repeated(seam: _Seam, found: list[_Seam], cloud: np.ndarray, config: PerceptionConfig) -> bool:
-    """Whether ``seam`` lies midway between two bounds, one on each side: a parallel seam on
-    the same surface (``_neighbours``, at least ``seams.min_width_m`` away) or the segment's
-    far outline (its points ``cloud`` (N, 3), m, within the seam's length, 98th percentile),
+def _repeated(seam: _Seam, found: list[_Seam], cloud: np.ndarray, config: PerceptionConfig) -> int:
+    """How ``seam`` lies midway between two bounds, one on each side: a parallel seam on the
+    same surface (``_neighbours``, at least ``seams.min_width_m`` away) or the segment's far
+    outline (its points ``cloud`` (N, 3), m, within the seam's length, 98th percentile),
     measured in 3D across the seam; the narrower strip is at least 1 - ``seams.strip_tolerance``
     of the wider. Packed boxes of one size repeat at one spacing, a printed border lies where
     the print puts it; a bound may lie beyond a nearer seam (a printed line on a box in the
-    row)."""
+    row). Returns ``_BY_SEAM`` when a pair of bounds that passes includes a seam,
+    ``_BY_OUTLINE`` when only the outline on both sides passes, else ``_UNBOUNDED``."""
     relative = cloud - seam.middle
     along = relative @ seam.direction
     across = (relative @ seam.across)[np.abs(along) <= seam.half_length_m]
@@ -243,7 +265,31 @@ def _repeated(seam: _Seam, found: list[_Seam], cloud: np.ndarray, config: Percep
         nearer = [sign * offset for offset in offsets if sign * offset >= config.seams.min_width_m]
         bounds.append(np.array([widest, *nearer]))
     ratio = np.minimum.outer(*bounds) / np.maximum(np.maximum.outer(*bounds), 1e-9)
-    return bool(np.any(ratio >= 1.0 - config.seams.strip_tolerance))
+    passes = ratio >= 1.0 - config.seams.strip_tolerance
+    if not passes.any():
+        return _UNBOUNDED
+    passes[0, 0] = False  # the outline on both sides
+    return _BY_SEAM if passes.any() else _BY_OUTLINE
+
+
+def _meets_any(seam: _Seam, others: list[_Seam], config: PerceptionConfig) -> bool:
+    """Whether ``seam`` meets one of ``others`` on one surface at an angle, as the seams of a
+    grid of packed boxes do: normals within ``_PARALLEL_DEG``, directions more than 45 deg
+    apart, and the crossing of their 3D lines within each seam's half length plus
+    ``seams.min_width_m`` (a seam found in a piece ends at the seam that cut it off)."""
+    parallel = np.cos(np.radians(_PARALLEL_DEG))
+    for other in others:
+        if other is seam or float(other.normal @ seam.normal) < parallel:
+            continue
+        if abs(float(other.direction @ seam.direction)) > np.cos(np.radians(45.0)):
+            continue
+        # middle + t direction = other.middle + u other.direction, least squares (skew lines).
+        system = np.stack([seam.direction, -other.direction], axis=1)
+        (t, u), *_ = np.linalg.lstsq(system, other.middle - seam.middle, rcond=None)
+        margin = config.seams.min_width_m
+        if abs(t) <= seam.half_length_m + margin and abs(u) <= other.half_length_m + margin:
+            return True
+    return False
 
 
 def _neighbours(seam: _Seam, found: list[_Seam]) -> list[_Seam]:
@@ -263,8 +309,11 @@ def _neighbours(seam: _Seam, found: list[_Seam]) -> list[_Seam]:
 
 
 def _undo(pieces: np.ndarray, seam: _Seam) -> np.ndarray:
-    """``pieces`` with the pieces that face each other across ``seam`` (3 px either side of it,
-    along its length) merged into one (the lower id)."""
+    """``pieces`` with the pieces that face each other across ``seam`` (3-5 px either side of
+    it, along its length) merged back, one to one: each piece joins at most one piece across
+    it, the one it faces along most of the seam. A piece that faces several pieces across it
+    was cut by kept seams after this one (a printed line across a row of boxes cut first,
+    then the seams between the boxes): joining it to all of them would undo those cuts too."""
     height, width = pieces.shape
     pairs = []
     for k in (3, 4, 5):
@@ -277,9 +326,16 @@ def _undo(pieces: np.ndarray, seam: _Seam) -> np.ndarray:
         pairs.extend(zip(a[keep].tolist(), b[keep].tolist(), strict=True))
     if not pairs:
         return pieces
-    # Union the pairs (few pieces: a plain relabel loop).
+    counts: dict[tuple[int, int], int] = {}
+    for a, b in pairs:
+        key = (min(a, b), max(a, b))
+        counts[key] = counts.get(key, 0) + 1
     relabel = np.arange(int(pieces.max()) + 1)
-    for a, b in set(pairs):
+    joined: set[int] = set()
+    for (a, b), _ in sorted(counts.items(), key=lambda item: (-item[1], item[0])):
+        if a in joined or b in joined:
+            continue
+        joined.update((a, b))
         root_a, root_b = relabel[a], relabel[b]
         low, high = min(root_a, root_b), max(root_a, root_b)
         relabel[relabel == high] = low
