@@ -108,6 +108,29 @@ def test_a_lone_seam_midway_is_kept_only_in_a_grid():
     assert a > 0 and a == b
 
 
+def test_a_lone_seam_is_kept_when_a_box_of_its_strips_size_is_seen_elsewhere():
+    # The pair beside a third, separate box of the same size: packed boxes repeat across the
+    # frame, so the pair is two boxes. A box of another size (6 x 14 cm) does not tell.
+    def scene(size):
+        boxes = [box(0.0, -0.05, (0.1, 0.1, TOP)), box(0.0, 0.05, (0.1, 0.1, TOP))]
+        boxes.append(box(-0.2, 0.0, (*size, TOP)))
+        return painted(render(camera(), boxes, noise_m=0.0005), gap_between)
+
+    frame = scene((0.1, 0.1))
+    result = segment_frame(frame, config=ON)
+    a, b = centres(result.labels, frame)
+    assert a > 0 and b > 0 and a != b
+    assert segment_of_point(frame, result.labels, [-0.2, 0.0, TOP]) not in (0, a, b)
+    frame = scene((0.06, 0.14))
+    a, b = centres(segment_frame(frame, config=ON).labels, frame)
+    assert a > 0 and a == b
+    # And only with the sizes' test on.
+    no_sizes = replace(ON, seams=replace(ON.seams, pair_sizes=False))
+    frame = scene((0.1, 0.1))
+    a, b = centres(segment_frame(frame, config=no_sizes).labels, frame)
+    assert a > 0 and a == b
+
+
 def test_a_short_seam_is_not_a_seam():
     # Cutting needs min_length_m of seam: 10 cm boxes are too short for 15 cm.
     config = replace(PAIRS, seams=replace(PAIRS.seams, min_length_m=0.15))

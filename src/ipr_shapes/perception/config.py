@@ -471,6 +471,10 @@ class SeamsConfig:
             midway across it: two boxes, or one box with a printed line through its middle)
             is kept only where it meets a seam bounded by another seam (a grid of packed
             boxes); False keeps it whenever it lies midway.
+        pair_sizes: with ``pair_needs_grid``, such a seam is also kept when both its strips
+            have the size of a face of another segment or piece in the frame (packed boxes
+            repeat across the frame; a printed line through one box makes halves nothing else
+            matches).
         max_cuts: most cuts per segment (bounds the time on a textured segment).
     """
 
@@ -498,6 +502,7 @@ class SeamsConfig:
     max_bend_m: float = 0.005
     strip_tolerance: float = 0.25
     pair_needs_grid: bool = True
+    pair_sizes: bool = True
     max_cuts: int = 32
 
     def __post_init__(self) -> None:
