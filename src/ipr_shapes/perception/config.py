@@ -475,6 +475,8 @@ class SeamsConfig:
             have the size of a face of another segment or piece in the frame (packed boxes
             repeat across the frame; a printed line through one box makes halves nothing else
             matches).
+        size_tolerance_m: the strips' and the face's extents agree within this (m; the error
+            of an extent measured to a real outline: side faces, dropouts).
         max_cuts: most cuts per segment (bounds the time on a textured segment).
     """
 
@@ -488,6 +490,7 @@ class SeamsConfig:
         "max_step_m": _NON_NEGATIVE,
         "max_bend_m": _NON_NEGATIVE,
         "strip_tolerance": _SHARE,
+        "size_tolerance_m": _NON_NEGATIVE,
         "max_cuts": _COUNT,
     }
 
@@ -503,6 +506,7 @@ class SeamsConfig:
     strip_tolerance: float = 0.25
     pair_needs_grid: bool = True
     pair_sizes: bool = True
+    size_tolerance_m: float = 0.01
     max_cuts: int = 32
 
     def __post_init__(self) -> None:

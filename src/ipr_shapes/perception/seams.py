@@ -309,7 +309,7 @@ def _unrepeated(
     two boxes, or one box with a printed line through its middle) is kept only when it meets
     a seam that repeats between seams (a grid of packed boxes), or when both its strips have
     one of the (longer, shorter) face sizes ``sizes`` ((M, 2), m) of boxes seen elsewhere in
-    the frame, within ``seams.strip_tolerance``."""
+    the frame, within ``seams.size_tolerance_m``."""
     usable = mask & (depth_m > 0)
     cloud = points[usable].astype(np.float64)
     kept = [seam for seam in found if _flat_strips(seam, cloud, config)]
@@ -340,14 +340,13 @@ def _sized_like(
 ) -> bool:
     """Whether both strips beside ``seam`` (its length by each of ``widths``, m) match one
     face size of ``sizes`` ((M, 2) longer, shorter; m): each extent within
-    ``seams.strip_tolerance`` of the larger of the two."""
+    ``seams.size_tolerance_m``."""
     if sizes is None or len(sizes) == 0:
         return False
-    tolerance = config.seams.strip_tolerance
     length = 2.0 * seam.half_length_m
     for width in widths:
         strip = np.array([max(length, width), min(length, width)])
-        close = np.abs(sizes - strip) <= tolerance * np.maximum(sizes, strip)
+        close = np.abs(sizes - strip) <= config.seams.size_tolerance_m
         if not np.any(close.all(axis=1)):
             return False
     return True
