@@ -443,14 +443,15 @@ class SeamsConfig:
     (``ipr_shapes.perception.seams``): packed boxes of one height whose coplanar tops the convexity
     graph cannot tell apart.
 
-    Off by default: on the generated scenes it still cuts one box along a printed line through
-    its middle, which a single view cannot tell from a seam between two boxes of half its size
-    (docs/experiments/2026-11-26-colour-seams.md). Turn it on for packed boxes (bin picking).
+    Off by default for its time (0.15-0.3 s of CPU per tabletop frame), not its accuracy: on
+    the development sets it changes no scene (docs/experiments/2026-11-26-packed-boxes.md).
+    Turn it on for packed boxes (bin picking).
 
     Attributes:
         enabled: cut segments along seams (False: labels as the graph gives them).
         edge_factor: an edge pixel's colour gradient exceeds this many times the median
-            gradient of the frame's segment pixels (a noise scale of the camera and lighting).
+            gradient of the frame's pixels with depth (a noise scale of the camera and
+            lighting).
         coverage: share of a seam's pixels that lie on (within a pixel of) an edge pixel.
         min_length_m: shortest seam (m, between its ends in 3D).
         min_width_m: narrowest piece a cut may leave (m, twice the largest inscribed radius).

@@ -23,13 +23,19 @@ object's own lines whole:
   must lie midway between a bound on each side (a parallel seam on the same surface, or the
   segment's outline), within ``seams.strip_tolerance``: packed boxes of one size repeat at one
   spacing, a printed border (a box's end panel) lies where the print puts it. Cuts that fail
-  are undone.
+  are undone;
+- **supported when alone**: a seam midway between the outline on both sides (two boxes, or
+  one box with a printed line through its middle) is kept only where it meets a seam that
+  lies between seams (a grid of boxes) or its strips have the size of a flat rectangular
+  face seen elsewhere in the frame (packed boxes repeat; ``seams.pair_needs_grid``,
+  ``seams.pair_sizes``).
 
 The best seam (most edge pixels) is cut and both pieces are searched again, up to
-``seams.max_cuts`` cuts per segment. Text and logos do not qualify: their edges are short or
-do not line up across the segment. What no check here tells apart: a printed line through
-the middle of one box from a seam between two boxes of half its size
-(docs/experiments/2026-11-26-colour-seams.md).
+``seams.max_cuts`` cuts per segment; every segment is searched before any cut is judged, so
+that the frame's faces are known. Text and logos do not qualify: their edges are short or do
+not line up across the segment. What no check here tells apart: a printed line through the
+middle of one box from a seam between two boxes of half its size when no box of that size is
+seen alone (docs/experiments/2026-11-26-colour-seams.md, 2026-11-26-packed-boxes.md).
 """
 
 from __future__ import annotations
