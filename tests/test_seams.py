@@ -180,6 +180,7 @@ def row_gaps(points: np.ndarray) -> np.ndarray:
     return (np.abs(np.abs(points[:, 1]) - 0.05) < 0.002) & (points[:, 2] > TOP - 0.004)
 
 
+@pytest.mark.slow
 def test_a_grid_of_boxes_is_cut_at_every_seam():
     # 3 x 2 boxes of 10 cm: the seams along x lie between seams (a row of three), the seam
     # along y midway between the outlines, and it meets them (a grid).
