@@ -131,6 +131,24 @@ def test_a_lone_seam_is_kept_when_a_box_of_its_strips_size_is_seen_elsewhere():
     assert a > 0 and a == b
 
 
+def test_two_pairs_of_one_size_are_four_boxes():
+    # Two separate pairs of 10 cm boxes, each one segment with one seam midway: each pair's
+    # halves have the size of the other pair's, so both are cut.
+    boxes = [box(x, y, (0.1, 0.1, TOP)) for x in (0.0, 0.2) for y in (-0.05, 0.05)]
+    frame = painted(render(camera(), boxes, noise_m=0.0005), gap_between)
+
+    def boxes_seen(config):
+        labels = segment_frame(frame, config=config).labels
+        ids = [
+            segment_of_point(frame, labels, [x, y, TOP]) for x in (0.0, 0.2) for y in (-0.05, 0.05)
+        ]
+        assert min(ids) > 0
+        return len(set(ids))
+
+    assert boxes_seen(ON) == 4
+    assert boxes_seen(replace(ON, seams=replace(ON.seams, pair_sizes=False))) == 2
+
+
 def test_a_short_seam_is_not_a_seam():
     # Cutting needs min_length_m of seam: 10 cm boxes are too short for 15 cm.
     config = replace(PAIRS, seams=replace(PAIRS.seams, min_length_m=0.15))

@@ -473,9 +473,9 @@ class SeamsConfig:
             is kept only where it meets a seam bounded by another seam (a grid of packed
             boxes); False keeps it whenever it lies midway.
         pair_sizes: with ``pair_needs_grid``, such a seam is also kept when both its strips
-            have the size of a face of another segment or piece in the frame (packed boxes
-            repeat across the frame; a printed line through one box makes halves nothing else
-            matches).
+            have the size of a face of another segment or piece in the frame, or of a strip of
+            such a seam in another segment (packed boxes repeat across the frame; a printed
+            line through one box makes halves nothing else matches).
         size_tolerance_m: the strips' and the face's extents agree within this (m; the error
             of an extent measured to a real outline: side faces, dropouts).
         max_cuts: most cuts per segment (bounds the time on a textured segment).

@@ -165,14 +165,18 @@ def _pairs_by_size(
 ) -> list[np.ndarray]:
     """``decided`` with each segment's strip tests run again, a lone midway seam now also kept
     when its strips have the size of a box seen elsewhere in the frame (another segment or
-    piece, ``_face_size``): packed boxes repeat across the frame, a printed line through one
-    box's middle makes halves that nothing else in the frame matches."""
+    piece, ``_face_size``, or a strip of a lone seam of another segment, ``_lone_strips``):
+    packed boxes repeat across the frame, a printed line through one box's middle makes halves
+    that nothing else in the frame matches."""
     faces = []
     for index, ((crop, _, _, _), pieces) in enumerate(zip(searched, decided, strict=True)):
         for piece in range(1, int(pieces.max()) + 1):
             size = _face_size(pieces == piece, points[crop], normals[crop], depth_m[crop], config)
             if size is not None:
                 faces.append((index, size))
+    for index, (crop, mask, _, found) in enumerate(searched):
+        faces.extend((index, size) for size in _lone_strips(found, mask, points[crop],
+                                                             depth_m[crop], config))  # fmt: skip
     result = []
     for index, ((crop, mask, cut, found), pieces) in enumerate(zip(searched, decided, strict=True)):
         others = np.array([size for owner, size in faces if owner != index]).reshape(-1, 2)
@@ -181,6 +185,29 @@ def _pairs_by_size(
             continue
         result.append(_decide(crop, mask, cut, found, points, depth_m, config, others))
     return result
+
+
+def _lone_strips(
+    found: list[_Seam],
+    mask: np.ndarray,
+    points: np.ndarray,
+    depth_m: np.ndarray,
+    config: PerceptionConfig,
+) -> list[tuple[float, float]]:
+    """(longer, shorter) sizes (m) of the strips beside the seams of one segment that have flat
+    strips and lie midway between its outline on both sides (``_repeated`` among no other
+    seams): two pairs of one size in two segments are two boxes each."""
+    usable = mask & (depth_m > 0)
+    cloud = points[usable].astype(np.float64)
+    sizes = []
+    for seam in found:
+        if not _flat_strips(seam, cloud, config):
+            continue
+        by, widths = _repeated(seam, [], cloud, config)
+        if by == _BY_OUTLINE:
+            length = 2.0 * seam.half_length_m
+            sizes.extend((max(length, width), min(length, width)) for width in widths)
+    return sizes
 
 
 def _face_size(
