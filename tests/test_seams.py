@@ -2,9 +2,12 @@
 
 Two boxes of one height touching side by side have coplanar tops: the convexity graph sees one
 surface. Painted like real packed boxes (a thin dark gap between them, or boxes of different
-colours), the seam setting cuts them apart, and a row of three at both seams; it leaves alone a
-box's own edge (a crease), a stripe that ends inside a face, a printed end panel (its strips
-are not one box size), a straight line on a ball (a curve in 3D), and everything when it is off.
+colours), the seam setting cuts a row of three at both seams and a grid of 3 x 2 at every
+seam, and a pair apart when a lone midway seam is allowed (``pair_needs_grid`` False); it
+leaves alone a box's own edge (a crease), a stripe that ends inside a face, a printed end
+panel (its strips are not one box size), a line through one box's middle (a pair by default),
+a straight line on a ball (a curve in 3D), and everything when it is off. A printed line
+across a whole row, cut and undone, does not undo the seams between the row's boxes.
 """
 
 from __future__ import annotations
@@ -15,11 +18,14 @@ import numpy as np
 import pytest
 
 from ipr_shapes.perception.config import PerceptionConfig, SeamsConfig
+from ipr_shapes.perception.seams import _Seam, _undo
 from ipr_shapes.perception.segmentation import segment_frame
 from ipr_shapes.scene import Frame
 from tests.test_segmentation import box, camera, render, segment_of_point
 
 ON = replace(PerceptionConfig(), seams=SeamsConfig(enabled=True))
+#: Seams on, a lone seam midway across a segment kept too (two boxes side by side).
+PAIRS = replace(ON, seams=replace(ON.seams, pair_needs_grid=False))
 TOP = 0.06  # the boxes' height (m)
 
 
@@ -60,7 +66,7 @@ def test_touching_boxes_of_one_height_merge_without_seams():
 
 def test_a_seam_between_coplanar_tops_cuts_the_boxes_apart():
     frame = two_boxes(gap_between)
-    result = segment_frame(frame, config=ON)
+    result = segment_frame(frame, config=PAIRS)
     a, b = centres(result.labels, frame)
     assert a > 0 and b > 0 and a != b
     # Each box is one piece: its top's corners are in its own segment.
@@ -94,9 +100,58 @@ def test_a_stripe_that_ends_inside_the_face_does_not_cut():
     assert a > 0 and a == b
 
 
+def test_a_lone_seam_midway_is_kept_only_in_a_grid():
+    # One seam midway across a segment is two boxes or one box with a printed line through its
+    # middle: by default it stays whole (the line on one box is the likelier on a tabletop).
+    frame = two_boxes(gap_between)
+    a, b = centres(segment_frame(frame, config=ON).labels, frame)
+    assert a > 0 and a == b
+
+
+def test_a_lone_seam_is_kept_when_a_box_of_its_strips_size_is_seen_elsewhere():
+    # The pair beside a third, separate box of the same size: packed boxes repeat across the
+    # frame, so the pair is two boxes. A box of another size (6 x 14 cm) does not tell.
+    def scene(size):
+        boxes = [box(0.0, -0.05, (0.1, 0.1, TOP)), box(0.0, 0.05, (0.1, 0.1, TOP))]
+        boxes.append(box(-0.2, 0.0, (*size, TOP)))
+        return painted(render(camera(), boxes, noise_m=0.0005), gap_between)
+
+    frame = scene((0.1, 0.1))
+    result = segment_frame(frame, config=ON)
+    a, b = centres(result.labels, frame)
+    assert a > 0 and b > 0 and a != b
+    assert segment_of_point(frame, result.labels, [-0.2, 0.0, TOP]) not in (0, a, b)
+    frame = scene((0.06, 0.14))
+    a, b = centres(segment_frame(frame, config=ON).labels, frame)
+    assert a > 0 and a == b
+    # And only with the sizes' test on.
+    no_sizes = replace(ON, seams=replace(ON.seams, pair_sizes=False))
+    frame = scene((0.1, 0.1))
+    a, b = centres(segment_frame(frame, config=no_sizes).labels, frame)
+    assert a > 0 and a == b
+
+
+def test_two_pairs_of_one_size_are_four_boxes():
+    # Two separate pairs of 10 cm boxes, each one segment with one seam midway: each pair's
+    # halves have the size of the other pair's, so both are cut.
+    boxes = [box(x, y, (0.1, 0.1, TOP)) for x in (0.0, 0.2) for y in (-0.05, 0.05)]
+    frame = painted(render(camera(), boxes, noise_m=0.0005), gap_between)
+
+    def boxes_seen(config):
+        labels = segment_frame(frame, config=config).labels
+        ids = [
+            segment_of_point(frame, labels, [x, y, TOP]) for x in (0.0, 0.2) for y in (-0.05, 0.05)
+        ]
+        assert min(ids) > 0
+        return len(set(ids))
+
+    assert boxes_seen(ON) == 4
+    assert boxes_seen(replace(ON, seams=replace(ON.seams, pair_sizes=False))) == 2
+
+
 def test_a_short_seam_is_not_a_seam():
     # Cutting needs min_length_m of seam: 10 cm boxes are too short for 15 cm.
-    config = replace(ON, seams=replace(ON.seams, min_length_m=0.15))
+    config = replace(PAIRS, seams=replace(PAIRS.seams, min_length_m=0.15))
     frame = two_boxes(gap_between)
     a, b = centres(segment_frame(frame, config=config).labels, frame)
     assert a > 0 and a == b
@@ -127,16 +182,59 @@ def three_boxes(dark) -> Frame:
 def test_touching_boxes_of_different_colours_are_cut_apart():
     # No gap line: the seam is the step from a dark box to a light one.
     frame = two_boxes(lambda points: points[:, 1] < 0.0)
-    a, b = centres(segment_frame(frame, config=ON).labels, frame)
+    a, b = centres(segment_frame(frame, config=PAIRS).labels, frame)
     assert a > 0 and b > 0 and a != b
 
 
 def test_a_row_of_boxes_of_one_size_is_cut_at_every_seam():
-    frame = three_boxes(lambda points: (np.abs(np.abs(points[:, 1]) - 0.05) < 0.002)
-                        & (points[:, 2] > TOP - 0.004))  # fmt: skip
+    frame = three_boxes(row_gaps)
     labels = segment_frame(frame, config=ON).labels
     ids = [segment_of_point(frame, labels, [0.0, y, TOP]) for y in (-0.1, 0.0, 0.1)]
     assert min(ids) > 0 and len(set(ids)) == 3
+
+
+def row_gaps(points: np.ndarray) -> np.ndarray:
+    """The thin gaps between the tops of ``three_boxes`` (4 mm wide, at y = +-0.05)."""
+    return (np.abs(np.abs(points[:, 1]) - 0.05) < 0.002) & (points[:, 2] > TOP - 0.004)
+
+
+@pytest.mark.slow
+def test_a_grid_of_boxes_is_cut_at_every_seam():
+    # 3 x 2 boxes of 10 cm: the seams along x lie between seams (a row of three), the seam
+    # along y midway between the outlines, and it meets them (a grid).
+    boxes = [box(x, y, (0.1, 0.1, TOP)) for x in (-0.05, 0.05) for y in (-0.1, 0.0, 0.1)]
+    frame = painted(
+        render(camera(), boxes, noise_m=0.0005),
+        lambda points: (
+            (row_gaps(points) | (np.abs(points[:, 0]) < 0.002)) & (points[:, 2] > TOP - 0.004)
+        ),
+    )
+    labels = segment_frame(frame, config=ON).labels
+    ids = [
+        segment_of_point(frame, labels, [x, y, TOP])
+        for x in (-0.05, 0.05)
+        for y in (-0.1, 0.0, 0.1)
+    ]
+    assert min(ids) > 0 and len(set(ids)) == 6
+
+
+def test_an_undone_line_across_a_row_keeps_the_rows_seams():
+    # A printed line across a row of three boxes, cut first (the longest seam), then the gaps
+    # between the boxes below it: undoing the line (its strips are no box size) joins the strip
+    # above it to one box it faces, not the three boxes to each other through the strip.
+    pieces = np.zeros((30, 30), dtype=np.int32)
+    pieces[:10] = 1
+    pieces[10:, :10], pieces[10:, 10:19], pieces[10:, 19:] = 2, 3, 4
+    cols = np.arange(30)
+    line = _Seam(
+        rows=np.full(30, 10), cols=cols, cos_a=0.0, sin_a=1.0, middle=np.zeros(3),
+        direction=np.array([1.0, 0.0, 0.0]), across=np.array([0.0, 1.0, 0.0]),
+        normal=np.array([0.0, 0.0, 1.0]), half_length_m=0.15,
+    )  # fmt: skip
+    joined = _undo(pieces, line)
+    assert len(np.unique(joined)) == 3
+    assert joined[0, 0] == joined[20, 25]  # the strip joins the box it faces along most
+    assert len({joined[20, 5], joined[20, 15], joined[20, 25]}) == 3
 
 
 def test_a_printed_border_across_one_box_is_not_a_seam():

@@ -444,14 +444,15 @@ class SeamsConfig:
     (``ipr_shapes.perception.seams``): packed boxes of one height whose coplanar tops the convexity
     graph cannot tell apart.
 
-    Off by default: on the generated scenes it still cuts one box along a printed line through
-    its middle, which a single view cannot tell from a seam between two boxes of half its size
-    (docs/experiments/2026-11-26-colour-seams.md). Turn it on for packed boxes (bin picking).
+    Off by default for its time (0.15-0.3 s of CPU per tabletop frame), not its accuracy: on
+    the development sets it changes no scene (docs/experiments/2026-11-26-packed-boxes.md).
+    Turn it on for packed boxes (bin picking).
 
     Attributes:
         enabled: cut segments along seams (False: labels as the graph gives them).
         edge_factor: an edge pixel's colour gradient exceeds this many times the median
-            gradient of the frame's segment pixels (a noise scale of the camera and lighting).
+            gradient of the frame's pixels with depth (a noise scale of the camera and
+            lighting).
         coverage: share of a seam's pixels that lie on (within a pixel of) an edge pixel.
         min_length_m: shortest seam (m, between its ends in 3D).
         min_width_m: narrowest piece a cut may leave (m, twice the largest inscribed radius).
@@ -468,6 +469,16 @@ class SeamsConfig:
             boxes of one size repeat at one spacing, a printed border lies anywhere (1: neither
             this test nor the strips' flatness; bins-real 44.5 % instead of 37.9 %, and the
             generated boxes' end panels cut).
+        pair_needs_grid: a seam bounded by the segment's outline on both sides (one seam
+            midway across it: two boxes, or one box with a printed line through its middle)
+            is kept only where it meets a seam bounded by another seam (a grid of packed
+            boxes); False keeps it whenever it lies midway.
+        pair_sizes: with ``pair_needs_grid``, such a seam is also kept when both its strips
+            have the size of a face of another segment or piece in the frame, or of a strip of
+            such a seam in another segment (packed boxes repeat across the frame; a printed
+            line through one box makes halves nothing else matches).
+        size_tolerance_m: the strips' and the face's extents agree within this (m; the error
+            of an extent measured to a real outline: side faces, dropouts).
         max_cuts: most cuts per segment (bounds the time on a textured segment).
     """
 
@@ -481,6 +492,7 @@ class SeamsConfig:
         "max_step_m": _NON_NEGATIVE,
         "max_bend_m": _NON_NEGATIVE,
         "strip_tolerance": _SHARE,
+        "size_tolerance_m": _NON_NEGATIVE,
         "max_cuts": _COUNT,
     }
 
@@ -494,6 +506,9 @@ class SeamsConfig:
     max_step_m: float = 0.005
     max_bend_m: float = 0.005
     strip_tolerance: float = 0.25
+    pair_needs_grid: bool = True
+    pair_sizes: bool = True
+    size_tolerance_m: float = 0.01
     max_cuts: int = 32
 
     def __post_init__(self) -> None:

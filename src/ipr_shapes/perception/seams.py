@@ -23,13 +23,19 @@ object's own lines whole:
   must lie midway between a bound on each side (a parallel seam on the same surface, or the
   segment's outline), within ``seams.strip_tolerance``: packed boxes of one size repeat at one
   spacing, a printed border (a box's end panel) lies where the print puts it. Cuts that fail
-  are undone.
+  are undone;
+- **supported when alone**: a seam midway between the outline on both sides (two boxes, or
+  one box with a printed line through its middle) is kept only where it meets a seam that
+  lies between seams (a grid of boxes) or its strips have the size of a flat rectangular
+  face seen elsewhere in the frame (packed boxes repeat; ``seams.pair_needs_grid``,
+  ``seams.pair_sizes``).
 
 The best seam (most edge pixels) is cut and both pieces are searched again, up to
-``seams.max_cuts`` cuts per segment. Text and logos do not qualify: their edges are short or
-do not line up across the segment. What no check here tells apart: a printed line through
-the middle of one box from a seam between two boxes of half its size
-(docs/experiments/2026-11-26-colour-seams.md).
+``seams.max_cuts`` cuts per segment; every segment is searched before any cut is judged, so
+that the frame's faces are known. Text and logos do not qualify: their edges are short or do
+not line up across the segment. What no check here tells apart: a printed line through the
+middle of one box from a seam between two boxes of half its size when no box of that size is
+seen alone (docs/experiments/2026-11-26-colour-seams.md, 2026-11-26-packed-boxes.md).
 """
 
 from __future__ import annotations
@@ -38,6 +44,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy import ndimage
+from scipy.spatial import ConvexHull
 
 from ipr_shapes.perception.config import PerceptionConfig
 
@@ -52,6 +59,8 @@ _SIDE_BAND_PX = (2, 10)
 _MARGIN_PX = 12
 #: Seams within this of one direction (deg) are parallel: neighbours in one row of boxes.
 _PARALLEL_DEG = 10.0
+#: How a seam is bounded (``_repeated``).
+_UNBOUNDED, _BY_OUTLINE, _BY_SEAM = 0, 1, 2
 
 
 @dataclass(frozen=True)
@@ -94,11 +103,14 @@ def cut_colour_seams(
     if not seams.enabled or not segment_pixels.any():
         return out
     magnitude, direction = _colour_gradient(rgb)
-    noise = float(np.median(magnitude[segment_pixels]))
+    # The frame's own scale, over every pixel with depth: not over the segments, whose
+    # share of smooth surfaces depends on what the earlier steps removed (a bin's walls).
+    measured = depth_m > 0
+    noise = float(np.median(magnitude[measured if measured.any() else segment_pixels]))
     edges = _thin(magnitude, direction) & (magnitude > seams.edge_factor * max(noise, 1e-6))
-    next_id = int(labels.max()) + 1
-    boxes = ndimage.find_objects(labels)
-    for segment, box in enumerate(boxes, start=1):
+    focal_px = float(K[0, 0])
+    searched = []
+    for segment, box in enumerate(ndimage.find_objects(labels), start=1):
         if box is None:
             continue
         top = max(box[0].start - _MARGIN_PX, 0)
@@ -106,21 +118,153 @@ def cut_colour_seams(
         left = max(box[1].start - _MARGIN_PX, 0)
         right = min(box[1].stop + _MARGIN_PX, labels.shape[1])
         crop = (slice(top, bottom), slice(left, right))
-        pieces = _cut_segment(
-            labels[crop] == segment,
-            edges[crop],
-            direction[crop],
-            points[crop],
-            normals[crop],
-            depth_m[crop],
-            float(K[0, 0]),
-            config,
-        )
+        mask = labels[crop] == segment
+        cut, found = _search_segment(mask, edges[crop], direction[crop], points[crop],
+                                     normals[crop], depth_m[crop], focal_px, config)  # fmt: skip
+        searched.append((crop, mask, cut, found))
+    decided = [_decide(crop, mask, cut, found, points, depth_m, config) for crop, mask, cut, found
+               in searched]  # fmt: skip
+    if seams.pair_needs_grid and seams.pair_sizes:
+        decided = _pairs_by_size(searched, decided, points, normals, depth_m, config)
+    next_id = int(labels.max()) + 1
+    for (crop, _, _, _), pieces in zip(searched, decided, strict=True):
         view = out[crop]  # writes go to out
         for piece in range(2, int(pieces.max()) + 1):
             view[pieces == piece] = next_id
             next_id += 1
     return out
+
+
+def _decide(
+    crop: tuple[slice, slice],
+    mask: np.ndarray,
+    cut: np.ndarray,
+    found: list[_Seam],
+    points: np.ndarray,
+    depth_m: np.ndarray,
+    config: PerceptionConfig,
+    sizes: np.ndarray | None = None,
+) -> np.ndarray:
+    """(h, w) int pieces of one segment's crop with the cuts that fail the strip tests undone
+    (``_unrepeated``; ``sizes``: see there)."""
+    if config.seams.strip_tolerance >= 1.0:
+        return cut
+    pieces = cut
+    for seam in _unrepeated(found, mask, points[crop], depth_m[crop], config, sizes):
+        pieces = _undo(pieces, seam)
+    return pieces
+
+
+def _pairs_by_size(
+    searched: list,
+    decided: list[np.ndarray],
+    points: np.ndarray,
+    normals: np.ndarray,
+    depth_m: np.ndarray,
+    config: PerceptionConfig,
+) -> list[np.ndarray]:
+    """``decided`` with each segment's strip tests run again, a lone midway seam now also kept
+    when its strips have the size of a box seen elsewhere in the frame (another segment or
+    piece, ``_face_size``, or a strip of a lone seam of another segment, ``_lone_strips``):
+    packed boxes repeat across the frame, a printed line through one box's middle makes halves
+    that nothing else in the frame matches."""
+    faces = []
+    for index, ((crop, _, _, _), pieces) in enumerate(zip(searched, decided, strict=True)):
+        for piece in range(1, int(pieces.max()) + 1):
+            size = _face_size(pieces == piece, points[crop], normals[crop], depth_m[crop], config)
+            if size is not None:
+                faces.append((index, size))
+    for index, (crop, mask, _, found) in enumerate(searched):
+        faces.extend((index, size) for size in _lone_strips(found, mask, points[crop],
+                                                             depth_m[crop], config))  # fmt: skip
+    result = []
+    for index, ((crop, mask, cut, found), pieces) in enumerate(zip(searched, decided, strict=True)):
+        others = np.array([size for owner, size in faces if owner != index]).reshape(-1, 2)
+        if len(found) == 0 or len(others) == 0:
+            result.append(pieces)
+            continue
+        result.append(_decide(crop, mask, cut, found, points, depth_m, config, others))
+    return result
+
+
+def _lone_strips(
+    found: list[_Seam],
+    mask: np.ndarray,
+    points: np.ndarray,
+    depth_m: np.ndarray,
+    config: PerceptionConfig,
+) -> list[tuple[float, float]]:
+    """(longer, shorter) sizes (m) of the strips beside the seams of one segment that have flat
+    strips and lie midway between its outline on both sides (``_repeated`` among no other
+    seams): two pairs of one size in two segments are two boxes each."""
+    usable = mask & (depth_m > 0)
+    cloud = points[usable].astype(np.float64)
+    sizes = []
+    for seam in found:
+        if not _flat_strips(seam, cloud, config):
+            continue
+        by, widths = _repeated(seam, [], cloud, config)
+        if by == _BY_OUTLINE:
+            length = 2.0 * seam.half_length_m
+            sizes.extend((max(length, width), min(length, width)) for width in widths)
+    return sizes
+
+
+def _face_size(
+    piece: np.ndarray, points: np.ndarray, normals: np.ndarray, depth_m: np.ndarray,
+    config: PerceptionConfig,
+) -> tuple[float, float] | None:  # fmt: skip
+    """(longer, shorter) extent (m) of the dominant face of ``piece`` ((h, w) bool): its points
+    whose normals lie within ``seams.max_normal_deg`` of their median normal, 2nd to 98th
+    percentile along the axes of its smallest enclosing rectangle (a hull edge's direction);
+    None for fewer than 50 such points, or a face
+    that is not a flat rectangle (90 % of the points within ``seams.max_bend_m`` of its plane;
+    its extent across each axis at 10, 50 and 90 % along it at least 1 -
+    ``seams.strip_tolerance`` of the whole)."""
+    usable = piece & (depth_m > 0) & np.any(normals != 0, axis=2)
+    if usable.sum() < 50:
+        return None
+    face_normals = normals[usable].astype(np.float64)
+    normal = np.median(face_normals, axis=0)
+    normal /= max(float(np.linalg.norm(normal)), 1e-12)
+    on_face = face_normals @ normal >= np.cos(np.radians(config.seams.max_normal_deg))
+    if on_face.sum() < 50:
+        return None
+    cloud = points[usable][on_face].astype(np.float64)
+    centred = cloud - cloud.mean(axis=0)
+    # A box's face is flat: a can's side or a bottle's is not.
+    if float(np.percentile(np.abs(centred @ normal), 90)) > config.seams.max_bend_m:
+        return None
+    flat = centred - np.outer(centred @ normal, normal)
+    basis = np.linalg.svd(flat, full_matrices=False)[2][:2]
+    plane = flat @ basis.T
+    # The rectangle's axes: the hull edge direction whose extents enclose the least area (a
+    # square's principal axes are any two).
+    hull = plane[ConvexHull(plane).vertices]
+    edges = np.roll(hull, -1, axis=0) - hull
+    best = None
+    for angle in np.unique(np.round(np.arctan2(edges[:, 1], edges[:, 0]) % (np.pi / 2), 3)):
+        axes = np.array([[np.cos(angle), np.sin(angle)], [-np.sin(angle), np.cos(angle)]])
+        coords = plane @ axes.T
+        low, high = np.percentile(coords, 2, axis=0), np.percentile(coords, 98, axis=0)
+        area = float(np.prod(high - low))
+        if best is None or area < best[0]:
+            best = (area, coords, low, high)
+    _, coords, low, high = best
+    extent = high - low
+    # And a rectangle: as wide near its ends as in its middle (a can's top is a disc).
+    tolerance = config.seams.strip_tolerance
+    for axis in (0, 1):
+        other = 1 - axis
+        for share in (0.1, 0.5, 0.9):
+            at = low[axis] + share * extent[axis]
+            near = np.abs(coords[:, axis] - at) <= 0.05 * extent[axis]
+            if near.sum() < 5:
+                return None
+            span = np.ptp(coords[near, other])
+            if span < (1.0 - tolerance) * extent[other]:
+                return None
+    return float(extent.max()), float(extent.min())
 
 
 def _colour_gradient(rgb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -149,7 +293,7 @@ def _thin(magnitude: np.ndarray, direction: np.ndarray) -> np.ndarray:
     return keep
 
 
-def _cut_segment(
+def _search_segment(
     mask: np.ndarray,
     edges: np.ndarray,
     direction: np.ndarray,
@@ -158,9 +302,10 @@ def _cut_segment(
     depth_m: np.ndarray,
     focal_px: float,
     config: PerceptionConfig,
-) -> np.ndarray:
-    """(h, w) int pieces of one segment's crop: 0 outside, 1 the first piece, 2.. the cut-off
-    pieces (cuts whose strips do not repeat are undone, ``_unrepeated``)."""
+) -> tuple[np.ndarray, list[_Seam]]:
+    """(h, w) int pieces of one segment's crop cut at every seam found (0 outside, 1 the first
+    piece, 2.. the cut-off pieces), and the seams in the order cut (best first, then the
+    pieces searched again)."""
     pieces = mask.astype(np.int32)
     near_edge = ndimage.binary_dilation(edges, np.ones((3, 3), dtype=bool))
     queue = [1]
@@ -179,10 +324,7 @@ def _cut_segment(
         pieces[side] = new
         found.append(seam)
         queue.extend((piece, new))
-    if config.seams.strip_tolerance < 1.0:
-        for seam in _unrepeated(found, mask, points, depth_m, config):
-            pieces = _undo(pieces, seam)
-    return pieces
+    return pieces, found
 
 
 def _unrepeated(
@@ -191,16 +333,56 @@ def _unrepeated(
     points: np.ndarray,
     depth_m: np.ndarray,
     config: PerceptionConfig,
+    sizes: np.ndarray | None = None,
 ) -> list[_Seam]:
     """The seams of one segment whose strips are not flat (``_flat_strips``) or that do not
-    repeat (``_repeated``)."""
+    repeat (``_repeated``). Repetition is judged among the seams still kept, until no more
+    drop out: a seam dropped is no bound for its neighbours. With ``seams.pair_needs_grid``
+    a seam bounded only by the outline on both sides (one seam midway across the segment:
+    two boxes, or one box with a printed line through its middle) is kept only when it meets
+    a seam that repeats between seams (a grid of packed boxes), or when both its strips have
+    one of the (longer, shorter) face sizes ``sizes`` ((M, 2), m) of boxes seen elsewhere in
+    the frame, within ``seams.size_tolerance_m``."""
     usable = mask & (depth_m > 0)
     cloud = points[usable].astype(np.float64)
-    return [
-        seam
-        for seam in found
-        if not (_flat_strips(seam, cloud, config) and _repeated(seam, found, cloud, config))
-    ]
+    kept = [seam for seam in found if _flat_strips(seam, cloud, config)]
+    while True:
+        bound = [_repeated(seam, kept, cloud, config) for seam in kept]
+        in_row = [seam for seam, (by, _) in zip(kept, bound, strict=True) if by == _BY_SEAM]
+        still = [
+            seam
+            for seam, (by, widths) in zip(kept, bound, strict=True)
+            if by == _BY_SEAM
+            or (
+                by == _BY_OUTLINE
+                and (
+                    not config.seams.pair_needs_grid
+                    or _meets_any(seam, in_row, config)
+                    or _sized_like(seam, widths, sizes, config)
+                )
+            )
+        ]
+        if len(still) == len(kept):
+            break
+        kept = still
+    return [seam for seam in found if not any(seam is other for other in kept)]
+
+
+def _sized_like(
+    seam: _Seam, widths: tuple[float, float], sizes: np.ndarray | None, config: PerceptionConfig
+) -> bool:
+    """Whether both strips beside ``seam`` (its length by each of ``widths``, m) match one
+    face size of ``sizes`` ((M, 2) longer, shorter; m): each extent within
+    ``seams.size_tolerance_m``."""
+    if sizes is None or len(sizes) == 0:
+        return False
+    length = 2.0 * seam.half_length_m
+    for width in widths:
+        strip = np.array([max(length, width), min(length, width)])
+        close = np.abs(sizes - strip) <= config.seams.size_tolerance_m
+        if not np.any(close.all(axis=1)):
+            return False
+    return True
 
 
 def _flat_strips(seam: _Seam, cloud: np.ndarray, config: PerceptionConfig) -> bool:
@@ -222,14 +404,18 @@ def _flat_strips(seam: _Seam, cloud: np.ndarray, config: PerceptionConfig) -> bo
     return True
 
 
-def _repeated(seam: _Seam, found: list[_Seam], cloud: np.ndarray, config: PerceptionConfig) -> bool:
-    """Whether ``seam`` lies midway between two bounds, one on each side: a parallel seam on
-    the same surface (``_neighbours``, at least ``seams.min_width_m`` away) or the segment's
-    far outline (its points ``cloud`` (N, 3), m, within the seam's length, 98th percentile),
+def _repeated(
+    seam: _Seam, found: list[_Seam], cloud: np.ndarray, config: PerceptionConfig
+) -> tuple[int, tuple[float, float]]:
+    """How ``seam`` lies midway between two bounds, one on each side: a parallel seam on the
+    same surface (``_neighbours``, at least ``seams.min_width_m`` away) or the segment's far
+    outline (its points ``cloud`` (N, 3), m, within the seam's length, 98th percentile),
     measured in 3D across the seam; the narrower strip is at least 1 - ``seams.strip_tolerance``
     of the wider. Packed boxes of one size repeat at one spacing, a printed border lies where
     the print puts it; a bound may lie beyond a nearer seam (a printed line on a box in the
-    row)."""
+    row). Returns ``_BY_SEAM`` when a pair of bounds that passes includes a seam,
+    ``_BY_OUTLINE`` when only the outline on both sides passes, else ``_UNBOUNDED``, and the
+    distances (m) from the seam to the outline on its two sides."""
     relative = cloud - seam.middle
     along = relative @ seam.direction
     across = (relative @ seam.across)[np.abs(along) <= seam.half_length_m]
@@ -243,7 +429,32 @@ def _repeated(seam: _Seam, found: list[_Seam], cloud: np.ndarray, config: Percep
         nearer = [sign * offset for offset in offsets if sign * offset >= config.seams.min_width_m]
         bounds.append(np.array([widest, *nearer]))
     ratio = np.minimum.outer(*bounds) / np.maximum(np.maximum.outer(*bounds), 1e-9)
-    return bool(np.any(ratio >= 1.0 - config.seams.strip_tolerance))
+    passes = ratio >= 1.0 - config.seams.strip_tolerance
+    widths = (float(bounds[0][0]), float(bounds[1][0]))
+    if not passes.any():
+        return _UNBOUNDED, widths
+    passes[0, 0] = False  # the outline on both sides
+    return (_BY_SEAM if passes.any() else _BY_OUTLINE), widths
+
+
+def _meets_any(seam: _Seam, others: list[_Seam], config: PerceptionConfig) -> bool:
+    """Whether ``seam`` meets one of ``others`` on one surface at an angle, as the seams of a
+    grid of packed boxes do: normals within ``_PARALLEL_DEG``, directions more than 45 deg
+    apart, and the crossing of their 3D lines within each seam's half length plus
+    ``seams.min_width_m`` (a seam found in a piece ends at the seam that cut it off)."""
+    parallel = np.cos(np.radians(_PARALLEL_DEG))
+    for other in others:
+        if other is seam or float(other.normal @ seam.normal) < parallel:
+            continue
+        if abs(float(other.direction @ seam.direction)) > np.cos(np.radians(45.0)):
+            continue
+        # middle + t direction = other.middle + u other.direction, least squares (skew lines).
+        system = np.stack([seam.direction, -other.direction], axis=1)
+        (t, u), *_ = np.linalg.lstsq(system, other.middle - seam.middle, rcond=None)
+        margin = config.seams.min_width_m
+        if abs(t) <= seam.half_length_m + margin and abs(u) <= other.half_length_m + margin:
+            return True
+    return False
 
 
 def _neighbours(seam: _Seam, found: list[_Seam]) -> list[_Seam]:
@@ -263,8 +474,11 @@ def _neighbours(seam: _Seam, found: list[_Seam]) -> list[_Seam]:
 
 
 def _undo(pieces: np.ndarray, seam: _Seam) -> np.ndarray:
-    """``pieces`` with the pieces that face each other across ``seam`` (3 px either side of it,
-    along its length) merged into one (the lower id)."""
+    """``pieces`` with the pieces that face each other across ``seam`` (3-5 px either side of
+    it, along its length) merged back, one to one: each piece joins at most one piece across
+    it, the one it faces along most of the seam. A piece that faces several pieces across it
+    was cut by kept seams after this one (a printed line across a row of boxes cut first,
+    then the seams between the boxes): joining it to all of them would undo those cuts too."""
     height, width = pieces.shape
     pairs = []
     for k in (3, 4, 5):
@@ -277,9 +491,16 @@ def _undo(pieces: np.ndarray, seam: _Seam) -> np.ndarray:
         pairs.extend(zip(a[keep].tolist(), b[keep].tolist(), strict=True))
     if not pairs:
         return pieces
-    # Union the pairs (few pieces: a plain relabel loop).
+    counts: dict[tuple[int, int], int] = {}
+    for a, b in pairs:
+        key = (min(a, b), max(a, b))
+        counts[key] = counts.get(key, 0) + 1
     relabel = np.arange(int(pieces.max()) + 1)
-    for a, b in set(pairs):
+    joined: set[int] = set()
+    for (a, b), _ in sorted(counts.items(), key=lambda item: (-item[1], item[0])):
+        if a in joined or b in joined:
+            continue
+        joined.update((a, b))
         root_a, root_b = relabel[a], relabel[b]
         low, high = min(root_a, root_b), max(root_a, root_b)
         relabel[relabel == high] = low
