@@ -127,6 +127,7 @@ def _levels(prepared, posterior, truth, pitch):
         float(ious[unary].max()) if unary else 0.0,
         float(ious[best_kept]),
         generated[best_kept],
+        generated[int(np.argmax(ious))],
     )
 
 
@@ -171,7 +172,7 @@ def _surface_error(points: np.ndarray, mesh) -> float:
     return float(np.median(distances))
 
 
-def measure_scene(path: Path, cache: Path | None = None) -> list[dict]:
+def measure_scene(path: Path, cache: Path | None = None, wide: int = 0) -> list[dict]:
     """One scene's rows, one per visible ground-truth object (module doc)."""
     from scipy.optimize import linear_sum_assignment
 
@@ -194,7 +195,9 @@ def measure_scene(path: Path, cache: Path | None = None) -> list[dict]:
         mesh.apply_transform(world_from_camera @ pose.camera_from_model)
         placed.append(mesh)
     visible = [k for k, entry in enumerate(info) if entry["px_count_visib"] >= MIN_VISIBLE_PX]
-    truths = {k: voxels.scanline_voxels(placed[k].vertices, placed[k].faces, pitch) for k in visible}
+    truths = {
+        k: voxels.scanline_voxels(placed[k].vertices, placed[k].faces, pitch) for k in visible
+    }
 
     results = {}
     for name, perceived in (("as_is", as_is), ("true_masks", true_masks)):
@@ -213,6 +216,18 @@ def measure_scene(path: Path, cache: Path | None = None) -> list[dict]:
                     if checker[row, column] > 0:
                         matched[visible[column]] = int(row)
         results[name] = (prepared, posteriors, outputs, matched, perceived)
+    wide_best: dict[int, float] = {}
+    if wide:  # the as-is objects' best among ``wide`` candidates (sampling vs families)
+        from ipr_shapes.hypotheses import generate_hypotheses
+
+        wide_config = dataclasses.replace(config.hypotheses, count=wide)
+        _, objects_per_frame, space, planes = as_is
+        by_id = {obj.id: obj for obj in objects_per_frame[0]}
+        prepared, posteriors, _, matched, _ = results["as_is"]
+        for k, i in matched.items():
+            obj = by_id[posteriors[i].object_id]
+            hyps = generate_hypotheses(obj, space, planes, wide_config, np.random.default_rng(1))
+            wide_best[k] = max(_iou(h.keys(pitch), truths[k]) for h in hyps)
 
     rows = []
     for k in visible:
@@ -225,6 +240,8 @@ def measure_scene(path: Path, cache: Path | None = None) -> list[dict]:
             "visib_fract": float(info[k]["visib_fract"]),
             "hull_cap": _iou(hull, truth),
         }
+        if wide:
+            row["wide_generated"] = wide_best.get(k, 0.0)
         # Perception's placement error: observed points (true mask) from the true surface.
         prepared, posteriors, outputs, matched, perceived = results["true_masks"]
         objects = {obj.id: obj for obj in perceived[1][0]}
@@ -245,7 +262,9 @@ def measure_scene(path: Path, cache: Path | None = None) -> list[dict]:
                             f"{prefix}oracle": 0.0, f"{prefix}checker": 0.0})  # fmt: skip
                 continue
             posterior = posteriors[matched[k]]
-            generated, unary, oracle, best = _levels(prepared, posterior, truth, pitch)
+            generated, unary, oracle, best, best_generated = _levels(
+                prepared, posterior, truth, pitch
+            )
             row.update({
                 f"{prefix}generated": generated,
                 f"{prefix}unary": unary,
@@ -256,15 +275,29 @@ def measure_scene(path: Path, cache: Path | None = None) -> list[dict]:
             if name == "as_is":
                 space = perceived[2]
                 row["split"] = _split(best.keys(pitch), truth, hull, space, pitch)
-                candidate = best.keys(pitch)
-                common = voxels.intersection_count(candidate, truth)
-                row["precision"] = common / max(len(candidate), 1)
-                row["recall"] = common / max(len(truth), 1)
+                row["generated_split"] = _split(
+                    best_generated.keys(pitch), truth, hull, space, pitch
+                )
+                row["generated_generator"] = best_generated.generator
+                for key, chosen in (("split", best), ("generated_split", best_generated)):
+                    candidate = chosen.keys(pitch)
+                    common = voxels.intersection_count(candidate, truth)
+                    row[key]["precision"] = common / max(len(candidate), 1)
+                    row[key]["recall"] = common / max(len(truth), 1)
         rows.append(row)
     return rows
 
 
-LEVELS = ("pose_cap", "hull_cap", "gt_generated", "generated", "unary", "oracle", "checker")
+LEVELS = (
+    "pose_cap",
+    "hull_cap",
+    "wide_generated",
+    "gt_generated",
+    "generated",
+    "unary",
+    "oracle",
+    "checker",
+)
 SPLITS = ("concave", "leak", "extra", "missing_free", "missing")
 
 
@@ -282,26 +315,27 @@ def render(rows: list[dict]) -> str:
     lines += [markdown_table(header, [[f"{len(rows)} (mean)", *mean, *gt],
                                       [f"{len(rows)} (median)", *med, *gt_med]]), ""]  # fmt: skip
     split_rows = [r for r in rows if "split" in r]
-    header = ["group", "objects", "oracle", "1 - oracle", *SPLITS, "precision", "recall"]
+    header = ["group", "objects", "IoU", "1 - IoU", *SPLITS, "precision", "recall"]
 
-    def group(label: str, members: list[dict]) -> list:
+    def group(label: str, members: list[dict], key: str = "split", level: str = "oracle") -> list:
         if not members:
             return [label, 0, *([float("nan")] * (len(header) - 2))]
         return [
             label,
             len(members),
-            float(np.mean([r["oracle"] for r in members])),
-            float(np.mean([1 - r["oracle"] for r in members])),
-            *[float(np.mean([r["split"][s] for r in members])) for s in SPLITS],
-            float(np.mean([r["precision"] for r in members])),
-            float(np.mean([r["recall"] for r in members])),
+            float(np.mean([r[level] for r in members])),
+            float(np.mean([1 - r[level] for r in members])),
+            *[float(np.mean([r[key][s] for r in members])) for s in SPLITS],
+            float(np.mean([r[key]["precision"] for r in members])),
+            float(np.mean([r[key]["recall"] for r in members])),
         ]
 
-    table = [group("all matched", split_rows)]
-    for low, high in ((0.0, 0.3), (0.3, 0.6), (0.6, 0.8), (0.8, 1.01)):
-        members = [r for r in split_rows if low <= r["visib_fract"] < high]
-        table.append(group(f"visible {low:.1f}-{min(high, 1.0):.1f}", members))
-    lines += [markdown_table(header, table), ""]
+    for key, level in (("split", "oracle"), ("generated_split", "generated")):
+        table = [group(f"{level}: all matched", split_rows, key, level)]
+        for low, high in ((0.0, 0.3), (0.3, 0.6), (0.6, 0.8), (0.8, 1.01)):
+            members = [r for r in split_rows if low <= r["visib_fract"] < high]
+            table.append(group(f"visible {low:.1f}-{min(high, 1.0):.1f}", members, key, level))
+        lines += [markdown_table(header, table), ""]
     by_object: dict[str, list[dict]] = {}
     for r in split_rows:
         by_object.setdefault(r["object"], []).append(r)
@@ -315,14 +349,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--scene", action="append", default=[], type=Path, required=True)
     parser.add_argument("--perception-cache", type=Path, default=None)
     parser.add_argument("--json", type=Path, default=None, help="write the rows here")
+    parser.add_argument("--wide", type=int, default=0, help="also the best of this many")
     args = parser.parse_args(argv)
     rows = []
     for path in args.scene:
-        scene_rows = measure_scene(path, args.perception_cache)
+        scene_rows = measure_scene(path, args.perception_cache, args.wide)
         rows += scene_rows
         print(
             f"{path.name}: "
-            + " ".join(f"{lv} {np.mean([r.get(lv, 0.0) for r in scene_rows]):.3f}" for lv in LEVELS),
+            + " ".join(
+                f"{lv} {np.mean([r.get(lv, 0.0) for r in scene_rows]):.3f}" for lv in LEVELS
+            ),
             flush=True,
         )
     if args.json:

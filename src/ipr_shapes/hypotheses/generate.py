@@ -86,7 +86,7 @@ import numpy as np
 from scipy.spatial import ConvexHull, HalfspaceIntersection, QhullError
 
 from ipr_shapes import voxels
-from ipr_shapes.checks import Checks, Interval, OrNone, Predicate, check_fields
+from ipr_shapes.checks import Checks, Interval, Options, OrNone, Predicate, check_fields
 from ipr_shapes.geometry.convex import clip_halfspace, convex_mesh
 from ipr_shapes.hypotheses import structure
 from ipr_shapes.perception.free_space import FREE, SeenSpace
@@ -175,6 +175,9 @@ class HypothesisConfig:
             given), split over the objects as their ``timeout_s``; inference gets the rest.
         structure_share: share of ``count`` made by the structure-aware generators (rounded;
             0: Algorithm 1 alone, as in the paper); the total stays ``count``.
+        neighbour_surfaces: other objects' observed points bound each object's hidden extent
+            and count as seen-free space in its unary check (``prepare_hypotheses``;
+            ``ipr_shapes.hypotheses.neighbours``); False: the frame's free space alone.
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -205,6 +208,7 @@ class HypothesisConfig:
         "seed": Interval(0, None, integer=True),
         "budget_share": Interval(0, 1, closed="neither"),
         "structure_share": Interval(0, 1),
+        "neighbour_surfaces": Options(True, False),
     }
 
     count: int = 32
@@ -232,6 +236,7 @@ class HypothesisConfig:
     seed: int = 0
     budget_share: float = 0.6
     structure_share: float = 0.5
+    neighbour_surfaces: bool = True
 
     def __post_init__(self) -> None:
         check_fields(self)

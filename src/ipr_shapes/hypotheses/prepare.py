@@ -23,6 +23,7 @@ from ipr_shapes.hypotheses.constraints import (
     unary_feasible,
 )
 from ipr_shapes.hypotheses.generate import HypothesisConfig, generate_hypotheses, minimum_shape
+from ipr_shapes.hypotheses.neighbours import neighbour_spaces
 from ipr_shapes.perception.free_space import SeenSpace, SpaceMap
 from ipr_shapes.perception.types import KnownPlane, PartialObject
 from ipr_shapes.products import PreparedHypotheses, ShapeHypothesis, volume_spread
@@ -47,7 +48,8 @@ def prepare_hypotheses(
 
     ``object_spaces``: per object id, the seen-free space to use for that object instead of
     ``space`` (``ipr_shapes.fusion.tracked_free_spaces``: later frames' free space through the
-    object's registered motion).
+    object's registered motion). With ``config.neighbour_surfaces`` each object's space also
+    reads FREE where the other objects' observed points are (``neighbour_spaces``).
 
     ``time_budget_s``: generation gets ``config.budget_share`` of it, split over the objects
     (capping their timeouts). ``rng`` defaults to one seeded from ``config.seed``; each object
@@ -73,6 +75,8 @@ def prepare_hypotheses(
             else min(hypothesis_config.timeout_s, per_object),
         )
     object_rngs = rng.spawn(len(objects))
+    if config.neighbour_surfaces:
+        object_spaces = neighbour_spaces(objects, space, object_spaces)
 
     generated: dict[int, tuple[ShapeHypothesis, ...]] = {}
     minima: dict[int, ShapeHypothesis] = {}
