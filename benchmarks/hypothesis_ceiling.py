@@ -238,6 +238,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--algorithm1-only", action="store_true", help="no structure-aware candidates (before)"
     )
+    parser.add_argument(
+        "--no-neighbour-surfaces",
+        action="store_true",
+        help="other objects' observed points do not bound the hidden extent (before)",
+    )
     args = parser.parse_args(argv)
     from ipr_shapes.config import Config
     from ipr_shapes.suites import suite_scenes
@@ -246,6 +251,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.algorithm1_only:
         config = dataclasses.replace(
             config, hypotheses=dataclasses.replace(config.hypotheses, structure_share=0.0)
+        )
+    if args.no_neighbour_surfaces:
+        config = dataclasses.replace(
+            config, hypotheses=dataclasses.replace(config.hypotheses, neighbour_surfaces=False)
         )
     groups = {name: suite_scenes(name)[: args.limit] for name in args.suite}
     if args.scene:
