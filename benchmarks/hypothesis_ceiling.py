@@ -239,9 +239,9 @@ def main(argv: list[str] | None = None) -> int:
         "--algorithm1-only", action="store_true", help="no structure-aware candidates (before)"
     )
     parser.add_argument(
-        "--no-neighbour-surfaces",
+        "--neighbour-surfaces",
         action="store_true",
-        help="other objects' observed points do not bound the hidden extent (before)",
+        help="other objects' observed points stop the hidden extent's rays (opt-in)",
     )
     args = parser.parse_args(argv)
     from ipr_shapes.config import Config
@@ -252,9 +252,9 @@ def main(argv: list[str] | None = None) -> int:
         config = dataclasses.replace(
             config, hypotheses=dataclasses.replace(config.hypotheses, structure_share=0.0)
         )
-    if args.no_neighbour_surfaces:
+    if args.neighbour_surfaces:
         config = dataclasses.replace(
-            config, hypotheses=dataclasses.replace(config.hypotheses, neighbour_surfaces=False)
+            config, hypotheses=dataclasses.replace(config.hypotheses, neighbour_surfaces=True)
         )
     groups = {name: suite_scenes(name)[: args.limit] for name in args.suite}
     if args.scene:

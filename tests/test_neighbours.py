@@ -76,7 +76,7 @@ def test_the_wrapper_for_other_spaces_agrees_with_the_copied_map(scene):
 def test_hidden_extent_stops_at_a_neighbours_seen_surface(scene):
     objects, space = scene
     box = objects[0]
-    config = HypothesisConfig(count=16)
+    config = HypothesisConfig(count=16, neighbour_surfaces=True)
     alone = prepare_hypotheses(objects, space, (SUPPORT,), dataclasses.replace(
         config, neighbour_surfaces=False), rng=np.random.default_rng(3))  # fmt: skip
     bounded = prepare_hypotheses(objects, space, (SUPPORT,), config, rng=np.random.default_rng(3))

@@ -177,7 +177,9 @@ class HypothesisConfig:
             0: Algorithm 1 alone, as in the paper); the total stays ``count``.
         neighbour_surfaces: other objects' observed points stop the rays that bound each
             object's hidden extent (``prepare_hypotheses``; ``ipr_shapes.hypotheses.neighbours``);
-            the unary checks still use the frame's free space alone.
+            the unary checks still use the frame's free space alone. Off by default: it raises
+            the best candidate but not the Collision Checker's choice (docs/DESIGN_NOTES.md,
+            "Other objects' seen surfaces bound the hidden extent: opt-in").
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -236,7 +238,7 @@ class HypothesisConfig:
     seed: int = 0
     budget_share: float = 0.6
     structure_share: float = 0.5
-    neighbour_surfaces: bool = True
+    neighbour_surfaces: bool = False
 
     def __post_init__(self) -> None:
         check_fields(self)
