@@ -4,7 +4,7 @@ The ``hypotheses`` section of docs/BENCHMARKS.md (``python -m benchmarks.run --o
 hypotheses``), or on its own for a subset::
 
     python -m benchmarks.hypothesis_ceiling --suite ycb-dynamic --limit 4 [--scene DIR ...]
-        [--perception-cache DIR] [--algorithm1-only]
+        [--perception-cache DIR] [--algorithm1-only] [--neighbour-surfaces]
 
 Per scene: frame 0 is perceived, the hypotheses are prepared (``prepare_hypotheses``, the
 default configuration, seed 0, as the Collision Checker's run draws them) and the Collision
