@@ -4,7 +4,7 @@ The ``hypotheses`` section of docs/BENCHMARKS.md (``python -m benchmarks.run --o
 hypotheses``), or on its own for a subset::
 
     python -m benchmarks.hypothesis_ceiling --suite ycb-dynamic --limit 4 [--scene DIR ...]
-        [--perception-cache DIR] [--algorithm1-only]
+        [--perception-cache DIR] [--algorithm1-only] [--neighbour-surfaces]
 
 Per scene: frame 0 is perceived, the hypotheses are prepared (``prepare_hypotheses``, the
 default configuration, seed 0, as the Collision Checker's run draws them) and the Collision
@@ -238,6 +238,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--algorithm1-only", action="store_true", help="no structure-aware candidates (before)"
     )
+    parser.add_argument(
+        "--neighbour-surfaces",
+        action="store_true",
+        help="other objects' observed points stop the hidden extent's rays (opt-in)",
+    )
     args = parser.parse_args(argv)
     from ipr_shapes.config import Config
     from ipr_shapes.suites import suite_scenes
@@ -246,6 +251,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.algorithm1_only:
         config = dataclasses.replace(
             config, hypotheses=dataclasses.replace(config.hypotheses, structure_share=0.0)
+        )
+    if args.neighbour_surfaces:
+        config = dataclasses.replace(
+            config, hypotheses=dataclasses.replace(config.hypotheses, neighbour_surfaces=True)
         )
     groups = {name: suite_scenes(name)[: args.limit] for name in args.suite}
     if args.scene:

@@ -86,7 +86,7 @@ import numpy as np
 from scipy.spatial import ConvexHull, HalfspaceIntersection, QhullError
 
 from ipr_shapes import voxels
-from ipr_shapes.checks import Checks, Interval, OrNone, Predicate, check_fields
+from ipr_shapes.checks import Checks, Interval, Options, OrNone, Predicate, check_fields
 from ipr_shapes.geometry.convex import clip_halfspace, convex_mesh
 from ipr_shapes.hypotheses import structure
 from ipr_shapes.perception.free_space import FREE, SeenSpace
@@ -175,6 +175,11 @@ class HypothesisConfig:
             given), split over the objects as their ``timeout_s``; inference gets the rest.
         structure_share: share of ``count`` made by the structure-aware generators (rounded;
             0: Algorithm 1 alone, as in the paper); the total stays ``count``.
+        neighbour_surfaces: other objects' observed points stop the rays that bound each
+            object's hidden extent (``prepare_hypotheses``; ``ipr_shapes.hypotheses.neighbours``);
+            the unary checks still use the frame's free space alone. Off by default: it raises
+            the best candidate but not the Collision Checker's choice (docs/DESIGN_NOTES.md,
+            "Other objects' seen surfaces bound the hidden extent: opt-in").
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -205,6 +210,7 @@ class HypothesisConfig:
         "seed": Interval(0, None, integer=True),
         "budget_share": Interval(0, 1, closed="neither"),
         "structure_share": Interval(0, 1),
+        "neighbour_surfaces": Options(True, False),
     }
 
     count: int = 32
@@ -232,6 +238,7 @@ class HypothesisConfig:
     seed: int = 0
     budget_share: float = 0.6
     structure_share: float = 0.5
+    neighbour_surfaces: bool = False
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -331,6 +338,7 @@ class _Context:
     forced_wall: int
     pitch_m: float
     config: HypothesisConfig
+    rays: SeenSpace | None = None  # the space hidden-extent rays stop in (``bounds``)
 
 
 def dominant_normal(obj: PartialObject, planes: tuple[KnownPlane, ...]) -> np.ndarray:
@@ -475,8 +483,10 @@ def _prepare(
     space: SeenSpace | None,
     planes: tuple[KnownPlane, ...],
     config: HypothesisConfig,
+    bounds: SeenSpace | None = None,
 ) -> _Context:
-    """Per-object set-up: observed facets to mirror with their D_max, clip levels, baselines."""
+    """Per-object set-up: observed facets to mirror with their D_max, clip levels, baselines;
+    rays stop in ``bounds`` (default: ``space``)."""
     points = np.asarray(obj.points, float).reshape(-1, 3)
     points = points[np.all(np.isfinite(points), axis=1)]
     if len(points) == 0:
@@ -485,7 +495,8 @@ def _prepare(
     cap = config.border_max_depth_m if obj.touches_border else config.max_depth_m
     pitch = space.grid.voxel_size_m if space is not None else voxels.DEFAULT_PITCH_M
     step = config.ray_step_m or pitch
-    ray_parts = (space, regions, cap, step)
+    rays = bounds if bounds is not None else space
+    ray_parts = (rays, regions, cap, step)
     fallback = dominant_normal(obj, planes)
 
     used = [
@@ -590,6 +601,7 @@ def _prepare(
         forced_wall,
         pitch,
         config,
+        rays,
     )
 
 
@@ -696,7 +708,7 @@ def _hull_source(
     samples = samples + r2[:, None] * (tri[pick, 2] - tri[pick, 0])
     samples = centre + 0.85 * (samples - centre)
     step = ctx.config.ray_step_m or ctx.pitch_m
-    parts = (ctx.space, ctx.regions, ctx.cap_m, step)
+    parts = (ctx.rays, ctx.regions, ctx.cap_m, step)
     cells, conflict = _admissible(
         [_ray_bounds(samples, centre, normal, parts)], ctx.config.ray_quantile, step
     )
@@ -903,7 +915,7 @@ def _structure_makers(
     step = config.ray_step_m or ctx.pitch_m
 
     def reach(origins: np.ndarray, direction: np.ndarray) -> np.ndarray:
-        return _ray_limits(origins, -direction, ctx.space, ctx.regions, ctx.cap_m, step)
+        return _ray_limits(origins, -direction, ctx.rays, ctx.regions, ctx.cap_m, step)
 
     makers: dict[str, _Maker] = {}
     support = next((r.plane for r in ctx.regions if r.is_support), None)
@@ -1015,6 +1027,7 @@ def generate_hypotheses(
     planes: tuple[KnownPlane, ...],
     config: HypothesisConfig | None = None,
     rng: np.random.Generator | None = None,
+    bounds: SeenSpace | None = None,
 ) -> tuple[ShapeHypothesis, ...]:
     """``config.count`` complete-shape hypotheses of a partial object: Algorithm 1's first, then
     the structure-aware candidates (``structure_share``; module doc).
@@ -1025,6 +1038,9 @@ def generate_hypotheses(
         planes: the frame's support and walls.
         config: settings (defaults: ``HypothesisConfig()``).
         rng: random source (default: seeded from ``config.seed`` and the object id).
+        bounds: the space the hidden extent's rays stop in (default ``space``):
+            ``prepare_hypotheses`` passes ``space`` with the other objects' observed surfaces
+            (``ipr_shapes.hypotheses.neighbours``); the unary checks use ``space``.
 
     Returns:
         m closed convex hypotheses, each containing every observed point, none below the
@@ -1035,7 +1051,7 @@ def generate_hypotheses(
     if rng is None:
         rng = np.random.default_rng([config.seed, int(obj.id)])
     started = time.perf_counter()
-    ctx = _prepare(obj, space, planes, config)
+    ctx = _prepare(obj, space, planes, config, bounds)
     m = config.count
     makers, fits = _structure_makers(obj, ctx) if config.structure_share > 0 else ({}, {})
     structured = int(round(config.structure_share * m)) if makers else 0

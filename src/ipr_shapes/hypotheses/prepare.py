@@ -23,6 +23,7 @@ from ipr_shapes.hypotheses.constraints import (
     unary_feasible,
 )
 from ipr_shapes.hypotheses.generate import HypothesisConfig, generate_hypotheses, minimum_shape
+from ipr_shapes.hypotheses.neighbours import neighbour_spaces
 from ipr_shapes.perception.free_space import SeenSpace, SpaceMap
 from ipr_shapes.perception.types import KnownPlane, PartialObject
 from ipr_shapes.products import PreparedHypotheses, ShapeHypothesis, volume_spread
@@ -47,7 +48,8 @@ def prepare_hypotheses(
 
     ``object_spaces``: per object id, the seen-free space to use for that object instead of
     ``space`` (``ipr_shapes.fusion.tracked_free_spaces``: later frames' free space through the
-    object's registered motion).
+    object's registered motion). With ``config.neighbour_surfaces`` the rays that bound each object's
+    hidden extent also stop at the other objects' observed points (``neighbour_spaces``).
 
     ``time_budget_s``: generation gets ``config.budget_share`` of it, split over the objects
     (capping their timeouts). ``rng`` defaults to one seeded from ``config.seed``; each object
@@ -73,6 +75,7 @@ def prepare_hypotheses(
             else min(hypothesis_config.timeout_s, per_object),
         )
     object_rngs = rng.spawn(len(objects))
+    bounds = neighbour_spaces(objects, space, object_spaces) if config.neighbour_surfaces else {}
 
     generated: dict[int, tuple[ShapeHypothesis, ...]] = {}
     minima: dict[int, ShapeHypothesis] = {}
@@ -82,7 +85,9 @@ def prepare_hypotheses(
     for done, (obj, object_rng) in enumerate(zip(objects, object_rngs, strict=True), start=1):
         begin = time.perf_counter()
         seen = (object_spaces or {}).get(obj.id, space)
-        hyps = generate_hypotheses(obj, seen, planes, hypothesis_config, object_rng)
+        hyps = generate_hypotheses(
+            obj, seen, planes, hypothesis_config, object_rng, bounds=bounds.get(obj.id)
+        )
         minima[obj.id] = minimum_shape(obj, planes, hypothesis_config)
         feasible = [k for k, h in enumerate(hyps) if unary_feasible(h, seen, planes, config.unary)]
         if not feasible:
