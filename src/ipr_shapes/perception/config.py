@@ -314,6 +314,16 @@ class SegmentationConfig:
             step, while two objects meet at a crease or a colour edge. 0: off (LCCP).
         concave_join_colour: largest distance between the two supervoxels' mean
             chromaticities (r, g, b over their sum) for ``concave_join_deg`` to apply.
+        curved_join_deg: a concave edge whose normals differ by less than this (deg) is still
+            strong when the surface beyond both its ends keeps bending concavely
+            (``ipr_shapes.perception.curvature``): a bowl's inside bends at every step, two
+            objects meet at a crease between flat or convex faces. 0: off.
+        curved_join_ratio: ... by a mean bend of at least this share of the edge's own.
+        curved_join_edges: such edges weigh 1 in the graph (before the clustering).
+        curved_segment_vote: after the clustering, two neighbouring segments of alike colour
+            (``concave_join_colour``) are joined when at least this share of the edges
+            between them are such smooth concave edges
+            (``curvature.join_curved_segments``); 0: off.
         concave_weight: graph weight of concave (or not smooth) edges; convex and flat edges
             weigh 1, so the clustering cuts at concavities.
         singular_weight: graph weight of convex edges that fail the sanity check.
@@ -331,6 +341,13 @@ class SegmentationConfig:
             or dropped (an object peeking over a drawer front can show ~50).
         min_object_height_m: segments whose 90th-percentile height above the support is lower
             (m) are support residue (noise, a slightly curved table), not objects.
+        workspace_share: a segment with less than this share of its points over the support's
+            seen extent (their projection within its inliers' convex hull) stands beyond the
+            table, not on it, and is dropped (``ipr_shapes.perception.workspace``); 0: off.
+        workspace_margin_m: the hull is grown by this (m): an object at the table's edge hides
+            the edge beneath it.
+        workspace_cell_m: cell (m) of the grid whose largest connected region of support
+            points is the table (a chair's seat at the table's height beyond it is another).
         label_fill_px: pixels without depth take the label of the nearest pixel with depth up
             to this distance (px; edge dropout, small holes); 0 = no filling.
     """
@@ -341,6 +358,9 @@ class SegmentationConfig:
         "smoothness_threshold": _NON_NEGATIVE,
         "concave_join_deg": _ANGLE,
         "concave_join_colour": _NON_NEGATIVE,
+        "curved_join_deg": _ANGLE,
+        "curved_join_ratio": _NON_NEGATIVE,
+        "curved_segment_vote": _SHARE,
         "concave_weight": _NON_NEGATIVE,
         "singular_weight": _NON_NEGATIVE,
         "dense_eigen_limit": _COUNT,
@@ -351,6 +371,9 @@ class SegmentationConfig:
         "min_object_pixels": _COUNT,
         "min_object_height_m": _NON_NEGATIVE,
         "label_fill_px": _NON_NEGATIVE,
+        "workspace_share": _SHARE,
+        "workspace_margin_m": _NON_NEGATIVE,
+        "workspace_cell_m": _POSITIVE,
     }
 
     concavity_tolerance_deg: float = 10.0
@@ -359,6 +382,10 @@ class SegmentationConfig:
     smoothness_threshold: float = 0.1
     concave_join_deg: float = 0.0
     concave_join_colour: float = 0.02
+    curved_join_deg: float = 0.0
+    curved_join_ratio: float = 0.5
+    curved_join_edges: bool = False
+    curved_segment_vote: float = 0.0
     concave_weight: float = 0.001
     singular_weight: float = 0.001
     dense_eigen_limit: int = 400
@@ -369,6 +396,9 @@ class SegmentationConfig:
     min_object_pixels: int = 40
     min_object_height_m: float = 0.015
     label_fill_px: float = 3.0
+    workspace_share: float = 0.0
+    workspace_margin_m: float = 0.02
+    workspace_cell_m: float = 0.02
 
     def __post_init__(self) -> None:
         check_fields(self)
