@@ -314,16 +314,19 @@ class SegmentationConfig:
             step, while two objects meet at a crease or a colour edge. 0: off (LCCP).
         concave_join_colour: largest distance between the two supervoxels' mean
             chromaticities (r, g, b over their sum) for ``concave_join_deg`` to apply.
-        curved_join_deg: a concave edge whose normals differ by less than this (deg) is still
-            strong when the surface beyond both its ends keeps bending concavely
-            (``ipr_shapes.perception.curvature``): a bowl's inside bends at every step, two
-            objects meet at a crease between flat or convex faces. 0: off.
+        curved_join_deg: a concave edge whose normals differ by less than this (deg) is a
+            "smooth concave" edge when the surface beyond both its ends keeps bending
+            concavely (``ipr_shapes.perception.curvature``): a bowl's inside bends at every
+            step, two objects meet at a crease between flat or convex faces. 0: none.
         curved_join_ratio: ... by a mean bend of at least this share of the edge's own.
-        curved_join_edges: such edges weigh 1 in the graph (before the clustering).
+        curved_join_edges: smooth concave edges weigh 1 in the graph, before the clustering
+            (loses 1.7 points on bins-real: docs/experiments/2026-11-26-curved-objects.md).
         curved_segment_vote: after the clustering, two neighbouring segments of alike colour
-            (``concave_join_colour``) are joined when at least this share of the edges
-            between them are such smooth concave edges
+            (``curved_segment_colour``) are joined when at least this share of the edges
+            between them (and 2) are smooth concave edges
             (``curvature.join_curved_segments``); 0: off.
+        curved_segment_colour: largest distance between the two segments' mean
+            chromaticities (r, g, b over their sum) for the vote to join them.
         concave_weight: graph weight of concave (or not smooth) edges; convex and flat edges
             weigh 1, so the clustering cuts at concavities.
         singular_weight: graph weight of convex edges that fail the sanity check.
@@ -361,6 +364,7 @@ class SegmentationConfig:
         "curved_join_deg": _ANGLE,
         "curved_join_ratio": _NON_NEGATIVE,
         "curved_segment_vote": _SHARE,
+        "curved_segment_colour": _NON_NEGATIVE,
         "concave_weight": _NON_NEGATIVE,
         "singular_weight": _NON_NEGATIVE,
         "dense_eigen_limit": _COUNT,
@@ -382,10 +386,11 @@ class SegmentationConfig:
     smoothness_threshold: float = 0.1
     concave_join_deg: float = 0.0
     concave_join_colour: float = 0.02
-    curved_join_deg: float = 0.0
-    curved_join_ratio: float = 0.5
+    curved_join_deg: float = 40.0
+    curved_join_ratio: float = 0.3
     curved_join_edges: bool = False
-    curved_segment_vote: float = 0.0
+    curved_segment_vote: float = 0.3
+    curved_segment_colour: float = 0.04
     concave_weight: float = 0.001
     singular_weight: float = 0.001
     dense_eigen_limit: int = 400
@@ -396,7 +401,7 @@ class SegmentationConfig:
     min_object_pixels: int = 40
     min_object_height_m: float = 0.015
     label_fill_px: float = 3.0
-    workspace_share: float = 0.0
+    workspace_share: float = 0.5
     workspace_margin_m: float = 0.02
     workspace_cell_m: float = 0.02
 

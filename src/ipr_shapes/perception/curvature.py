@@ -108,7 +108,7 @@ def join_curved_segments(
 
     Two segments are joined when at least ``segmentation.curved_segment_vote`` of the
     adjacency edges between them (and at least 2) are ``smooth_concave_edges`` and their
-    mean chromaticities are within ``segmentation.concave_join_colour``. Deciding per pair of
+    mean chromaticities are within ``segmentation.curved_segment_colour``. Deciding per pair of
     segments by a vote of their whole boundary, rather than per edge before the clustering,
     is robust to the single edges that depth noise makes look curved along a crease.
     """
@@ -136,7 +136,7 @@ def join_curved_segments(
     first, second = key // n, key % n
     alike = (
         np.linalg.norm(chroma[first] - chroma[second], axis=1)
-        <= config.segmentation.concave_join_colour
+        <= config.segmentation.curved_segment_colour
     )
     join = (total >= 2) & (agree >= vote * total) & alike
     if not join.any():

@@ -24,7 +24,8 @@ def support_outline(
     a x + b y + c <= 0 inside and (a, b) unit), or None when it spans no area.
 
     The extent is the convex hull, in the plane's coordinates (m), of the largest connected
-    region of ``cell_m`` cells holding the (N, 3) points seen on the support (world, m):
+    region of ``cell_m`` cells holding the (N, 3) points seen on the support (world, m; cells
+    one apart count as connected):
     another surface at the table's height beyond it (a chair's seat) is a separate region,
     and the holes the objects hide in the table are inside the hull.
     """
@@ -39,7 +40,9 @@ def support_outline(
     cells = np.floor((flat - flat.min(axis=0)) / cell_m).astype(np.int64)
     occupied = np.zeros(tuple(cells.max(axis=0) + 1), dtype=bool)
     occupied[cells[:, 0], cells[:, 1]] = True
-    regions, _ = ndimage.label(occupied, structure=np.ones((3, 3), dtype=bool))
+    # Grown by a cell, so that the gaps between sampled points far away do not split it.
+    grown = ndimage.binary_dilation(occupied, structure=np.ones((3, 3), dtype=bool))
+    regions, _ = ndimage.label(grown, structure=np.ones((3, 3), dtype=bool))
     region = regions[cells[:, 0], cells[:, 1]]
     largest = np.argmax(np.bincount(region)[1:]) + 1
     try:
