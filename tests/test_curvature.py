@@ -145,10 +145,9 @@ def test_clutter_beyond_the_table_is_dropped_and_objects_on_it_kept():
     on_table = box(0.0, 0.1, (0.08, 0.08, 0.10))
     at_edge = box(-0.49, -0.35, (0.08, 0.08, 0.08))
     frame = render(pose, boxes=[beyond, seat, on_seat, on_table, at_edge])
-    plain = segment_frame(
-        frame, config=PerceptionConfig(segmentation=SegmentationConfig(workspace_share=0.0))
-    ).labels
-    kept = segment_frame(frame).labels  # the default
+    plain = segment_frame(frame).labels  # the default: off
+    workspace = PerceptionConfig(segmentation=SegmentationConfig(workspace_share=0.5))
+    kept = segment_frame(frame, config=workspace).labels
     far, seated = (-0.62, 0.2, 0.1), (-0.78, -0.15, 0.08)
     table_point, edge_point = (0.0, 0.1, 0.1), (-0.49, -0.35, 0.08)
     assert segment_of_point(frame, plain, far) > 0  # segmented without the test
