@@ -145,9 +145,10 @@ def test_clutter_beyond_the_table_is_dropped_and_objects_on_it_kept():
     on_table = box(0.0, 0.1, (0.08, 0.08, 0.10))
     at_edge = box(-0.49, -0.35, (0.08, 0.08, 0.08))
     frame = render(pose, boxes=[beyond, seat, on_seat, on_table, at_edge])
-    plain = segment_frame(frame).labels  # the default: off
-    workspace = PerceptionConfig(segmentation=SegmentationConfig(workspace_share=0.5))
-    kept = segment_frame(frame, config=workspace).labels
+    plain = segment_frame(
+        frame, config=PerceptionConfig(segmentation=SegmentationConfig(workspace_share=0.0))
+    ).labels
+    kept = segment_frame(frame).labels  # the default
     far, seated = (-0.62, 0.2, 0.1), (-0.78, -0.15, 0.08)
     table_point, edge_point = (0.0, 0.1, 0.1), (-0.49, -0.35, 0.08)
     assert segment_of_point(frame, plain, far) > 0  # segmented without the test
@@ -207,3 +208,16 @@ def test_a_bowl_under_real_sensor_noise_stays_whole(seed):
     assert _segments_on(curved, bowl) <= 2
     # The bowl's pixels are covered: joined, not dropped.
     assert (curved[bowl] > 0).mean() >= 0.9
+
+
+def test_a_table_split_by_a_long_object_is_still_one_workspace():
+    """A long low box runs across the whole table along the view, so the table's visible points
+    fall into two regions; the box bridges them, and neither it nor a box on the smaller side
+    is dropped."""
+    pose = camera(1.1, 40.0, 0.0)
+    long_box = (np.array([0.0, 0.15, 0.04]), np.array([0.6, 0.05, 0.04]), 0.0)
+    small_side = box(-0.1, 0.35, (0.08, 0.08, 0.10))
+    frame = render(pose, boxes=[long_box, small_side])
+    kept = segment_frame(frame).labels  # the default
+    assert segment_of_point(frame, kept, (-0.1, 0.35, 0.1)) > 0
+    assert segment_of_point(frame, kept, (0.1, 0.15, 0.08)) > 0

@@ -346,14 +346,12 @@ class SegmentationConfig:
             (m) are support residue (noise, a slightly curved table), not objects.
         workspace_share: a segment with less than this share of its points over the support's
             seen extent (their projection within its inliers' convex hull) stands beyond the
-            table, not on it, and is dropped (``ipr_shapes.perception.workspace``); 0: off,
-            the default: a pile that hides a band of the table from front to back splits it
-            into regions, and the objects over the smaller ones were dropped
-            (docs/experiments/2026-11-26-curved-objects.md). 0.5 for lab frames with clutter.
+            table, not on it, and is dropped (``ipr_shapes.perception.workspace``); 0: off.
         workspace_margin_m: the hull is grown by this (m): an object at the table's edge hides
             the edge beneath it.
-        workspace_cell_m: cell (m) of the grid whose largest connected region of support
-            points is the table (a chair's seat at the table's height beyond it is another).
+        workspace_cell_m: cell (m) of the grid whose connected region holding most support
+            points is the table, the cells under the segments joining the regions they touch
+            (a chair's seat at the table's height beyond it is another region).
         label_fill_px: pixels without depth take the label of the nearest pixel with depth up
             to this distance (px; edge dropout, small holes); 0 = no filling.
     """
@@ -404,7 +402,7 @@ class SegmentationConfig:
     min_object_pixels: int = 40
     min_object_height_m: float = 0.015
     label_fill_px: float = 3.0
-    workspace_share: float = 0.0
+    workspace_share: float = 0.5
     workspace_margin_m: float = 0.02
     workspace_cell_m: float = 0.02
 

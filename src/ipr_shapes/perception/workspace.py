@@ -18,16 +18,21 @@ from ipr_shapes.perception.types import KnownPlane
 
 
 def support_outline(
-    support: KnownPlane, on_support: np.ndarray, cell_m: float
+    support: KnownPlane,
+    on_support: np.ndarray,
+    cell_m: float,
+    standing: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray] | None:
     """The support's seen extent: ((2, 3) in-plane axes, (F, 3) 2D hull facets (a, b, c), with
     a x + b y + c <= 0 inside and (a, b) unit), or None when it spans no area.
 
-    The extent is the convex hull, in the plane's coordinates (m), of the largest connected
-    region of ``cell_m`` cells holding the (N, 3) points seen on the support (world, m; cells
-    one apart count as connected):
-    another surface at the table's height beyond it (a chair's seat) is a separate region,
-    and the holes the objects hide in the table are inside the hull.
+    The extent is the convex hull, in the plane's coordinates (m), of the support points in
+    the connected region of ``cell_m`` cells that holds most of the (N, 3) points seen on the
+    support (world, m; cells one apart count as connected). The cells under the (S, 3)
+    ``standing`` points (the segments' points, world, m) join the regions they touch: a pile
+    that hides a band of the table from front to back bridges its two sides, while another
+    surface at the table's height beyond it (a chair's seat) stays a separate region; the
+    holes the objects hide in the table are inside the hull.
     """
     normal = np.asarray(support.normal, dtype=np.float64)
     helper = np.array([1.0, 0.0, 0.0]) if abs(normal[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
@@ -37,11 +42,18 @@ def support_outline(
     flat = np.asarray(on_support, dtype=np.float64) @ axes.T
     if len(flat) < 3:
         return None
-    cells = np.floor((flat - flat.min(axis=0)) / cell_m).astype(np.int64)
-    occupied = np.zeros(tuple(cells.max(axis=0) + 1), dtype=bool)
+    origin = flat.min(axis=0)
+    cells = np.floor((flat - origin) / cell_m).astype(np.int64)
+    shape = tuple(cells.max(axis=0) + 1)
+    occupied = np.zeros(shape, dtype=bool)
     occupied[cells[:, 0], cells[:, 1]] = True
     # Grown by a cell, so that the gaps between sampled points far away do not split it.
     grown = ndimage.binary_dilation(occupied, structure=np.ones((3, 3), dtype=bool))
+    if standing is not None and len(standing):
+        under = np.floor((np.asarray(standing, dtype=np.float64) @ axes.T - origin) / cell_m)
+        under = under.astype(np.int64)
+        within = ((under >= 0) & (under < shape)).all(axis=1)
+        grown[under[within, 0], under[within, 1]] = True
     regions, _ = ndimage.label(grown, structure=np.ones((3, 3), dtype=bool))
     region = regions[cells[:, 0], cells[:, 1]]
     largest = np.argmax(np.bincount(region)[1:]) + 1
@@ -84,14 +96,16 @@ def drop_beyond_support(
     share = config.segmentation.workspace_share
     if share <= 0 or support_share < config.support.min_fraction:
         return labels, segment_of_supervoxel
-    outline = support_outline(support, on_support, config.segmentation.workspace_cell_m)
-    if outline is None:
-        return labels, segment_of_supervoxel
-    axes, facets = outline
     flat = labels.reshape(-1)
     labelled = np.flatnonzero((flat > 0) & valid)[::4]
     if labelled.size == 0:
         return labels, segment_of_supervoxel
+    outline = support_outline(
+        support, on_support, config.segmentation.workspace_cell_m, points[labelled]
+    )
+    if outline is None:
+        return labels, segment_of_supervoxel
+    axes, facets = outline
     footprint = points[labelled] @ axes.T
     outside = footprint @ facets[:, :2].T + facets[:, 2]
     inside = outside.max(axis=1) <= config.segmentation.workspace_margin_m
