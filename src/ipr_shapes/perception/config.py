@@ -314,6 +314,19 @@ class SegmentationConfig:
             step, while two objects meet at a crease or a colour edge. 0: off (LCCP).
         concave_join_colour: largest distance between the two supervoxels' mean
             chromaticities (r, g, b over their sum) for ``concave_join_deg`` to apply.
+        curved_join_deg: a concave edge whose normals differ by less than this (deg) is a
+            "smooth concave" edge when the surface beyond both its ends keeps bending
+            concavely (``ipr_shapes.perception.curvature``): a bowl's inside bends at every
+            step, two objects meet at a crease between flat or convex faces. 0: none.
+        curved_join_ratio: ... by a mean bend of at least this share of the edge's own.
+        curved_join_edges: smooth concave edges weigh 1 in the graph, before the clustering
+            (loses 1.7 points on bins-real: docs/experiments/2026-11-26-curved-objects.md).
+        curved_segment_vote: after the clustering, two neighbouring segments of alike colour
+            (``curved_segment_colour``) are joined when at least this share of the edges
+            between them (and 2) are smooth concave edges
+            (``curvature.join_curved_segments``); 0: off.
+        curved_segment_colour: largest distance between the two segments' mean
+            chromaticities (r, g, b over their sum) for the vote to join them.
         concave_weight: graph weight of concave (or not smooth) edges; convex and flat edges
             weigh 1, so the clustering cuts at concavities.
         singular_weight: graph weight of convex edges that fail the sanity check.
@@ -332,6 +345,14 @@ class SegmentationConfig:
             or dropped (an object peeking over a drawer front can show ~50).
         min_object_height_m: segments whose 90th-percentile height above the support is lower
             (m) are support residue (noise, a slightly curved table), not objects.
+        workspace_share: a segment with less than this share of its points over the support's
+            seen extent (their projection within its inliers' convex hull) stands beyond the
+            table, not on it, and is dropped (``ipr_shapes.perception.workspace``); 0: off.
+        workspace_margin_m: the hull is grown by this (m): an object at the table's edge hides
+            the edge beneath it.
+        workspace_cell_m: cell (m) of the grid whose connected region holding most support
+            points is the table, the cells under the segments joining the regions they touch
+            (a chair's seat at the table's height beyond it is another region).
         label_fill_px: pixels without depth take the label of the nearest pixel with depth up
             to this distance (px; edge dropout, small holes); 0 = no filling.
     """
@@ -342,6 +363,10 @@ class SegmentationConfig:
         "smoothness_threshold": _NON_NEGATIVE,
         "concave_join_deg": _ANGLE,
         "concave_join_colour": _NON_NEGATIVE,
+        "curved_join_deg": _ANGLE,
+        "curved_join_ratio": _NON_NEGATIVE,
+        "curved_segment_vote": _SHARE,
+        "curved_segment_colour": _NON_NEGATIVE,
         "concave_weight": _NON_NEGATIVE,
         "singular_weight": _NON_NEGATIVE,
         "dense_eigen_limit": _COUNT,
@@ -352,6 +377,9 @@ class SegmentationConfig:
         "min_object_pixels": _COUNT,
         "min_object_height_m": _NON_NEGATIVE,
         "label_fill_px": _NON_NEGATIVE,
+        "workspace_share": _SHARE,
+        "workspace_margin_m": _NON_NEGATIVE,
+        "workspace_cell_m": _POSITIVE,
     }
 
     concavity_tolerance_deg: float = 10.0
@@ -360,6 +388,11 @@ class SegmentationConfig:
     smoothness_threshold: float = 0.1
     concave_join_deg: float = 0.0
     concave_join_colour: float = 0.02
+    curved_join_deg: float = 40.0
+    curved_join_ratio: float = 0.3
+    curved_join_edges: bool = False
+    curved_segment_vote: float = 0.3
+    curved_segment_colour: float = 0.04
     concave_weight: float = 0.001
     singular_weight: float = 0.001
     dense_eigen_limit: int = 300
@@ -370,6 +403,9 @@ class SegmentationConfig:
     min_object_pixels: int = 40
     min_object_height_m: float = 0.015
     label_fill_px: float = 3.0
+    workspace_share: float = 0.5
+    workspace_margin_m: float = 0.02
+    workspace_cell_m: float = 0.02
 
     def __post_init__(self) -> None:
         check_fields(self)

@@ -28,6 +28,7 @@ from ipr_shapes.errors import IprError
 from ipr_shapes.perception import kernels
 from ipr_shapes.perception.config import PerceptionConfig
 from ipr_shapes.perception.containers import join_container_insides
+from ipr_shapes.perception.curvature import join_curved_segments, smooth_concave_edges
 from ipr_shapes.perception.planes import find_support_plane, find_walls, static_geometry_mask
 from ipr_shapes.perception.robot import robot_pixels
 from ipr_shapes.perception.seams import cut_colour_seams
@@ -43,6 +44,7 @@ from ipr_shapes.perception.temporal import (
     supervoxel_anchors,
 )
 from ipr_shapes.perception.types import DepthView, FrameSegmentation, KnownPlane, Supervoxels
+from ipr_shapes.perception.workspace import drop_beyond_support
 from ipr_shapes.scene import Frame, Push, Pusher
 
 
@@ -160,6 +162,8 @@ def segment_frame(
     if frame_change is not None and config.temporal.anchoring:
         change = supervoxel_anchors(supervoxels, frame_change, config)
     segment_of_supervoxel = cluster_supervoxels(supervoxels, config, change)
+    if config.segmentation.curved_segment_vote > 0:
+        segment_of_supervoxel = join_curved_segments(segment_of_supervoxel, supervoxels, config)
     lookup = np.append(segment_of_supervoxel, 0).astype(np.int32)  # label -1 -> last -> 0
     labels = fill_label_holes(
         lookup[supervoxels.labels], valid | robot, config.segmentation.label_fill_px
@@ -167,6 +171,18 @@ def segment_frame(
     labels, segment_of_supervoxel = drop_support_residue(
         labels, segment_of_supervoxel, flat_points, valid.reshape(-1), support, config
     )
+    if config.segmentation.workspace_share > 0:
+        on_support, share = _on_support(points, valid & ~robot, support, config)
+        labels, segment_of_supervoxel = drop_beyond_support(
+            labels,
+            segment_of_supervoxel,
+            flat_points,
+            valid.reshape(-1),
+            support,
+            on_support,
+            share,
+            config,
+        )
     labels, segment_of_supervoxel = join_container_insides(
         labels,
         segment_of_supervoxel,
@@ -209,6 +225,19 @@ def _cut_seams(
         has = counts.sum(axis=1) > 0
         segment_of_supervoxel[has] = np.argmax(counts[has], axis=1)
     return cut, segment_of_supervoxel
+
+
+def _on_support(
+    points: np.ndarray, usable: np.ndarray, support: KnownPlane, config: PerceptionConfig
+) -> tuple[np.ndarray, float]:
+    """The points (world, m) of every 4th row and column of the (H, W, 3) grid ``points`` where
+    ``usable`` (H, W) that lie within the support's clearance, and the share of them that do
+    (a grid, not every n-th pixel in row order, which leaves stripes on a far table)."""
+    sample = points[::4, ::4][usable[::4, ::4]]
+    if len(sample) == 0:
+        return sample, 0.0
+    near = np.abs(support.signed_distance(sample)) < config.support.clearance_m
+    return sample[near], float(near.mean())
 
 
 def drop_support_residue(
@@ -387,6 +416,8 @@ def edge_weights(supervoxels: Supervoxels, config: PerceptionConfig) -> np.ndarr
             <= config.segmentation.concave_join_colour
         )
         strong |= ~convex & (normal_angle < join_deg) & alike & smooth
+    if config.segmentation.curved_join_edges and config.segmentation.curved_join_deg > 0:
+        strong |= smooth_concave_edges(supervoxels, config) & smooth
     weights = np.where(strong, 1.0, config.segmentation.concave_weight)
     weights[singular & smooth] = config.segmentation.singular_weight
     return weights
