@@ -66,7 +66,7 @@ class PhysicsConfig:
 
     Attributes:
         timestep_s: integration step (s). 8 ms: half the steps of 4 ms, and the replayed
-            pushes no further from the data (docs/DESIGN_NOTES.md, "Sampling throughput");
+            pushes no further from the data (docs/DESIGN_NOTES.md, "Time step");
             MuJoCo wants a contact's time constant (0.02 s) at least two steps.
         density_kg_m3: uniform object density (kg/m^3); 400 is a typical packaged household
             object (YCB's boxes and bottles span roughly 100-1200).
