@@ -3,7 +3,7 @@
 evidence the pushes can give about hidden shapes.
 
 Usage: ``python -m benchmarks.dev_push_replay [--seed 9100] [--count 10] [--friction 1.0]
-[--timestep 0.004]``.
+[--timestep S]`` (default: ``PhysicsConfig``'s step).
 
 Generates (or reuses) development dynamic scenes with ``ipr-shapes synth`` seeds from ``--seed`` (never
 the benchmark suites). For each scene, builds ``ipr_shapes.physics``'s world from the ground-truth
@@ -19,6 +19,7 @@ ladder (``benchmarks.replay``) runs this as its last rung, at the default ``Phys
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import functools
 import sys
 from pathlib import Path
@@ -89,15 +90,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=9100)
     parser.add_argument("--count", type=int, default=10)
     parser.add_argument("--friction", type=float, default=1.0)
-    parser.add_argument("--timestep", type=float, default=0.004)
+    parser.add_argument("--timestep", type=float, default=None)
     parser.add_argument("--scenes", type=Path, default=Path("/tmp/ipr-dev-inference"))
     args = parser.parse_args(argv)
-    if not (args.friction > 0 and args.timestep > 0 and args.count >= 1):
+    if not (args.friction > 0 and (args.timestep or 1) > 0 and args.count >= 1):
         parser.error("--friction and --timestep must be positive and --count at least 1")
     from benchmarks.common import development_scenes
     from ipr_shapes.physics import PhysicsConfig
 
-    config = PhysicsConfig(friction=args.friction, timestep_s=args.timestep)
+    config = PhysicsConfig(friction=args.friction)
+    if args.timestep is not None:
+        config = dataclasses.replace(config, timestep_s=args.timestep)
     rows = []
     for path in development_scenes(args.scenes, args.seed, args.count):
         rows += replay_errors(path, config)

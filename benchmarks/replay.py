@@ -25,7 +25,7 @@ g. the inference world as it is: ``ipr_shapes.physics.build_world`` with the tru
    true frame-0 poses on the support perception found, default ``PhysicsConfig``
    (``benchmarks.dev_push_replay.replay_errors``);
 h. (g) with a stiff, position-controlled pusher (``ipr_shapes.physics.STIFF_PUSHER``: contact
-   time constant 4 ms at a 2 ms push step, where (g) has MuJoCo's soft default at 4 ms), the
+   time constant 4 ms at a 2 ms push step, where (g) has MuJoCo's soft default at the default step), the
    generator's pusher contact: whether the pusher's model matters in the inference world.
 
 The generator's world is rebuilt by replaying the accepted attempt's draws up to the settled

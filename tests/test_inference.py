@@ -375,6 +375,10 @@ def test_a_joint_model_drawn_again_is_not_simulated_again():
 #: A brisk push into the box's left face: once the pusher is withdrawn the box slides on by
 #: about v^2 / (2 mu g), 8 mm at friction 0.25 and 2 mm at 1.0.
 FAST = Push(0, 1, np.array([-0.075, 0.0, 0.02]), np.array([1.0, 0.0, 0.0]), 0.05, 0.2)
+#: 4 ms steps for the friction tests: there the box ends 5.3 mm further at friction 0.25 than
+#: at 1.0, visible at a quarter of the resolution; at the default 8 ms only 2.8 mm, which moves
+#: no pixel of the decimated images (docs/experiments/2026-11-26-samples-per-scene.md).
+FRICTION_PHYSICS = {"timestep_s": 0.004, "push_timestep_s": 0.004}
 
 
 def _pushed_scene(friction: float):
@@ -382,7 +386,7 @@ def _pushed_scene(friction: float):
     world = build_world(
         [Body(*box_mesh(TRUE_HALF, TRUE_CENTRE))],
         (SUPPORT,),
-        PhysicsConfig(friction=friction),
+        PhysicsConfig(friction=friction, **FRICTION_PHYSICS),
         pusher=Pusher(),
     )
     world.settle()
@@ -399,7 +403,10 @@ def test_the_friction_posterior_favours_the_friction_the_push_showed(true_fricti
     # The true shape alone, so the friction is all that differs; a strict alpha, since 5 mm
     # of slide is little evidence at the default one.
     config = InferenceConfig(
-        max_samples=1, likelihood=LikelihoodConfig(alpha_per_m=8.0), frictions=FRICTION_GRID
+        physics=PhysicsConfig(**FRICTION_PHYSICS),
+        max_samples=1,
+        likelihood=LikelihoodConfig(alpha_per_m=8.0),
+        frictions=FRICTION_GRID,
     )
     outcome = infer_shapes(
         _prepared(TRUE_BOX), (SUPPORT,), observed,

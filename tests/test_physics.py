@@ -208,15 +208,22 @@ def test_resting_drop_settles_only_the_clear_cases_and_agrees_with_the_simulatio
     assert screened(on_edge) is None
 
 
+#: The settings before 2026-11-26: 4 ms steps, every push at its own speed (the tests that
+#: count steps or compare pushers were written for them).
+AT_4_MS = {"timestep_s": 0.004, "push_timestep_s": 0.004, "push_max_s": 20.0}
+
+
 def test_a_push_into_a_world_at_rest_skips_the_steps_before_the_pusher_arrives():
     push = Push(0, 1, np.array([-0.15, 0.0, 0.03]), np.array([1.0, 0.0, 0.0]), 0.12, 0.05)
-    # 600 steps of 0.2 mm; the capsule (r = 1 cm) meets the box face after 9 cm (450 steps).
-    settled = build_world([Body(*STANDING)], [SUPPORT], pusher=Pusher())
+    # 600 steps of 0.2 mm at 4 ms and the push's own speed; the capsule (r = 1 cm) meets the
+    # box face after 9 cm (450 steps).
+    config = PhysicsConfig(**AT_4_MS)
+    settled = build_world([Body(*STANDING)], [SUPPORT], config, pusher=Pusher())
     assert settled.settle() and settled.at_rest
     before = settled.data.time
     settled.push(push)
     skipped = 600 - round((settled.data.time - before) / 0.004)
-    moving = build_world([Body(*STANDING)], [SUPPORT], pusher=Pusher())
+    moving = build_world([Body(*STANDING)], [SUPPORT], config, pusher=Pusher())
     moving.step(0.2)  # the same world, not known to be at rest: every step simulated
     assert not moving.at_rest
     start = moving.data.time
@@ -249,7 +256,7 @@ def test_the_stiff_pusher_moves_a_box_as_far_as_it_travels_past_the_contact():
     shifts = {}
     for name, settings in variants.items():
         for limit in (0.0007, 0.01):
-            config = PhysicsConfig(push_stop_intrusion_m=limit, **settings)
+            config = PhysicsConfig(push_stop_intrusion_m=limit, **{**AT_4_MS, **settings})
             world = build_world([Body(*STANDING)], [SUPPORT], config, pusher=Pusher())
             world.settle()
             world.step(0.004)  # not known to be at rest: every push step simulated
@@ -281,3 +288,59 @@ def test_pusher_contact_settings_reach_mujoco_and_are_checked():
         PhysicsConfig(pusher_impedance=(0.99, 0.9))
     with pytest.raises(ValueError, match="push_timestep_s"):
         PhysicsConfig(push_timestep_s=0.0)
+
+
+def test_the_default_step_and_push_speed_move_a_box_as_the_push_at_its_own_speed_does():
+    # A 12 cm push at 5 cm/s meets the box after 9 cm and carries it about 3 cm. At the
+    # defaults (8 ms steps, a push lasting at most push_max_s = 1 s: 12 cm/s) the box ends
+    # within 2.5 mm of where 4 ms steps at the push's own speed leave it (the soft pusher
+    # sinks about 2 mm deeper at 12 cm/s), in less than half the simulated pushing time; a
+    # push faster than that floor keeps its own speed.
+    push = Push(0, 1, np.array([-0.15, 0.0, 0.03]), np.array([1.0, 0.0, 0.0]), 0.12, 0.05)
+    fast = Push(0, 1, np.array([-0.15, 0.0, 0.03]), np.array([1.0, 0.0, 0.0]), 0.12, 0.3)
+    ends, pushing = {}, {}
+    for name, settings in {"4 ms, own speed": AT_4_MS, "default": {}}.items():
+        config = PhysicsConfig(**settings)
+        for each in (push, fast):
+            world = build_world([Body(*STANDING)], [SUPPORT], config, pusher=Pusher())
+            world.settle()
+            world.step(config.timestep_s)  # not known to be at rest: every push step simulated
+            before = world.data.time
+            travelled = world.push(each)
+            ends[name, each.speed_m_s] = world.poses()[0][:3, 3]
+            pushing[name, each.speed_m_s] = seconds = travelled / max(
+                each.speed_m_s, each.distance_m / config.push_max_s
+            )
+            after = world.data.time - before - seconds  # the settling after the push
+            assert -1e-6 < after < config.settle_max_s + 0.05
+    assert pushing["default", 0.05] == pytest.approx(1.0)
+    assert pushing["4 ms, own speed", 0.05] == pytest.approx(2.4)
+    assert pushing["default", 0.3] == pytest.approx(0.4)
+    assert ends["default", 0.05][0] > 0.025  # carried, not left behind
+    assert ends["default", 0.05] == pytest.approx(ends["4 ms, own speed", 0.05], abs=0.0025)
+
+
+def test_the_default_8_ms_step_settles_and_tests_stability_as_4_ms_steps_do():
+    # Candidates on a static box: one resting on it, one overhanging its edge by more than
+    # half (it tips off), one 6 cm above it (it falls); and a two-box stack settling as one
+    # world. Drops and settled poses agree with 4 ms steps within 1 mm.
+    base = box_mesh(np.array([0.04, 0.04, 0.02]), np.array([0.0, 0.0, 0.02]))
+    on_top = box_mesh(np.array([0.02, 0.02, 0.02]), np.array([0.0, 0.0, 0.06]))
+    overhanging = box_mesh(np.array([0.03, 0.01, 0.01]), np.array([0.06, 0.0, 0.05]))
+    above = box_mesh(np.array([0.02, 0.02, 0.02]), np.array([0.0, 0.0, 0.12]))
+    drops, poses = {}, {}
+    for name, settings in {"4 ms": AT_4_MS, "default": {}}.items():
+        config = PhysicsConfig(**settings)
+        bodies = [Body(*base, dynamic=False)] + [
+            Body(*shape, candidate=True, switchable=True) for shape in (on_top, overhanging, above)
+        ]
+        world = build_world(bodies, [SUPPORT], config)
+        world.settle_each([1, 2, 3], config.stability_s)
+        drops[name] = world.drops()[1:]
+        stack = build_world([Body(*base), Body(*on_top)], [SUPPORT], config)
+        assert stack.settle()
+        poses[name] = stack.poses()
+    assert drops["default"] == pytest.approx(drops["4 ms"], abs=0.001)
+    assert drops["default"][0] < 0.001 and drops["default"][1] > 0.02
+    assert drops["default"][2] > 0.055
+    assert poses["default"] == pytest.approx(poses["4 ms"], abs=0.001)

@@ -65,7 +65,9 @@ class PhysicsConfig:
     """Physical parameters of the simulated scenes (one set for every object, as in the paper).
 
     Attributes:
-        timestep_s: integration step (s).
+        timestep_s: integration step (s). 8 ms: half the steps of 4 ms, and the replayed
+            pushes no further from the data (docs/DESIGN_NOTES.md, "Time step");
+            MuJoCo wants a contact's time constant (0.02 s) at least two steps.
         density_kg_m3: uniform object density (kg/m^3); 400 is a typical packaged household
             object (YCB's boxes and bottles span roughly 100-1200).
         friction: sliding friction of every contact (MuJoCo takes the larger of the two geoms').
@@ -95,7 +97,9 @@ class PhysicsConfig:
             and at 1 mm of intrusion; nearer 1 yields less.
         push_max_s: longest simulated push (s): a slower push is replayed at distance /
             push_max_s, so that any push costs a bounded number of steps (the pusher is
-            position-controlled and the objects quasi-static at either speed).
+            position-controlled and the objects quasi-static at either speed). 1 s: a robot's
+            push of 4-6 cm/s is replayed at up to 12 cm/s, in half the steps and no further
+            from the data.
         flung_m: an object moving further than this (m) means the simulation exploded.
         support_half_extent_m: half side of the support box (m).
         wall_min_thickness_m: thinnest wall slab (m); thinner slabs let objects tunnel.
@@ -123,7 +127,7 @@ class PhysicsConfig:
         "wall_min_thickness_m": Interval(0, None),
     }
 
-    timestep_s: float = 0.004
+    timestep_s: float = 0.008
     density_kg_m3: float = 400.0
     friction: float = 1.0
     torsional_friction: float = 0.005
@@ -134,11 +138,11 @@ class PhysicsConfig:
     settle_angular_rad_s: float = 0.05
     stability_s: float = 0.3
     push_stop_intrusion_m: float = 0.01
-    push_timestep_s: float = 0.004
+    push_timestep_s: float = 0.008
     pusher_timeconst_s: float = 0.02
     pusher_dampratio: float = 1.0
     pusher_impedance: tuple[float, float] = (0.9, 0.95)
-    push_max_s: float = 20.0
+    push_max_s: float = 1.0
     flung_m: float = 0.5
     support_half_extent_m: float = 2.0
     wall_min_thickness_m: float = 0.01
