@@ -179,6 +179,22 @@ MUTANTS: tuple[Mutant, ...] = (
         _t("inference"),
     ),
     Mutant(
+        "undrawn-candidates-dropped",
+        "inference",
+        "a candidate no sample drew gets no probability (the estimator before 2026-11-26)",
+        "evidence = np.where(chosen, means, mean + _exploration_ratio(results, k, chosen))",
+        "evidence = np.where(chosen, means, -np.inf)",
+        _t("inference"),
+    ),
+    Mutant(
+        "undrawn-exploration-ignored",
+        "inference",
+        "an undrawn candidate takes the plain mean, not scaled by its exploration probability",
+        "evidence = np.where(chosen, means, mean + _exploration_ratio(results, k, chosen))",
+        "evidence = np.where(chosen, means, mean)",
+        _t("inference"),
+    ),
+    Mutant(
         "placement-order-ignored",
         "inference",
         "tree sampling places objects in list order, not the one with the largest mass first",
@@ -278,8 +294,8 @@ MUTANTS: tuple[Mutant, ...] = (
         "unchosen-candidates-keep-prior",
         "inference",
         "candidates no sample chose keep their prior probability",
-        "evidence = np.where(chosen, means, -np.inf) if chosen.any() else np.zeros(len(means))",
-        "evidence = np.where(chosen, means, 0.0) if chosen.any() else np.zeros(len(means))",
+        "evidence = np.where(chosen, means, mean + _exploration_ratio(results, k, chosen))",
+        "evidence = np.where(chosen, means, 0.0)",
         _t("inference"),
     ),
     Mutant(
