@@ -13,6 +13,19 @@ import pytest
 from ipr_shapes.cli import EXIT_INPUT_ERROR, main
 
 
+def _small_scene(tmp_path: Path, kind: str, seed: int, arrangement: str = "table") -> Path:
+    """A generated 320x240 scene under ``tmp_path/scenes`` (what the end-to-end tests run on)."""
+    from ipr_shapes.synth import SynthConfig, generate_scene
+
+    return generate_scene(
+        tmp_path / "scenes",
+        kind=kind,
+        seed=seed,
+        arrangement=arrangement,
+        config=SynthConfig(width=320, height=240),
+    )
+
+
 def test_help_lists_every_command():
     completed = subprocess.run(
         [sys.executable, "-m", "ipr_shapes", "--help"], capture_output=True, text=True
@@ -103,15 +116,7 @@ def test_eval_json_is_not_half_written_on_error(scene_dir: Path, tmp_path: Path)
 def test_segment_writes_labels_facets_and_overlays(tmp_path: Path, capsys):
     from PIL import Image
 
-    from ipr_shapes.synth import SynthConfig, generate_scene
-
-    scene = generate_scene(
-        tmp_path / "scenes",
-        kind="dynamic",
-        seed=5,
-        arrangement="table",
-        config=SynthConfig(width=320, height=240),
-    )
+    scene = _small_scene(tmp_path, "dynamic", 5)
     out = tmp_path / "seg"
     assert main(["segment", str(scene), "-o", str(out)]) == 0
     summary = json.loads((out / "segmentation.json").read_text())
@@ -139,15 +144,8 @@ def test_segment_writes_labels_facets_and_overlays(tmp_path: Path, capsys):
 @pytest.mark.slow
 def test_infer_collision_checker_end_to_end(tmp_path: Path, capsys):
     from ipr_shapes.result import load_result
-    from ipr_shapes.synth import SynthConfig, generate_scene
 
-    scene = generate_scene(
-        tmp_path / "scenes",
-        kind="static",
-        seed=2,
-        arrangement="table",
-        config=SynthConfig(width=320, height=240),
-    )
+    scene = _small_scene(tmp_path, "static", 2)
     out = tmp_path / "result"
     assert (
         main(["infer", str(scene), "-o", str(out), "--method", "collision-checker", "--seed", "1"])
@@ -266,15 +264,8 @@ def test_infer_default_method_writes_the_full_result_and_is_reproducible(tmp_pat
 
     from ipr_shapes.inference import InferenceConfig
     from ipr_shapes.result import load_result
-    from ipr_shapes.synth import SynthConfig, generate_scene
 
-    scene = generate_scene(
-        tmp_path / "scenes",
-        kind="dynamic",
-        seed=4,
-        arrangement="table",
-        config=SynthConfig(width=320, height=240),
-    )
+    scene = _small_scene(tmp_path, "dynamic", 4)
     runs = []
     for workers in ("1", "2"):
         out = tmp_path / f"result-{workers}"
@@ -313,12 +304,8 @@ def test_infer_default_method_writes_the_full_result_and_is_reproducible(tmp_pat
 @pytest.mark.slow  # an end-to-end run of several seconds
 def test_infer_with_the_friction_searched_reports_its_posterior(tmp_path: Path, capsys):
     from ipr_shapes.result import load_result
-    from ipr_shapes.synth import SynthConfig, generate_scene
 
-    scene = generate_scene(
-        tmp_path / "scenes", kind="dynamic", seed=4, arrangement="table",
-        config=SynthConfig(width=320, height=240),
-    )  # fmt: skip
+    scene = _small_scene(tmp_path, "dynamic", 4)
     config = tmp_path / "friction.toml"
     config.write_text("[inference]\nfrictions = [0.25, 0.5, 1.0]\n")
     out = tmp_path / "result"
@@ -453,15 +440,8 @@ def test_collision_checker_with_views_fuses_the_later_frames_without_physics(
     tmp_path: Path, capsys
 ) -> None:
     from ipr_shapes.result import load_result
-    from ipr_shapes.synth import SynthConfig, generate_scene
 
-    scene = generate_scene(
-        tmp_path / "scenes",
-        kind="dynamic",
-        seed=4,
-        arrangement="table",
-        config=SynthConfig(width=320, height=240),
-    )
+    scene = _small_scene(tmp_path, "dynamic", 4)
     volumes = {}
     for method in ("collision-checker", "collision-checker+views"):
         out = tmp_path / method
