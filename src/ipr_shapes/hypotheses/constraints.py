@@ -38,7 +38,12 @@ from ipr_shapes import voxels
 from ipr_shapes.checks import Checks, Interval, Options, check_fields
 from ipr_shapes.hypotheses.generate import UnaryTolerances
 from ipr_shapes.perception.free_space import SeenSpace
-from ipr_shapes.perception.occupancy import allowed_voxels, plane_regions, unary_report
+from ipr_shapes.perception.occupancy import (
+    PlaneRegion,
+    allowed_voxels,
+    plane_regions,
+    unary_report,
+)
 from ipr_shapes.perception.types import KnownPlane
 from ipr_shapes.products import ShapeHypothesis
 
@@ -262,6 +267,21 @@ def unary_feasible(
     free = report.free_voxels - h.forced_free_voxels
     walls = report.wall_voxels - h.forced_wall_voxels
     return free <= allowed and walls <= allowed
+
+
+def generated_unary_feasible(
+    h: ShapeHypothesis, regions: tuple[PlaneRegion, ...], tolerances: UnaryTolerances
+) -> bool:
+    """``unary_feasible`` of a hypothesis straight from ``generate_hypotheses`` with the same
+    space, planes (``regions``: ``plane_regions(planes, tolerances.wall_min_thickness_m)``) and
+    tolerances: generation measured its seen-free and wall voxels against them already
+    (``h.feasible``), so only the support depth is left to check (from the vertices). The same
+    answer without voxelising and looking up every hypothesis twice."""
+    below = 0.0
+    for region in regions:
+        if region.is_support:
+            below = max(below, float(-region.plane.signed_distance(h.vertices).min()))
+    return bool(h.feasible) and below <= tolerances.support_tolerance_m
 
 
 def joint_feasible(

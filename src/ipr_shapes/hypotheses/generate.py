@@ -87,9 +87,10 @@ from scipy.spatial import ConvexHull, HalfspaceIntersection, QhullError
 
 from ipr_shapes import voxels
 from ipr_shapes.checks import Checks, Interval, Options, OrNone, Predicate, check_fields
-from ipr_shapes.geometry.convex import clip_halfspace, convex_mesh
+from ipr_shapes.geometry.convex import clip_halfspace, convex_mesh, row_norms, triangle_cross
 from ipr_shapes.hypotheses import structure
-from ipr_shapes.perception.free_space import FREE, SeenSpace
+from ipr_shapes.hypotheses.kernels import first_state_samples
+from ipr_shapes.perception.free_space import FREE, SeenSpace, SpaceMap
 from ipr_shapes.perception.occupancy import PlaneRegion, allowed_voxels, plane_regions, unary_report
 from ipr_shapes.perception.types import KnownPlane, PartialObject
 from ipr_shapes.products import ShapeHypothesis, volume_spread
@@ -385,17 +386,39 @@ def _ray_limits(
     if space is None and not walls:
         return limits
     t = (np.arange(int(np.ceil(cap / step))) + 1.0) * step
-    samples = (origins[:, None, :] + t[None, :, None] * direction).reshape(-1, 3)
-    blocked = np.zeros(len(samples), dtype=bool)
-    if space is not None:
-        blocked |= space.state_at(samples) == FREE
-    for region in walls:
-        blocked |= region.in_wall(samples)
-    blocked = blocked.reshape(len(origins), len(t))
-    first = np.argmax(blocked, axis=1)
-    hit = blocked[np.arange(len(origins)), first]
-    sampled = np.where(hit, t[first] - 0.5 * step, cap)
+    # Index of each ray's first blocked sample (len(t): none). On a ``SpaceMap`` a compiled
+    # loop marches each ray and stops at its first free voxel (the same voxels, same bits).
+    first = np.full(len(origins), len(t), dtype=np.int64)
+    samples = None
+    if isinstance(space, SpaceMap):
+        first = first_state_samples(
+            np.ascontiguousarray(origins, dtype=float),
+            np.ascontiguousarray(direction, dtype=float),
+            t,
+            np.asarray(space.grid.origin, float),
+            float(space.grid.voxel_size_m),
+            space.state,
+            FREE,
+        )
+    elif space is not None:
+        samples = (origins[:, None, :] + t[None, :, None] * direction).reshape(-1, 3)
+        first = _first_true((space.state_at(samples) == FREE).reshape(len(origins), len(t)))
+    if walls:
+        if samples is None:
+            samples = (origins[:, None, :] + t[None, :, None] * direction).reshape(-1, 3)
+        in_wall = np.zeros(len(samples), dtype=bool)
+        for region in walls:
+            in_wall |= region.in_wall(samples)
+        first = np.minimum(first, _first_true(in_wall.reshape(len(origins), len(t))))
+    hit = first < len(t)
+    sampled = np.where(hit, t[np.minimum(first, len(t) - 1)] - 0.5 * step, cap)
     return np.minimum(limits, sampled)
+
+
+def _first_true(blocked: np.ndarray) -> np.ndarray:
+    """Per row of (R, T) bool, the index (R,) of its first True, T when it has none."""
+    first = np.argmax(blocked, axis=1)
+    return np.where(blocked[np.arange(len(blocked)), first], first, blocked.shape[1])
 
 
 def _ray_bounds(
@@ -640,7 +663,7 @@ def _hull_groups(
     """
     normals = hull.equations[:, :3]
     tri = hull.points[hull.simplices]
-    areas = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    areas = 0.5 * row_norms(triangle_cross(tri))
     count = len(areas)
     label = np.full(count, -1, dtype=np.int64)
     number = 0
@@ -697,7 +720,7 @@ def _hull_source(
     cast from points sampled on it (pulled 15 % towards its centre, off the edges)."""
     simplices = hull.simplices[members]
     tri = hull.points[simplices]
-    areas = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    areas = 0.5 * row_norms(triangle_cross(tri))
     centre = (tri.mean(axis=1) * areas[:, None]).sum(axis=0) / max(areas.sum(), 1e-15)
     count = ctx.config.hull_facet_rays
     pick = rng.choice(len(areas), size=count, p=areas / areas.sum())
@@ -842,8 +865,8 @@ def _cut_all(
     fails (the caller cuts one by one)."""
     vertices, faces, _ = mesh
     tri = vertices[faces]
-    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    lengths = np.linalg.norm(normals, axis=1)
+    normals = triangle_cross(tri)
+    lengths = row_norms(normals)
     keep = lengths > 1e-12
     normals = normals[keep] / lengths[keep, None]
     offsets = -np.einsum("ij,ij->i", normals, tri[keep, 0])
@@ -865,8 +888,8 @@ def _cut_all(
     # cross by more than rounding: then the one-cut-at-a-time path decides.
     vertices, faces, _ = result
     tri = vertices[faces]
-    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    lengths = np.linalg.norm(normals, axis=1)
+    normals = triangle_cross(tri)
+    lengths = row_norms(normals)
     keep = lengths > 1e-15
     normals = normals[keep] / lengths[keep, None]
     excess = vertices @ normals.T - np.einsum("ij,ij->i", normals, tri[keep, 0])
