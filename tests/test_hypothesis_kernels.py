@@ -1,5 +1,5 @@
 """The compiled loops behind hypothesis generation give the same bits as the numpy they
-replace: the voxel scanline (``geometry.kernels.scanline_keys``), the rays' march through the
+replace: the voxel scanline (``voxel_kernels.scanline_keys``), the rays' march through the
 free space (``hypotheses.kernels.first_state_samples``) and, in the constraints, the unary
 check of generated hypotheses (``generated_unary_feasible``)."""
 

@@ -278,9 +278,9 @@ def scanline_voxels(vertices: np.ndarray, faces: np.ndarray, pitch_m: float) -> 
     x, y = fixed[faces][:, :, 0], fixed[faces][:, :, 1]  # (F, 3) each
     z_corner = grid[faces][:, :, 2]
 
-    # The scanline proper, compiled (``geometry.kernels.scanline_keys``: the same keys as
+    # The scanline proper, compiled (``voxel_kernels.scanline_keys``: the same keys as
     # ``_scanline_keys_numpy``, without its per-column temporaries).
-    from ipr_shapes.geometry.kernels import scanline_keys
+    from ipr_shapes.voxel_kernels import scanline_keys
 
     keys, fits = scanline_keys(
         np.ascontiguousarray(x),
@@ -299,8 +299,8 @@ def _scanline_keys_numpy(
 ) -> np.ndarray:
     """The scanline of ``scanline_voxels`` after its set-up, in numpy: triangles' corners
     (F, 3) in fixed point (``x``, ``y`` int64, 2^-``bits`` grid units) and grid-unit heights
-    ``z_corner`` (F, 3) -> sorted keys. The reference ``geometry.kernels.scanline_keys`` is
-    pinned against (tests/test_voxels.py)."""
+    ``z_corner`` (F, 3) -> sorted keys. The reference ``voxel_kernels.scanline_keys`` is
+    pinned against (tests/test_hypothesis_kernels.py)."""
     i0 = -((-x.min(axis=1)) >> bits)  # ceil(min / 2^bits)
     i1 = x.max(axis=1) >> bits  # floor(max / 2^bits)
     j0 = -((-y.min(axis=1)) >> bits)
