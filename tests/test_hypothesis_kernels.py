@@ -129,3 +129,50 @@ def test_generated_hypotheses_need_not_be_measured_twice():
             assert generated_unary_feasible(h, regions, unary) == expected
             answers.append(expected)
     assert any(answers) and not all(answers)
+
+
+def _numpy_parts(label, neighbours, areas, normals):
+    """The numpy ``hull_parts`` replaces: label propagation to each part's smallest triangle,
+    parts numbered in that order, sums by ``np.bincount``."""
+    count = len(label)
+    rows = np.repeat(np.arange(count), 3)
+    cols = neighbours.ravel()
+    same = label[rows] == label[cols]
+    rows, cols = rows[same], cols[same]
+    part = np.arange(count)
+    while True:
+        previous = part.copy()
+        np.minimum.at(part, rows, part[cols])
+        part = part[part]
+        if np.array_equal(part, previous):
+            break
+    part = np.unique(part, return_inverse=True)[1]
+    parts = int(part.max()) + 1
+    area = np.bincount(part, weights=areas, minlength=parts)
+    normal = np.stack(
+        [np.bincount(part, weights=areas * normals[:, k], minlength=parts) for k in range(3)],
+        axis=1,
+    )
+    return part, area, normal
+
+
+def test_hull_parts_are_the_numpy_components_and_sums():
+    """Hulls of random clouds, triangles labelled by a few random normal directions (parts
+    split where a label's triangles do not touch): the same parts, areas and normals."""
+    from ipr_shapes.geometry.convex import row_norms, triangle_cross
+    from ipr_shapes.hypotheses.kernels import hull_parts
+
+    rng = np.random.default_rng(5)
+    split = 0
+    for _ in range(50):
+        hull = ConvexHull(rng.normal(size=(int(rng.integers(10, 200)), 3)))
+        normals = hull.equations[:, :3]
+        areas = 0.5 * row_norms(triangle_cross(hull.points[hull.simplices]))
+        directions = rng.normal(size=(int(rng.integers(1, 6)), 3))
+        label = np.argmax(normals @ directions.T, axis=1).astype(np.int64)
+        got = hull_parts(label, hull.neighbors.astype(np.int64), areas, normals)
+        expected = _numpy_parts(label, hull.neighbors, areas, normals)
+        for a, b in zip(got, expected, strict=True):
+            assert a.shape == b.shape and np.array_equal(a, b)
+        split += got[1].size > len(np.unique(label))
+    assert split > 0

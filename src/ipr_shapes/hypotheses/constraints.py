@@ -195,8 +195,22 @@ class OverlapCache:
         bounds_i = np.array([h.bounds for h in hyps_i]).reshape(-1, 2, 3)
         bounds_j = np.array([h.bounds for h in hyps_j]).reshape(-1, 2, 3)
         depths = _box_bounds(bounds_i[:, 0], bounds_i[:, 1], bounds_j[:, 0], bounds_j[:, 1])
+        # ``depth`` per pair, inlined: at thousands of pairs its call overhead outweighs the
+        # query itself.
+        import mujoco
+
+        keys_i, keys_j = signature[0], signature[1]
+        cache, geom, model, data = self._depth, self._geom, self._model, self._data
         for a, b in zip(*np.nonzero(depths > exact_above_m), strict=True):
-            depths[a, b] = self.depth(hyps_i[a], hyps_j[b])
+            ka, kb = keys_i[a], keys_j[b]
+            pair = (ka, kb) if ka <= kb else (kb, ka)
+            depth = cache.get(pair)
+            if depth is None:
+                distance = mujoco.mj_geomDistance(model, data, geom[ka], geom[kb], 0.0, None)
+                self.queries += 1
+                depth = max(-float(distance), 0.0)
+                cache[pair] = depth
+            depths[a, b] = depth
         self._matrices[signature] = depths
         return depths
 

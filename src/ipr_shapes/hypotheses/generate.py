@@ -89,7 +89,7 @@ from ipr_shapes import voxels
 from ipr_shapes.checks import Checks, Interval, Options, OrNone, Predicate, check_fields
 from ipr_shapes.geometry.convex import clip_halfspace, convex_mesh, row_norms, triangle_cross
 from ipr_shapes.hypotheses import structure
-from ipr_shapes.hypotheses.kernels import first_state_samples
+from ipr_shapes.hypotheses.kernels import first_state_samples, hull_parts
 from ipr_shapes.perception.free_space import FREE, SeenSpace, SpaceMap
 from ipr_shapes.perception.occupancy import PlaneRegion, allowed_voxels, plane_regions, unary_report
 from ipr_shapes.perception.types import KnownPlane, PartialObject
@@ -290,6 +290,23 @@ def _extreme_points(points: np.ndarray) -> np.ndarray:
         return points[ConvexHull(points).vertices]
     except (QhullError, ValueError):
         return points
+
+
+#: The last object's observed points (as a key) and their hull vertices (``_observed_extremes``).
+_LAST_EXTREMES: list[tuple[tuple, np.ndarray]] = [((), np.zeros((0, 3)))]
+
+
+def _observed_extremes(points: np.ndarray) -> np.ndarray:
+    """``_extreme_points`` of an object's observed points, remembered for the next call with
+    the same points: ``prepare_hypotheses`` asks for them twice per object (its hypotheses'
+    set-up, then its minimum shape), and their hull is the largest one of the set-up. A copy
+    (safe across threads: the entry is read and replaced whole)."""
+    key = (points.shape, points.dtype.str, points.tobytes())
+    entry = _LAST_EXTREMES[0]
+    if entry[0] != key:
+        entry = (key, _extreme_points(points))
+        _LAST_EXTREMES[0] = entry
+    return entry[1].copy()
 
 
 # --------------------------------------------------------------------------------------------
@@ -597,7 +614,7 @@ def _prepare(
             reach = float((points @ facet.normal).max()) + config.facet_tolerance_m
             cuts.append(np.append(-facet.normal, reach))
     forced_free = forced_wall = 0
-    base = _extreme_points(points)
+    base = _observed_extremes(points)
     observed_hull = convex_mesh(base)
     if observed_hull is not None and (space is not None or any(not r.is_support for r in regions)):
         keys = voxels.scanline_voxels(observed_hull[0], observed_hull[1], pitch)
@@ -668,22 +685,20 @@ def _hull_groups(
     label = np.full(count, -1, dtype=np.int64)
     number = 0
     unassigned = np.arange(count)
-    while unassigned.size and areas[unassigned].sum() >= min_area_m2:
-        seed = unassigned[int(np.argmax(areas[unassigned]))]
+    while unassigned.size:
+        remaining = areas[unassigned]
+        if not remaining.sum() >= min_area_m2:
+            break
+        seed = unassigned[int(np.argmax(remaining))]
+        # numpy's (BLAS's) products, on the same rows: their last bits depend on the call.
         close = normals[unassigned] @ normals[seed] >= cos_group
         label[unassigned[close]] = number
         unassigned = unassigned[~close]
         number += 1
     label[unassigned] = np.arange(number, number + unassigned.size)  # too small to matter
-    rows = np.repeat(np.arange(count), 3)
-    cols = hull.neighbors.ravel()
-    same = label[rows] == label[cols]
-    part = _components(rows[same], cols[same], count)
-    parts = int(part.max()) + 1 if count else 0
-    part_area = np.bincount(part, weights=areas, minlength=parts)
-    part_normal = np.stack(
-        [np.bincount(part, weights=areas * normals[:, k], minlength=parts) for k in range(3)],
-        axis=1,
+    # Connected parts of each label and their area and area-weighted normal (compiled).
+    part, part_area, part_normal = hull_parts(
+        label, np.ascontiguousarray(hull.neighbors, dtype=np.int64), areas, normals
     )
     groups = []
     for index in np.argsort(-part_area, kind="stable"):
@@ -692,21 +707,6 @@ def _hull_groups(
         normal = part_normal[index] / (np.linalg.norm(part_normal[index]) + 1e-15)
         groups.append((normal, np.flatnonzero(part == index), float(part_area[index])))
     return groups
-
-
-def _components(rows: np.ndarray, cols: np.ndarray, count: int) -> np.ndarray:
-    """Connected components (count,) numbered 0, 1, ... of the graph with edges rows[i] -
-    cols[i] (both directions listed): each node takes the smallest label among its
-    neighbours' until none changes (a hull's facets are small graphs; this costs a few
-    vectorised passes where scipy's sparse graph set-up dominates)."""
-    label = np.arange(count)
-    while True:
-        previous = label.copy()
-        np.minimum.at(label, rows, label[cols])
-        label = label[label]  # pointer jumping: follow labels to their own labels
-        if np.array_equal(label, previous):
-            break
-    return np.unique(label, return_inverse=True)[1]
 
 
 def _hull_source(
@@ -735,7 +735,9 @@ def _hull_source(
     cells, conflict = _admissible(
         [_ray_bounds(samples, centre, normal, parts)], ctx.config.ray_quantile, step
     )
-    points = hull.points[np.unique(simplices)]
+    used = np.zeros(len(hull.points), dtype=bool)
+    used[simplices] = True  # np.unique(simplices) without its sort
+    points = hull.points[used]
     return _SourceFacet(normal, centre, points, cells, step, "hull", conflict)
 
 
@@ -917,6 +919,22 @@ def _evaluate(
     return keys, free, wall, free <= allowed and wall <= allowed
 
 
+def _finished(
+    ctx: _Context, points: np.ndarray, memo: dict[tuple, tuple]
+) -> tuple[tuple[np.ndarray, np.ndarray, float], np.ndarray | None, int, int, bool]:
+    """``_finish`` and ``_evaluate`` of a cloud, computed once per distinct cloud (``memo``,
+    keyed by its bytes): the structure-aware generators repeat clouds (a family's own fit is
+    its first candidates' cloud and every second attempt's of the same frame), and both steps
+    are functions of the cloud alone. Returns copies, so no two hypotheses share arrays."""
+    key = (points.shape, points.dtype.str, points.tobytes())
+    if key not in memo:
+        mesh = _finish(ctx, points)
+        memo[key] = (mesh, *_evaluate(ctx, mesh))
+    (vertices, faces, volume), keys, free, wall, feasible = memo[key]
+    keys = None if keys is None else keys.copy()
+    return (vertices.copy(), faces.copy(), volume), keys, free, wall, feasible
+
+
 _Maker = Callable[[np.ndarray, int], np.ndarray]
 
 
@@ -1085,6 +1103,7 @@ def generate_hypotheses(
     slot_rngs = rng.spawn(m1)
     plan = _structure_plan(makers, fits, structured, rng.spawn(1)[0], ctx) if structured else []
     hypotheses = []
+    finished: dict[tuple, tuple] = {}  # structure-aware clouds already finished (_finished)
     timed_out = False
     for k in range(m):
         if (
@@ -1114,8 +1133,11 @@ def generate_hypotheses(
             else:
                 generator, make = plan[k - m1]
                 sample = make(0.0 if attempt else 1.0)
-            mesh = _finish(ctx, sample.points)
-            keys, free, wall, feasible = _evaluate(ctx, mesh)
+            if k < m1:
+                mesh = _finish(ctx, sample.points)
+                keys, free, wall, feasible = _evaluate(ctx, mesh)
+            else:
+                mesh, keys, free, wall, feasible = _finished(ctx, sample.points, finished)
             candidate = (free + wall, attempt, sample, mesh, keys, free, wall, feasible)
             if best is None or candidate[0] < best[0]:
                 best = candidate
@@ -1187,7 +1209,7 @@ def minimum_shape(
     if len(points) == 0:
         raise ValueError(f"object {obj.id} has no finite observed point")
     normal = dominant_normal(obj, planes)
-    base = _extreme_points(points)
+    base = _observed_extremes(points)
     extent = float(np.ptp(base @ normal))
     thickness = 0.0
     if extent < config.min_thickness_m:

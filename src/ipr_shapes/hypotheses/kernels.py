@@ -55,3 +55,49 @@ def first_state_samples(
                 first[r] = s
                 break
     return first
+
+
+@_jit
+def hull_parts(label: np.ndarray, neighbours: np.ndarray, areas: np.ndarray, normals: np.ndarray):
+    """The connected parts of a hull's labelled triangles and their sums: triangles (T,) with
+    ``label`` (T,) int64 join their ``neighbours`` (T, 3) (qhull's, across each edge) of the
+    same label. Returns the part of each triangle (T,) int64, numbered by their smallest
+    triangle (0, 1, ...), each part's area (P,) (the sum of ``areas`` (T,) m^2) and
+    area-weighted normal (P, 3) (the sum of ``areas * normals[:, k]``), summed in triangle
+    order like ``np.bincount`` (the same bits). The numpy it replaces
+    (``generate._hull_groups``)::
+
+        same = label[rows] == label[cols]   # rows, cols: every (triangle, neighbour) pair
+        part = components(rows[same], cols[same], count)   # numbered by smallest member
+        part_area = np.bincount(part, weights=areas, minlength=parts)
+        part_normal[:, k] = np.bincount(part, weights=areas * normals[:, k], minlength=parts)
+    """
+    count = label.shape[0]
+    part = np.full(count, -1, dtype=np.int64)
+    stack = np.empty(count, dtype=np.int64)
+    parts = 0
+    for start in range(count):
+        if part[start] >= 0:
+            continue
+        part[start] = parts
+        top = 0
+        stack[top] = start
+        top += 1
+        while top > 0:
+            top -= 1
+            node = stack[top]
+            for e in range(neighbours.shape[1]):
+                other = neighbours[node, e]
+                if part[other] < 0 and label[other] == label[node]:
+                    part[other] = parts
+                    stack[top] = other
+                    top += 1
+        parts += 1
+    part_area = np.zeros(parts)
+    part_normal = np.zeros((parts, 3))
+    for t in range(count):
+        p = part[t]
+        part_area[p] += areas[t]
+        for k in range(3):
+            part_normal[p, k] += areas[t] * normals[t, k]
+    return part, part_area, part_normal
