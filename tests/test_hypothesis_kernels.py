@@ -176,3 +176,29 @@ def test_hull_parts_are_the_numpy_components_and_sums():
             assert a.shape == b.shape and np.array_equal(a, b)
         split += got[1].size > len(np.unique(label))
     assert split > 0
+
+
+def test_greedy_labels_are_numpy_s_or_give_way_to_them():
+    """The compiled greedy grouping gives numpy's labels whenever it is certain, and is certain
+    on generic hulls; a product at the threshold itself makes it give way."""
+    from ipr_shapes.geometry.convex import row_norms, triangle_cross
+    from ipr_shapes.hypotheses.generate import _CERTAIN_BAND, _greedy_labels_numpy
+    from ipr_shapes.hypotheses.kernels import greedy_labels
+
+    rng = np.random.default_rng(11)
+    certain = 0
+    for _ in range(100):
+        hull = ConvexHull(rng.normal(size=(int(rng.integers(10, 300)), 3)))
+        normals = np.ascontiguousarray(hull.equations[:, :3])
+        areas = 0.5 * row_norms(triangle_cross(hull.points[hull.simplices]))
+        cos_group, min_area = np.cos(np.radians(rng.uniform(5, 40))), areas.sum() * 0.05
+        label, sure = greedy_labels(areas, normals, cos_group, min_area, _CERTAIN_BAND)
+        if sure:
+            expected = _greedy_labels_numpy(areas, hull.equations[:, :3], cos_group, min_area)
+            assert np.array_equal(label, expected)
+            certain += 1
+    assert certain >= 95
+    # Two triangles' normals exactly cos_group apart: too close to call.
+    normals = np.array([[0.0, 0.0, 1.0], [0.0, np.sin(0.3), np.cos(0.3)]])
+    _, sure = greedy_labels(np.ones(2), normals, normals[1, 2], 0.5, _CERTAIN_BAND)
+    assert not sure

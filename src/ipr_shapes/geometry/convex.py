@@ -70,10 +70,12 @@ def clip_halfspace(
     distance = vertices @ normal + offset
     if distance.min() >= 0:
         return vertices
-    edges = np.unique(
-        np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1),
-        axis=0,
-    )
+    # The mesh's edges (E, 2), (low, high) in lexicographic order: np.unique(axis=0) of the
+    # sorted pairs, as one int64 key per pair (the same rows, without the row-wise sort).
+    pairs = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    count = np.int64(len(vertices))
+    keys = np.unique(pairs[:, 0].astype(np.int64) * count + pairs[:, 1])
+    edges = np.stack([keys // count, keys % count], axis=1)
     da, db = distance[edges[:, 0]], distance[edges[:, 1]]
     crossing = (da < 0) != (db < 0)
     a, b = edges[crossing, 0], edges[crossing, 1]

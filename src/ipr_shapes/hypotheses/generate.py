@@ -89,7 +89,7 @@ from ipr_shapes import voxels
 from ipr_shapes.checks import Checks, Interval, Options, OrNone, Predicate, check_fields
 from ipr_shapes.geometry.convex import clip_halfspace, convex_mesh, row_norms, triangle_cross
 from ipr_shapes.hypotheses import structure
-from ipr_shapes.hypotheses.kernels import first_state_samples, hull_parts
+from ipr_shapes.hypotheses.kernels import first_state_samples, greedy_labels, hull_parts
 from ipr_shapes.perception.free_space import FREE, SeenSpace, SpaceMap
 from ipr_shapes.perception.occupancy import PlaneRegion, allowed_voxels, plane_regions, unary_report
 from ipr_shapes.perception.types import KnownPlane, PartialObject
@@ -668,6 +668,30 @@ def _mirror(facet: _SourceFacet, d: float) -> np.ndarray:
     return facet.points - (2.0 * offsets + d)[:, None] * n
 
 
+#: How far (absolute for unit-normal products, relative for area sums) a compiled comparison
+#: must be from its threshold to be certain of numpy's outcome (their values differ by
+#: ~1e-15 at most: BLAS and pairwise summation round differently from a plain loop).
+_CERTAIN_BAND = 1e-9
+
+
+def _greedy_labels_numpy(
+    areas: np.ndarray, normals: np.ndarray, cos_group: float, min_area_m2: float
+) -> np.ndarray:
+    """``kernels.greedy_labels`` in numpy (the reference, and the fallback when the compiled
+    loop is not certain): labels (T,) of a hull's triangles (``_hull_groups``)."""
+    label = np.full(len(areas), -1, dtype=np.int64)
+    number = 0
+    unassigned = np.arange(len(areas))
+    while unassigned.size and areas[unassigned].sum() >= min_area_m2:
+        seed = unassigned[int(np.argmax(areas[unassigned]))]
+        close = normals[unassigned] @ normals[seed] >= cos_group
+        label[unassigned[close]] = number
+        unassigned = unassigned[~close]
+        number += 1
+    label[unassigned] = np.arange(number, number + unassigned.size)  # too small to matter
+    return label
+
+
 def _hull_groups(
     hull: ConvexHull, cos_group: float, min_area_m2: float
 ) -> list[tuple[np.ndarray, np.ndarray, float]]:
@@ -676,26 +700,18 @@ def _hull_groups(
 
     The largest unassigned triangle claims every unassigned triangle within the angle of its
     normal, repeatedly; each such set is then split into connected parts (triangles sharing an
-    edge), so two parallel faces are two facets. Vectorised per seed.
+    edge), so two parallel faces are two facets. Both steps compiled (``kernels.greedy_labels``
+    with numpy's loop as the fallback, ``kernels.hull_parts``): the same facets as numpy.
     """
     normals = hull.equations[:, :3]
     tri = hull.points[hull.simplices]
     areas = 0.5 * row_norms(triangle_cross(tri))
-    count = len(areas)
-    label = np.full(count, -1, dtype=np.int64)
-    number = 0
-    unassigned = np.arange(count)
-    while unassigned.size:
-        remaining = areas[unassigned]
-        if not remaining.sum() >= min_area_m2:
-            break
-        seed = unassigned[int(np.argmax(remaining))]
-        # numpy's (BLAS's) products, on the same rows: their last bits depend on the call.
-        close = normals[unassigned] @ normals[seed] >= cos_group
-        label[unassigned[close]] = number
-        unassigned = unassigned[~close]
-        number += 1
-    label[unassigned] = np.arange(number, number + unassigned.size)  # too small to matter
+    # The greedy grouping, compiled; numpy's loop when a comparison is too close to call.
+    label, certain = greedy_labels(
+        areas, np.ascontiguousarray(normals), cos_group, min_area_m2, _CERTAIN_BAND
+    )
+    if not certain:
+        label = _greedy_labels_numpy(areas, normals, cos_group, min_area_m2)
     # Connected parts of each label and their area and area-weighted normal (compiled).
     part, part_area, part_normal = hull_parts(
         label, np.ascontiguousarray(hull.neighbors, dtype=np.int64), areas, normals
@@ -788,7 +804,11 @@ def _algorithm1(
             hull = ConvexHull(cloud)
         except (QhullError, ValueError):
             break  # still flat: the final hull is thickened
-        cloud = hull.points[hull.vertices]  # only hull vertices matter from now on
+        # Only hull vertices matter from now on (``hull.vertices``, np.unique of the
+        # simplices, without its sort).
+        used = np.zeros(len(hull.points), dtype=bool)
+        used[hull.simplices] = True
+        cloud = hull.points[used]
         known = np.array(handled)
         todo = []
         for normal, members, _ in _hull_groups(hull, cos_group, config.min_facet_area_m2):

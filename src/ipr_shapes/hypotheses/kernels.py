@@ -101,3 +101,59 @@ def hull_parts(label: np.ndarray, neighbours: np.ndarray, areas: np.ndarray, nor
         for k in range(3):
             part_normal[p, k] += areas[t] * normals[t, k]
     return part, part_area, part_normal
+
+
+@_jit
+def greedy_labels(
+    areas: np.ndarray, normals: np.ndarray, cos_group: float, min_area_m2: float, band: float
+):
+    """The greedy grouping of a hull's triangles (``generate._hull_groups``): while the
+    unassigned triangles' areas (T,) m^2 sum to at least ``min_area_m2``, the largest (the
+    first of equals) claims every unassigned triangle whose unit normal (T, 3) is within
+    ``cos_group`` of its own (label 0, 1, ...); the rest get labels of their own. Returns the
+    labels (T,) int64 and whether they are certain: the products and sums here differ from
+    numpy's (BLAS's, pairwise) in their last bits, so when any product lies within ``band``
+    of ``cos_group``, or the area sum within ``band`` (relative) of ``min_area_m2``, it stops
+    and returns False, and the caller runs numpy's loop. Otherwise every comparison has
+    numpy's outcome (the two differ by ~1e-15 at most), and so do the labels."""
+    count = areas.shape[0]
+    label = np.full(count, -1, dtype=np.int64)
+    for t in range(count):
+        if not np.isfinite(areas[t]):
+            return label, False
+    unassigned = np.arange(count)
+    size = count
+    number = 0
+    while size > 0:
+        total = 0.0
+        for i in range(size):
+            total += areas[unassigned[i]]
+        if abs(total - min_area_m2) <= band * max(abs(total), abs(min_area_m2)):
+            return label, False
+        if not total >= min_area_m2:
+            break
+        best = 0
+        for i in range(1, size):
+            if areas[unassigned[i]] > areas[unassigned[best]]:
+                best = i
+        seed = unassigned[best]
+        kept = 0
+        for i in range(size):
+            t = unassigned[i]
+            product = (
+                normals[t, 0] * normals[seed, 0]
+                + normals[t, 1] * normals[seed, 1]
+                + normals[t, 2] * normals[seed, 2]
+            )
+            if not abs(product - cos_group) > band:
+                return label, False
+            if product >= cos_group:
+                label[t] = number
+            else:
+                unassigned[kept] = t
+                kept += 1
+        size = kept
+        number += 1
+    for i in range(size):
+        label[unassigned[i]] = number + i
+    return label, True
