@@ -93,8 +93,12 @@ def test_rays_marched_in_the_compiled_loop_stop_where_numpy_says(walls):
     if walls:
         wall_points = np.array([[0.08, y, z] for y in (-0.1, 0.1) for z in (0.0, 0.2)])
         planes.append(KnownPlane("wall", np.array([-1.0, 0.0, 0.0]), 0.08, wall_points, 0.01))
+        # An unbounded wall (too few points for an outline), tilted.
+        normal = np.array([0.3, 1.0, 0.1]) / np.linalg.norm([0.3, 1.0, 0.1])
+        planes.append(KnownPlane("wall", normal, 0.07, wall_points[:2], 0.02))
     regions = plane_regions(tuple(planes))
     origins = rng.uniform([-0.15, -0.15, -0.02], [0.15, 0.15, 0.2], size=(400, 3))
+    walled = 0
     for _ in range(5):
         normal = rng.normal(size=3)
         normal /= np.linalg.norm(normal)
@@ -104,6 +108,10 @@ def test_rays_marched_in_the_compiled_loop_stop_where_numpy_says(walls):
         # Free voxels stop a share of the rays, not all of them.
         planes_only = _ray_limits(origins, normal, None, regions, 0.3, 0.005)
         assert 0.05 < (compiled < planes_only).mean() < 0.95
+        walled += int(
+            (compiled < _ray_limits(origins, normal, space, regions[:1], 0.3, 0.005)).sum()
+        )
+    assert (walled > 0) == walls  # the walls stop rays that free space does not
 
 
 def test_generated_hypotheses_need_not_be_measured_twice():

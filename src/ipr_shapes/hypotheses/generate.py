@@ -89,7 +89,12 @@ from ipr_shapes import voxels
 from ipr_shapes.checks import Checks, Interval, Options, OrNone, Predicate, check_fields
 from ipr_shapes.geometry.convex import clip_halfspace, convex_mesh, row_norms, triangle_cross
 from ipr_shapes.hypotheses import structure
-from ipr_shapes.hypotheses.kernels import first_state_samples, greedy_labels, hull_parts
+from ipr_shapes.hypotheses.kernels import (
+    first_state_samples,
+    first_wall_samples,
+    greedy_labels,
+    hull_parts,
+)
 from ipr_shapes.perception.free_space import FREE, SeenSpace, SpaceMap
 from ipr_shapes.perception.occupancy import PlaneRegion, allowed_voxels, plane_regions, unary_report
 from ipr_shapes.perception.types import KnownPlane, PartialObject
@@ -421,15 +426,45 @@ def _ray_limits(
         samples = (origins[:, None, :] + t[None, :, None] * direction).reshape(-1, 3)
         first = _first_true((space.state_at(samples) == FREE).reshape(len(origins), len(t)))
     if walls:
+        in_walls = None
         if samples is None:
-            samples = (origins[:, None, :] + t[None, :, None] * direction).reshape(-1, 3)
-        in_wall = np.zeros(len(samples), dtype=bool)
-        for region in walls:
-            in_wall |= region.in_wall(samples)
-        first = np.minimum(first, _first_true(in_wall.reshape(len(origins), len(t))))
+            # Compiled too, up to each ray's first free sample; numpy's path when a sample is
+            # too close to a wall's boundary to be certain of numpy's answer.
+            in_walls, certain = first_wall_samples(
+                np.ascontiguousarray(origins, dtype=float),
+                np.ascontiguousarray(direction, dtype=float),
+                t,
+                first,
+                *_wall_arrays(tuple(walls)),
+                _CERTAIN_BAND,
+            )
+            if not certain:
+                in_walls = None
+                samples = (origins[:, None, :] + t[None, :, None] * direction).reshape(-1, 3)
+        if in_walls is None:
+            in_wall = np.zeros(len(samples), dtype=bool)
+            for region in walls:
+                in_wall |= region.in_wall(samples)
+            in_walls = _first_true(in_wall.reshape(len(origins), len(t)))
+        first = np.minimum(first, in_walls)
     hit = first < len(t)
     sampled = np.where(hit, t[np.minimum(first, len(t) - 1)] - 0.5 * step, cap)
     return np.minimum(limits, sampled)
+
+
+def _wall_arrays(walls: tuple[PlaneRegion, ...]) -> tuple[np.ndarray, ...]:
+    """The walls as ``kernels.first_wall_samples`` takes them: normals (W, 3), offsets (W,),
+    thicknesses (W,), in-plane axes (W, 2, 3), stacked outlines (E, 3) and their starts
+    (W + 1,)."""
+    outlines = [r.outline if r.outline is not None else np.zeros((0, 3)) for r in walls]
+    return (
+        np.array([np.asarray(r.plane.normal, float) for r in walls]).reshape(-1, 3),
+        np.array([float(r.plane.offset) for r in walls]),
+        np.array([float(r.thickness_m) for r in walls]),
+        np.array([r.axes for r in walls], dtype=float).reshape(-1, 2, 3),
+        np.ascontiguousarray(np.concatenate(outlines), dtype=float).reshape(-1, 3),
+        np.concatenate([[0], np.cumsum([len(o) for o in outlines])]).astype(np.int64),
+    )
 
 
 def _first_true(blocked: np.ndarray) -> np.ndarray:

@@ -157,3 +157,57 @@ def greedy_labels(
     for i in range(size):
         label[unassigned[i]] = number + i
     return label, True
+
+
+@_jit
+def first_wall_samples(
+    origins: np.ndarray,
+    direction: np.ndarray,
+    t: np.ndarray,
+    limit: np.ndarray,
+    normals: np.ndarray,
+    offsets: np.ndarray,
+    thickness: np.ndarray,
+    axes: np.ndarray,
+    outlines: np.ndarray,
+    outline_start: np.ndarray,
+    band: float,
+):
+    """Per ray, the index (R,) int64 of its first sample before ``limit`` (R,) that is inside a
+    wall's slab (``PlaneRegion.in_wall``, no margin), else ``limit``; samples as in
+    ``first_state_samples``. Walls: unit ``normals`` (W, 3), ``offsets`` (W,), slab
+    ``thickness`` (W,) m, in-plane ``axes`` (W, 2, 3) and outline half-planes (a, b, c) of wall
+    w in rows ``outline_start[w]:outline_start[w + 1]`` of ``outlines`` (none: unbounded).
+    Also returns whether the answer is certain: numpy computes the distances with BLAS, whose
+    last bits differ from this loop's, so a distance or outline value within ``band`` (m) of
+    its threshold stops the loop (False) and the caller takes numpy's path."""
+    count, samples, walls = origins.shape[0], t.shape[0], normals.shape[0]
+    first = limit.copy()
+    for r in range(count):
+        for s in range(min(limit[r], samples)):
+            x = origins[r, 0] + t[s] * direction[0]
+            y = origins[r, 1] + t[s] * direction[1]
+            z = origins[r, 2] + t[s] * direction[2]
+            hit = False
+            for w in range(walls):
+                distance = x * normals[w, 0] + y * normals[w, 1] + z * normals[w, 2] + offsets[w]
+                if abs(distance) <= band or abs(distance + thickness[w]) <= band:
+                    return first, False
+                if not (distance < 0.0 and distance > -thickness[w]):
+                    continue
+                u = x * axes[w, 0, 0] + y * axes[w, 0, 1] + z * axes[w, 0, 2]
+                v = x * axes[w, 1, 0] + y * axes[w, 1, 1] + z * axes[w, 1, 2]
+                inside = True
+                for e in range(outline_start[w], outline_start[w + 1]):
+                    value = u * outlines[e, 0] + v * outlines[e, 1] + outlines[e, 2]
+                    if abs(value) <= band:
+                        return first, False
+                    if value > 0.0:
+                        inside = False
+                if inside:
+                    hit = True
+                    break
+            if hit:
+                first[r] = s
+                break
+    return first, True
