@@ -76,6 +76,7 @@ Choices made here (the paper leaves them open):
 
 from __future__ import annotations
 
+import functools
 import logging
 import time
 from collections.abc import Callable
@@ -331,6 +332,8 @@ class _SourceFacet:
     width: float
     source: str
     conflict: bool = False
+    #: ``_distance``'s tables per D_min (an observed facet serves every hypothesis).
+    tables: dict = field(default_factory=dict, repr=False)
 
     @property
     def d_max(self) -> float:
@@ -452,10 +455,11 @@ def _ray_limits(
     return np.minimum(limits, sampled)
 
 
+@functools.lru_cache(maxsize=16)
 def _wall_arrays(walls: tuple[PlaneRegion, ...]) -> tuple[np.ndarray, ...]:
     """The walls as ``kernels.first_wall_samples`` takes them: normals (W, 3), offsets (W,),
     thicknesses (W,), in-plane axes (W, 2, 3), stacked outlines (E, 3) and their starts
-    (W + 1,)."""
+    (W + 1,); remembered per walls (regions compare by identity)."""
     outlines = [r.outline if r.outline is not None else np.zeros((0, 3)) for r in walls]
     return (
         np.array([np.asarray(r.plane.normal, float) for r in walls]).reshape(-1, 3),
@@ -683,15 +687,18 @@ def _prepare(
 def _distance(facet: _SourceFacet, u: float, config: HypothesisConfig) -> float:
     """d for variate u in [0, 1): uniform over the admissible d at least D_min; when none is
     (no room), the largest admissible d, at least ``min_room_m``."""
-    lower = np.maximum(facet.cells, config.min_thickness_m)
-    lengths = np.clip(facet.cells + facet.width - lower, 0.0, None)
-    total = float(lengths.sum())
+    table = facet.tables.get(config.min_thickness_m)
+    if table is None:
+        lower = np.maximum(facet.cells, config.min_thickness_m)
+        lengths = np.clip(facet.cells + facet.width - lower, 0.0, None)
+        table = (lower, lengths, float(lengths.sum()), np.cumsum(lengths))
+        facet.tables[config.min_thickness_m] = table
+    lower, lengths, total, ends = table
     if total <= 0:
         return max(facet.d_max, config.min_room_m)
     # Inverse CDF of the uniform distribution on the union of cells (monotone in u, so the
     # stratification of u carries over to d).
     target = u * total
-    ends = np.cumsum(lengths)
     index = min(int(np.searchsorted(ends, target, side="right")), len(ends) - 1)
     return float(lower[index] + (target - (ends[index] - lengths[index])))
 
