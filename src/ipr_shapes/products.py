@@ -8,6 +8,7 @@ without importing another stage's code.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -65,10 +66,13 @@ class ShapeHypothesis:
     voxel_pitch_m: float = voxels.DEFAULT_PITCH_M
     generator: str = "algorithm1"
 
-    @property
+    @functools.cached_property
     def bounds(self) -> np.ndarray:
-        """(2, 3) axis-aligned bounding box [minimum, maximum] (m, world)."""
-        return np.stack([self.vertices.min(axis=0), self.vertices.max(axis=0)])
+        """(2, 3) axis-aligned bounding box [minimum, maximum] (m, world); computed once (the
+        constraints ask for it per pair of objects) and read-only."""
+        box = np.stack([self.vertices.min(axis=0), self.vertices.max(axis=0)])
+        box.setflags(write=False)
+        return box
 
     @property
     def mesh(self) -> tuple[np.ndarray, np.ndarray]:

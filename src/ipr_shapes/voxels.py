@@ -278,6 +278,29 @@ def scanline_voxels(vertices: np.ndarray, faces: np.ndarray, pitch_m: float) -> 
     x, y = fixed[faces][:, :, 0], fixed[faces][:, :, 1]  # (F, 3) each
     z_corner = grid[faces][:, :, 2]
 
+    # The scanline proper, compiled (``voxel_kernels.scanline_keys``: the same keys as
+    # ``_scanline_keys_numpy``, without its per-column temporaries).
+    from ipr_shapes.voxel_kernels import scanline_keys
+
+    keys, fits = scanline_keys(
+        np.ascontiguousarray(x),
+        np.ascontiguousarray(y),
+        np.ascontiguousarray(z_corner),
+        bits,
+        _BITS,
+    )
+    if not fits:
+        raise ValueError("voxel index out of range: the mesh is too far from the origin")
+    return keys
+
+
+def _scanline_keys_numpy(
+    x: np.ndarray, y: np.ndarray, z_corner: np.ndarray, bits: int
+) -> np.ndarray:
+    """The scanline of ``scanline_voxels`` after its set-up, in numpy: triangles' corners
+    (F, 3) in fixed point (``x``, ``y`` int64, 2^-``bits`` grid units) and grid-unit heights
+    ``z_corner`` (F, 3) -> sorted keys. The reference ``voxel_kernels.scanline_keys`` is
+    pinned against (tests/test_hypothesis_kernels.py)."""
     i0 = -((-x.min(axis=1)) >> bits)  # ceil(min / 2^bits)
     i1 = x.max(axis=1) >> bits  # floor(max / 2^bits)
     j0 = -((-y.min(axis=1)) >> bits)

@@ -38,7 +38,12 @@ from ipr_shapes import voxels
 from ipr_shapes.checks import Checks, Interval, Options, check_fields
 from ipr_shapes.hypotheses.generate import UnaryTolerances
 from ipr_shapes.perception.free_space import SeenSpace
-from ipr_shapes.perception.occupancy import allowed_voxels, plane_regions, unary_report
+from ipr_shapes.perception.occupancy import (
+    PlaneRegion,
+    allowed_voxels,
+    plane_regions,
+    unary_report,
+)
 from ipr_shapes.perception.types import KnownPlane
 from ipr_shapes.products import ShapeHypothesis
 
@@ -190,8 +195,22 @@ class OverlapCache:
         bounds_i = np.array([h.bounds for h in hyps_i]).reshape(-1, 2, 3)
         bounds_j = np.array([h.bounds for h in hyps_j]).reshape(-1, 2, 3)
         depths = _box_bounds(bounds_i[:, 0], bounds_i[:, 1], bounds_j[:, 0], bounds_j[:, 1])
+        # ``depth`` per pair, inlined: at thousands of pairs its call overhead outweighs the
+        # query itself.
+        import mujoco
+
+        keys_i, keys_j = signature[0], signature[1]
+        cache, geom, model, data = self._depth, self._geom, self._model, self._data
         for a, b in zip(*np.nonzero(depths > exact_above_m), strict=True):
-            depths[a, b] = self.depth(hyps_i[a], hyps_j[b])
+            ka, kb = keys_i[a], keys_j[b]
+            pair = (ka, kb) if ka <= kb else (kb, ka)
+            depth = cache.get(pair)
+            if depth is None:
+                distance = mujoco.mj_geomDistance(model, data, geom[ka], geom[kb], 0.0, None)
+                self.queries += 1
+                depth = max(-float(distance), 0.0)
+                cache[pair] = depth
+            depths[a, b] = depth
         self._matrices[signature] = depths
         return depths
 
@@ -262,6 +281,21 @@ def unary_feasible(
     free = report.free_voxels - h.forced_free_voxels
     walls = report.wall_voxels - h.forced_wall_voxels
     return free <= allowed and walls <= allowed
+
+
+def generated_unary_feasible(
+    h: ShapeHypothesis, regions: tuple[PlaneRegion, ...], tolerances: UnaryTolerances
+) -> bool:
+    """``unary_feasible`` of a hypothesis straight from ``generate_hypotheses`` with the same
+    space, planes (``regions``: ``plane_regions(planes, tolerances.wall_min_thickness_m)``) and
+    tolerances: generation measured its seen-free and wall voxels against them already
+    (``h.feasible``), so only the support depth is left to check (from the vertices). The same
+    answer without voxelising and looking up every hypothesis twice."""
+    below = 0.0
+    for region in regions:
+        if region.is_support:
+            below = max(below, float(-region.plane.signed_distance(h.vertices).min()))
+    return bool(h.feasible) and below <= tolerances.support_tolerance_m
 
 
 def joint_feasible(

@@ -76,6 +76,7 @@ Choices made here (the paper leaves them open):
 
 from __future__ import annotations
 
+import functools
 import logging
 import time
 from collections.abc import Callable
@@ -87,9 +88,15 @@ from scipy.spatial import ConvexHull, HalfspaceIntersection, QhullError
 
 from ipr_shapes import voxels
 from ipr_shapes.checks import Checks, Interval, Options, OrNone, Predicate, check_fields
-from ipr_shapes.geometry.convex import clip_halfspace, convex_mesh
+from ipr_shapes.geometry.convex import clip_halfspace, convex_mesh, row_norms, triangle_cross
 from ipr_shapes.hypotheses import structure
-from ipr_shapes.perception.free_space import FREE, SeenSpace
+from ipr_shapes.hypotheses.kernels import (
+    first_state_samples,
+    first_wall_samples,
+    greedy_labels,
+    hull_parts,
+)
+from ipr_shapes.perception.free_space import FREE, SeenSpace, SpaceMap
 from ipr_shapes.perception.occupancy import PlaneRegion, allowed_voxels, plane_regions, unary_report
 from ipr_shapes.perception.types import KnownPlane, PartialObject
 from ipr_shapes.products import ShapeHypothesis, volume_spread
@@ -291,6 +298,23 @@ def _extreme_points(points: np.ndarray) -> np.ndarray:
         return points
 
 
+#: The last object's observed points (as a key) and their hull vertices (``_observed_extremes``).
+_LAST_EXTREMES: list[tuple[tuple, np.ndarray]] = [((), np.zeros((0, 3)))]
+
+
+def _observed_extremes(points: np.ndarray) -> np.ndarray:
+    """``_extreme_points`` of an object's observed points, remembered for the next call with
+    the same points: ``prepare_hypotheses`` asks for them twice per object (its hypotheses'
+    set-up, then its minimum shape), and their hull is the largest one of the set-up. A copy
+    (safe across threads: the entry is read and replaced whole)."""
+    key = (points.shape, points.dtype.str, points.tobytes())
+    entry = _LAST_EXTREMES[0]
+    if entry[0] != key:
+        entry = (key, _extreme_points(points))
+        _LAST_EXTREMES[0] = entry
+    return entry[1].copy()
+
+
 # --------------------------------------------------------------------------------------------
 # Generation
 
@@ -308,6 +332,8 @@ class _SourceFacet:
     width: float
     source: str
     conflict: bool = False
+    #: ``_distance``'s tables per D_min (an observed facet serves every hypothesis).
+    tables: dict = field(default_factory=dict, repr=False)
 
     @property
     def d_max(self) -> float:
@@ -385,17 +411,70 @@ def _ray_limits(
     if space is None and not walls:
         return limits
     t = (np.arange(int(np.ceil(cap / step))) + 1.0) * step
-    samples = (origins[:, None, :] + t[None, :, None] * direction).reshape(-1, 3)
-    blocked = np.zeros(len(samples), dtype=bool)
-    if space is not None:
-        blocked |= space.state_at(samples) == FREE
-    for region in walls:
-        blocked |= region.in_wall(samples)
-    blocked = blocked.reshape(len(origins), len(t))
-    first = np.argmax(blocked, axis=1)
-    hit = blocked[np.arange(len(origins)), first]
-    sampled = np.where(hit, t[first] - 0.5 * step, cap)
+    # Index of each ray's first blocked sample (len(t): none). On a ``SpaceMap`` a compiled
+    # loop marches each ray and stops at its first free voxel (the same voxels, same bits).
+    first = np.full(len(origins), len(t), dtype=np.int64)
+    samples = None
+    if isinstance(space, SpaceMap):
+        first = first_state_samples(
+            np.ascontiguousarray(origins, dtype=float),
+            np.ascontiguousarray(direction, dtype=float),
+            t,
+            np.asarray(space.grid.origin, float),
+            float(space.grid.voxel_size_m),
+            space.state,
+            FREE,
+        )
+    elif space is not None:
+        samples = (origins[:, None, :] + t[None, :, None] * direction).reshape(-1, 3)
+        first = _first_true((space.state_at(samples) == FREE).reshape(len(origins), len(t)))
+    if walls:
+        in_walls = None
+        if samples is None:
+            # Compiled too, up to each ray's first free sample; numpy's path when a sample is
+            # too close to a wall's boundary to be certain of numpy's answer.
+            in_walls, certain = first_wall_samples(
+                np.ascontiguousarray(origins, dtype=float),
+                np.ascontiguousarray(direction, dtype=float),
+                t,
+                first,
+                *_wall_arrays(tuple(walls)),
+                _CERTAIN_BAND,
+            )
+            if not certain:
+                in_walls = None
+                samples = (origins[:, None, :] + t[None, :, None] * direction).reshape(-1, 3)
+        if in_walls is None:
+            in_wall = np.zeros(len(samples), dtype=bool)
+            for region in walls:
+                in_wall |= region.in_wall(samples)
+            in_walls = _first_true(in_wall.reshape(len(origins), len(t)))
+        first = np.minimum(first, in_walls)
+    hit = first < len(t)
+    sampled = np.where(hit, t[np.minimum(first, len(t) - 1)] - 0.5 * step, cap)
     return np.minimum(limits, sampled)
+
+
+@functools.lru_cache(maxsize=16)
+def _wall_arrays(walls: tuple[PlaneRegion, ...]) -> tuple[np.ndarray, ...]:
+    """The walls as ``kernels.first_wall_samples`` takes them: normals (W, 3), offsets (W,),
+    thicknesses (W,), in-plane axes (W, 2, 3), stacked outlines (E, 3) and their starts
+    (W + 1,); remembered per walls (regions compare by identity)."""
+    outlines = [r.outline if r.outline is not None else np.zeros((0, 3)) for r in walls]
+    return (
+        np.array([np.asarray(r.plane.normal, float) for r in walls]).reshape(-1, 3),
+        np.array([float(r.plane.offset) for r in walls]),
+        np.array([float(r.thickness_m) for r in walls]),
+        np.array([r.axes for r in walls], dtype=float).reshape(-1, 2, 3),
+        np.ascontiguousarray(np.concatenate(outlines), dtype=float).reshape(-1, 3),
+        np.concatenate([[0], np.cumsum([len(o) for o in outlines])]).astype(np.int64),
+    )
+
+
+def _first_true(blocked: np.ndarray) -> np.ndarray:
+    """Per row of (R, T) bool, the index (R,) of its first True, T when it has none."""
+    first = np.argmax(blocked, axis=1)
+    return np.where(blocked[np.arange(len(blocked)), first], first, blocked.shape[1])
 
 
 def _ray_bounds(
@@ -574,7 +653,7 @@ def _prepare(
             reach = float((points @ facet.normal).max()) + config.facet_tolerance_m
             cuts.append(np.append(-facet.normal, reach))
     forced_free = forced_wall = 0
-    base = _extreme_points(points)
+    base = _observed_extremes(points)
     observed_hull = convex_mesh(base)
     if observed_hull is not None and (space is not None or any(not r.is_support for r in regions)):
         keys = voxels.scanline_voxels(observed_hull[0], observed_hull[1], pitch)
@@ -608,15 +687,18 @@ def _prepare(
 def _distance(facet: _SourceFacet, u: float, config: HypothesisConfig) -> float:
     """d for variate u in [0, 1): uniform over the admissible d at least D_min; when none is
     (no room), the largest admissible d, at least ``min_room_m``."""
-    lower = np.maximum(facet.cells, config.min_thickness_m)
-    lengths = np.clip(facet.cells + facet.width - lower, 0.0, None)
-    total = float(lengths.sum())
+    table = facet.tables.get(config.min_thickness_m)
+    if table is None:
+        lower = np.maximum(facet.cells, config.min_thickness_m)
+        lengths = np.clip(facet.cells + facet.width - lower, 0.0, None)
+        table = (lower, lengths, float(lengths.sum()), np.cumsum(lengths))
+        facet.tables[config.min_thickness_m] = table
+    lower, lengths, total, ends = table
     if total <= 0:
         return max(facet.d_max, config.min_room_m)
     # Inverse CDF of the uniform distribution on the union of cells (monotone in u, so the
     # stratification of u carries over to d).
     target = u * total
-    ends = np.cumsum(lengths)
     index = min(int(np.searchsorted(ends, target, side="right")), len(ends) - 1)
     return float(lower[index] + (target - (ends[index] - lengths[index])))
 
@@ -628,6 +710,30 @@ def _mirror(facet: _SourceFacet, d: float) -> np.ndarray:
     return facet.points - (2.0 * offsets + d)[:, None] * n
 
 
+#: How far (absolute for unit-normal products, relative for area sums) a compiled comparison
+#: must be from its threshold to be certain of numpy's outcome (their values differ by
+#: ~1e-15 at most: BLAS and pairwise summation round differently from a plain loop).
+_CERTAIN_BAND = 1e-9
+
+
+def _greedy_labels_numpy(
+    areas: np.ndarray, normals: np.ndarray, cos_group: float, min_area_m2: float
+) -> np.ndarray:
+    """``kernels.greedy_labels`` in numpy (the reference, and the fallback when the compiled
+    loop is not certain): labels (T,) of a hull's triangles (``_hull_groups``)."""
+    label = np.full(len(areas), -1, dtype=np.int64)
+    number = 0
+    unassigned = np.arange(len(areas))
+    while unassigned.size and areas[unassigned].sum() >= min_area_m2:
+        seed = unassigned[int(np.argmax(areas[unassigned]))]
+        close = normals[unassigned] @ normals[seed] >= cos_group
+        label[unassigned[close]] = number
+        unassigned = unassigned[~close]
+        number += 1
+    label[unassigned] = np.arange(number, number + unassigned.size)  # too small to matter
+    return label
+
+
 def _hull_groups(
     hull: ConvexHull, cos_group: float, min_area_m2: float
 ) -> list[tuple[np.ndarray, np.ndarray, float]]:
@@ -636,31 +742,21 @@ def _hull_groups(
 
     The largest unassigned triangle claims every unassigned triangle within the angle of its
     normal, repeatedly; each such set is then split into connected parts (triangles sharing an
-    edge), so two parallel faces are two facets. Vectorised per seed.
+    edge), so two parallel faces are two facets. Both steps compiled (``kernels.greedy_labels``
+    with numpy's loop as the fallback, ``kernels.hull_parts``): the same facets as numpy.
     """
     normals = hull.equations[:, :3]
     tri = hull.points[hull.simplices]
-    areas = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-    count = len(areas)
-    label = np.full(count, -1, dtype=np.int64)
-    number = 0
-    unassigned = np.arange(count)
-    while unassigned.size and areas[unassigned].sum() >= min_area_m2:
-        seed = unassigned[int(np.argmax(areas[unassigned]))]
-        close = normals[unassigned] @ normals[seed] >= cos_group
-        label[unassigned[close]] = number
-        unassigned = unassigned[~close]
-        number += 1
-    label[unassigned] = np.arange(number, number + unassigned.size)  # too small to matter
-    rows = np.repeat(np.arange(count), 3)
-    cols = hull.neighbors.ravel()
-    same = label[rows] == label[cols]
-    part = _components(rows[same], cols[same], count)
-    parts = int(part.max()) + 1 if count else 0
-    part_area = np.bincount(part, weights=areas, minlength=parts)
-    part_normal = np.stack(
-        [np.bincount(part, weights=areas * normals[:, k], minlength=parts) for k in range(3)],
-        axis=1,
+    areas = 0.5 * row_norms(triangle_cross(tri))
+    # The greedy grouping, compiled; numpy's loop when a comparison is too close to call.
+    label, certain = greedy_labels(
+        areas, np.ascontiguousarray(normals), cos_group, min_area_m2, _CERTAIN_BAND
+    )
+    if not certain:
+        label = _greedy_labels_numpy(areas, normals, cos_group, min_area_m2)
+    # Connected parts of each label and their area and area-weighted normal (compiled).
+    part, part_area, part_normal = hull_parts(
+        label, np.ascontiguousarray(hull.neighbors, dtype=np.int64), areas, normals
     )
     groups = []
     for index in np.argsort(-part_area, kind="stable"):
@@ -669,21 +765,6 @@ def _hull_groups(
         normal = part_normal[index] / (np.linalg.norm(part_normal[index]) + 1e-15)
         groups.append((normal, np.flatnonzero(part == index), float(part_area[index])))
     return groups
-
-
-def _components(rows: np.ndarray, cols: np.ndarray, count: int) -> np.ndarray:
-    """Connected components (count,) numbered 0, 1, ... of the graph with edges rows[i] -
-    cols[i] (both directions listed): each node takes the smallest label among its
-    neighbours' until none changes (a hull's facets are small graphs; this costs a few
-    vectorised passes where scipy's sparse graph set-up dominates)."""
-    label = np.arange(count)
-    while True:
-        previous = label.copy()
-        np.minimum.at(label, rows, label[cols])
-        label = label[label]  # pointer jumping: follow labels to their own labels
-        if np.array_equal(label, previous):
-            break
-    return np.unique(label, return_inverse=True)[1]
 
 
 def _hull_source(
@@ -697,7 +778,7 @@ def _hull_source(
     cast from points sampled on it (pulled 15 % towards its centre, off the edges)."""
     simplices = hull.simplices[members]
     tri = hull.points[simplices]
-    areas = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    areas = 0.5 * row_norms(triangle_cross(tri))
     centre = (tri.mean(axis=1) * areas[:, None]).sum(axis=0) / max(areas.sum(), 1e-15)
     count = ctx.config.hull_facet_rays
     pick = rng.choice(len(areas), size=count, p=areas / areas.sum())
@@ -712,7 +793,9 @@ def _hull_source(
     cells, conflict = _admissible(
         [_ray_bounds(samples, centre, normal, parts)], ctx.config.ray_quantile, step
     )
-    points = hull.points[np.unique(simplices)]
+    used = np.zeros(len(hull.points), dtype=bool)
+    used[simplices] = True  # np.unique(simplices) without its sort
+    points = hull.points[used]
     return _SourceFacet(normal, centre, points, cells, step, "hull", conflict)
 
 
@@ -763,7 +846,11 @@ def _algorithm1(
             hull = ConvexHull(cloud)
         except (QhullError, ValueError):
             break  # still flat: the final hull is thickened
-        cloud = hull.points[hull.vertices]  # only hull vertices matter from now on
+        # Only hull vertices matter from now on (``hull.vertices``, np.unique of the
+        # simplices, without its sort).
+        used = np.zeros(len(hull.points), dtype=bool)
+        used[hull.simplices] = True
+        cloud = hull.points[used]
         known = np.array(handled)
         todo = []
         for normal, members, _ in _hull_groups(hull, cos_group, config.min_facet_area_m2):
@@ -842,8 +929,8 @@ def _cut_all(
     fails (the caller cuts one by one)."""
     vertices, faces, _ = mesh
     tri = vertices[faces]
-    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    lengths = np.linalg.norm(normals, axis=1)
+    normals = triangle_cross(tri)
+    lengths = row_norms(normals)
     keep = lengths > 1e-12
     normals = normals[keep] / lengths[keep, None]
     offsets = -np.einsum("ij,ij->i", normals, tri[keep, 0])
@@ -865,8 +952,8 @@ def _cut_all(
     # cross by more than rounding: then the one-cut-at-a-time path decides.
     vertices, faces, _ = result
     tri = vertices[faces]
-    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    lengths = np.linalg.norm(normals, axis=1)
+    normals = triangle_cross(tri)
+    lengths = row_norms(normals)
     keep = lengths > 1e-15
     normals = normals[keep] / lengths[keep, None]
     excess = vertices @ normals.T - np.einsum("ij,ij->i", normals, tri[keep, 0])
@@ -892,6 +979,22 @@ def _evaluate(
         ctx.config.unary.free_space_tolerance_voxels,
     )
     return keys, free, wall, free <= allowed and wall <= allowed
+
+
+def _finished(
+    ctx: _Context, points: np.ndarray, memo: dict[tuple, tuple]
+) -> tuple[tuple[np.ndarray, np.ndarray, float], np.ndarray | None, int, int, bool]:
+    """``_finish`` and ``_evaluate`` of a cloud, computed once per distinct cloud (``memo``,
+    keyed by its bytes): the structure-aware generators repeat clouds (a family's own fit is
+    its first candidates' cloud and every second attempt's of the same frame), and both steps
+    are functions of the cloud alone. Returns copies, so no two hypotheses share arrays."""
+    key = (points.shape, points.dtype.str, points.tobytes())
+    if key not in memo:
+        mesh = _finish(ctx, points)
+        memo[key] = (mesh, *_evaluate(ctx, mesh))
+    (vertices, faces, volume), keys, free, wall, feasible = memo[key]
+    keys = None if keys is None else keys.copy()
+    return (vertices.copy(), faces.copy(), volume), keys, free, wall, feasible
 
 
 _Maker = Callable[[np.ndarray, int], np.ndarray]
@@ -1062,6 +1165,7 @@ def generate_hypotheses(
     slot_rngs = rng.spawn(m1)
     plan = _structure_plan(makers, fits, structured, rng.spawn(1)[0], ctx) if structured else []
     hypotheses = []
+    finished: dict[tuple, tuple] = {}  # structure-aware clouds already finished (_finished)
     timed_out = False
     for k in range(m):
         if (
@@ -1091,8 +1195,11 @@ def generate_hypotheses(
             else:
                 generator, make = plan[k - m1]
                 sample = make(0.0 if attempt else 1.0)
-            mesh = _finish(ctx, sample.points)
-            keys, free, wall, feasible = _evaluate(ctx, mesh)
+            if k < m1:
+                mesh = _finish(ctx, sample.points)
+                keys, free, wall, feasible = _evaluate(ctx, mesh)
+            else:
+                mesh, keys, free, wall, feasible = _finished(ctx, sample.points, finished)
             candidate = (free + wall, attempt, sample, mesh, keys, free, wall, feasible)
             if best is None or candidate[0] < best[0]:
                 best = candidate
@@ -1164,7 +1271,7 @@ def minimum_shape(
     if len(points) == 0:
         raise ValueError(f"object {obj.id} has no finite observed point")
     normal = dominant_normal(obj, planes)
-    base = _extreme_points(points)
+    base = _observed_extremes(points)
     extent = float(np.ptp(base @ normal))
     thickness = 0.0
     if extent < config.min_thickness_m:

@@ -19,12 +19,13 @@ import numpy as np
 from ipr_shapes.hypotheses.constraints import (
     ConstraintConfig,
     OverlapCache,
+    generated_unary_feasible,
     overlap_threshold,
-    unary_feasible,
 )
 from ipr_shapes.hypotheses.generate import HypothesisConfig, generate_hypotheses, minimum_shape
 from ipr_shapes.hypotheses.neighbours import neighbour_spaces
 from ipr_shapes.perception.free_space import SeenSpace, SpaceMap
+from ipr_shapes.perception.occupancy import plane_regions
 from ipr_shapes.perception.types import KnownPlane, PartialObject
 from ipr_shapes.products import PreparedHypotheses, ShapeHypothesis, volume_spread
 from ipr_shapes.progress import ProgressCallback, report
@@ -75,6 +76,7 @@ def prepare_hypotheses(
             else min(hypothesis_config.timeout_s, per_object),
         )
     object_rngs = rng.spawn(len(objects))
+    regions = plane_regions(planes, config.unary.wall_min_thickness_m)
     bounds = neighbour_spaces(objects, space, object_spaces) if config.neighbour_surfaces else {}
 
     generated: dict[int, tuple[ShapeHypothesis, ...]] = {}
@@ -89,7 +91,11 @@ def prepare_hypotheses(
             obj, seen, planes, hypothesis_config, object_rng, bounds=bounds.get(obj.id)
         )
         minima[obj.id] = minimum_shape(obj, planes, hypothesis_config)
-        feasible = [k for k, h in enumerate(hyps) if unary_feasible(h, seen, planes, config.unary)]
+        # generate_hypotheses checked each against ``seen`` and ``planes`` already (h.feasible):
+        # ``unary_feasible``'s answer without measuring every hypothesis again.
+        feasible = [
+            k for k, h in enumerate(hyps) if generated_unary_feasible(h, regions, config.unary)
+        ]
         if not feasible:
             logger.warning("object %d: no feasible hypothesis; using its minimum shape", obj.id)
             hyps = (minima[obj.id],)

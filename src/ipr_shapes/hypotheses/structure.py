@@ -159,6 +159,14 @@ class UprightFrame:
         return (1.0 - 2.0 * (index % 2)) * self.rotation[index // 2]
 
 
+def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """u x v of (3,) vectors: ``np.cross``'s arithmetic (each product rounded, then their
+    difference: the same bits) without its per-call overhead."""
+    return np.array(
+        [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]]
+    )
+
+
 def _min_area_axis(flat: np.ndarray) -> np.ndarray:
     """Unit (2,) side direction of the minimum-area rectangle around 2-D points."""
     try:
@@ -189,9 +197,9 @@ def upright_frame(
     dominant normal."""
     up = np.asarray(up, float) / np.linalg.norm(up)
     helper = np.eye(3)[int(np.argmin(np.abs(up)))]
-    e1 = np.cross(up, helper)
+    e1 = _cross(up, helper)
     e1 /= np.linalg.norm(e1)
-    e2 = np.cross(up, e1)
+    e2 = _cross(up, e1)
     vertical = [(n, area) for n, area in facets if abs(float(n @ up)) < 0.5]
     if vertical:
         normal = max(vertical, key=lambda item: item[1])[0]
@@ -200,7 +208,7 @@ def upright_frame(
         side = _min_area_axis(np.column_stack([points @ e1, points @ e2]))
     side = side / max(np.linalg.norm(side), 1e-12)
     a = side[0] * e1 + side[1] * e2
-    b = np.cross(up, a)
+    b = _cross(up, a)
     hidden = -np.array([towards_camera @ a, towards_camera @ b])
     norm = float(np.linalg.norm(hidden))
     hidden = hidden / norm if norm > 0.2 else np.zeros(2)
@@ -220,9 +228,9 @@ def facet_frame(
     up = np.asarray(ordered[0][0], float)
     up = up / np.linalg.norm(up)
     helper = np.eye(3)[int(np.argmin(np.abs(up)))]
-    e1 = np.cross(up, helper)
+    e1 = _cross(up, helper)
     e1 /= np.linalg.norm(e1)
-    e2 = np.cross(up, e1)
+    e2 = _cross(up, e1)
     side = None
     for normal, _ in ordered[1:]:
         if abs(float(normal @ up)) < 0.5:
@@ -232,7 +240,7 @@ def facet_frame(
         side = _min_area_axis(np.column_stack([points @ e1, points @ e2]))
     side = side / max(np.linalg.norm(side), 1e-12)
     a = side[0] * e1 + side[1] * e2
-    b = np.cross(up, a)
+    b = _cross(up, a)
     hidden = -np.array([towards_camera @ a, towards_camera @ b])
     norm = float(np.linalg.norm(hidden))
     hidden = hidden / norm if norm > 0.2 else np.zeros(2)
@@ -389,9 +397,9 @@ def axis_frame(axis: np.ndarray, towards_camera: np.ndarray) -> UprightFrame:
     revolution about a direction other than the support normal (a can lying on its side)."""
     axis = np.asarray(axis, float) / np.linalg.norm(axis)
     helper = np.eye(3)[int(np.argmin(np.abs(axis)))]
-    a = np.cross(axis, helper)
+    a = _cross(axis, helper)
     a /= np.linalg.norm(a)
-    b = np.cross(axis, a)
+    b = _cross(axis, a)
     hidden = -np.array([towards_camera @ a, towards_camera @ b])
     norm = float(np.linalg.norm(hidden))
     hidden = hidden / norm if norm > 0.2 else np.zeros(2)

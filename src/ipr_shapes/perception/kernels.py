@@ -1155,3 +1155,26 @@ def region_groups(point_region: np.ndarray, points: np.ndarray, areas: np.ndarra
         for axis in range(3):
             sums[region, axis] += points[p, axis]
     return by_region, starts[1:].copy(), grouped, sizes, sums, area_sums
+
+
+@_jit
+def count_key_states(
+    keys: np.ndarray, offset: np.ndarray, state: np.ndarray, value: int, bits: int
+) -> int:
+    """Number of voxel keys (N,) int64 (``ipr_shapes.voxels.pack``, ``bits`` per axis) whose
+    voxel, at integer index minus ``offset`` (3,) int64 in the (nx, ny, nz) uint8 ``state``
+    grid, holds ``value`` (voxels outside the grid hold none): ``np.count_nonzero(
+    occupancy._states(space, keys, pitch) == value)`` for a lattice-aligned grid, with no
+    (N, 3) index temporaries."""
+    nx, ny, nz = state.shape
+    half = np.int64(1) << (bits - 1)
+    mask = (np.int64(1) << bits) - 1
+    count = 0
+    for n in range(keys.shape[0]):
+        key = keys[n]
+        i = (key >> (2 * bits)) - half - offset[0]
+        j = ((key >> bits) & mask) - half - offset[1]
+        k = (key & mask) - half - offset[2]
+        if 0 <= i < nx and 0 <= j < ny and 0 <= k < nz and state[i, j, k] == value:
+            count += 1
+    return count

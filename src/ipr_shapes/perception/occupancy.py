@@ -116,7 +116,7 @@ def unary_report(
     if keys is not None and keys.size:
         walls_regions = [region for region in regions if not region.is_support]
         if space is not None:
-            free = int(np.count_nonzero(_states(space, keys, pitch_m) == FREE))
+            free = _free_count(space, keys, pitch_m)
         if walls_regions:
             centres = voxels.centres(keys, pitch_m)
             wall_mask = np.zeros(len(centres), dtype=bool)
@@ -124,6 +124,34 @@ def unary_report(
                 wall_mask |= region.in_wall(centres)
             walls = int(np.count_nonzero(wall_mask))
     return UnaryReport(count, free, walls, below)
+
+
+def _lattice_offset(space: SeenSpace, pitch_m: float) -> np.ndarray | None:
+    """(3,) int64 lattice index of a ``SpaceMap``'s origin when its grid has pitch ``pitch_m``
+    and sits on the same lattice as voxel keys (``VoxelGrid.around`` aligns it), else None."""
+    if isinstance(space, SpaceMap) and space.grid.voxel_size_m == pitch_m:
+        origin = np.asarray(space.grid.origin, float)
+        offset = np.round(origin / pitch_m)
+        # np.allclose(offset * pitch_m, origin, rtol=0, atol=1e-9), without its overhead.
+        if bool(np.all(np.abs(offset * pitch_m - origin) <= 1e-9)):
+            return offset.astype(np.int64)
+    return None
+
+
+def _free_count(space: SeenSpace, keys: np.ndarray, pitch_m: float) -> int:
+    """Number of voxel keys at ``pitch_m`` that ``space`` holds FREE: ``_states(...) == FREE``
+    counted, in one compiled pass over the keys on a lattice-aligned ``SpaceMap``."""
+    offset = _lattice_offset(space, pitch_m)
+    if offset is not None:
+        from ipr_shapes.perception.kernels import count_key_states
+
+        state = space.state  # type: ignore[attr-defined]
+        return int(
+            count_key_states(
+                np.ascontiguousarray(keys, dtype=np.int64), offset, state, FREE, voxels._BITS
+            )
+        )
+    return int(np.count_nonzero(_states(space, keys, pitch_m) == FREE))
 
 
 def _states(space: SeenSpace, keys: np.ndarray, pitch_m: float) -> np.ndarray:
