@@ -143,8 +143,12 @@ def settle(
         )
         if not at_rest:
             current = settled
+    # A body no round moved is where the result put it: exactly no turn (its axes times their
+    # own transpose are the identity only to rounding, which arccos blows up to 1e-6 degrees).
     total = tuple(
-        replace(body, rotation_deg=_angle_deg(body.principal_axes @ first.principal_axes.T))
+        body
+        if body is first
+        else replace(body, rotation_deg=_angle_deg(body.principal_axes @ first.principal_axes.T))
         for first, body in zip(start, current, strict=True)
     )
     return total, seconds, at_rest
