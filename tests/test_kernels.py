@@ -580,3 +580,61 @@ def test_distinct_per_slice_is_each_slice_unique():
         np.testing.assert_array_equal(
             distinct[bounds[k] : bounds[k + 1]], np.unique(part[part >= 0])
         )
+
+
+def test_largest_inscribed_squared_is_the_square_of_scipys_distance_transform():
+    """Exact: the kernel's integer is the square whose root scipy's largest distance is."""
+    from scipy.ndimage import binary_dilation, distance_transform_edt
+
+    rng = np.random.default_rng(3)
+    for trial in range(400):
+        height, width = rng.integers(1, 40, 2)
+        occupied = rng.random((height, width)) < rng.uniform(0.3, 1.0)
+        if trial % 2:
+            occupied = binary_dilation(occupied, iterations=3)
+        inside = occupied & (rng.random((height, width)) < 0.5)
+        squared = kernels.largest_inscribed_squared(inside, occupied)
+        if occupied.all() or not inside.any():
+            assert squared == -1
+        else:
+            assert np.sqrt(float(squared)) == distance_transform_edt(occupied)[inside].max()
+
+
+def test_seam_side_bands_are_the_numpy_masks():
+    rng = np.random.default_rng(4)
+    rows, cols = np.nonzero(rng.random((60, 80)) < 0.7)
+    for _ in range(50):
+        angle = rng.uniform(0.0, np.pi)
+        cos_a, sin_a = float(np.cos(angle)), float(np.sin(angle))
+        rho = float(rng.integers(-40, 90))
+        box = np.sort(rng.integers(0, 80, 4).reshape(2, 2), axis=1).ravel()
+        along_range = np.sort(rng.uniform(-80.0, 80.0, 2))
+        side_a, side_b = kernels.seam_side_bands(
+            rows, cols, box, cos_a, sin_a, rho, along_range, 2.0, 10.0
+        )
+        in_box = (rows >= box[0]) & (rows < box[1]) & (cols >= box[2]) & (cols < box[3])
+        across = cols * cos_a + rows * sin_a - rho
+        along = -cols * sin_a + rows * cos_a
+        usable = in_box & (along >= along_range[0]) & (along <= along_range[1])
+        for sign, side in ((1.0, side_a), (-1.0, side_b)):
+            chosen = usable & (sign * across >= 2.0) & (sign * across <= 10.0)
+            assert np.array_equal(side, np.flatnonzero(chosen))
+
+
+def test_colour_gradient_is_bit_identical_to_scipys_filters():
+    """Gaussian (sigma 1) then Sobel per channel with scipy, the strongest channel picked by
+    argmax: the kernel gives the same float32 bits, borders included."""
+    from scipy import ndimage
+
+    weights = ndimage.gaussian_filter1d(np.eye(1, 9, 4)[0], 1.0, truncate=4.0, mode="constant")
+    rng = np.random.default_rng(5)
+    for height, width in ((5, 5), (7, 12), (40, 31)):
+        rgb = rng.integers(0, 256, (height, width, 3)).astype(np.uint8)
+        rgb[: height // 2] = rgb[: height // 2] // 64 * 64  # flat patches: ties between channels
+        image = ndimage.gaussian_filter(rgb.astype(np.float32) / 255.0, sigma=(1.0, 1.0, 0.0))
+        gx = np.stack([ndimage.sobel(image[..., c], axis=1) for c in range(3)], axis=-1)
+        gy = np.stack([ndimage.sobel(image[..., c], axis=0) for c in range(3)], axis=-1)
+        strongest = np.argmax(gx**2 + gy**2, axis=2)[..., None]
+        best_x, best_y = kernels.colour_gradient(rgb, weights)
+        assert np.array_equal(best_x, np.take_along_axis(gx, strongest, axis=2)[..., 0])
+        assert np.array_equal(best_y, np.take_along_axis(gy, strongest, axis=2)[..., 0])

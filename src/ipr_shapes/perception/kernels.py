@@ -1155,3 +1155,235 @@ def region_groups(point_region: np.ndarray, points: np.ndarray, areas: np.ndarra
         for axis in range(3):
             sums[region, axis] += points[p, axis]
     return by_region, starts[1:].copy(), grouped, sizes, sums, area_sums
+
+
+@_jit
+def largest_inscribed_squared(inside: np.ndarray, occupied: np.ndarray) -> int:
+    """The largest squared Euclidean distance (px^2, exact integer) from a pixel of ``inside``
+    to the nearest pixel of the (h, w) bool grid that is not ``occupied``: the square of
+    ``scipy.ndimage.distance_transform_edt(occupied)[inside].max()`` (which is the root of
+    the same integer), -1 when every pixel is occupied or none is inside. Felzenszwalb and
+    Huttenlocher's two passes (column distances, then the lower envelope of parabolas along
+    each row) in integers, the envelope's breakpoints compared as fractions: the seams'
+    ``_split`` asks this once per candidate cut (the width of a piece)."""
+    height, width = inside.shape
+    big = height + width + 1
+    column = np.empty((height, width), dtype=np.int64)
+    any_free = False
+    for c in range(width):
+        last = -1
+        for r in range(height):
+            if not occupied[r, c]:
+                last = r
+                any_free = True
+            column[r, c] = r - last if last >= 0 else big
+        last = -1
+        for r in range(height - 1, -1, -1):
+            if not occupied[r, c]:
+                last = r
+            if last >= 0 and last - r < column[r, c]:
+                column[r, c] = last - r
+    if not any_free:
+        return -1
+    best = -1
+    vertex = np.empty(width, dtype=np.int64)
+    cut_num = np.empty(width + 1, dtype=np.int64)  # breakpoint k: cut_num[k] / cut_den[k]
+    cut_den = np.empty(width + 1, dtype=np.int64)
+    for r in range(height):
+        wanted = False
+        for c in range(width):
+            if inside[r, c]:
+                wanted = True
+                break
+        if not wanted:
+            continue
+        k = -1
+        for q in range(width):
+            if column[r, q] >= big:
+                continue
+            f_q = column[r, q] * column[r, q] + q * q
+            while k >= 0:
+                p = vertex[k]
+                num = f_q - (column[r, p] * column[r, p] + p * p)
+                den = 2 * (q - p)
+                # The new parabola takes over where it is below vertex k's: drop k when that
+                # is at or before vertex k's own start.
+                if k > 0 and num * cut_den[k] <= cut_num[k] * den:
+                    k -= 1
+                else:
+                    break
+            if k < 0:
+                k = 0
+                vertex[0] = q
+            else:
+                p = vertex[k]
+                k += 1
+                vertex[k] = q
+                cut_num[k] = f_q - (column[r, p] * column[r, p] + p * p)
+                cut_den[k] = 2 * (q - p)
+        k_top = k
+        k = 0
+        for c in range(width):
+            while k < k_top and cut_num[k + 1] < c * cut_den[k + 1]:
+                k += 1
+            if inside[r, c]:
+                p = vertex[k]
+                squared = (c - p) * (c - p) + column[r, p] * column[r, p]
+                if squared > best:
+                    best = squared
+    return best
+
+
+@_jit
+def seam_side_bands(
+    rows: np.ndarray,
+    cols: np.ndarray,
+    box: np.ndarray,
+    cos_a: float,
+    sin_a: float,
+    rho: float,
+    along_range: np.ndarray,
+    near: float,
+    far: float,
+):
+    """Positions in (rows, cols) ((N,) int64 pixels, any order kept) of the pixels in the
+    bands beside a seam on the line x cos a + y sin a = rho: inside ``box`` (top, bottom,
+    left, right; half-open), ``along_range`` (lowest, highest) of -x sin a + y cos a, and
+    across = x cos a + y sin a - rho in [near, far] (side one) or in [-far, -near] (side
+    two). The masks of the numpy expressions ``across = xx * cos_a + yy * sin_a - rho`` and
+    ``along = -xx * sin_a + yy * cos_a`` with the same operations in the same order."""
+    n = rows.shape[0]
+    side_a = np.empty(n, dtype=np.int64)
+    side_b = np.empty(n, dtype=np.int64)
+    count_a = 0
+    count_b = 0
+    for i in range(n):
+        y = rows[i]
+        x = cols[i]
+        if y < box[0] or y >= box[1] or x < box[2] or x >= box[3]:
+            continue
+        along = float(-x) * sin_a + float(y) * cos_a
+        if along < along_range[0] or along > along_range[1]:
+            continue
+        across = float(x) * cos_a + float(y) * sin_a - rho
+        if across >= near and across <= far:
+            side_a[count_a] = i
+            count_a += 1
+        elif -across >= near and -across <= far:
+            side_b[count_b] = i
+            count_b += 1
+    return side_a[:count_a].copy(), side_b[:count_b].copy()
+
+
+@_jit
+def _reflected(index: int, length: int) -> int:
+    """``index`` folded into [0, length) as scipy.ndimage's mode "reflect" (d c b a | a b c d),
+    for overshoots up to ``length``."""
+    if index < 0:
+        return -index - 1
+    if index >= length:
+        return 2 * length - index - 1
+    return index
+
+
+@_jit
+def _padded(plane: np.ndarray, rows: int, cols: int) -> np.ndarray:
+    """(H + 2 rows, W + 2 cols) copy of the (H, W) float32 ``plane`` with reflected borders."""
+    height, width = plane.shape
+    out = np.empty((height + 2 * rows, width + 2 * cols), dtype=np.float32)
+    for y in range(height + 2 * rows):
+        source_y = _reflected(y - rows, height)
+        for x in range(width):
+            out[y, x + cols] = plane[source_y, x]
+        for x in range(cols):
+            out[y, x] = plane[source_y, _reflected(x - cols, width)]
+            out[y, width + cols + x] = plane[source_y, _reflected(width + x, width)]
+    return out
+
+
+@_jit
+def colour_gradient(rgb: np.ndarray, weights: np.ndarray):
+    """Sobel x and y components (H, W) float32 of the colour channel whose squared gradient is
+    largest at each pixel (the first of equals), of the (H, W, 3) uint8 image in [0, 1] smoothed
+    by the symmetric (2r + 1,) float64 ``weights`` (a Gaussian's) along columns and rows. The
+    same numbers as ``scipy.ndimage.gaussian_filter(rgb.astype(np.float32) / 255.0, sigma=(s, s,
+    0))`` followed by ``ndimage.sobel`` per channel and ``np.argmax`` of ``gx**2 + gy**2``: each
+    1D pass in scipy's order of operations (``NI_Correlate1D``: the centre tap, then each pair
+    of mirrored taps from the outside in, summed in float64 and stored as float32), borders
+    reflected. Needs H, W > r. One compiled pass per filter instead of numpy's temporaries
+    (the seams' edges, every frame)."""
+    height, width = rgb.shape[0], rgb.shape[1]
+    radius = weights.shape[0] // 2
+    best_x = np.zeros((height, width), dtype=np.float32)
+    best_y = np.zeros((height, width), dtype=np.float32)
+    best = np.zeros((height, width), dtype=np.float32)
+    image = np.empty((height, width), dtype=np.float32)
+    plane = np.empty((height, width), dtype=np.float32)
+    smooth = np.empty((height, width), dtype=np.float32)
+    first = np.empty((height, width), dtype=np.float32)
+    gx = np.empty((height, width), dtype=np.float32)
+    sums = np.empty(width, dtype=np.float64)
+    scale = np.float32(255.0)
+    for channel in range(3):
+        for y in range(height):
+            for x in range(width):
+                image[y, x] = np.float32(rgb[y, x, channel]) / scale
+        # Gaussian along the columns (axis 0), then along the rows (axis 1).
+        # (Each pixel's sum in a row of accumulators: the taps in scipy's order per pixel.)
+        source = _padded(image, radius, 0)
+        for y in range(height):
+            c = y + radius
+            for x in range(width):
+                sums[x] = np.float64(source[c, x]) * weights[radius]
+            for j in range(radius, 0, -1):
+                weight = weights[radius - j]
+                for x in range(width):
+                    sums[x] += (
+                        np.float64(source[c - j, x]) + np.float64(source[c + j, x])
+                    ) * weight
+            for x in range(width):
+                plane[y, x] = np.float32(sums[x])
+        source = _padded(plane, 0, radius)
+        for y in range(height):
+            for x in range(width):
+                sums[x] = np.float64(source[y, x + radius]) * weights[radius]
+            for j in range(radius, 0, -1):
+                weight = weights[radius - j]
+                for x in range(width):
+                    sums[x] += (
+                        np.float64(source[y, x + radius - j])
+                        + np.float64(source[y, x + radius + j])
+                    ) * weight
+            for x in range(width):
+                smooth[y, x] = np.float32(sums[x])
+        source = _padded(smooth, 1, 1)
+        # Sobel x: [-1, 0, 1] along the rows, then [1, 2, 1] along the columns.
+        for y in range(height):
+            for x in range(width):
+                total = np.float64(source[y + 1, x + 1]) * 0.0
+                total += (np.float64(source[y + 1, x]) - np.float64(source[y + 1, x + 2])) * -1.0
+                first[y, x] = np.float32(total)
+        across = _padded(first, 1, 0)
+        for y in range(height):
+            for x in range(width):
+                total = np.float64(across[y + 1, x]) * 2.0
+                total += (np.float64(across[y, x]) + np.float64(across[y + 2, x])) * 1.0
+                gx[y, x] = np.float32(total)
+        # Sobel y: [-1, 0, 1] along the columns, then [1, 2, 1] along the rows.
+        for y in range(height):
+            for x in range(width):
+                total = np.float64(source[y + 1, x + 1]) * 0.0
+                total += (np.float64(source[y, x + 1]) - np.float64(source[y + 2, x + 1])) * -1.0
+                first[y, x] = np.float32(total)
+        across = _padded(first, 0, 1)
+        for y in range(height):
+            for x in range(width):
+                total = np.float64(across[y, x + 1]) * 2.0
+                total += (np.float64(across[y, x]) + np.float64(across[y, x + 2])) * 1.0
+                gy = np.float32(total)
+                square = gx[y, x] * gx[y, x] + gy * gy
+                if channel == 0 or square > best[y, x]:
+                    best[y, x] = square
+                    best_x[y, x] = gx[y, x]
+                    best_y[y, x] = gy
+    return best_x, best_y

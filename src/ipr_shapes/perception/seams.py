@@ -46,6 +46,7 @@ import numpy as np
 from scipy import ndimage
 from scipy.spatial import ConvexHull
 
+from ipr_shapes.perception import kernels
 from ipr_shapes.perception.config import PerceptionConfig
 
 #: Hough resolution: line directions per half turn, and the candidates tried per search.
@@ -61,6 +62,9 @@ _MARGIN_PX = 12
 _PARALLEL_DEG = 10.0
 #: How a seam is bounded (``_repeated``).
 _UNBOUNDED, _BY_OUTLINE, _BY_SEAM = 0, 1, 2
+#: The colour gradient's smoothing: scipy's Gaussian of sigma 1 px (truncated at 4 sigma) as
+#: weights, its response to a unit impulse.
+_GAUSSIAN = ndimage.gaussian_filter1d(np.eye(1, 9, 4)[0], 1.0, truncate=4.0, mode="constant")
 
 
 @dataclass(frozen=True)
@@ -194,16 +198,16 @@ def _pairs_by_size(
     (``asked``) are run again (the others' tests go the same way), and the frame's faces are
     measured only when one of them asks."""
     faces: list[tuple[int, tuple[float, float]]] = []
-    measured = []
+    done = []
 
     def frame_faces() -> list[tuple[int, tuple[float, float]]]:
-        if not measured:
-            measured.append(True)
+        if not done:
+            done.append(True)
+            measured = (depth_m > 0) & np.any(normals != 0, axis=2)
             for index, ((crop, _, _, _), pieces) in enumerate(zip(searched, decided, strict=True)):
                 for piece in range(1, int(pieces.max()) + 1):
-                    size = _face_size(
-                        pieces == piece, points[crop], normals[crop], depth_m[crop], config
-                    )
+                    size = _face_size(pieces == piece, measured[crop], points[crop],
+                                      normals[crop], config)  # fmt: skip
                     if size is not None:
                         faces.append((index, size))
             for index, (crop, mask, _, found) in enumerate(searched):
@@ -250,17 +254,18 @@ def _lone_strips(
 
 
 def _face_size(
-    piece: np.ndarray, points: np.ndarray, normals: np.ndarray, depth_m: np.ndarray,
+    piece: np.ndarray, measured: np.ndarray, points: np.ndarray, normals: np.ndarray,
     config: PerceptionConfig,
 ) -> tuple[float, float] | None:  # fmt: skip
-    """(longer, shorter) extent (m) of the dominant face of ``piece`` ((h, w) bool): its points
+    """(longer, shorter) extent (m) of the dominant face of ``piece`` ((h, w) bool; ``measured``
+    (h, w) bool: pixels with depth and a normal): its points
     whose normals lie within ``seams.max_normal_deg`` of their median normal, 2nd to 98th
     percentile along the axes of its smallest enclosing rectangle (a hull edge's direction);
     None for fewer than 50 such points, or a face
     that is not a flat rectangle (90 % of the points within ``seams.max_bend_m`` of its plane;
     its extent across each axis at 10, 50 and 90 % along it at least 1 -
     ``seams.strip_tolerance`` of the whole)."""
-    usable = piece & (depth_m > 0) & np.any(normals != 0, axis=2)
+    usable = piece & measured
     if usable.sum() < 50:
         return None
     face_normals = normals[usable].astype(np.float64)
@@ -281,14 +286,19 @@ def _face_size(
     # square's principal axes are any two).
     hull = plane[ConvexHull(plane).vertices]
     edges = np.roll(hull, -1, axis=0) - hull
+    angles = np.unique(np.round(np.arctan2(edges[:, 1], edges[:, 0]) % (np.pi / 2), 3))
+    coords = [
+        plane @ np.array([[np.cos(angle), np.sin(angle)], [-np.sin(angle), np.cos(angle)]]).T
+        for angle in angles
+    ]
+    # Every direction's percentiles in one call (column by column, as one call each).
+    lows, highs = np.percentile(np.concatenate(coords, axis=1), [2, 98], axis=0)
     best = None
-    for angle in np.unique(np.round(np.arctan2(edges[:, 1], edges[:, 0]) % (np.pi / 2), 3)):
-        axes = np.array([[np.cos(angle), np.sin(angle)], [-np.sin(angle), np.cos(angle)]])
-        coords = plane @ axes.T
-        low, high = np.percentile(coords, [2, 98], axis=0)
+    for index in range(len(angles)):
+        low, high = lows[2 * index : 2 * index + 2], highs[2 * index : 2 * index + 2]
         area = float(np.prod(high - low))
         if best is None or area < best[0]:
-            best = (area, coords, low, high)
+            best = (area, coords[index], low, high)
     _, coords, low, high = best
     extent = high - low
     # And a rectangle: as wide near its ends as in its middle (a can's top is a disc).
@@ -309,7 +319,11 @@ def _face_size(
 def _colour_gradient(rgb: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(H, W) float32 gradient magnitude and its x and y components (Sobel, per pixel of
     RGB in [0, 1] smoothed by a Gaussian of sigma 1 px) of the colour channel that changes
-    most at each pixel (the first of equals)."""
+    most at each pixel (the first of equals). Compiled (``kernels.colour_gradient``, the same
+    numbers as the scipy filters below, which remain for images narrower than the kernel)."""
+    if min(rgb.shape[0], rgb.shape[1]) > len(_GAUSSIAN) // 2:
+        gx, gy = kernels.colour_gradient(rgb, _GAUSSIAN)
+        return np.hypot(gx, gy), gx, gy
     image = ndimage.gaussian_filter(rgb.astype(np.float32) / 255.0, sigma=(1.0, 1.0, 0.0))
     # ndimage.sobel per channel, all three channels in one pass along each axis.
     gx = ndimage.correlate1d(image, [-1, 0, 1], axis=1, output=np.float32)
@@ -766,16 +780,21 @@ def _coplanar_sides(
     top, bottom = max(rows.min() - far, 0), min(rows.max() + far + 1, shape[0])
     left, right = max(cols.min() - far, 0), min(cols.max() + far + 1, shape[1])
     yy, xx = part_pixels
-    in_box = (yy >= top) & (yy < bottom) & (xx >= left) & (xx < right)
-    yy, xx = yy[in_box], xx[in_box]
-    across = xx * cos_a + yy * sin_a - rho
-    along = -xx * sin_a + yy * cos_a
     seam_along = -cols * sin_a + rows * cos_a
-    usable = (along >= seam_along.min()) & (along <= seam_along.max())
+    bands = kernels.seam_side_bands(
+        yy,
+        xx,
+        np.array([top, bottom, left, right], dtype=np.int64),
+        float(cos_a),
+        float(sin_a),
+        float(rho),
+        np.array([seam_along.min(), seam_along.max()]),
+        float(near),
+        float(far),
+    )
     sides = []
-    for sign in (1.0, -1.0):
-        chosen = usable & (sign * across >= near) & (sign * across <= far)
-        if chosen.sum() < 20:
+    for chosen in bands:
+        if len(chosen) < 20:
             return None
         at_rows, at_cols = yy[chosen], xx[chosen]
         mean = normals[at_rows, at_cols].astype(np.float64).mean(axis=0)
@@ -832,11 +851,14 @@ def _split(
             return None
     for inside in masks:
         box = _window(inside, sub.shape)
-        # Each piece's largest inscribed radius: the seam and the outside bound every piece.
-        inscribed = ndimage.distance_transform_edt(pieces[box] > 0)
+        # Each piece's largest inscribed radius: the seam and the outside bound every piece
+        # (``distance_transform_edt(pieces > 0)[inside].max()``, the root of an integer).
+        squared = kernels.largest_inscribed_squared(inside[box], pieces[box] > 0)
+        if squared < 0:
+            squared = ndimage.distance_transform_edt(pieces[box] > 0)[inside[box]].max() ** 2
         depths = sub_depth[inside]
         depths = depths[depths > 0]
-        radius_px = float(inscribed[inside[box]].max())
+        radius_px = float(np.sqrt(float(squared)))
         if 2.0 * radius_px * float(np.median(depths)) / focal_px < config.seams.min_width_m:
             return None
     two = np.where(masks[0], 1, np.where(masks[1], 2, 0))
