@@ -638,3 +638,97 @@ def test_colour_gradient_is_bit_identical_to_scipys_filters():
         best_x, best_y = kernels.colour_gradient(rgb, weights)
         assert np.array_equal(best_x, np.take_along_axis(gx, strongest, axis=2)[..., 0])
         assert np.array_equal(best_y, np.take_along_axis(gy, strongest, axis=2)[..., 0])
+
+
+def _reference_chord(
+    part: np.ndarray, cos_a: float, sin_a: float, rho: float, window: tuple[slice, slice]
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """(rows, cols) of the pixels of ``part`` on the line x cos a + y sin a = rho, in order
+    along it (one pixel per step along its longer image axis), stepping only through
+    ``window`` (a box that holds all of ``part``)."""
+    height, width = part.shape
+    if abs(sin_a) > abs(cos_a):
+        cols = np.arange(window[1].start, window[1].stop)
+        rows = np.round((rho - cols * cos_a) / sin_a).astype(np.int64)
+    else:
+        rows = np.arange(window[0].start, window[0].stop)
+        cols = np.round((rho - rows * sin_a) / cos_a).astype(np.int64)
+    inside = (rows >= 0) & (rows < height) & (cols >= 0) & (cols < width)
+    rows, cols = rows[inside], cols[inside]
+    on = part[rows, cols]
+    if on.sum() < 20:
+        return None
+    return rows[on], cols[on]
+
+
+def _reference_reaches_outline(part: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> bool:
+    """Whether the stretch (pixels in order along a line) ends at the outline of ``part`` at
+    both ends: within 3 px beyond each end, along the line, lies a pixel outside it (a stretch
+    that stops inside cannot cut)."""
+    height, width = part.shape
+    length = max(len(rows) - 1, 1)
+    # Per-pixel direction along the stretch (one pixel along its longer axis).
+    d_row = (rows[-1] - rows[0]) / length
+    d_col = (cols[-1] - cols[0]) / length
+    for end, sign in ((0, -1.0), (len(rows) - 1, 1.0)):
+        outside = False
+        for k in (1, 2, 3):
+            r = int(round(rows[end] + sign * k * d_row))
+            c = int(round(cols[end] + sign * k * d_col))
+            if not (0 <= r < height and 0 <= c < width) or not part[r, c]:
+                outside = True
+                break
+        if not outside:
+            return False
+    return True
+
+
+def _reference_densest_stretch(on_edge: np.ndarray, density: float) -> tuple[int, int]:
+    """The longest [start, stop) of ``on_edge`` (bool, (n,)) whose mean is at least
+    ``density``: with prefix sums s of (on_edge - density), the longest b - a with
+    s[b] >= s[a]; the prefix minima are non-increasing, so each b finds its first such a by
+    bisection (the first longest wins)."""
+    prefix = np.concatenate([[0.0], np.cumsum(on_edge.astype(np.float64) - density)])
+    lowest = np.minimum.accumulate(prefix)
+    begins = np.searchsorted(-lowest, -prefix[1:], side="left")
+    lengths = np.arange(1, len(on_edge) + 1) - begins
+    end = int(np.argmax(lengths))
+    if lengths[end] <= 0:
+        return 0, 0
+    return int(begins[end]), end + 1
+
+
+def test_line_stretches_match_the_numpy_chord_stretch_and_outline():
+    """Bit for bit: each candidate line's chord, densest stretch and outline test as the seams'
+    numpy functions gave them one line at a time."""
+    rng = np.random.default_rng(6)
+    yy, xx = np.mgrid[0:70, 0:90]
+    part = ((yy - 35) ** 2 / 30.0**2 + (xx - 45) ** 2 / 40.0**2 < 1.0) | (
+        (yy > 5) & (yy < 30) & (xx > 10) & (xx < 50)
+    )
+    near_edge = rng.random(part.shape) < 0.8
+    near_edge[:, 40:43] = True
+    window = (slice(3, 68), slice(2, 88))
+    angles = rng.uniform(0.0, np.pi, 200)
+    angles[:4] = (0.0, np.pi / 2, np.pi / 4, 3 * np.pi / 4)
+    cos_a, sin_a = np.cos(angles), np.sin(angles)
+    rho = rng.integers(-60, 110, 200).astype(np.float64)
+    rho[:2] = (41.0, 30.0)
+    lengths, reaches, rows, cols, bounds = kernels.line_stretches(
+        part, near_edge, np.array([3, 68, 2, 88]), cos_a, sin_a, rho, 0.75, 20
+    )
+    found = 0
+    for k in range(len(rho)):
+        expected = (0, False, np.empty(0), np.empty(0))
+        line = _reference_chord(part, cos_a[k], sin_a[k], int(rho[k]), window)
+        if line is not None:
+            start, stop = _reference_densest_stretch(near_edge[line[0], line[1]], 0.75)
+            if stop - start >= 20:
+                run = line[0][start:stop], line[1][start:stop]
+                expected = (stop - start, _reference_reaches_outline(part, *run), *run)
+        assert lengths[k] == expected[0]
+        assert bool(reaches[k]) == expected[1]
+        np.testing.assert_array_equal(rows[bounds[k] : bounds[k + 1]], expected[2])
+        np.testing.assert_array_equal(cols[bounds[k] : bounds[k + 1]], expected[3])
+        found += expected[0] > 0
+    assert found > 20

@@ -1387,3 +1387,115 @@ def colour_gradient(rgb: np.ndarray, weights: np.ndarray):
                     best_x[y, x] = gx[y, x]
                     best_y[y, x] = gy
     return best_x, best_y
+
+
+@_jit
+def line_stretches(
+    part: np.ndarray,
+    near_edge: np.ndarray,
+    window: np.ndarray,
+    cos_a: np.ndarray,
+    sin_a: np.ndarray,
+    rho: np.ndarray,
+    coverage: float,
+    shortest: int,
+):
+    """For K candidate lines x cos a + y sin a = rho ((K,) float64 each) through the (h, w)
+    bool ``part``, the densest stretch of each line's chord (the seams' candidate cuts; the
+    numpy version one line at a time is pinned in ``tests/test_kernels.py``):
+
+    - the chord: the pixels of ``part`` on the line, one per step along its longer image axis
+      through ``window`` (top, bottom, left, right; a box holding all of ``part``), the other
+      coordinate ``np.round((rho - t cos a) / sin a)`` (or with sin and cos swapped); fewer
+      than ``shortest`` pixels: no chord;
+    - its longest run [start, stop) whose share of ``near_edge`` pixels is at least
+      ``coverage`` (the first longest);
+    - whether that run reaches the outline of ``part`` at both ends (a pixel outside it or
+      outside the grid within 3 px beyond each end, stepping along the run).
+
+    Returns ``lengths`` (K,) int64 (stop - start; 0 with no chord or no run), ``reaches``
+    (K,) bool, and the runs' pixels: ``rows``, ``cols`` (total,) int64, line k's at
+    ``bounds[k]:bounds[k + 1]`` ((K + 1,) int64), runs shorter than ``shortest`` left out."""
+    height, width = part.shape
+    count = rho.shape[0]
+    steps = max(window[1] - window[0], window[3] - window[2])
+    chord_rows = np.empty(steps, dtype=np.int64)
+    chord_cols = np.empty(steps, dtype=np.int64)
+    prefix = np.empty(steps + 1, dtype=np.float64)
+    lowest = np.empty(steps + 1, dtype=np.float64)
+    lengths = np.zeros(count, dtype=np.int64)
+    reaches = np.zeros(count, dtype=np.bool_)
+    bounds = np.zeros(count + 1, dtype=np.int64)
+    out_rows = np.empty(count * steps, dtype=np.int64)
+    out_cols = np.empty(count * steps, dtype=np.int64)
+    total = 0
+    for k in range(count):
+        n = 0
+        if abs(sin_a[k]) > abs(cos_a[k]):
+            for col in range(window[2], window[3]):
+                row = np.int64(np.rint((rho[k] - col * cos_a[k]) / sin_a[k]))
+                if 0 <= row < height and 0 <= col < width and part[row, col]:
+                    chord_rows[n] = row
+                    chord_cols[n] = col
+                    n += 1
+        else:
+            for row in range(window[0], window[1]):
+                col = np.int64(np.rint((rho[k] - row * sin_a[k]) / cos_a[k]))
+                if 0 <= row < height and 0 <= col < width and part[row, col]:
+                    chord_rows[n] = row
+                    chord_cols[n] = col
+                    n += 1
+        bounds[k + 1] = total
+        if n < shortest:
+            continue
+        # Densest run: prefix sums of (on edge - coverage), each end's first start at or
+        # below it among the non-increasing prefix minima (bisection).
+        prefix[0] = 0.0
+        lowest[0] = 0.0
+        for i in range(n):
+            on = 1.0 if near_edge[chord_rows[i], chord_cols[i]] else 0.0
+            prefix[i + 1] = prefix[i] + (on - coverage)
+            lowest[i + 1] = min(lowest[i], prefix[i + 1])
+        best_length = 0
+        best_start = 0
+        for b in range(1, n + 1):
+            low, high = 0, n + 1
+            while low < high:  # first j with -lowest[j] >= -prefix[b]
+                middle = (low + high) // 2
+                if -lowest[middle] >= -prefix[b]:
+                    high = middle
+                else:
+                    low = middle + 1
+            if b - low > best_length:
+                best_length = b - low
+                best_start = low
+        if best_length < shortest:
+            continue
+        lengths[k] = best_length
+        start = best_start
+        stop = best_start + best_length
+        for i in range(start, stop):
+            out_rows[total] = chord_rows[i]
+            out_cols[total] = chord_cols[i]
+            total += 1
+        bounds[k + 1] = total
+        # The outline beyond both ends.
+        steps_along = max(stop - start - 1, 1)
+        d_row = (chord_rows[stop - 1] - chord_rows[start]) / steps_along
+        d_col = (chord_cols[stop - 1] - chord_cols[start]) / steps_along
+        both = True
+        for end in range(2):
+            at = start if end == 0 else stop - 1
+            sign = -1.0 if end == 0 else 1.0
+            outside = False
+            for step in range(1, 4):
+                r = np.int64(np.rint(chord_rows[at] + sign * step * d_row))
+                c = np.int64(np.rint(chord_cols[at] + sign * step * d_col))
+                if not (0 <= r < height and 0 <= c < width) or not part[r, c]:
+                    outside = True
+                    break
+            if not outside:
+                both = False
+                break
+        reaches[k] = both
+    return lengths, reaches, out_rows[:total].copy(), out_cols[:total].copy(), bounds

@@ -62,6 +62,8 @@ _MARGIN_PX = 12
 _PARALLEL_DEG = 10.0
 #: How a seam is bounded (``_repeated``).
 _UNBOUNDED, _BY_OUTLINE, _BY_SEAM = 0, 1, 2
+#: Row and column offsets of a pixel's 3 x 3 neighbourhood.
+_NEIGHBOURS = np.mgrid[-1:2, -1:2].reshape(2, -1)
 #: The colour gradient's smoothing: scipy's Gaussian of sigma 1 px (truncated at 4 sigma) as
 #: weights, its response to a unit impulse.
 _GAUSSIAN = ndimage.gaussian_filter1d(np.eye(1, 9, 4)[0], 1.0, truncate=4.0, mode="constant")
@@ -619,23 +621,33 @@ def _best_cut(
     # the first that passes them all is the best.
     # The _CANDIDATES lines with most votes, at least 20; equal votes in the order of
     # (direction, offset).
-    stretches = []
     lines = np.flatnonzero(votes >= 20)
-    for flat in lines[np.argsort(-votes[lines], kind="stable")][:_CANDIDATES]:
-        a, rho = divmod(int(flat), 2 * reach + 1)
-        rho -= reach
-        line = _chord(part, cos_a[a], sin_a[a], rho, window)
-        if line is None:
-            continue
-        start, stop = _densest_stretch(near_edge[line[0], line[1]], seams.coverage)
-        if stop - start >= 20:
-            stretches.append((stop - start, a, rho, line[0][start:stop], line[1][start:stop]))
+    lines = lines[np.argsort(-votes[lines], kind="stable")][:_CANDIDATES]
+    line_a, line_rho = np.divmod(lines, 2 * reach + 1)
+    line_rho -= reach
+    # Each line's chord through the part, its densest stretch and whether that reaches the
+    # outline at both ends (one compiled pass over all lines).
+    lengths, reaches, stretch_rows, stretch_cols, bounds = kernels.line_stretches(
+        part,
+        near_edge,
+        np.array([window[0].start, window[0].stop, window[1].start, window[1].stop]),
+        cos_a[line_a],
+        sin_a[line_a],
+        line_rho.astype(np.float64),
+        float(seams.coverage),
+        20,
+    )
+    stretches = [
+        (int(lengths[k]), int(line_a[k]), int(line_rho[k]), bool(reaches[k]),
+         stretch_rows[bounds[k] : bounds[k + 1]], stretch_cols[bounds[k] : bounds[k + 1]])
+        for k in np.flatnonzero(lengths)
+    ]  # fmt: skip
     stretches.sort(key=lambda item: -item[0])  # stable: ties keep the vote order
     # The part's pixels with a normal, row-major (the side bands' pixels are among them).
     part_rows, part_cols = np.nonzero(part[window] & has_normal[window])
     part_pixels = (part_rows + top_px, part_cols + left_px)
-    for _, a, rho, line_rows, line_cols in stretches:
-        if not _reaches_outline(part, line_rows, line_cols):
+    for _, a, rho, reaches_outline, line_rows, line_cols in stretches:
+        if not reaches_outline:
             continue
         # Its length between its outermost pixels with depth (label images fill dropouts).
         measured = np.flatnonzero(depth_m[line_rows, line_cols] > 0)
@@ -699,64 +711,6 @@ def _straight_seam(
         normal=normal,
         half_length_m=float(extent.max() - extent.min()) / 2.0,
     )
-
-
-def _chord(
-    part: np.ndarray, cos_a: float, sin_a: float, rho: float, window: tuple[slice, slice]
-) -> tuple[np.ndarray, np.ndarray] | None:
-    """(rows, cols) of the pixels of ``part`` on the line x cos a + y sin a = rho, in order
-    along it (one pixel per step along its longer image axis), stepping only through
-    ``window`` (a box that holds all of ``part``)."""
-    height, width = part.shape
-    if abs(sin_a) > abs(cos_a):
-        cols = np.arange(window[1].start, window[1].stop)
-        rows = np.round((rho - cols * cos_a) / sin_a).astype(np.int64)
-    else:
-        rows = np.arange(window[0].start, window[0].stop)
-        cols = np.round((rho - rows * sin_a) / cos_a).astype(np.int64)
-    inside = (rows >= 0) & (rows < height) & (cols >= 0) & (cols < width)
-    rows, cols = rows[inside], cols[inside]
-    on = part[rows, cols]
-    if on.sum() < 20:
-        return None
-    return rows[on], cols[on]
-
-
-def _reaches_outline(part: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> bool:
-    """Whether the stretch (pixels in order along a line) ends at the outline of ``part`` at
-    both ends: within 3 px beyond each end, along the line, lies a pixel outside it (a stretch
-    that stops inside cannot cut)."""
-    height, width = part.shape
-    length = max(len(rows) - 1, 1)
-    # Per-pixel direction along the stretch (one pixel along its longer axis).
-    d_row = (rows[-1] - rows[0]) / length
-    d_col = (cols[-1] - cols[0]) / length
-    for end, sign in ((0, -1.0), (len(rows) - 1, 1.0)):
-        outside = False
-        for k in (1, 2, 3):
-            r = int(round(rows[end] + sign * k * d_row))
-            c = int(round(cols[end] + sign * k * d_col))
-            if not (0 <= r < height and 0 <= c < width) or not part[r, c]:
-                outside = True
-                break
-        if not outside:
-            return False
-    return True
-
-
-def _densest_stretch(on_edge: np.ndarray, density: float) -> tuple[int, int]:
-    """The longest [start, stop) of ``on_edge`` (bool, (n,)) whose mean is at least
-    ``density``: with prefix sums s of (on_edge - density), the longest b - a with
-    s[b] >= s[a]; the prefix minima are non-increasing, so each b finds its first such a by
-    bisection (the first longest wins)."""
-    prefix = np.concatenate([[0.0], np.cumsum(on_edge.astype(np.float64) - density)])
-    lowest = np.minimum.accumulate(prefix)
-    begins = np.searchsorted(-lowest, -prefix[1:], side="left")
-    lengths = np.arange(1, len(on_edge) + 1) - begins
-    end = int(np.argmax(lengths))
-    if lengths[end] <= 0:
-        return 0, 0
-    return int(begins[end]), end + 1
 
 
 def _coplanar_sides(
@@ -831,13 +785,11 @@ def _split(
     sub = part[window]
     sub_depth = depth_m[window]
     seam = np.zeros(sub.shape, dtype=bool)
-    for dy in (-1, 0, 1):
-        for dx in (-1, 0, 1):
-            # Clipped to the crop as a whole, then kept where inside the window.
-            r = np.clip(rows + dy, 0, height - 1) - top
-            c = np.clip(cols + dx, 0, width - 1) - left
-            inside = (r >= 0) & (r < sub.shape[0]) & (c >= 0) & (c < sub.shape[1])
-            seam[r[inside], c[inside]] = True
+    # The seam's 3 x 3 neighbourhood, clipped to the crop as a whole, kept inside the window.
+    r = np.clip(rows[:, None] + _NEIGHBOURS[0], 0, height - 1) - top
+    c = np.clip(cols[:, None] + _NEIGHBOURS[1], 0, width - 1) - left
+    inside = (r >= 0) & (r < sub.shape[0]) & (c >= 0) & (c < sub.shape[1])
+    seam[r[inside], c[inside]] = True
     seam &= sub
     pieces, count = ndimage.label(sub & ~seam)
     if count < 2:
