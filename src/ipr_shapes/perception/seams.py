@@ -62,6 +62,8 @@ _MARGIN_PX = 12
 _PARALLEL_DEG = 10.0
 #: How a seam is bounded (``_repeated``).
 _UNBOUNDED, _BY_OUTLINE, _BY_SEAM = 0, 1, 2
+#: Most points of a face whose size is measured (``_face_size``): larger faces are subsampled.
+_FACE_POINTS = 4096
 #: Row and column offsets of a pixel's 3 x 3 neighbourhood.
 _NEIGHBOURS = np.mgrid[-1:2, -1:2].reshape(2, -1)
 #: The colour gradient's smoothing: scipy's Gaussian of sigma 1 px (truncated at 4 sigma) as
@@ -131,14 +133,20 @@ def cut_colour_seams(
         mask = labels[crop] == segment
         cut, found = _search_segment(mask, edges[crop], direction[crop], points[crop],
                                      normals[crop], depth_m[crop], focal_px, config)  # fmt: skip
-        searched.append((crop, mask, cut, found))
+        # The segment's points with depth, and which seams have flat strips: measured once,
+        # asked by every strip test below.
+        cloud = np.empty((0, 3))
+        if found:
+            cloud = points[crop][mask & (depth_m[crop] > 0)].astype(np.float64)
+        flat = [_flat_strips(seam, cloud, config) for seam in found]
+        searched.append((crop, mask, cut, found, cloud, flat))
     asked = [_Sizes() for _ in searched]
-    decided = [_decide(crop, mask, cut, found, points, depth_m, config, sizes) for (crop, mask, cut,
-               found), sizes in zip(searched, asked, strict=True)]  # fmt: skip
+    decided = [_decide(cut, found, cloud, flat, config, sizes) for (_, _, cut, found, cloud, flat),
+               sizes in zip(searched, asked, strict=True)]  # fmt: skip
     if seams.pair_needs_grid and seams.pair_sizes:
         decided = _pairs_by_size(searched, decided, asked, points, normals, depth_m, config)
     next_id = int(labels.max()) + 1
-    for (crop, _, _, _), pieces in zip(searched, decided, strict=True):
+    for (crop, *_), pieces in zip(searched, decided, strict=True):
         view = out[crop]  # writes go to out
         for piece in range(2, int(pieces.max()) + 1):
             view[pieces == piece] = next_id
@@ -147,21 +155,19 @@ def cut_colour_seams(
 
 
 def _decide(
-    crop: tuple[slice, slice],
-    mask: np.ndarray,
     cut: np.ndarray,
     found: list[_Seam],
-    points: np.ndarray,
-    depth_m: np.ndarray,
+    cloud: np.ndarray,
+    flat: list[bool],
     config: PerceptionConfig,
     sizes: _Sizes | None = None,
 ) -> np.ndarray:
     """(h, w) int pieces of one segment's crop with the cuts that fail the strip tests undone
-    (``_unrepeated``; ``sizes``: see there)."""
+    (``_unrepeated``: ``cloud``, ``flat`` and ``sizes`` see there)."""
     if config.seams.strip_tolerance >= 1.0:
         return cut
     pieces = cut
-    for seam in _unrepeated(found, mask, points[crop], depth_m[crop], config, sizes):
+    for seam in _unrepeated(found, cloud, flat, config, sizes):
         pieces = _undo(pieces, seam)
     return pieces
 
@@ -206,19 +212,20 @@ def _pairs_by_size(
         if not done:
             done.append(True)
             measured = (depth_m > 0) & np.any(normals != 0, axis=2)
-            for index, ((crop, _, _, _), pieces) in enumerate(zip(searched, decided, strict=True)):
+            for index, ((crop, *_), pieces) in enumerate(zip(searched, decided, strict=True)):
                 for piece in range(1, int(pieces.max()) + 1):
                     size = _face_size(pieces == piece, measured[crop], points[crop],
                                       normals[crop], config)  # fmt: skip
                     if size is not None:
                         faces.append((index, size))
-            for index, (crop, mask, _, found) in enumerate(searched):
-                faces.extend((index, size) for size in _lone_strips(found, mask, points[crop],
-                                                                     depth_m[crop], config))  # fmt: skip
+            for index, (_, _, _, found, cloud, flat) in enumerate(searched):
+                faces.extend((index, size) for size in _lone_strips(found, cloud, flat, config))
         return faces
 
     result = []
-    for index, ((crop, mask, cut, found), pieces) in enumerate(zip(searched, decided, strict=True)):
+    for index, ((_, _, cut, found, cloud, flat), pieces) in enumerate(
+        zip(searched, decided, strict=True)
+    ):
         if len(found) == 0 or not asked[index].asked:
             result.append(pieces)
             continue
@@ -228,25 +235,20 @@ def _pairs_by_size(
                 -1, 2
             )
 
-        result.append(_decide(crop, mask, cut, found, points, depth_m, config, _Sizes(others)))
+        result.append(_decide(cut, found, cloud, flat, config, _Sizes(others)))
     return result
 
 
 def _lone_strips(
-    found: list[_Seam],
-    mask: np.ndarray,
-    points: np.ndarray,
-    depth_m: np.ndarray,
-    config: PerceptionConfig,
+    found: list[_Seam], cloud: np.ndarray, flat: list[bool], config: PerceptionConfig
 ) -> list[tuple[float, float]]:
     """(longer, shorter) sizes (m) of the strips beside the seams of one segment that have flat
-    strips and lie midway between its outline on both sides (``_repeated`` among no other
-    seams): two pairs of one size in two segments are two boxes each."""
-    usable = mask & (depth_m > 0)
-    cloud = points[usable].astype(np.float64)
+    strips (``flat``, per seam) and lie midway between its outline on both sides
+    (``_repeated`` among no other seams; ``cloud``: the segment's points): two pairs of one
+    size in two segments are two boxes each."""
     sizes = []
-    for seam in found:
-        if not _flat_strips(seam, cloud, config):
+    for seam, is_flat in zip(found, flat, strict=True):
+        if not is_flat:
             continue
         by, widths = _repeated(seam, [], cloud, config)
         if by == _BY_OUTLINE:
@@ -267,16 +269,19 @@ def _face_size(
     that is not a flat rectangle (90 % of the points within ``seams.max_bend_m`` of its plane;
     its extent across each axis at 10, 50 and 90 % along it at least 1 -
     ``seams.strip_tolerance`` of the whole)."""
-    usable = piece & measured
-    if usable.sum() < 50:
+    usable = np.flatnonzero(piece & measured)
+    if len(usable) < 50:
         return None
-    face_normals = normals[usable].astype(np.float64)
+    # A large face's every k-th pixel: its percentiles move by far less than the sizes'
+    # tolerance, and the time of the rectangle search goes with the points.
+    usable = usable[:: -(-len(usable) // _FACE_POINTS)]
+    face_normals = normals.reshape(-1, 3)[usable].astype(np.float64)
     normal = np.median(face_normals, axis=0)
     normal /= max(float(np.linalg.norm(normal)), 1e-12)
     on_face = face_normals @ normal >= np.cos(np.radians(config.seams.max_normal_deg))
     if on_face.sum() < 50:
         return None
-    cloud = points[usable][on_face].astype(np.float64)
+    cloud = points.reshape(-1, 3)[usable][on_face].astype(np.float64)
     centred = cloud - cloud.mean(axis=0)
     # A box's face is flat: a can's side or a bottle's is not.
     if float(np.percentile(np.abs(centred @ normal), 90)) > config.seams.max_bend_m:
@@ -399,9 +404,8 @@ def _search_segment(
 
 def _unrepeated(
     found: list[_Seam],
-    mask: np.ndarray,
-    points: np.ndarray,
-    depth_m: np.ndarray,
+    cloud: np.ndarray,
+    flat: list[bool],
     config: PerceptionConfig,
     sizes: _Sizes | None = None,
 ) -> list[_Seam]:
@@ -412,10 +416,9 @@ def _unrepeated(
     two boxes, or one box with a printed line through its middle) is kept only when it meets
     a seam that repeats between seams (a grid of packed boxes), or when both its strips have
     one of the (longer, shorter) face sizes ``sizes`` ((M, 2), m) of boxes seen elsewhere in
-    the frame, within ``seams.size_tolerance_m``."""
-    usable = mask & (depth_m > 0)
-    cloud = points[usable].astype(np.float64)
-    kept = [seam for seam in found if _flat_strips(seam, cloud, config)]
+    the frame, within ``seams.size_tolerance_m``. ``cloud`` (N, 3): the segment's points with
+    depth (world, m); ``flat``: whether each seam's strips are flat (``_flat_strips``)."""
+    kept = [seam for seam, is_flat in zip(found, flat, strict=True) if is_flat]
     while True:
         bound = [_repeated(seam, kept, cloud, config) for seam in kept]
         in_row = [seam for seam, (by, _) in zip(kept, bound, strict=True) if by == _BY_SEAM]
