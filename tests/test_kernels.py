@@ -732,3 +732,12 @@ def test_line_stretches_match_the_numpy_chord_stretch_and_outline():
         np.testing.assert_array_equal(cols[bounds[k] : bounds[k + 1]], expected[3])
         found += expected[0] > 0
     assert found > 20
+
+
+def test_mean_at_is_the_numpy_mean_of_the_gathered_rows():
+    rng = np.random.default_rng(7)
+    values = rng.normal(size=(30, 40, 3)).astype(np.float32)
+    for count in (1, 20, 333):
+        rows, cols = rng.integers(0, 30, count), rng.integers(0, 40, count)
+        expected = values[rows, cols].astype(np.float64).mean(axis=0)
+        assert np.array_equal(kernels.mean_at(values, rows, cols), expected)

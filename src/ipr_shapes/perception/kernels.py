@@ -1499,3 +1499,15 @@ def line_stretches(
                 break
         reaches[k] = both
     return lengths, reaches, out_rows[:total].copy(), out_cols[:total].copy(), bounds
+
+
+@_jit
+def mean_at(values: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """(3,) float64 mean of the (H, W, 3) ``values`` at the pixels (rows, cols) ((N,) int64,
+    N > 0): ``values[rows, cols].astype(np.float64).mean(axis=0)`` without the gathered copy
+    (numpy sums the rows in order along axis 0, as here)."""
+    total = np.zeros(3)
+    for i in range(rows.shape[0]):
+        for axis in range(3):
+            total[axis] += np.float64(values[rows[i], cols[i], axis])
+    return total / rows.shape[0]

@@ -749,19 +749,17 @@ def _coplanar_sides(
         float(near),
         float(far),
     )
-    sides = []
-    for chosen in bands:
-        if len(chosen) < 20:
-            return None
-        at_rows, at_cols = yy[chosen], xx[chosen]
-        mean = normals[at_rows, at_cols].astype(np.float64).mean(axis=0)
-        sides.append((mean / max(np.linalg.norm(mean), 1e-12), points[at_rows, at_cols]))
-    (normal_a, points_a), (normal_b, points_b) = sides
+    if len(bands[0]) < 20 or len(bands[1]) < 20:
+        return None
+    normal_a, normal_b = (kernels.mean_at(normals, yy[chosen], xx[chosen]) for chosen in bands)
+    normal_a /= max(np.linalg.norm(normal_a), 1e-12)
+    normal_b /= max(np.linalg.norm(normal_b), 1e-12)
     cos_angle = float(np.clip(normal_a @ normal_b, -1.0, 1.0))
     if np.degrees(np.arccos(cos_angle)) > config.seams.max_normal_deg:
         return None
     normal = normal_a + normal_b
     normal /= max(np.linalg.norm(normal), 1e-12)
+    points_a, points_b = (points[yy[chosen], xx[chosen]] for chosen in bands)
     step = abs(float(np.median(points_a @ normal) - np.median(points_b @ normal)))
     return normal if step <= config.seams.max_step_m else None
 
@@ -800,11 +798,12 @@ def _split(
     sizes = np.bincount(pieces.ravel())[1:]
     largest = np.argsort(sizes)[::-1][:2] + 1
     masks = [pieces == piece for piece in largest]
-    # Areas first: cheaper than the radii, and either failing is a None.
-    for inside in masks:
+    # Areas first, then the widths, the smaller piece first each time: cheaper, and the one
+    # that fails when either does (a sliver cut off the outline); either failing is a None.
+    for inside in masks[::-1]:
         if _area_m2(inside, sub_depth, focal_px) < config.seams.min_area_m2:
             return None
-    for inside in masks:
+    for inside in masks[::-1]:
         box = _window(inside, sub.shape)
         # Each piece's largest inscribed radius: the seam and the outside bound every piece
         # (``distance_transform_edt(pieces > 0)[inside].max()``, the root of an integer).
