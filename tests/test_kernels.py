@@ -741,3 +741,19 @@ def test_mean_at_is_the_numpy_mean_of_the_gathered_rows():
         rows, cols = rng.integers(0, 30, count), rng.integers(0, 40, count)
         expected = values[rows, cols].astype(np.float64).mean(axis=0)
         assert np.array_equal(kernels.mean_at(values, rows, cols), expected)
+
+
+def test_hough_votes_are_the_numpy_bincount():
+    rng = np.random.default_rng(8)
+    directions, spread, reach = 180, 10, 120
+    angles = np.linspace(0.0, np.pi, directions, endpoint=False)
+    cos_a, sin_a = np.cos(angles), np.sin(angles)
+    rows, cols = rng.integers(0, 80, 500), rng.integers(0, 90, 500)
+    own = rng.integers(0, directions + 1, 500)  # directions itself: a direction of pi
+    a = (own[None, :] + np.arange(-spread, spread + 1)[:, None]) % directions
+    rho = np.round(cols * cos_a[a] + rows * sin_a[a]).astype(np.int64) + reach
+    expected = np.bincount(
+        (a * (2 * reach + 1) + rho).ravel(), minlength=directions * (2 * reach + 1)
+    )
+    votes = kernels.hough_votes(rows, cols, own, spread, cos_a, sin_a, reach)
+    assert np.array_equal(votes, expected)

@@ -1511,3 +1511,29 @@ def mean_at(values: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarra
         for axis in range(3):
             total[axis] += np.float64(values[rows[i], cols[i], axis])
     return total / rows.shape[0]
+
+
+@_jit
+def hough_votes(
+    rows: np.ndarray,
+    cols: np.ndarray,
+    own: np.ndarray,
+    spread: int,
+    cos_a: np.ndarray,
+    sin_a: np.ndarray,
+    reach: int,
+) -> np.ndarray:
+    """Votes (D * (2 reach + 1),) int64 of the lines x cos a + y sin a = rho (direction a of D,
+    rho + reach at a * (2 reach + 1) + rho + reach) through the (N,) pixels (rows, cols), each
+    voting for its own direction index ``own`` +- ``spread`` (modulo D), rho rounded half to
+    even: the seams' ``np.bincount`` of ``np.round(cols * cos_a[a] + rows * sin_a[a])`` over
+    every (pixel, direction) pair, without the (2 spread + 1, N) temporaries."""
+    directions = cos_a.shape[0]
+    width = 2 * reach + 1
+    votes = np.zeros(directions * width, dtype=np.int64)
+    for i in range(rows.shape[0]):
+        for step in range(-spread, spread + 1):
+            a = (own[i] + step) % directions
+            rho = np.int64(np.rint(cols[i] * cos_a[a] + rows[i] * sin_a[a])) + reach
+            votes[a * width + rho] += 1
+    return votes

@@ -614,12 +614,8 @@ def _best_cut(
     reach = int(np.ceil(np.hypot(height, width)))
     own = np.round((direction[rows, cols] % np.pi) / np.pi * _DIRECTIONS).astype(np.int64)
     spread = int(np.ceil(_VOTE_SPREAD_DEG / 180.0 * _DIRECTIONS))
-    # Every pixel's votes for its own direction +- spread, counted at once.
-    a = (own[None, :] + np.arange(-spread, spread + 1)[:, None]) % _DIRECTIONS
-    rho = np.round(cols * cos_a[a] + rows * sin_a[a]).astype(np.int64) + reach
-    votes = np.bincount(
-        (a * (2 * reach + 1) + rho).ravel(), minlength=_DIRECTIONS * (2 * reach + 1)
-    )
+    # Every pixel's votes for its own direction +- spread.
+    votes = kernels.hough_votes(rows, cols, own, spread, cos_a, sin_a, reach)
     # Each candidate's densest stretch first (cheap), then the checks from the longest down:
     # the first that passes them all is the best.
     # The _CANDIDATES lines with most votes, at least 20; equal votes in the order of
