@@ -268,7 +268,8 @@ def _face_size(
     None for fewer than 50 such points, or a face
     that is not a flat rectangle (90 % of the points within ``seams.max_bend_m`` of its plane;
     its extent across each axis at 10, 50 and 90 % along it at least 1 -
-    ``seams.strip_tolerance`` of the whole)."""
+    ``seams.strip_tolerance`` of the whole). A face of more than ``_FACE_POINTS`` pixels is
+    measured on every k-th of them."""
     usable = np.flatnonzero(piece & measured)
     if len(usable) < 50:
         return None
@@ -713,7 +714,7 @@ def _straight_seam(
 
 
 def _coplanar_sides(
-    part_pixels: tuple[np.ndarray, np.ndarray, np.ndarray],
+    part_pixels: tuple[np.ndarray, np.ndarray],
     shape: tuple[int, int],
     rows: np.ndarray,
     cols: np.ndarray,
@@ -726,9 +727,9 @@ def _coplanar_sides(
 ) -> np.ndarray | None:
     """The surfaces' unit normal (3,) when the surfaces along both sides of the seam
     (``_SIDE_BAND_PX`` away, within its extent) have one normal (``seams.max_normal_deg``) and
-    no step (``seams.max_step_m``), else None. ``part_pixels``: the (rows, cols) of the part's
-    pixels with a normal, in row-major order, and the (rows, cols) pair's
-    ``x cos a + y sin a`` is measured for those alone (not for the crop ``shape``'s box)."""
+    no step (``seams.max_step_m``), else None. ``part_pixels``: the (rows, cols) (int64, in
+    the crop of ``shape``) of the part's pixels with a normal, row-major: the bands are chosen
+    among them (``kernels.seam_side_bands``), not among every pixel of the seam's box."""
     near, far = _SIDE_BAND_PX
     top, bottom = max(rows.min() - far, 0), min(rows.max() + far + 1, shape[0])
     left, right = max(cols.min() - far, 0), min(cols.max() + far + 1, shape[1])
