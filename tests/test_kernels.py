@@ -580,3 +580,180 @@ def test_distinct_per_slice_is_each_slice_unique():
         np.testing.assert_array_equal(
             distinct[bounds[k] : bounds[k + 1]], np.unique(part[part >= 0])
         )
+
+
+def test_largest_inscribed_squared_is_the_square_of_scipys_distance_transform():
+    """Exact: the kernel's integer is the square whose root scipy's largest distance is."""
+    from scipy.ndimage import binary_dilation, distance_transform_edt
+
+    rng = np.random.default_rng(3)
+    for trial in range(400):
+        height, width = rng.integers(1, 40, 2)
+        occupied = rng.random((height, width)) < rng.uniform(0.3, 1.0)
+        if trial % 2:
+            occupied = binary_dilation(occupied, iterations=3)
+        inside = occupied & (rng.random((height, width)) < 0.5)
+        squared = kernels.largest_inscribed_squared(inside, occupied)
+        if occupied.all() or not inside.any():
+            assert squared == -1
+        else:
+            assert np.sqrt(float(squared)) == distance_transform_edt(occupied)[inside].max()
+
+
+def test_seam_side_bands_are_the_numpy_masks():
+    rng = np.random.default_rng(4)
+    rows, cols = np.nonzero(rng.random((60, 80)) < 0.7)
+    for _ in range(50):
+        angle = rng.uniform(0.0, np.pi)
+        cos_a, sin_a = float(np.cos(angle)), float(np.sin(angle))
+        rho = float(rng.integers(-40, 90))
+        box = np.sort(rng.integers(0, 80, 4).reshape(2, 2), axis=1).ravel()
+        along_range = np.sort(rng.uniform(-80.0, 80.0, 2))
+        side_a, side_b = kernels.seam_side_bands(
+            rows, cols, box, cos_a, sin_a, rho, along_range, 2.0, 10.0
+        )
+        in_box = (rows >= box[0]) & (rows < box[1]) & (cols >= box[2]) & (cols < box[3])
+        across = cols * cos_a + rows * sin_a - rho
+        along = -cols * sin_a + rows * cos_a
+        usable = in_box & (along >= along_range[0]) & (along <= along_range[1])
+        for sign, side in ((1.0, side_a), (-1.0, side_b)):
+            chosen = usable & (sign * across >= 2.0) & (sign * across <= 10.0)
+            assert np.array_equal(side, np.flatnonzero(chosen))
+
+
+def test_colour_gradient_is_bit_identical_to_scipys_filters():
+    """Gaussian (sigma 1) then Sobel per channel with scipy, the strongest channel picked by
+    argmax: the kernel gives the same float32 bits, borders included."""
+    from scipy import ndimage
+
+    weights = ndimage.gaussian_filter1d(np.eye(1, 9, 4)[0], 1.0, truncate=4.0, mode="constant")
+    rng = np.random.default_rng(5)
+    for height, width in ((5, 5), (7, 12), (40, 31)):
+        rgb = rng.integers(0, 256, (height, width, 3)).astype(np.uint8)
+        rgb[: height // 2] = rgb[: height // 2] // 64 * 64  # flat patches: ties between channels
+        image = ndimage.gaussian_filter(rgb.astype(np.float32) / 255.0, sigma=(1.0, 1.0, 0.0))
+        gx = np.stack([ndimage.sobel(image[..., c], axis=1) for c in range(3)], axis=-1)
+        gy = np.stack([ndimage.sobel(image[..., c], axis=0) for c in range(3)], axis=-1)
+        strongest = np.argmax(gx**2 + gy**2, axis=2)[..., None]
+        best_x, best_y = kernels.colour_gradient(rgb, weights)
+        assert np.array_equal(best_x, np.take_along_axis(gx, strongest, axis=2)[..., 0])
+        assert np.array_equal(best_y, np.take_along_axis(gy, strongest, axis=2)[..., 0])
+
+
+def _reference_chord(
+    part: np.ndarray, cos_a: float, sin_a: float, rho: float, window: tuple[slice, slice]
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """(rows, cols) of the pixels of ``part`` on the line x cos a + y sin a = rho, in order
+    along it (one pixel per step along its longer image axis), stepping only through
+    ``window`` (a box that holds all of ``part``)."""
+    height, width = part.shape
+    if abs(sin_a) > abs(cos_a):
+        cols = np.arange(window[1].start, window[1].stop)
+        rows = np.round((rho - cols * cos_a) / sin_a).astype(np.int64)
+    else:
+        rows = np.arange(window[0].start, window[0].stop)
+        cols = np.round((rho - rows * sin_a) / cos_a).astype(np.int64)
+    inside = (rows >= 0) & (rows < height) & (cols >= 0) & (cols < width)
+    rows, cols = rows[inside], cols[inside]
+    on = part[rows, cols]
+    if on.sum() < 20:
+        return None
+    return rows[on], cols[on]
+
+
+def _reference_reaches_outline(part: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> bool:
+    """Whether the stretch (pixels in order along a line) ends at the outline of ``part`` at
+    both ends: within 3 px beyond each end, along the line, lies a pixel outside it (a stretch
+    that stops inside cannot cut)."""
+    height, width = part.shape
+    length = max(len(rows) - 1, 1)
+    # Per-pixel direction along the stretch (one pixel along its longer axis).
+    d_row = (rows[-1] - rows[0]) / length
+    d_col = (cols[-1] - cols[0]) / length
+    for end, sign in ((0, -1.0), (len(rows) - 1, 1.0)):
+        outside = False
+        for k in (1, 2, 3):
+            r = int(round(rows[end] + sign * k * d_row))
+            c = int(round(cols[end] + sign * k * d_col))
+            if not (0 <= r < height and 0 <= c < width) or not part[r, c]:
+                outside = True
+                break
+        if not outside:
+            return False
+    return True
+
+
+def _reference_densest_stretch(on_edge: np.ndarray, density: float) -> tuple[int, int]:
+    """The longest [start, stop) of ``on_edge`` (bool, (n,)) whose mean is at least
+    ``density``: with prefix sums s of (on_edge - density), the longest b - a with
+    s[b] >= s[a]; the prefix minima are non-increasing, so each b finds its first such a by
+    bisection (the first longest wins)."""
+    prefix = np.concatenate([[0.0], np.cumsum(on_edge.astype(np.float64) - density)])
+    lowest = np.minimum.accumulate(prefix)
+    begins = np.searchsorted(-lowest, -prefix[1:], side="left")
+    lengths = np.arange(1, len(on_edge) + 1) - begins
+    end = int(np.argmax(lengths))
+    if lengths[end] <= 0:
+        return 0, 0
+    return int(begins[end]), end + 1
+
+
+def test_line_stretches_match_the_numpy_chord_stretch_and_outline():
+    """Bit for bit: each candidate line's chord, densest stretch and outline test as the seams'
+    numpy functions gave them one line at a time."""
+    rng = np.random.default_rng(6)
+    yy, xx = np.mgrid[0:70, 0:90]
+    part = ((yy - 35) ** 2 / 30.0**2 + (xx - 45) ** 2 / 40.0**2 < 1.0) | (
+        (yy > 5) & (yy < 30) & (xx > 10) & (xx < 50)
+    )
+    near_edge = rng.random(part.shape) < 0.8
+    near_edge[:, 40:43] = True
+    window = (slice(3, 68), slice(2, 88))
+    angles = rng.uniform(0.0, np.pi, 200)
+    angles[:4] = (0.0, np.pi / 2, np.pi / 4, 3 * np.pi / 4)
+    cos_a, sin_a = np.cos(angles), np.sin(angles)
+    rho = rng.integers(-60, 110, 200).astype(np.float64)
+    rho[:2] = (41.0, 30.0)
+    lengths, reaches, rows, cols, bounds = kernels.line_stretches(
+        part, near_edge, np.array([3, 68, 2, 88]), cos_a, sin_a, rho, 0.75, 20
+    )
+    found = 0
+    for k in range(len(rho)):
+        expected = (0, False, np.empty(0), np.empty(0))
+        line = _reference_chord(part, cos_a[k], sin_a[k], int(rho[k]), window)
+        if line is not None:
+            start, stop = _reference_densest_stretch(near_edge[line[0], line[1]], 0.75)
+            if stop - start >= 20:
+                run = line[0][start:stop], line[1][start:stop]
+                expected = (stop - start, _reference_reaches_outline(part, *run), *run)
+        assert lengths[k] == expected[0]
+        assert bool(reaches[k]) == expected[1]
+        np.testing.assert_array_equal(rows[bounds[k] : bounds[k + 1]], expected[2])
+        np.testing.assert_array_equal(cols[bounds[k] : bounds[k + 1]], expected[3])
+        found += expected[0] > 0
+    assert found > 20
+
+
+def test_mean_at_is_the_numpy_mean_of_the_gathered_rows():
+    rng = np.random.default_rng(7)
+    values = rng.normal(size=(30, 40, 3)).astype(np.float32)
+    for count in (1, 20, 333):
+        rows, cols = rng.integers(0, 30, count), rng.integers(0, 40, count)
+        expected = values[rows, cols].astype(np.float64).mean(axis=0)
+        assert np.array_equal(kernels.mean_at(values, rows, cols), expected)
+
+
+def test_hough_votes_are_the_numpy_bincount():
+    rng = np.random.default_rng(8)
+    directions, spread, reach = 180, 10, 120
+    angles = np.linspace(0.0, np.pi, directions, endpoint=False)
+    cos_a, sin_a = np.cos(angles), np.sin(angles)
+    rows, cols = rng.integers(0, 80, 500), rng.integers(0, 90, 500)
+    own = rng.integers(0, directions + 1, 500)  # directions itself: a direction of pi
+    a = (own[None, :] + np.arange(-spread, spread + 1)[:, None]) % directions
+    rho = np.round(cols * cos_a[a] + rows * sin_a[a]).astype(np.int64) + reach
+    expected = np.bincount(
+        (a * (2 * reach + 1) + rho).ravel(), minlength=directions * (2 * reach + 1)
+    )
+    votes = kernels.hough_votes(rows, cols, own, spread, cos_a, sin_a, reach)
+    assert np.array_equal(votes, expected)

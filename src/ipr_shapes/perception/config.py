@@ -480,8 +480,10 @@ class SeamsConfig:
     (``ipr_shapes.perception.seams``): packed boxes of one height whose coplanar tops the convexity
     graph cannot tell apart.
 
-    Off by default for its time (0.15-0.3 s of CPU per tabletop frame), not its accuracy: on
-    the development sets it changes no scene (docs/experiments/2026-11-26-packed-boxes.md).
+    Off by default for its time, not its accuracy: on the development sets it changes no scene
+    (docs/experiments/2026-11-26-packed-boxes.md), but with it on the perception costs 1.4-1.9
+    times as much CPU per tabletop frame and about 4 times per bin frame (about 680 ms on a
+    loaded machine; docs/experiments/2026-11-26-seams-speed.md), against a 150 ms budget.
     Turn it on for packed boxes (bin picking).
 
     Attributes:

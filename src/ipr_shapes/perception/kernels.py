@@ -1178,3 +1178,385 @@ def count_key_states(
         if 0 <= i < nx and 0 <= j < ny and 0 <= k < nz and state[i, j, k] == value:
             count += 1
     return count
+
+
+@_jit
+def largest_inscribed_squared(inside: np.ndarray, occupied: np.ndarray) -> int:
+    """The largest squared Euclidean distance (px^2, exact integer) from a pixel of ``inside``
+    to the nearest pixel of the (h, w) bool grid that is not ``occupied``: the square of
+    ``scipy.ndimage.distance_transform_edt(occupied)[inside].max()`` (which is the root of
+    the same integer), -1 when every pixel is occupied or none is inside. Felzenszwalb and
+    Huttenlocher's two passes (column distances, then the lower envelope of parabolas along
+    each row) in integers, the envelope's breakpoints compared as fractions: the seams'
+    ``_split`` asks this once per candidate cut (the width of a piece)."""
+    height, width = inside.shape
+    big = height + width + 1
+    column = np.empty((height, width), dtype=np.int64)
+    any_free = False
+    for c in range(width):
+        last = -1
+        for r in range(height):
+            if not occupied[r, c]:
+                last = r
+                any_free = True
+            column[r, c] = r - last if last >= 0 else big
+        last = -1
+        for r in range(height - 1, -1, -1):
+            if not occupied[r, c]:
+                last = r
+            if last >= 0 and last - r < column[r, c]:
+                column[r, c] = last - r
+    if not any_free:
+        return -1
+    best = -1
+    vertex = np.empty(width, dtype=np.int64)
+    cut_num = np.empty(width + 1, dtype=np.int64)  # breakpoint k: cut_num[k] / cut_den[k]
+    cut_den = np.empty(width + 1, dtype=np.int64)
+    for r in range(height):
+        wanted = False
+        for c in range(width):
+            if inside[r, c]:
+                wanted = True
+                break
+        if not wanted:
+            continue
+        k = -1
+        for q in range(width):
+            if column[r, q] >= big:
+                continue
+            f_q = column[r, q] * column[r, q] + q * q
+            while k >= 0:
+                p = vertex[k]
+                num = f_q - (column[r, p] * column[r, p] + p * p)
+                den = 2 * (q - p)
+                # The new parabola takes over where it is below vertex k's: drop k when that
+                # is at or before vertex k's own start.
+                if k > 0 and num * cut_den[k] <= cut_num[k] * den:
+                    k -= 1
+                else:
+                    break
+            if k < 0:
+                k = 0
+                vertex[0] = q
+            else:
+                p = vertex[k]
+                k += 1
+                vertex[k] = q
+                cut_num[k] = f_q - (column[r, p] * column[r, p] + p * p)
+                cut_den[k] = 2 * (q - p)
+        k_top = k
+        k = 0
+        for c in range(width):
+            while k < k_top and cut_num[k + 1] < c * cut_den[k + 1]:
+                k += 1
+            if inside[r, c]:
+                p = vertex[k]
+                squared = (c - p) * (c - p) + column[r, p] * column[r, p]
+                if squared > best:
+                    best = squared
+    return best
+
+
+@_jit
+def seam_side_bands(
+    rows: np.ndarray,
+    cols: np.ndarray,
+    box: np.ndarray,
+    cos_a: float,
+    sin_a: float,
+    rho: float,
+    along_range: np.ndarray,
+    near: float,
+    far: float,
+):
+    """Positions in (rows, cols) ((N,) int64 pixels, any order kept) of the pixels in the
+    bands beside a seam on the line x cos a + y sin a = rho: inside ``box`` (top, bottom,
+    left, right; half-open), ``along_range`` (lowest, highest) of -x sin a + y cos a, and
+    across = x cos a + y sin a - rho in [near, far] (side one) or in [-far, -near] (side
+    two). The masks of the numpy expressions ``across = xx * cos_a + yy * sin_a - rho`` and
+    ``along = -xx * sin_a + yy * cos_a`` with the same operations in the same order."""
+    n = rows.shape[0]
+    side_a = np.empty(n, dtype=np.int64)
+    side_b = np.empty(n, dtype=np.int64)
+    count_a = 0
+    count_b = 0
+    for i in range(n):
+        y = rows[i]
+        x = cols[i]
+        if y < box[0] or y >= box[1] or x < box[2] or x >= box[3]:
+            continue
+        along = float(-x) * sin_a + float(y) * cos_a
+        if along < along_range[0] or along > along_range[1]:
+            continue
+        across = float(x) * cos_a + float(y) * sin_a - rho
+        if across >= near and across <= far:
+            side_a[count_a] = i
+            count_a += 1
+        elif -across >= near and -across <= far:
+            side_b[count_b] = i
+            count_b += 1
+    return side_a[:count_a].copy(), side_b[:count_b].copy()
+
+
+@_jit
+def _reflected(index: int, length: int) -> int:
+    """``index`` folded into [0, length) as scipy.ndimage's mode "reflect" (d c b a | a b c d),
+    for overshoots up to ``length``."""
+    if index < 0:
+        return -index - 1
+    if index >= length:
+        return 2 * length - index - 1
+    return index
+
+
+@_jit
+def _padded(plane: np.ndarray, rows: int, cols: int) -> np.ndarray:
+    """(H + 2 rows, W + 2 cols) copy of the (H, W) float32 ``plane`` with reflected borders."""
+    height, width = plane.shape
+    out = np.empty((height + 2 * rows, width + 2 * cols), dtype=np.float32)
+    for y in range(height + 2 * rows):
+        source_y = _reflected(y - rows, height)
+        for x in range(width):
+            out[y, x + cols] = plane[source_y, x]
+        for x in range(cols):
+            out[y, x] = plane[source_y, _reflected(x - cols, width)]
+            out[y, width + cols + x] = plane[source_y, _reflected(width + x, width)]
+    return out
+
+
+@_jit
+def colour_gradient(rgb: np.ndarray, weights: np.ndarray):
+    """Sobel x and y components (H, W) float32 of the colour channel whose squared gradient is
+    largest at each pixel (the first of equals), of the (H, W, 3) uint8 image in [0, 1] smoothed
+    by the symmetric (2r + 1,) float64 ``weights`` (a Gaussian's) along columns and rows. The
+    same numbers as ``scipy.ndimage.gaussian_filter(rgb.astype(np.float32) / 255.0, sigma=(s, s,
+    0))`` followed by ``ndimage.sobel`` per channel and ``np.argmax`` of ``gx**2 + gy**2``: each
+    1D pass in scipy's order of operations (``NI_Correlate1D``: the centre tap, then each pair
+    of mirrored taps from the outside in, summed in float64 and stored as float32), borders
+    reflected. Needs H, W > r. One compiled pass per filter instead of numpy's temporaries
+    (the seams' edges, every frame)."""
+    height, width = rgb.shape[0], rgb.shape[1]
+    radius = weights.shape[0] // 2
+    best_x = np.zeros((height, width), dtype=np.float32)
+    best_y = np.zeros((height, width), dtype=np.float32)
+    best = np.zeros((height, width), dtype=np.float32)
+    image = np.empty((height, width), dtype=np.float32)
+    plane = np.empty((height, width), dtype=np.float32)
+    smooth = np.empty((height, width), dtype=np.float32)
+    first = np.empty((height, width), dtype=np.float32)
+    gx = np.empty((height, width), dtype=np.float32)
+    sums = np.empty(width, dtype=np.float64)
+    scale = np.float32(255.0)
+    for channel in range(3):
+        for y in range(height):
+            for x in range(width):
+                image[y, x] = np.float32(rgb[y, x, channel]) / scale
+        # Gaussian along the columns (axis 0), then along the rows (axis 1).
+        # (Each pixel's sum in a row of accumulators: the taps in scipy's order per pixel.)
+        source = _padded(image, radius, 0)
+        for y in range(height):
+            c = y + radius
+            for x in range(width):
+                sums[x] = np.float64(source[c, x]) * weights[radius]
+            for j in range(radius, 0, -1):
+                weight = weights[radius - j]
+                for x in range(width):
+                    sums[x] += (
+                        np.float64(source[c - j, x]) + np.float64(source[c + j, x])
+                    ) * weight
+            for x in range(width):
+                plane[y, x] = np.float32(sums[x])
+        source = _padded(plane, 0, radius)
+        for y in range(height):
+            for x in range(width):
+                sums[x] = np.float64(source[y, x + radius]) * weights[radius]
+            for j in range(radius, 0, -1):
+                weight = weights[radius - j]
+                for x in range(width):
+                    sums[x] += (
+                        np.float64(source[y, x + radius - j])
+                        + np.float64(source[y, x + radius + j])
+                    ) * weight
+            for x in range(width):
+                smooth[y, x] = np.float32(sums[x])
+        source = _padded(smooth, 1, 1)
+        # Sobel x: [-1, 0, 1] along the rows, then [1, 2, 1] along the columns.
+        for y in range(height):
+            for x in range(width):
+                total = np.float64(source[y + 1, x + 1]) * 0.0
+                total += (np.float64(source[y + 1, x]) - np.float64(source[y + 1, x + 2])) * -1.0
+                first[y, x] = np.float32(total)
+        across = _padded(first, 1, 0)
+        for y in range(height):
+            for x in range(width):
+                total = np.float64(across[y + 1, x]) * 2.0
+                total += (np.float64(across[y, x]) + np.float64(across[y + 2, x])) * 1.0
+                gx[y, x] = np.float32(total)
+        # Sobel y: [-1, 0, 1] along the columns, then [1, 2, 1] along the rows.
+        for y in range(height):
+            for x in range(width):
+                total = np.float64(source[y + 1, x + 1]) * 0.0
+                total += (np.float64(source[y, x + 1]) - np.float64(source[y + 2, x + 1])) * -1.0
+                first[y, x] = np.float32(total)
+        across = _padded(first, 0, 1)
+        for y in range(height):
+            for x in range(width):
+                total = np.float64(across[y, x + 1]) * 2.0
+                total += (np.float64(across[y, x]) + np.float64(across[y, x + 2])) * 1.0
+                gy = np.float32(total)
+                square = gx[y, x] * gx[y, x] + gy * gy
+                if channel == 0 or square > best[y, x]:
+                    best[y, x] = square
+                    best_x[y, x] = gx[y, x]
+                    best_y[y, x] = gy
+    return best_x, best_y
+
+
+@_jit
+def line_stretches(
+    part: np.ndarray,
+    near_edge: np.ndarray,
+    window: np.ndarray,
+    cos_a: np.ndarray,
+    sin_a: np.ndarray,
+    rho: np.ndarray,
+    coverage: float,
+    shortest: int,
+):
+    """For K candidate lines x cos a + y sin a = rho ((K,) float64 each) through the (h, w)
+    bool ``part``, the densest stretch of each line's chord (the seams' candidate cuts; the
+    numpy version one line at a time is pinned in ``tests/test_kernels.py``):
+
+    - the chord: the pixels of ``part`` on the line, one per step along its longer image axis
+      through ``window`` (top, bottom, left, right; a box holding all of ``part``), the other
+      coordinate ``np.round((rho - t cos a) / sin a)`` (or with sin and cos swapped); fewer
+      than ``shortest`` pixels: no chord;
+    - its longest run [start, stop) whose share of ``near_edge`` pixels is at least
+      ``coverage`` (the first longest);
+    - whether that run reaches the outline of ``part`` at both ends (a pixel outside it or
+      outside the grid within 3 px beyond each end, stepping along the run).
+
+    Returns ``lengths`` (K,) int64 (stop - start; 0 with no chord or no run), ``reaches``
+    (K,) bool, and the runs' pixels: ``rows``, ``cols`` (total,) int64, line k's at
+    ``bounds[k]:bounds[k + 1]`` ((K + 1,) int64), runs shorter than ``shortest`` left out."""
+    height, width = part.shape
+    count = rho.shape[0]
+    steps = max(window[1] - window[0], window[3] - window[2])
+    chord_rows = np.empty(steps, dtype=np.int64)
+    chord_cols = np.empty(steps, dtype=np.int64)
+    prefix = np.empty(steps + 1, dtype=np.float64)
+    lowest = np.empty(steps + 1, dtype=np.float64)
+    lengths = np.zeros(count, dtype=np.int64)
+    reaches = np.zeros(count, dtype=np.bool_)
+    bounds = np.zeros(count + 1, dtype=np.int64)
+    out_rows = np.empty(count * steps, dtype=np.int64)
+    out_cols = np.empty(count * steps, dtype=np.int64)
+    total = 0
+    for k in range(count):
+        n = 0
+        if abs(sin_a[k]) > abs(cos_a[k]):
+            for col in range(window[2], window[3]):
+                row = np.int64(np.rint((rho[k] - col * cos_a[k]) / sin_a[k]))
+                if 0 <= row < height and 0 <= col < width and part[row, col]:
+                    chord_rows[n] = row
+                    chord_cols[n] = col
+                    n += 1
+        else:
+            for row in range(window[0], window[1]):
+                col = np.int64(np.rint((rho[k] - row * sin_a[k]) / cos_a[k]))
+                if 0 <= row < height and 0 <= col < width and part[row, col]:
+                    chord_rows[n] = row
+                    chord_cols[n] = col
+                    n += 1
+        bounds[k + 1] = total
+        if n < shortest:
+            continue
+        # Densest run: prefix sums of (on edge - coverage), each end's first start at or
+        # below it among the non-increasing prefix minima (bisection).
+        prefix[0] = 0.0
+        lowest[0] = 0.0
+        for i in range(n):
+            on = 1.0 if near_edge[chord_rows[i], chord_cols[i]] else 0.0
+            prefix[i + 1] = prefix[i] + (on - coverage)
+            lowest[i + 1] = min(lowest[i], prefix[i + 1])
+        best_length = 0
+        best_start = 0
+        for b in range(1, n + 1):
+            low, high = 0, n + 1
+            while low < high:  # first j with -lowest[j] >= -prefix[b]
+                middle = (low + high) // 2
+                if -lowest[middle] >= -prefix[b]:
+                    high = middle
+                else:
+                    low = middle + 1
+            if b - low > best_length:
+                best_length = b - low
+                best_start = low
+        if best_length < shortest:
+            continue
+        lengths[k] = best_length
+        start = best_start
+        stop = best_start + best_length
+        for i in range(start, stop):
+            out_rows[total] = chord_rows[i]
+            out_cols[total] = chord_cols[i]
+            total += 1
+        bounds[k + 1] = total
+        # The outline beyond both ends.
+        steps_along = max(stop - start - 1, 1)
+        d_row = (chord_rows[stop - 1] - chord_rows[start]) / steps_along
+        d_col = (chord_cols[stop - 1] - chord_cols[start]) / steps_along
+        both = True
+        for end in range(2):
+            at = start if end == 0 else stop - 1
+            sign = -1.0 if end == 0 else 1.0
+            outside = False
+            for step in range(1, 4):
+                r = np.int64(np.rint(chord_rows[at] + sign * step * d_row))
+                c = np.int64(np.rint(chord_cols[at] + sign * step * d_col))
+                if not (0 <= r < height and 0 <= c < width) or not part[r, c]:
+                    outside = True
+                    break
+            if not outside:
+                both = False
+                break
+        reaches[k] = both
+    return lengths, reaches, out_rows[:total].copy(), out_cols[:total].copy(), bounds
+
+
+@_jit
+def mean_at(values: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """(3,) float64 mean of the (H, W, 3) ``values`` at the pixels (rows, cols) ((N,) int64,
+    N > 0): ``values[rows, cols].astype(np.float64).mean(axis=0)`` without the gathered copy
+    (numpy sums the rows in order along axis 0, as here)."""
+    total = np.zeros(3)
+    for i in range(rows.shape[0]):
+        for axis in range(3):
+            total[axis] += np.float64(values[rows[i], cols[i], axis])
+    return total / rows.shape[0]
+
+
+@_jit
+def hough_votes(
+    rows: np.ndarray,
+    cols: np.ndarray,
+    own: np.ndarray,
+    spread: int,
+    cos_a: np.ndarray,
+    sin_a: np.ndarray,
+    reach: int,
+) -> np.ndarray:
+    """Votes (D * (2 reach + 1),) int64 of the lines x cos a + y sin a = rho (direction a of D,
+    rho + reach at a * (2 reach + 1) + rho + reach) through the (N,) pixels (rows, cols), each
+    voting for its own direction index ``own`` +- ``spread`` (modulo D), rho rounded half to
+    even: the seams' ``np.bincount`` of ``np.round(cols * cos_a[a] + rows * sin_a[a])`` over
+    every (pixel, direction) pair, without the (2 spread + 1, N) temporaries."""
+    directions = cos_a.shape[0]
+    width = 2 * reach + 1
+    votes = np.zeros(directions * width, dtype=np.int64)
+    for i in range(rows.shape[0]):
+        for step in range(-spread, spread + 1):
+            a = (own[i] + step) % directions
+            rho = np.int64(np.rint(cols[i] * cos_a[a] + rows[i] * sin_a[a])) + reach
+            votes[a * width + rho] += 1
+    return votes

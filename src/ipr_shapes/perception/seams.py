@@ -46,6 +46,7 @@ import numpy as np
 from scipy import ndimage
 from scipy.spatial import ConvexHull
 
+from ipr_shapes.perception import kernels
 from ipr_shapes.perception.config import PerceptionConfig
 
 #: Hough resolution: line directions per half turn, and the candidates tried per search.
@@ -61,6 +62,13 @@ _MARGIN_PX = 12
 _PARALLEL_DEG = 10.0
 #: How a seam is bounded (``_repeated``).
 _UNBOUNDED, _BY_OUTLINE, _BY_SEAM = 0, 1, 2
+#: Most points of a face whose size is measured (``_face_size``): larger faces are subsampled.
+_FACE_POINTS = 4096
+#: Row and column offsets of a pixel's 3 x 3 neighbourhood.
+_NEIGHBOURS = np.mgrid[-1:2, -1:2].reshape(2, -1)
+#: The colour gradient's smoothing: scipy's Gaussian of sigma 1 px (truncated at 4 sigma) as
+#: weights, its response to a unit impulse.
+_GAUSSIAN = ndimage.gaussian_filter1d(np.eye(1, 9, 4)[0], 1.0, truncate=4.0, mode="constant")
 
 
 @dataclass(frozen=True)
@@ -102,12 +110,16 @@ def cut_colour_seams(
     segment_pixels = labels > 0
     if not seams.enabled or not segment_pixels.any():
         return out
-    magnitude, direction = _colour_gradient(rgb)
+    magnitude, gx, gy = _colour_gradient(rgb)
     # The frame's own scale, over every pixel with depth: not over the segments, whose
     # share of smooth surfaces depends on what the earlier steps removed (a bin's walls).
     measured = depth_m > 0
     noise = float(np.median(magnitude[measured if measured.any() else segment_pixels]))
-    edges = _thin(magnitude, direction) & (magnitude > seams.edge_factor * max(noise, 1e-6))
+    strong = np.flatnonzero(magnitude > seams.edge_factor * max(noise, 1e-6))
+    # The gradient's direction is used at edge pixels only: measured at the strong ones.
+    direction = np.zeros(magnitude.shape, dtype=magnitude.dtype)
+    direction.flat[strong] = np.arctan2(gy.flat[strong], gx.flat[strong])
+    edges = _thin(magnitude, direction, strong)
     focal_px = float(K[0, 0])
     searched = []
     for segment, box in enumerate(ndimage.find_objects(labels), start=1):
@@ -121,13 +133,20 @@ def cut_colour_seams(
         mask = labels[crop] == segment
         cut, found = _search_segment(mask, edges[crop], direction[crop], points[crop],
                                      normals[crop], depth_m[crop], focal_px, config)  # fmt: skip
-        searched.append((crop, mask, cut, found))
-    decided = [_decide(crop, mask, cut, found, points, depth_m, config) for crop, mask, cut, found
-               in searched]  # fmt: skip
+        # The segment's points with depth, and which seams have flat strips: measured once,
+        # asked by every strip test below.
+        cloud = np.empty((0, 3))
+        if found:
+            cloud = points[crop][mask & (depth_m[crop] > 0)].astype(np.float64)
+        flat = [_flat_strips(seam, cloud, config) for seam in found]
+        searched.append((crop, mask, cut, found, cloud, flat))
+    asked = [_Sizes() for _ in searched]
+    decided = [_decide(cut, found, cloud, flat, config, sizes) for (_, _, cut, found, cloud, flat),
+               sizes in zip(searched, asked, strict=True)]  # fmt: skip
     if seams.pair_needs_grid and seams.pair_sizes:
-        decided = _pairs_by_size(searched, decided, points, normals, depth_m, config)
+        decided = _pairs_by_size(searched, decided, asked, points, normals, depth_m, config)
     next_id = int(labels.max()) + 1
-    for (crop, _, _, _), pieces in zip(searched, decided, strict=True):
+    for (crop, *_), pieces in zip(searched, decided, strict=True):
         view = out[crop]  # writes go to out
         for piece in range(2, int(pieces.max()) + 1):
             view[pieces == piece] = next_id
@@ -136,28 +155,44 @@ def cut_colour_seams(
 
 
 def _decide(
-    crop: tuple[slice, slice],
-    mask: np.ndarray,
     cut: np.ndarray,
     found: list[_Seam],
-    points: np.ndarray,
-    depth_m: np.ndarray,
+    cloud: np.ndarray,
+    flat: list[bool],
     config: PerceptionConfig,
-    sizes: np.ndarray | None = None,
+    sizes: _Sizes | None = None,
 ) -> np.ndarray:
     """(h, w) int pieces of one segment's crop with the cuts that fail the strip tests undone
-    (``_unrepeated``; ``sizes``: see there)."""
+    (``_unrepeated``: ``cloud``, ``flat`` and ``sizes`` see there)."""
     if config.seams.strip_tolerance >= 1.0:
         return cut
     pieces = cut
-    for seam in _unrepeated(found, mask, points[crop], depth_m[crop], config, sizes):
+    for seam in _unrepeated(found, cloud, flat, config, sizes):
         pieces = _undo(pieces, seam)
     return pieces
+
+
+class _Sizes:
+    """The (M, 2) face sizes (longer, shorter; m) of boxes seen elsewhere in the frame, made by
+    ``make`` on first use (None: no sizes), and whether they were asked for: a segment whose
+    strip tests never asked is decided without them (``_pairs_by_size``)."""
+
+    def __init__(self, make=None) -> None:
+        self._make = make
+        self._sizes: np.ndarray | None = None
+        self.asked = False
+
+    def get(self) -> np.ndarray | None:
+        self.asked = True
+        if self._make is not None and self._sizes is None:
+            self._sizes = self._make()
+        return self._sizes
 
 
 def _pairs_by_size(
     searched: list,
     decided: list[np.ndarray],
+    asked: list[_Sizes],
     points: np.ndarray,
     normals: np.ndarray,
     depth_m: np.ndarray,
@@ -167,41 +202,53 @@ def _pairs_by_size(
     when its strips have the size of a box seen elsewhere in the frame (another segment or
     piece, ``_face_size``, or a strip of a lone seam of another segment, ``_lone_strips``):
     packed boxes repeat across the frame, a printed line through one box's middle makes halves
-    that nothing else in the frame matches."""
-    faces = []
-    for index, ((crop, _, _, _), pieces) in enumerate(zip(searched, decided, strict=True)):
-        for piece in range(1, int(pieces.max()) + 1):
-            size = _face_size(pieces == piece, points[crop], normals[crop], depth_m[crop], config)
-            if size is not None:
-                faces.append((index, size))
-    for index, (crop, mask, _, found) in enumerate(searched):
-        faces.extend((index, size) for size in _lone_strips(found, mask, points[crop],
-                                                             depth_m[crop], config))  # fmt: skip
+    that nothing else in the frame matches. Only segments whose first tests asked for sizes
+    (``asked``) are run again (the others' tests go the same way), and the frame's faces are
+    measured only when one of them asks."""
+    faces: list[tuple[int, tuple[float, float]]] = []
+    done = []
+
+    def frame_faces() -> list[tuple[int, tuple[float, float]]]:
+        if not done:
+            done.append(True)
+            measured = (depth_m > 0) & np.any(normals != 0, axis=2)
+            for index, ((crop, *_), pieces) in enumerate(zip(searched, decided, strict=True)):
+                for piece in range(1, int(pieces.max()) + 1):
+                    size = _face_size(pieces == piece, measured[crop], points[crop],
+                                      normals[crop], config)  # fmt: skip
+                    if size is not None:
+                        faces.append((index, size))
+            for index, (_, _, _, found, cloud, flat) in enumerate(searched):
+                faces.extend((index, size) for size in _lone_strips(found, cloud, flat, config))
+        return faces
+
     result = []
-    for index, ((crop, mask, cut, found), pieces) in enumerate(zip(searched, decided, strict=True)):
-        others = np.array([size for owner, size in faces if owner != index]).reshape(-1, 2)
-        if len(found) == 0 or len(others) == 0:
+    for index, ((_, _, cut, found, cloud, flat), pieces) in enumerate(
+        zip(searched, decided, strict=True)
+    ):
+        if len(found) == 0 or not asked[index].asked:
             result.append(pieces)
             continue
-        result.append(_decide(crop, mask, cut, found, points, depth_m, config, others))
+
+        def others(index: int = index) -> np.ndarray:
+            return np.array([size for owner, size in frame_faces() if owner != index]).reshape(
+                -1, 2
+            )
+
+        result.append(_decide(cut, found, cloud, flat, config, _Sizes(others)))
     return result
 
 
 def _lone_strips(
-    found: list[_Seam],
-    mask: np.ndarray,
-    points: np.ndarray,
-    depth_m: np.ndarray,
-    config: PerceptionConfig,
+    found: list[_Seam], cloud: np.ndarray, flat: list[bool], config: PerceptionConfig
 ) -> list[tuple[float, float]]:
     """(longer, shorter) sizes (m) of the strips beside the seams of one segment that have flat
-    strips and lie midway between its outline on both sides (``_repeated`` among no other
-    seams): two pairs of one size in two segments are two boxes each."""
-    usable = mask & (depth_m > 0)
-    cloud = points[usable].astype(np.float64)
+    strips (``flat``, per seam) and lie midway between its outline on both sides
+    (``_repeated`` among no other seams; ``cloud``: the segment's points): two pairs of one
+    size in two segments are two boxes each."""
     sizes = []
-    for seam in found:
-        if not _flat_strips(seam, cloud, config):
+    for seam, is_flat in zip(found, flat, strict=True):
+        if not is_flat:
             continue
         by, widths = _repeated(seam, [], cloud, config)
         if by == _BY_OUTLINE:
@@ -211,26 +258,31 @@ def _lone_strips(
 
 
 def _face_size(
-    piece: np.ndarray, points: np.ndarray, normals: np.ndarray, depth_m: np.ndarray,
+    piece: np.ndarray, measured: np.ndarray, points: np.ndarray, normals: np.ndarray,
     config: PerceptionConfig,
 ) -> tuple[float, float] | None:  # fmt: skip
-    """(longer, shorter) extent (m) of the dominant face of ``piece`` ((h, w) bool): its points
+    """(longer, shorter) extent (m) of the dominant face of ``piece`` ((h, w) bool; ``measured``
+    (h, w) bool: pixels with depth and a normal): its points
     whose normals lie within ``seams.max_normal_deg`` of their median normal, 2nd to 98th
     percentile along the axes of its smallest enclosing rectangle (a hull edge's direction);
     None for fewer than 50 such points, or a face
     that is not a flat rectangle (90 % of the points within ``seams.max_bend_m`` of its plane;
     its extent across each axis at 10, 50 and 90 % along it at least 1 -
-    ``seams.strip_tolerance`` of the whole)."""
-    usable = piece & (depth_m > 0) & np.any(normals != 0, axis=2)
-    if usable.sum() < 50:
+    ``seams.strip_tolerance`` of the whole). A face of more than ``_FACE_POINTS`` pixels is
+    measured on every k-th of them."""
+    usable = np.flatnonzero(piece & measured)
+    if len(usable) < 50:
         return None
-    face_normals = normals[usable].astype(np.float64)
+    # A large face's every k-th pixel: its percentiles move by far less than the sizes'
+    # tolerance, and the time of the rectangle search goes with the points.
+    usable = usable[:: -(-len(usable) // _FACE_POINTS)]
+    face_normals = normals.reshape(-1, 3)[usable].astype(np.float64)
     normal = np.median(face_normals, axis=0)
     normal /= max(float(np.linalg.norm(normal)), 1e-12)
     on_face = face_normals @ normal >= np.cos(np.radians(config.seams.max_normal_deg))
     if on_face.sum() < 50:
         return None
-    cloud = points[usable][on_face].astype(np.float64)
+    cloud = points.reshape(-1, 3)[usable][on_face].astype(np.float64)
     centred = cloud - cloud.mean(axis=0)
     # A box's face is flat: a can's side or a bottle's is not.
     if float(np.percentile(np.abs(centred @ normal), 90)) > config.seams.max_bend_m:
@@ -242,14 +294,19 @@ def _face_size(
     # square's principal axes are any two).
     hull = plane[ConvexHull(plane).vertices]
     edges = np.roll(hull, -1, axis=0) - hull
+    angles = np.unique(np.round(np.arctan2(edges[:, 1], edges[:, 0]) % (np.pi / 2), 3))
+    coords = [
+        plane @ np.array([[np.cos(angle), np.sin(angle)], [-np.sin(angle), np.cos(angle)]]).T
+        for angle in angles
+    ]
+    # Every direction's percentiles in one call (column by column, as one call each).
+    lows, highs = np.percentile(np.concatenate(coords, axis=1), [2, 98], axis=0)
     best = None
-    for angle in np.unique(np.round(np.arctan2(edges[:, 1], edges[:, 0]) % (np.pi / 2), 3)):
-        axes = np.array([[np.cos(angle), np.sin(angle)], [-np.sin(angle), np.cos(angle)]])
-        coords = plane @ axes.T
-        low, high = np.percentile(coords, 2, axis=0), np.percentile(coords, 98, axis=0)
+    for index in range(len(angles)):
+        low, high = lows[2 * index : 2 * index + 2], highs[2 * index : 2 * index + 2]
         area = float(np.prod(high - low))
         if best is None or area < best[0]:
-            best = (area, coords, low, high)
+            best = (area, coords[index], low, high)
     _, coords, low, high = best
     extent = high - low
     # And a rectangle: as wide near its ends as in its middle (a can's top is a disc).
@@ -267,30 +324,48 @@ def _face_size(
     return float(extent.max()), float(extent.min())
 
 
-def _colour_gradient(rgb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(H, W) gradient magnitude and direction (rad) of the colour channel that changes most
-    at each pixel (RGB in [0, 1], Gaussian sigma 1 px, Sobel)."""
+def _colour_gradient(rgb: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(H, W) float32 gradient magnitude and its x and y components (Sobel, per pixel of
+    RGB in [0, 1] smoothed by a Gaussian of sigma 1 px) of the colour channel that changes
+    most at each pixel (the first of equals). Compiled (``kernels.colour_gradient``, the same
+    numbers as the scipy filters below, which remain for images narrower than the kernel)."""
+    if min(rgb.shape[0], rgb.shape[1]) > len(_GAUSSIAN) // 2:
+        gx, gy = kernels.colour_gradient(rgb, _GAUSSIAN)
+        return np.hypot(gx, gy), gx, gy
     image = ndimage.gaussian_filter(rgb.astype(np.float32) / 255.0, sigma=(1.0, 1.0, 0.0))
-    gx = np.stack([ndimage.sobel(image[..., c], axis=1) for c in range(3)], axis=-1)
-    gy = np.stack([ndimage.sobel(image[..., c], axis=0) for c in range(3)], axis=-1)
-    strongest = np.argmax(gx**2 + gy**2, axis=2)[..., None]
-    gx = np.take_along_axis(gx, strongest, axis=2)[..., 0]
-    gy = np.take_along_axis(gy, strongest, axis=2)[..., 0]
-    return np.hypot(gx, gy), np.arctan2(gy, gx)
+    # ndimage.sobel per channel, all three channels in one pass along each axis.
+    gx = ndimage.correlate1d(image, [-1, 0, 1], axis=1, output=np.float32)
+    ndimage.correlate1d(gx, [1, 2, 1], axis=0, output=gx)
+    gy = ndimage.correlate1d(image, [-1, 0, 1], axis=0, output=np.float32)
+    ndimage.correlate1d(gy, [1, 2, 1], axis=1, output=gy)
+    square = gx**2 + gy**2
+    best_x, best_y, best = gx[..., 0], gy[..., 0], square[..., 0]
+    for channel in (1, 2):
+        larger = square[..., channel] > best  # argmax: the first of equals
+        best = np.where(larger, square[..., channel], best)
+        best_x = np.where(larger, gx[..., channel], best_x)
+        best_y = np.where(larger, gy[..., channel], best_y)
+    return np.hypot(best_x, best_y), best_x, best_y
 
 
-def _thin(magnitude: np.ndarray, direction: np.ndarray) -> np.ndarray:
-    """(H, W) bool: pixels whose gradient magnitude is a maximum across the edge (Canny's
-    non-maximum suppression, directions quantised to 45 degrees)."""
-    sector = (np.round(direction / (np.pi / 4)) % 4).astype(np.int8)
-    padded = np.pad(magnitude, 1)
+def _thin(magnitude: np.ndarray, direction: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """(H, W) bool: of the pixels ``at`` (flat indices), those whose gradient magnitude is a
+    maximum across the edge (Canny's non-maximum suppression, directions quantised to 45
+    degrees)."""
     height, width = magnitude.shape
-    keep = np.zeros(magnitude.shape, dtype=bool)
+    sector = (np.round(direction.flat[at] / (np.pi / 4)) % 4).astype(np.int8)
+    padded = np.pad(magnitude, 1)
+    rows, cols = np.divmod(at, width)
+    rows, cols = rows + 1, cols + 1
+    value = magnitude.flat[at]
+    keep = np.zeros(len(at), dtype=bool)
     for index, (dy, dx) in enumerate(((0, 1), (1, 1), (1, 0), (1, -1))):
-        ahead = padded[1 + dy : 1 + dy + height, 1 + dx : 1 + dx + width]
-        behind = padded[1 - dy : 1 - dy + height, 1 - dx : 1 - dx + width]
-        keep |= (sector == index) & (magnitude >= ahead) & (magnitude >= behind)
-    return keep
+        ahead = padded[rows + dy, cols + dx]
+        behind = padded[rows - dy, cols - dx]
+        keep |= (sector == index) & (value >= ahead) & (value >= behind)
+    edges = np.zeros(magnitude.shape, dtype=bool)
+    edges.flat[at[keep]] = True
+    return edges
 
 
 def _search_segment(
@@ -308,6 +383,7 @@ def _search_segment(
     pieces searched again)."""
     pieces = mask.astype(np.int32)
     near_edge = ndimage.binary_dilation(edges, np.ones((3, 3), dtype=bool))
+    has_normal = np.any(normals != 0, axis=2)
     queue = [1]
     found: list[_Seam] = []
     while queue and len(found) < config.seams.max_cuts:
@@ -315,8 +391,8 @@ def _search_segment(
         part = pieces == piece
         if _area_m2(part, depth_m, focal_px) < 2 * config.seams.min_area_m2:
             continue
-        cut = _best_cut(part, edges, near_edge, direction, points, normals, depth_m,
-                        focal_px, config)  # fmt: skip
+        cut = _best_cut(part, edges, near_edge, direction, points, normals, has_normal,
+                        depth_m, focal_px, config)  # fmt: skip
         if cut is None:
             continue
         side, seam = cut
@@ -329,11 +405,10 @@ def _search_segment(
 
 def _unrepeated(
     found: list[_Seam],
-    mask: np.ndarray,
-    points: np.ndarray,
-    depth_m: np.ndarray,
+    cloud: np.ndarray,
+    flat: list[bool],
     config: PerceptionConfig,
-    sizes: np.ndarray | None = None,
+    sizes: _Sizes | None = None,
 ) -> list[_Seam]:
     """The seams of one segment whose strips are not flat (``_flat_strips``) or that do not
     repeat (``_repeated``). Repetition is judged among the seams still kept, until no more
@@ -342,10 +417,9 @@ def _unrepeated(
     two boxes, or one box with a printed line through its middle) is kept only when it meets
     a seam that repeats between seams (a grid of packed boxes), or when both its strips have
     one of the (longer, shorter) face sizes ``sizes`` ((M, 2), m) of boxes seen elsewhere in
-    the frame, within ``seams.size_tolerance_m``."""
-    usable = mask & (depth_m > 0)
-    cloud = points[usable].astype(np.float64)
-    kept = [seam for seam in found if _flat_strips(seam, cloud, config)]
+    the frame, within ``seams.size_tolerance_m``. ``cloud`` (N, 3): the segment's points with
+    depth (world, m); ``flat``: whether each seam's strips are flat (``_flat_strips``)."""
+    kept = [seam for seam, is_flat in zip(found, flat, strict=True) if is_flat]
     while True:
         bound = [_repeated(seam, kept, cloud, config) for seam in kept]
         in_row = [seam for seam, (by, _) in zip(kept, bound, strict=True) if by == _BY_SEAM]
@@ -369,11 +443,14 @@ def _unrepeated(
 
 
 def _sized_like(
-    seam: _Seam, widths: tuple[float, float], sizes: np.ndarray | None, config: PerceptionConfig
+    seam: _Seam, widths: tuple[float, float], sizes: _Sizes | None, config: PerceptionConfig
 ) -> bool:
     """Whether both strips beside ``seam`` (its length by each of ``widths``, m) match one
     face size of ``sizes`` ((M, 2) longer, shorter; m): each extent within
     ``seams.size_tolerance_m``."""
+    if sizes is None:
+        return False
+    sizes = sizes.get()
     if sizes is None or len(sizes) == 0:
         return False
     length = 2.0 * seam.half_length_m
@@ -514,46 +591,63 @@ def _best_cut(
     direction: np.ndarray,
     points: np.ndarray,
     normals: np.ndarray,
+    has_normal: np.ndarray,
     depth_m: np.ndarray,
     focal_px: float,
     config: PerceptionConfig,
 ) -> tuple[np.ndarray, _Seam] | None:
     """(h, w) bool: the smaller side of the best seam of ``part`` and the seam, or None
-    (module doc)."""
+    (module doc; ``has_normal`` (h, w) bool: pixels whose normal is known)."""
     seams = config.seams
-    inner = ndimage.binary_erosion(part, iterations=2)
-    rows, cols = np.nonzero(edges & inner)
+    # The part's box and a ring: its erosion, edge pixels and chords lie there (coordinates
+    # stay the crop's, so that the votes are the crop's).
+    window = _window(part, part.shape)
+    top_px, left_px = window[0].start, window[1].start
+    inner = ndimage.binary_erosion(part[window], iterations=2)
+    rows, cols = np.nonzero(edges[window] & inner)
     if len(rows) < 20:
         return None
+    rows += top_px
+    cols += left_px
     height, width = part.shape
     angles = np.linspace(0.0, np.pi, _DIRECTIONS, endpoint=False)
     cos_a, sin_a = np.cos(angles), np.sin(angles)
     reach = int(np.ceil(np.hypot(height, width)))
     own = np.round((direction[rows, cols] % np.pi) / np.pi * _DIRECTIONS).astype(np.int64)
     spread = int(np.ceil(_VOTE_SPREAD_DEG / 180.0 * _DIRECTIONS))
-    votes = np.zeros(_DIRECTIONS * (2 * reach + 1), dtype=np.int64)
-    for step in range(-spread, spread + 1):
-        a = (own + step) % _DIRECTIONS
-        rho = np.round(cols * cos_a[a] + rows * sin_a[a]).astype(np.int64) + reach
-        votes += np.bincount(a * (2 * reach + 1) + rho, minlength=votes.size)
+    # Every pixel's votes for its own direction +- spread.
+    votes = kernels.hough_votes(rows, cols, own, spread, cos_a, sin_a, reach)
     # Each candidate's densest stretch first (cheap), then the checks from the longest down:
     # the first that passes them all is the best.
-    stretches = []
-    top = np.argpartition(votes, -_CANDIDATES)[-_CANDIDATES:]
-    for flat in top[np.argsort(-votes[top], kind="stable")]:
-        if votes[flat] < 20:
-            break
-        a, rho = divmod(int(flat), 2 * reach + 1)
-        rho -= reach
-        line = _chord(part, cos_a[a], sin_a[a], rho)
-        if line is None:
-            continue
-        start, stop = _densest_stretch(near_edge[line[0], line[1]], seams.coverage)
-        if stop - start >= 20:
-            stretches.append((stop - start, a, rho, line[0][start:stop], line[1][start:stop]))
+    # The _CANDIDATES lines with most votes, at least 20; equal votes in the order of
+    # (direction, offset).
+    lines = np.flatnonzero(votes >= 20)
+    lines = lines[np.argsort(-votes[lines], kind="stable")][:_CANDIDATES]
+    line_a, line_rho = np.divmod(lines, 2 * reach + 1)
+    line_rho -= reach
+    # Each line's chord through the part, its densest stretch and whether that reaches the
+    # outline at both ends (one compiled pass over all lines).
+    lengths, reaches, stretch_rows, stretch_cols, bounds = kernels.line_stretches(
+        part,
+        near_edge,
+        np.array([window[0].start, window[0].stop, window[1].start, window[1].stop]),
+        cos_a[line_a],
+        sin_a[line_a],
+        line_rho.astype(np.float64),
+        float(seams.coverage),
+        20,
+    )
+    stretches = [
+        (int(lengths[k]), int(line_a[k]), int(line_rho[k]), bool(reaches[k]),
+         stretch_rows[bounds[k] : bounds[k + 1]], stretch_cols[bounds[k] : bounds[k + 1]])
+        for k in np.flatnonzero(lengths)
+    ]  # fmt: skip
     stretches.sort(key=lambda item: -item[0])  # stable: ties keep the vote order
-    for _, a, rho, line_rows, line_cols in stretches:
-        if not _reaches_outline(part, line_rows, line_cols):
+    # The part's pixels with a normal, row-major (the side bands' pixels are among them).
+    part_rows, part_cols = np.nonzero(part[window] & has_normal[window])
+    part_pixels = (part_rows + top_px, part_cols + left_px)
+    for _, a, rho, reaches_outline, line_rows, line_cols in stretches:
+        if not reaches_outline:
             continue
         # Its length between its outermost pixels with depth (label images fill dropouts).
         measured = np.flatnonzero(depth_m[line_rows, line_cols] > 0)
@@ -563,8 +657,8 @@ def _best_cut(
         ends_3d = points[line_rows[ends], line_cols[ends]]
         if np.linalg.norm(ends_3d[0] - ends_3d[1]) < seams.min_length_m:
             continue
-        normal = _coplanar_sides(part, line_rows, line_cols, cos_a[a], sin_a[a], rho, points,
-                                 normals, config)  # fmt: skip
+        normal = _coplanar_sides(part_pixels, part.shape, line_rows, line_cols, cos_a[a],
+                                 sin_a[a], rho, points, normals, config)  # fmt: skip
         if normal is None:
             continue
         seam = _straight_seam(line_rows[measured], line_cols[measured], points, normal,
@@ -619,65 +713,9 @@ def _straight_seam(
     )
 
 
-def _chord(
-    part: np.ndarray, cos_a: float, sin_a: float, rho: float
-) -> tuple[np.ndarray, np.ndarray] | None:
-    """(rows, cols) of the pixels of ``part`` on the line x cos a + y sin a = rho, in order
-    along it (one pixel per step along its longer image axis)."""
-    height, width = part.shape
-    if abs(sin_a) > abs(cos_a):
-        cols = np.arange(width)
-        rows = np.round((rho - cols * cos_a) / sin_a).astype(np.int64)
-    else:
-        rows = np.arange(height)
-        cols = np.round((rho - rows * sin_a) / cos_a).astype(np.int64)
-    inside = (rows >= 0) & (rows < height) & (cols >= 0) & (cols < width)
-    rows, cols = rows[inside], cols[inside]
-    on = part[rows, cols]
-    if on.sum() < 20:
-        return None
-    return rows[on], cols[on]
-
-
-def _reaches_outline(part: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> bool:
-    """Whether the stretch (pixels in order along a line) ends at the outline of ``part`` at
-    both ends: within 3 px beyond each end, along the line, lies a pixel outside it (a stretch
-    that stops inside cannot cut)."""
-    height, width = part.shape
-    length = max(len(rows) - 1, 1)
-    # Per-pixel direction along the stretch (one pixel along its longer axis).
-    d_row = (rows[-1] - rows[0]) / length
-    d_col = (cols[-1] - cols[0]) / length
-    for end, sign in ((0, -1.0), (len(rows) - 1, 1.0)):
-        outside = False
-        for k in (1, 2, 3):
-            r = int(round(rows[end] + sign * k * d_row))
-            c = int(round(cols[end] + sign * k * d_col))
-            if not (0 <= r < height and 0 <= c < width) or not part[r, c]:
-                outside = True
-                break
-        if not outside:
-            return False
-    return True
-
-
-def _densest_stretch(on_edge: np.ndarray, density: float) -> tuple[int, int]:
-    """The longest [start, stop) of ``on_edge`` (bool, (n,)) whose mean is at least
-    ``density``: with prefix sums s of (on_edge - density), the longest b - a with
-    s[b] >= s[a]; the prefix minima are non-increasing, so each b finds its first such a by
-    bisection (the first longest wins)."""
-    prefix = np.concatenate([[0.0], np.cumsum(on_edge.astype(np.float64) - density)])
-    lowest = np.minimum.accumulate(prefix)
-    begins = np.searchsorted(-lowest, -prefix[1:], side="left")
-    lengths = np.arange(1, len(on_edge) + 1) - begins
-    end = int(np.argmax(lengths))
-    if lengths[end] <= 0:
-        return 0, 0
-    return int(begins[end]), end + 1
-
-
 def _coplanar_sides(
-    part: np.ndarray,
+    part_pixels: tuple[np.ndarray, np.ndarray],
+    shape: tuple[int, int],
     rows: np.ndarray,
     cols: np.ndarray,
     cos_a: float,
@@ -689,36 +727,36 @@ def _coplanar_sides(
 ) -> np.ndarray | None:
     """The surfaces' unit normal (3,) when the surfaces along both sides of the seam
     (``_SIDE_BAND_PX`` away, within its extent) have one normal (``seams.max_normal_deg``) and
-    no step (``seams.max_step_m``), else None."""
+    no step (``seams.max_step_m``), else None. ``part_pixels``: the (rows, cols) (int64, in
+    the crop of ``shape``) of the part's pixels with a normal, row-major: the bands are chosen
+    among them (``kernels.seam_side_bands``), not among every pixel of the seam's box."""
     near, far = _SIDE_BAND_PX
-    top, bottom = max(rows.min() - far, 0), min(rows.max() + far + 1, part.shape[0])
-    left, right = max(cols.min() - far, 0), min(cols.max() + far + 1, part.shape[1])
-    yy, xx = np.mgrid[top:bottom, left:right]
-    across = xx * cos_a + yy * sin_a - rho
-    along = -xx * sin_a + yy * cos_a
+    top, bottom = max(rows.min() - far, 0), min(rows.max() + far + 1, shape[0])
+    left, right = max(cols.min() - far, 0), min(cols.max() + far + 1, shape[1])
+    yy, xx = part_pixels
     seam_along = -cols * sin_a + rows * cos_a
-    box_normals = normals[top:bottom, left:right]
-    usable = (
-        part[top:bottom, left:right]
-        & (along >= seam_along.min())
-        & (along <= seam_along.max())
-        & np.any(box_normals != 0, axis=2)
+    bands = kernels.seam_side_bands(
+        yy,
+        xx,
+        np.array([top, bottom, left, right], dtype=np.int64),
+        float(cos_a),
+        float(sin_a),
+        float(rho),
+        np.array([seam_along.min(), seam_along.max()]),
+        float(near),
+        float(far),
     )
-    sides = []
-    for sign in (1.0, -1.0):
-        chosen = usable & (sign * across >= near) & (sign * across <= far)
-        if chosen.sum() < 20:
-            return None
-        mean = box_normals[chosen].astype(np.float64).mean(axis=0)
-        sides.append(
-            (mean / max(np.linalg.norm(mean), 1e-12), points[top:bottom, left:right][chosen])
-        )
-    (normal_a, points_a), (normal_b, points_b) = sides
+    if len(bands[0]) < 20 or len(bands[1]) < 20:
+        return None
+    normal_a, normal_b = (kernels.mean_at(normals, yy[chosen], xx[chosen]) for chosen in bands)
+    normal_a /= max(np.linalg.norm(normal_a), 1e-12)
+    normal_b /= max(np.linalg.norm(normal_b), 1e-12)
     cos_angle = float(np.clip(normal_a @ normal_b, -1.0, 1.0))
     if np.degrees(np.arccos(cos_angle)) > config.seams.max_normal_deg:
         return None
     normal = normal_a + normal_b
     normal /= max(np.linalg.norm(normal), 1e-12)
+    points_a, points_b = (points[yy[chosen], xx[chosen]] for chosen in bands)
     step = abs(float(np.median(points_a @ normal) - np.median(points_b @ normal)))
     return normal if step <= config.seams.max_step_m else None
 
@@ -733,32 +771,63 @@ def _split(
 ) -> np.ndarray | None:
     """(h, w) bool: the second-largest piece left when the seam (3 px wide) is removed from
     ``part``, with the seam and crumbs given to the nearest of the two largest pieces; None
-    when the seam does not cut ``part`` into two pieces large and wide enough."""
-    seam = np.zeros(part.shape, dtype=bool)
+    when the seam does not cut ``part`` into two pieces large and wide enough.
+
+    All of it is computed inside ``part``'s bounding box and a 1 px ring around it, each
+    piece's inscribed radius inside its own box and ring (``_window``): the nearest pixel
+    outside a 4-connected piece lies there (straight along a row or a column from any of its
+    pixels), so the figures are those of the whole crop at a fraction of the pixels."""
     height, width = part.shape
-    for dy in (-1, 0, 1):
-        for dx in (-1, 0, 1):
-            seam[np.clip(rows + dy, 0, height - 1), np.clip(cols + dx, 0, width - 1)] = True
-    seam &= part
-    pieces, count = ndimage.label(part & ~seam)
+    window = _window(part, part.shape)
+    top, left = window[0].start, window[1].start
+    sub = part[window]
+    sub_depth = depth_m[window]
+    seam = np.zeros(sub.shape, dtype=bool)
+    # The seam's 3 x 3 neighbourhood, clipped to the crop as a whole, kept inside the window.
+    r = np.clip(rows[:, None] + _NEIGHBOURS[0], 0, height - 1) - top
+    c = np.clip(cols[:, None] + _NEIGHBOURS[1], 0, width - 1) - left
+    inside = (r >= 0) & (r < sub.shape[0]) & (c >= 0) & (c < sub.shape[1])
+    seam[r[inside], c[inside]] = True
+    seam &= sub
+    pieces, count = ndimage.label(sub & ~seam)
     if count < 2:
         return None
     sizes = np.bincount(pieces.ravel())[1:]
     largest = np.argsort(sizes)[::-1][:2] + 1
-    # Each piece's largest inscribed radius: the seam and the outside bound every piece.
-    inscribed = ndimage.distance_transform_edt(pieces > 0)
-    for piece in largest:
-        inside = pieces == piece
-        if _area_m2(inside, depth_m, focal_px) < config.seams.min_area_m2:
+    masks = [pieces == piece for piece in largest]
+    # Areas first, then the widths, the smaller piece first each time: cheaper, and the one
+    # that fails when either does (a sliver cut off the outline); either failing is a None.
+    for inside in masks[::-1]:
+        if _area_m2(inside, sub_depth, focal_px) < config.seams.min_area_m2:
             return None
-        depths = depth_m[inside]
+    for inside in masks[::-1]:
+        box = _window(inside, sub.shape)
+        # Each piece's largest inscribed radius: the seam and the outside bound every piece
+        # (``distance_transform_edt(pieces > 0)[inside].max()``, the root of an integer).
+        squared = kernels.largest_inscribed_squared(inside[box], pieces[box] > 0)
+        if squared < 0:
+            squared = ndimage.distance_transform_edt(pieces[box] > 0)[inside[box]].max() ** 2
+        depths = sub_depth[inside]
         depths = depths[depths > 0]
-        radius_px = float(inscribed[inside].max())
+        radius_px = float(np.sqrt(float(squared)))
         if 2.0 * radius_px * float(np.median(depths)) / focal_px < config.seams.min_width_m:
             return None
-    two = np.where(pieces == largest[0], 1, np.where(pieces == largest[1], 2, 0))
+    two = np.where(masks[0], 1, np.where(masks[1], 2, 0))
     nearest = ndimage.distance_transform_edt(two == 0, return_distances=False, return_indices=True)
-    return part & (two[nearest[0], nearest[1]] == 2)
+    side = np.zeros(part.shape, dtype=bool)
+    side[window] = sub & (two[nearest[0], nearest[1]] == 2)
+    return side
+
+
+def _window(mask: np.ndarray, shape: tuple[int, int]) -> tuple[slice, slice]:
+    """The bounding box of ``mask`` ((h, w) bool, not empty) and a 1 px ring, within
+    ``shape``."""
+    rows = np.flatnonzero(mask.any(axis=1))
+    cols = np.flatnonzero(mask.any(axis=0))
+    return (
+        slice(max(int(rows[0]) - 1, 0), min(int(rows[-1]) + 2, shape[0])),
+        slice(max(int(cols[0]) - 1, 0), min(int(cols[-1]) + 2, shape[1])),
+    )
 
 
 def _area_m2(part: np.ndarray, depth_m: np.ndarray, focal_px: float) -> float:

@@ -32,11 +32,7 @@ from ipr_shapes.perception.curvature import join_curved_segments, smooth_concave
 from ipr_shapes.perception.planes import find_support_plane, find_walls, static_geometry_mask
 from ipr_shapes.perception.robot import robot_pixels
 from ipr_shapes.perception.seams import cut_colour_seams
-from ipr_shapes.perception.supervoxels import (
-    compute_supervoxels,
-    organised_normals,
-    organised_normals_at,
-)
+from ipr_shapes.perception.supervoxels import compute_supervoxels, organised_normals_at
 from ipr_shapes.perception.temporal import (
     SupervoxelChange,
     compare_frames,
@@ -207,7 +203,13 @@ def _cut_seams(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Labels cut along colour seams (``ipr_shapes.perception.seams``), renumbered 1..k by decreasing
     size, and each supervoxel's segment (the one holding most of its pixels)."""
-    normals = organised_normals(frame.depth_m, frame.K, config)
+    # The seams read normals at labelled pixels only: computed there, 0 elsewhere (each
+    # pixel's normal is its own neighbours', the same as ``organised_normals`` gives it).
+    normals = np.zeros((*labels.shape, 3), dtype=np.float32)
+    labelled = np.flatnonzero((labels.reshape(-1) > 0) & (frame.depth_m.reshape(-1) > 0))
+    normals.reshape(-1, 3)[labelled] = organised_normals_at(
+        frame.depth_m, frame.K, labelled, config
+    )
     normals = normals @ frame.world_from_camera[:3, :3].T.astype(np.float32)
     cut = cut_colour_seams(labels, frame.rgb, points, normals, frame.depth_m, frame.K, config)
     sizes = np.bincount(cut.ravel())
