@@ -174,12 +174,15 @@ def perceive(scene: Scene, config: Config, progress: ProgressCallback | None = N
 
 def _kernel_cache_marker() -> Path | None:
     """The file saying that the numba kernels (``ipr_shapes.geometry.kernels``,
-    ``ipr_shapes.perception.kernels``) were compiled into numba's cache folder for their present
+    ``ipr_shapes.perception.kernels``, ``ipr_shapes.hypotheses.kernels``,
+    ``ipr_shapes.voxel_kernels``) were compiled into numba's cache folder for their present
     source, this numba and this Python; None when that folder is unknown (e.g. JIT disabled)."""
     try:
         import numba
 
+        from ipr_shapes import voxel_kernels
         from ipr_shapes.geometry import kernels as geometry_kernels
+        from ipr_shapes.hypotheses import kernels as hypothesis_kernels
         from ipr_shapes.perception import kernels as perception_kernels
 
         folder = next(
@@ -188,7 +191,7 @@ def _kernel_cache_marker() -> Path | None:
             if getattr(getattr(value, "_cache", None), "_cache_path", None)
         )
         digest = hashlib.sha256(f"{numba.__version__} {sys.version}".encode())
-        for module in (geometry_kernels, perception_kernels):
+        for module in (geometry_kernels, perception_kernels, hypothesis_kernels, voxel_kernels):
             digest.update(Path(module.__file__).read_bytes())
         return folder / f"ipr-kernels-{digest.hexdigest()[:16]}.compiled"
     except Exception:  # numba's internals moved, or no cache: say nothing rather than fail
@@ -196,7 +199,7 @@ def _kernel_cache_marker() -> Path | None:
 
 
 def kernel_cache_cold() -> bool:
-    """Whether the next perception will compile the numba kernels first (25-35 s, once after
+    """Whether the next run will compile the numba kernels first (tens of seconds, once after
     installing or changing them): no perception has finished since their source, numba or
     Python changed, or their cache folder was cleared. One file test."""
     marker = _kernel_cache_marker()
