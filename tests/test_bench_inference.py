@@ -22,6 +22,7 @@ def scene(tmp_path_factory) -> Path:
     return Path(path)
 
 
+@pytest.mark.slow  # several seconds: keeps `make test` under 3 minutes on 2 cores
 def test_the_best_hypothesis_ceiling_finds_the_true_shape_among_the_hypotheses(scene, tmp_path):
     truth = load_result(write_ground_truth_result(scene, tmp_path / "truth"))
     assert len(truth.objects) >= 2

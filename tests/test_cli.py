@@ -376,6 +376,7 @@ def test_up_option_is_documented(command: str, capsys):
     assert "--up X Y Z" in text and "up direction in camera coordinates" in text
 
 
+@pytest.mark.slow  # several seconds: keeps `make test` under 3 minutes on 2 cores
 def test_gravity_that_cannot_be_determined_is_said_clearly(tmp_path: Path):
     """No camera pose and no plane in frame 0: one line naming the frame and both fixes, a
     non-zero exit and no output."""

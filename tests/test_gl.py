@@ -73,6 +73,7 @@ def _run(env_changes: dict[str, str | None]) -> dict:
     return json.loads(completed.stdout.strip().splitlines()[-1])
 
 
+@pytest.mark.slow  # several seconds: keeps `make test` under 3 minutes on 2 cores
 def test_importing_ipr_leaves_the_environment_alone_and_rendering_still_works():
     outcome = _run({"MUJOCO_GL": None, "PYOPENGL_PLATFORM": None})
     assert outcome["changed_by_import"] == {}
