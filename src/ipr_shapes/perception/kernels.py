@@ -1454,20 +1454,18 @@ def line_stretches(
     total = 0
     for k in range(count):
         n = 0
-        if abs(sin_a[k]) > abs(cos_a[k]):
-            for col in range(window[2], window[3]):
-                row = np.int64(np.rint((rho[k] - col * cos_a[k]) / sin_a[k]))
-                if 0 <= row < height and 0 <= col < width and part[row, col]:
-                    chord_rows[n] = row
-                    chord_cols[n] = col
-                    n += 1
-        else:
-            for row in range(window[0], window[1]):
-                col = np.int64(np.rint((rho[k] - row * sin_a[k]) / cos_a[k]))
-                if 0 <= row < height and 0 <= col < width and part[row, col]:
-                    chord_rows[n] = row
-                    chord_cols[n] = col
-                    n += 1
+        # One pixel per column of a steep line, per row of a flat one.
+        steep = abs(sin_a[k]) > abs(cos_a[k])
+        first, last = (window[2], window[3]) if steep else (window[0], window[1])
+        for t in range(first, last):
+            if steep:
+                row, col = np.int64(np.rint((rho[k] - t * cos_a[k]) / sin_a[k])), np.int64(t)
+            else:
+                row, col = np.int64(t), np.int64(np.rint((rho[k] - t * sin_a[k]) / cos_a[k]))
+            if 0 <= row < height and 0 <= col < width and part[row, col]:
+                chord_rows[n] = row
+                chord_cols[n] = col
+                n += 1
         bounds[k + 1] = total
         if n < shortest:
             continue
