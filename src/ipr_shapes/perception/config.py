@@ -355,6 +355,17 @@ class SegmentationConfig:
             (a chair's seat at the table's height beyond it is another region).
         label_fill_px: pixels without depth take the label of the nearest pixel with depth up
             to this distance (px; edge dropout, small holes); 0 = no filling.
+        fragment_area_m2: a segment smaller than this (m^2, its pixels' footprints facing the
+            camera) joins the neighbour its surface continues into
+            (``ipr_shapes.perception.fragments``); 0: off.
+        fragment_contact_share: ... when the pixel pairs along which the two surfaces meet
+            are at least this share of the small segment's outline.
+        fragment_gap_m: two neighbouring pixels whose world points are closer than this (m)
+            lie on one continuing surface.
+        fragment_bend_deg: ... and the surface normals of their supervoxels differ by at most
+            this (deg): a surface running on, not two objects meeting at a crease.
+        fragment_colour: ... and the two segments' mean chromaticities are at most this far
+            apart (as ``curved_segment_colour``).
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -380,6 +391,11 @@ class SegmentationConfig:
         "workspace_share": _SHARE,
         "workspace_margin_m": _NON_NEGATIVE,
         "workspace_cell_m": _POSITIVE,
+        "fragment_area_m2": _NON_NEGATIVE,
+        "fragment_contact_share": _SHARE,
+        "fragment_gap_m": _NON_NEGATIVE,
+        "fragment_colour": _NON_NEGATIVE,
+        "fragment_bend_deg": _ANGLE,
     }
 
     concavity_tolerance_deg: float = 10.0
@@ -406,6 +422,11 @@ class SegmentationConfig:
     workspace_share: float = 0.5
     workspace_margin_m: float = 0.02
     workspace_cell_m: float = 0.02
+    fragment_area_m2: float = 0.0016
+    fragment_contact_share: float = 0.5
+    fragment_gap_m: float = 0.01
+    fragment_colour: float = 0.04
+    fragment_bend_deg: float = 45.0
 
     def __post_init__(self) -> None:
         check_fields(self)

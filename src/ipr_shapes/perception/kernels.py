@@ -1558,3 +1558,71 @@ def hough_votes(
             rho = np.int64(np.rint(cols[i] * cos_a[a] + rows[i] * sin_a[a])) + reach
             votes[a * width + rho] += 1
     return votes
+
+
+@_jit
+def fragment_borders(
+    labels: np.ndarray,
+    points: np.ndarray,
+    depth_m: np.ndarray,
+    rgb: np.ndarray,
+    supervoxel_labels: np.ndarray,
+    supervoxel_normals: np.ndarray,
+    gap_m: float,
+    min_cos: float,
+    pixel_area: float,
+    n_labels: int,
+):
+    """One pass over a (H, W) label image for ``fragments.join_fragments``.
+
+    ``points`` (H, W, 3) world (m); ``depth_m`` (H, W), 0 = no reading; ``rgb`` (H, W, 3);
+    ``supervoxel_labels`` (H, W), -1 = none, indexing (M, 3) ``supervoxel_normals``;
+    ``pixel_area`` = 1 / (fx fy). Returns (L,) float64 areas (sum of depth^2 x
+    ``pixel_area`` over a label's pixels with depth, m^2), (L, 3) float64 colour sums over all
+    its pixels, and (L, L) int64 ``outline`` and ``continuous`` counts at [min(a, b), max(a, b)]
+    of 4-neighbour pixel pairs with labels a != b, both with depth: every such pair, and those
+    with both labels > 0 whose points are closer than ``gap_m`` and whose supervoxels' normals
+    (a pixel of none counts as (0, 0, 0)) have a cosine of at least ``min_cos``. Replaces the
+    numpy ``np.bincount`` of areas and colours and the masked pair counts of
+    ``fragments._pair_counts``."""
+    height, width = labels.shape
+    area = np.zeros(n_labels)
+    colour = np.zeros((n_labels, 3))
+    outline = np.zeros((n_labels, n_labels), dtype=np.int64)
+    continuous = np.zeros((n_labels, n_labels), dtype=np.int64)
+    for row in range(height):
+        for col in range(width):
+            a = labels[row, col]
+            for channel in range(3):
+                colour[a, channel] += rgb[row, col, channel]
+            if depth_m[row, col] <= 0:
+                continue
+            area[a] += float(depth_m[row, col]) ** 2 * pixel_area
+            for direction in range(2):
+                r = row + (1 if direction == 1 else 0)
+                c = col + (1 if direction == 0 else 0)
+                if r >= height or c >= width or depth_m[r, c] <= 0:
+                    continue
+                b = labels[r, c]
+                if a == b:
+                    continue
+                low, high = min(a, b), max(a, b)
+                outline[low, high] += 1
+                if low <= 0:
+                    continue
+                dx = points[row, col, 0] - points[r, c, 0]
+                dy = points[row, col, 1] - points[r, c, 1]
+                dz = points[row, col, 2] - points[r, c, 2]
+                if np.sqrt(dx * dx + dy * dy + dz * dz) >= gap_m:
+                    continue
+                s, t = supervoxel_labels[row, col], supervoxel_labels[r, c]
+                cosine = 0.0
+                if s >= 0 and t >= 0:
+                    cosine = (
+                        supervoxel_normals[s, 0] * supervoxel_normals[t, 0]
+                        + supervoxel_normals[s, 1] * supervoxel_normals[t, 1]
+                        + supervoxel_normals[s, 2] * supervoxel_normals[t, 2]
+                    )
+                if cosine >= min_cos:
+                    continuous[low, high] += 1
+    return area, colour, outline, continuous

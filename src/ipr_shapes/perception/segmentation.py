@@ -9,6 +9,12 @@ Steps, as in the paper:
 4. cluster it by spectral clustering: normalised Laplacian, number of objects from the
    eigengap, k-means on the row-normalised eigenvectors (``cluster_supervoxels``).
 
+Then, beyond the paper, for real sensors: segments meeting along a smoothly curved concave
+surface are joined (``curvature.py``), support residue and clutter beyond the table dropped
+(``workspace.py``), open containers' insides joined to them (``containers.py``), small fragments
+joined to the surface they continue (``fragments.py``) and, opt-in, packed boxes cut at colour
+seams (``seams.py``).
+
 Each connected component of the graph is clustered on its own: components are objects or piles
 that touch nothing else, so clustering them separately is both faster (small eigenproblems) and
 more robust (the eigengap of one pile is not mixed with another's).
@@ -29,6 +35,7 @@ from ipr_shapes.perception import kernels
 from ipr_shapes.perception.config import PerceptionConfig
 from ipr_shapes.perception.containers import join_container_insides
 from ipr_shapes.perception.curvature import join_curved_segments, smooth_concave_edges
+from ipr_shapes.perception.fragments import join_fragments
 from ipr_shapes.perception.planes import find_support_plane, find_walls, static_geometry_mask
 from ipr_shapes.perception.robot import robot_pixels
 from ipr_shapes.perception.seams import cut_colour_seams
@@ -187,6 +194,16 @@ def segment_frame(
         frame.depth_m,
         frame.rgb,
         support,
+        config,
+    )
+    labels, segment_of_supervoxel = join_fragments(
+        labels,
+        segment_of_supervoxel,
+        points,
+        frame.depth_m,
+        frame.K,
+        frame.rgb,
+        supervoxels,
         config,
     )
     if config.seams.enabled:

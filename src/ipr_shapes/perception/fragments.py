@@ -1,0 +1,111 @@
+"""Fragments of one surface joined to the segment they continue.
+
+On real sensors the convexity graph leaves small pieces of curved objects as segments of their
+own: slivers along a bowl's rim, a patch of a mug's ribbed side, a corner of a pouch. Each such
+fragment shares a long stretch of its outline with one neighbouring segment along which the
+surface runs on without a depth step, while an object, however small, is bounded by depth steps
+(it stands in front of what is behind it) or touches its neighbours along a short contact.
+A segment smaller than ``segmentation.fragment_area_m2`` is joined to the neighbour along which
+its surface continues, when that continuation is at least ``segmentation.fragment_contact_share``
+of its outline (docs/DESIGN_NOTES.md, "Fragments of curved surfaces joined by their outline").
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ipr_shapes.perception import kernels
+from ipr_shapes.perception.config import PerceptionConfig
+from ipr_shapes.perception.types import Supervoxels
+
+
+def join_fragments(
+    labels: np.ndarray,
+    segment_of_supervoxel: np.ndarray,
+    points: np.ndarray,
+    depth_m: np.ndarray,
+    K: np.ndarray,
+    rgb: np.ndarray,
+    supervoxels: Supervoxels,
+    config: PerceptionConfig,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Join small segments to the neighbour their surface continues into.
+
+    Smallest first, a segment whose area (its pixels' footprints facing the camera, m^2) is
+    under ``segmentation.fragment_area_m2`` joins the neighbouring segment with which it shares
+    the most continuous pixel pairs (world points closer than ``fragment_gap_m``, their
+    supervoxels' normals within ``fragment_bend_deg``: the surface runs on), when those are
+    at least ``fragment_contact_share`` of its outline (its pixel pairs with any other label,
+    the support and background included, both with depth) and the two mean chromaticities are
+    within ``fragment_colour`` (objects packed tightly touch along much of a small one's
+    outline; their colours tell them apart). Joined segments add their areas and
+    outlines, so a fragment of a fragment can join through it. Then renumbered 1..k by
+    decreasing pixel count.
+
+    Args:
+        labels: (H, W) int segment labels, 0 = none; segment_of_supervoxel: (M,) the segment of
+            each supervoxel (relabelled the same way).
+        points: (H, W, 3) world points (m); depth_m: (H, W) depth (m), 0 = no reading;
+        K: (3, 3) camera intrinsics (px); rgb: (H, W, 3) colours; supervoxels: the frame's
+            supervoxels (their normals; ``labels`` (H, W), -1 = none).
+
+    Returns:
+        The relabelled (labels, segment_of_supervoxel); the inputs when nothing is joined.
+    """
+    seg = config.segmentation
+    if seg.fragment_area_m2 <= 0 or labels.max() < 2:
+        return labels, segment_of_supervoxel
+    n = int(labels.max()) + 1
+    area, colour, outline, continuous = kernels.fragment_borders(
+        labels,
+        points,
+        depth_m,
+        rgb,
+        supervoxels.labels,
+        supervoxels.normals.astype(np.float64),
+        float(seg.fragment_gap_m),
+        float(np.cos(np.radians(seg.fragment_bend_deg))),
+        1.0 / (float(K[0, 0]) * float(K[1, 1])),
+        n,
+    )
+    order = [int(s) for s in np.argsort(area, kind="stable") if s > 0 and area[s] > 0]
+    small = [s for s in order if area[s] < seg.fragment_area_m2]
+    if not small:
+        return labels, segment_of_supervoxel
+    # Symmetric counts (label 0 included in the outline, never a partner).
+    outline = outline + outline.T
+    continuous = continuous + continuous.T
+    root = np.arange(n)
+    for piece in small:
+        if area[piece] >= seg.fragment_area_m2:
+            continue  # grown by the fragments joined to it
+        best = int(np.argmax(continuous[piece]))
+        if continuous[piece, best] == 0 or continuous[piece, best] < (
+            seg.fragment_contact_share * outline[piece].sum()
+        ):
+            continue
+        chroma = (
+            colour[[piece, best]] / np.maximum(colour[[piece, best]].sum(axis=1), 1e-9)[:, None]
+        )
+        if np.linalg.norm(chroma[0] - chroma[1]) > seg.fragment_colour:
+            continue
+        root[root == piece] = best
+        for counts in (outline, continuous):
+            counts[best] += counts[piece]
+            counts[:, best] += counts[:, piece]
+            counts[best, best] = 0
+            counts[piece] = 0
+            counts[:, piece] = 0
+        area[best] += area[piece]
+        colour[best] += colour[piece]
+    if np.array_equal(root, np.arange(n)):
+        return labels, segment_of_supervoxel
+    joined = root[labels]
+    sizes = np.bincount(joined.reshape(-1), minlength=n)
+    sizes[0] = 0
+    alive = np.flatnonzero(sizes > 0)
+    new_id = np.zeros(n, dtype=np.int32)
+    new_id[alive[np.argsort(-sizes[alive], kind="stable")]] = np.arange(1, len(alive) + 1)
+    segments = np.asarray(segment_of_supervoxel, dtype=np.int64)
+    relabelled = np.where(segments > 0, new_id[root[np.maximum(segments, 0)]], segments)
+    return new_id[joined].astype(labels.dtype), relabelled.astype(segment_of_supervoxel.dtype)

@@ -1,0 +1,190 @@
+"""Small segments joined to the surface they continue (``ipr_shapes.perception.fragments``)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from ipr_shapes.perception import kernels
+from ipr_shapes.perception.config import PerceptionConfig
+from ipr_shapes.perception.fragments import join_fragments
+from ipr_shapes.perception.types import Supervoxels
+
+K = np.array([[500.0, 0.0, 40.0], [0.0, 500.0, 30.0], [0.0, 0.0, 1.0]])
+HEIGHT, WIDTH = 60, 80
+RGB = np.full((HEIGHT, WIDTH, 3), 120, dtype=np.uint8)
+
+
+def _config(area_m2: float = 3e-4, share: float = 0.3) -> PerceptionConfig:
+    base = PerceptionConfig()
+    return dataclasses.replace(
+        base,
+        segmentation=dataclasses.replace(
+            base.segmentation, fragment_area_m2=area_m2, fragment_contact_share=share
+        ),
+    )
+
+
+def _supervoxels(labels: np.ndarray, normals: np.ndarray | None = None) -> Supervoxels:
+    """One supervoxel per segment (supervoxel i is segment i + 1; a fourth, unused), facing the
+    camera unless ``normals`` (4, 3) says otherwise."""
+    normals = np.tile([0.0, 0.0, -1.0], (4, 1)) if normals is None else normals
+    return Supervoxels(
+        labels - 1, np.zeros((4, 3)), normals, np.zeros((4, 3)), np.ones(4), np.zeros((0, 2))
+    )
+
+
+def _points(depth: np.ndarray) -> np.ndarray:
+    """(H, W, 3) camera-frame points of a (H, W) depth image (the world frame here)."""
+    rows, cols = np.mgrid[:HEIGHT, :WIDTH]
+    x = (cols - K[0, 2]) / K[0, 0] * depth
+    y = (rows - K[1, 2]) / K[1, 1] * depth
+    return np.stack([x, y, depth], axis=-1)
+
+
+def _scene(step_m: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A surface at 0.5 m over the whole frame: segment 1 on the left, a 10 x 10 px segment 2
+    (1 cm^2 at 0.5 m) cut out of its right edge, and segment 3, a 16 px wide band on the
+    right whose surface is ``step_m`` nearer than segment 1's. Background (0) above and below."""
+    labels = np.zeros((HEIGHT, WIDTH), dtype=np.int32)
+    labels[10:50, 0:50] = 1
+    labels[20:30, 40:50] = 2  # inside segment 1's outline: surrounded by it on three sides
+    labels[10:50, 50:66] = 3
+    depth = np.full((HEIGHT, WIDTH), 0.5)
+    depth[:, 50:66] -= step_m
+    depth[labels == 0] = 0.8  # the table below, far behind
+    segment_of_supervoxel = np.array([1, 2, 3, 0], dtype=np.int32)
+    return labels, depth, segment_of_supervoxel
+
+
+def test_a_fragment_joins_the_surface_it_continues_and_labels_are_renumbered():
+    labels, depth, segments = _scene(step_m=0.05)
+    joined, segments_joined = join_fragments(
+        labels, segments, _points(depth), depth, K, RGB, _supervoxels(labels), _config()
+    )
+    # Segment 2 continues segment 1 (no depth step on three of its four sides); segment 3 is
+    # 5 cm in front: it stays, and no label is left unused.
+    assert np.all(joined[20:30, 40:50] == joined[15, 5])
+    assert joined[15, 55] != joined[15, 5]
+    assert sorted(np.unique(joined).tolist()) == [0, 1, 2]
+    assert segments_joined.tolist() == [joined[15, 5], joined[15, 5], joined[15, 55], 0]
+
+
+def test_a_small_object_in_front_of_another_is_kept():
+    labels, depth, segments = _scene(step_m=0.05)
+    depth[labels == 2] -= 0.03  # a small box standing 3 cm in front of segment 1
+    joined, _ = join_fragments(
+        labels, segments, _points(depth), depth, K, RGB, _supervoxels(labels), _config()
+    )
+    assert len(np.unique(joined[joined > 0])) == 3
+
+
+def test_a_short_contact_does_not_join():
+    labels, depth, segments = _scene(step_m=0.0)
+    # Segment 2 (8 x 8 px, small) moved above segment 3, at its depth: they meet along 6 of
+    # segment 2's 32 outline pairs, the rest is background far behind.
+    labels[labels == 2] = 1
+    labels[2:10, 60:68] = 2
+    depth[2:10, 60:68] = 0.5
+    joined, _ = join_fragments(
+        labels, segments, _points(depth), depth, K, RGB, _supervoxels(labels), _config()
+    )
+    assert len(np.unique(joined[joined > 0])) == 3
+
+
+def test_large_segments_and_the_switch_off_are_left_alone():
+    labels, depth, segments = _scene(step_m=0.05)
+    points = _points(depth)
+    for config in (_config(area_m2=0.0), _config(area_m2=0.5e-4)):  # off; 2 is 1 cm^2
+        joined, segments_out = join_fragments(
+            labels, segments, points, depth, K, RGB, _supervoxels(labels), config
+        )
+        assert joined is labels and segments_out is segments
+
+
+@pytest.mark.parametrize("share", [0.5, 0.9])
+def test_the_contact_share_decides(share):
+    labels, depth, segments = _scene(step_m=0.05)
+    # Segment 2 meets segment 1 along 30 of its 40 outline pairs (three sides of ten).
+    joined, _ = join_fragments(
+        labels, segments, _points(depth), depth, K, RGB, _supervoxels(labels), _config(share=share)
+    )
+    assert (len(np.unique(joined[joined > 0])) == 2) == (share <= 0.75)
+
+
+def test_a_touching_piece_of_another_colour_is_kept():
+    labels, depth, segments = _scene(step_m=0.05)
+    rgb = RGB.copy()
+    rgb[labels == 2] = (200, 60, 60)  # a red object packed into segment 1's grey one
+    joined, _ = join_fragments(
+        labels, segments, _points(depth), depth, K, rgb, _supervoxels(labels), _config()
+    )
+    assert len(np.unique(joined[joined > 0])) == 3
+
+
+def test_a_piece_meeting_at_a_crease_is_kept():
+    labels, depth, segments = _scene(step_m=0.05)
+    normals = np.tile([0.0, 0.0, -1.0], (4, 1))
+    normals[1] = [-1.0, 0.0, 0.0]  # segment 2 is a face square to segment 1's
+    joined, _ = join_fragments(
+        labels, segments, _points(depth), depth, K, RGB, _supervoxels(labels, normals), _config()
+    )
+    assert len(np.unique(joined[joined > 0])) == 3
+
+
+def _numpy_borders(labels, points, depth, rgb, sv_labels, sv_normals, gap_m, min_cos, n):
+    """The numpy expression ``kernels.fragment_borders`` replaces."""
+    valid = depth > 0
+    area = np.bincount(labels[valid], weights=depth[valid] ** 2 / (K[0, 0] * K[1, 1]), minlength=n)
+    colour = np.stack(
+        [np.bincount(labels.ravel(), weights=rgb[..., c].ravel(), minlength=n) for c in range(3)],
+        axis=1,
+    )
+    normals = np.append(sv_normals, np.zeros((1, 3)), axis=0)[sv_labels]
+    outline = np.zeros((n, n), dtype=np.int64)
+    continuous = np.zeros((n, n), dtype=np.int64)
+    height, width = labels.shape
+    for d_row, d_col in ((0, 1), (1, 0)):
+        first = (slice(0, height - d_row), slice(0, width - d_col))
+        second = (slice(d_row, height), slice(d_col, width))
+        a, b = labels[first], labels[second]
+        border = valid[first] & valid[second] & (a != b)
+        low, high = np.minimum(a, b)[border], np.maximum(a, b)[border]
+        np.add.at(outline, (low, high), 1)
+        gap = np.linalg.norm(points[first][border] - points[second][border], axis=1)
+        cosine = np.einsum("ij,ij->i", normals[first][border], normals[second][border])
+        keep = (low > 0) & (gap < gap_m) & (cosine >= min_cos)
+        np.add.at(continuous, (low[keep], high[keep]), 1)
+    return area, colour, outline, continuous
+
+
+def test_the_border_kernel_matches_its_numpy_expression():
+    rng = np.random.default_rng(3)
+    labels = rng.integers(0, 6, size=(HEIGHT, WIDTH)).astype(np.int32)
+    labels[:, :40] = np.repeat(rng.integers(0, 6, size=(HEIGHT, 1)), 40, axis=1)  # long runs
+    depth = 0.5 + 0.004 * rng.standard_normal((HEIGHT, WIDTH))
+    depth[rng.random((HEIGHT, WIDTH)) < 0.1] = 0.0
+    rgb = rng.integers(0, 256, size=(HEIGHT, WIDTH, 3)).astype(np.uint8)
+    sv_labels = rng.integers(-1, 9, size=(HEIGHT, WIDTH)).astype(np.int32)
+    sv_normals = rng.standard_normal((9, 3))
+    sv_normals /= np.linalg.norm(sv_normals, axis=1, keepdims=True)
+    points = _points(depth)
+    for gap_m, min_cos in ((0.01, 0.5), (0.003, -1.0), (0.02, 0.9)):
+        got = kernels.fragment_borders(
+            labels,
+            points,
+            depth,
+            rgb,
+            sv_labels,
+            sv_normals,
+            gap_m,
+            min_cos,
+            1.0 / (K[0, 0] * K[1, 1]),
+            6,
+        )
+        want = _numpy_borders(labels, points, depth, rgb, sv_labels, sv_normals, gap_m, min_cos, 6)
+        for g, w in zip(got, want, strict=True):
+            np.testing.assert_allclose(g, w, rtol=1e-12)
+        assert got[3].sum() > 0 and got[3].sum() < got[2].sum()
