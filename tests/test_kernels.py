@@ -463,6 +463,70 @@ def test_wall_slab_kernels_match_the_numpy_masks(use_normals):
     assert 0 < on_plane.sum() < 800 and len(kept) < len(pool)
 
 
+@pytest.mark.parametrize("use_normals", [True, False])
+def test_wall_rim_cap_and_side_kernels_match_the_numpy_masks(use_normals):
+    rng = np.random.default_rng(31)
+    count = 4000
+    depth = rng.uniform(-0.2, 0.2, count)
+    position = rng.uniform(-0.3, 0.5, count)
+    heights = rng.uniform(0.0, 0.3, count)
+    normals_up = rng.uniform(-1.0, 1.0, count)
+    # Values exactly on the bounds, the other tests passed: the comparisons' strictness must
+    # be numpy's.
+    depth[:20], position[:20], heights[:20], normals_up[:20] = 0.01, 0.1, 0.1, 0.99
+    depth[20:40], position[20:40], heights[20:40], normals_up[20:40] = 0.0, 0.0, 0.1, 0.99
+    depth[40:60], position[40:60], heights[40:60], normals_up[40:60] = -0.05, 0.1, 0.075, 0.99
+    up_cos = float(np.cos(np.radians(30.0)))
+    s_lo, s_hi, top = 0.0, 0.3, 0.09
+    heights[40:60] = top - 0.015
+    rim = kernels.wall_rim_points(
+        depth, position, heights, normals_up, 0.01, -0.03, s_lo, s_hi, up_cos, 0.04
+    )
+    expected_rim = (
+        (depth < 0.01)
+        & (depth > -0.03)
+        & (position >= s_lo)
+        & (position <= s_hi)
+        & (normals_up > up_cos)
+        & (heights > 0.04)
+    )
+    np.testing.assert_array_equal(rim, np.flatnonzero(expected_rim))
+    behind, near, in_front = kernels.wall_behind_and_near(
+        depth,
+        position,
+        heights,
+        normals_up,
+        use_normals,
+        0.01,
+        -0.03,
+        -0.15,
+        top - 0.015,
+        top + 0.03,
+        up_cos,
+        s_lo,
+        s_hi,
+        0.1,
+        0.05,
+    )
+    expected_behind = (
+        (depth < -0.03)
+        & (depth > -0.15)
+        & (heights > top - 0.015)
+        & (heights < top + 0.03)
+        & (position >= s_lo)
+        & (position <= s_hi)
+    )
+    if use_normals:
+        expected_behind &= normals_up > up_cos
+    np.testing.assert_array_equal(behind, np.flatnonzero(expected_behind))
+    slab = (depth < 0.01) & (depth > -0.03)
+    expected_near = (
+        ~slab & (np.abs(depth) < 0.1) & (position > s_lo - 0.05) & (position < s_hi + 0.05)
+    )
+    assert near == expected_near.sum() and in_front == (depth[expected_near] > 0).sum()
+    assert 0 < len(rim) < count and 0 < len(behind) < count and 0 < in_front < near
+
+
 def test_projection_to_the_previous_camera_is_bit_identical_to_numpy():
     rng = np.random.default_rng(23)
     height, width = 48, 64

@@ -1626,3 +1626,93 @@ def fragment_borders(
                 if cosine >= min_cos:
                     continuous[low, high] += 1
     return area, colour, outline, continuous
+
+
+@_jit
+def wall_rim_points(
+    depth: np.ndarray,
+    position: np.ndarray,
+    heights: np.ndarray,
+    normals_up: np.ndarray,
+    front_m: float,
+    back_m: float,
+    s_lo: float,
+    s_hi: float,
+    min_cos_up: float,
+    min_height_m: float,
+) -> np.ndarray:
+    """Indices (ascending) of the points of a wall's rim (``planes._wall_cues``): ``depth`` (N,)
+    in front of the plane below ``front_m`` and above ``back_m``, ``position`` (N,) along it
+    within [``s_lo``, ``s_hi``], facing up (``normals_up`` (N,) above ``min_cos_up``) and
+    ``heights`` (N,) above ``min_height_m``. Replaces the numpy mask ``(depth < front_m) &
+    (depth > back_m) & (s >= s_lo) & (s <= s_hi) & (normals_up > min_cos_up) & (h >
+    min_height_m)`` and its ``np.flatnonzero``."""
+    count = depth.shape[0]
+    found = np.empty(count, dtype=np.int64)
+    n = 0
+    for p in range(count):
+        if (
+            depth[p] < front_m
+            and depth[p] > back_m
+            and position[p] >= s_lo
+            and position[p] <= s_hi
+            and normals_up[p] > min_cos_up
+            and heights[p] > min_height_m
+        ):
+            found[n] = p
+            n += 1
+    return found[:n]
+
+
+@_jit
+def wall_behind_and_near(
+    depth: np.ndarray,
+    position: np.ndarray,
+    heights: np.ndarray,
+    normals_up: np.ndarray,
+    use_normals: bool,
+    slab_front_m: float,
+    slab_back_m: float,
+    cap_back_m: float,
+    low_m: float,
+    high_m: float,
+    min_cos_up: float,
+    s_lo: float,
+    s_hi: float,
+    side_range_m: float,
+    margin_m: float,
+):
+    """The cap and side figures of a wall (``planes._wall_cues``) in one pass over (N,)
+    ``depth``, ``position``, ``heights`` and ``normals_up``: the indices (ascending) of the
+    points behind the face (``depth`` below ``slab_back_m`` and above ``cap_back_m``, heights
+    strictly between ``low_m`` and ``high_m``, ``position`` within [``s_lo``, ``s_hi``] and,
+    with ``use_normals``, facing up: ``normals_up`` above ``min_cos_up``), and the number of
+    points near the wall outside its slab (not (``slab_back_m`` < depth < ``slab_front_m``),
+    |depth| below ``side_range_m``, ``position`` strictly within ``margin_m`` of the run) and
+    how many of those are in front (depth > 0). Replaces the numpy masks ``behind``, ``slab``
+    and ``near``."""
+    count = depth.shape[0]
+    found = np.empty(count, dtype=np.int64)
+    n = 0
+    near = 0
+    in_front = 0
+    for p in range(count):
+        d = depth[p]
+        s = position[p]
+        if (
+            d < slab_back_m
+            and d > cap_back_m
+            and heights[p] > low_m
+            and heights[p] < high_m
+            and s >= s_lo
+            and s <= s_hi
+            and (not use_normals or normals_up[p] > min_cos_up)
+        ):
+            found[n] = p
+            n += 1
+        in_slab = d < slab_front_m and d > slab_back_m
+        if not in_slab and abs(d) < side_range_m and s > s_lo - margin_m and s < s_hi + margin_m:
+            near += 1
+            if d > 0:
+                in_front += 1
+    return found[:n], near, in_front

@@ -193,6 +193,9 @@ _SQUARE_SIN = float(np.sin(np.radians(5.0)))
 #: A point belongs to a plane's face only if its normal is within 30 degrees of the plane's.
 _FACING_COS = float(np.cos(np.radians(30.0)))
 
+#: A wall's rim and the cap behind its top face up: normals within 30 degrees of up.
+_UP_COS = float(np.cos(np.radians(30.0)))
+
 
 def _facing(
     normals: np.ndarray, direction: np.ndarray, unknown: np.ndarray | None = None
@@ -411,6 +414,11 @@ def _edge_on_walls(
             if len(region) < config.walls.min_points:
                 continue
             best = None
+            region_points, region_height = points[region], height[region]
+            region_normals = region_unknown = region_up = None
+            if normals is not None:  # what every position's cues would compute again
+                region_normals = normals[region]
+                region_unknown, region_up = ~region_normals.any(axis=1), region_normals @ up
             for position in end + np.arange(-gap, gap + 1e-9, 0.005):
                 if _crossed_within(present, along, position, gap):
                     continue  # a known wall's own face or rim
@@ -418,13 +426,15 @@ def _edge_on_walls(
                 if normal @ viewpoint + offset < 0:  # face the camera
                     normal, offset = -normal, -offset
                 cues = _wall_cues(
-                    points[region],
-                    None if normals is None else normals[region],
-                    height[region],
+                    region_points,
+                    region_normals,
+                    region_height,
                     normal,
                     offset,
                     up,
                     config,
+                    unknown=region_unknown,
+                    normals_up=region_up,
                     edge_on=True,
                 )
                 if cues is None or len(cues["run_points"]) < config.walls.min_points:
@@ -763,13 +773,18 @@ def _wall_cues(
     top = float(np.median(column_top[telling]))
     thickness = config.walls.max_thickness_m
     if normals is not None:
-        rim = (
-            (depth < threshold)
-            & (depth > -(config.walls.max_thickness_m + threshold))
-            & (s >= s_lo)
-            & (s <= s_hi)
-            & (normals_up > np.cos(np.radians(30.0)))
-            & (h > config.walls.min_height_m - threshold)
+        # Compiled (``kernels``): the rim's indices in one pass.
+        rim = kernels.wall_rim_points(
+            depth,
+            s,
+            h,
+            normals_up,
+            threshold,
+            -(config.walls.max_thickness_m + threshold),
+            s_lo,
+            s_hi,
+            _UP_COS,
+            config.walls.min_height_m - threshold,
         )
         rim_bins = np.unique(((s[rim] - s_lo) / 0.02).astype(np.int64))
         # A face does not rise above its own rim: upward-facing points well below the top
@@ -781,8 +796,8 @@ def _wall_cues(
             # Thickness: twice the median depth of the rim behind the face (its points spread
             # evenly over the thickness; objects just behind the wall barely move the median),
             # plus 3 mm of noise.
-            rim &= np.abs(h - top) < 0.015
-            if rim.sum() >= 10:
+            rim = rim[np.abs(h[rim] - top) < 0.015]
+            if rim.size >= 10:
                 thickness = 2.0 * float(np.median(np.maximum(-depth[rim], 0.0))) + 0.003
                 thickness = float(np.clip(thickness, 0.005, config.walls.max_thickness_m))
     if not config.walls.min_height_m <= top <= config.walls.max_height_m:
@@ -801,31 +816,36 @@ def _wall_cues(
     ] = True
     face_fill = float(face.mean())
     # Capped: an upward-facing surface at the height of the top, just behind the face.
-    behind = (
-        (depth < -(config.walls.max_thickness_m + threshold))
-        & (depth > -config.walls.cap_depth_m)
-        & (h > top - 0.015)
-        & (h < top + 0.03)  # the face's top edge is often partly hidden or dropped
-        & (s >= s_lo)
-        & (s <= s_hi)
+    # One-sided: the rest of the scene near the wall (outside its slab) lies on one side.
+    # Compiled (``kernels``): both in one pass; the face's top edge is often partly hidden or
+    # dropped, hence up to 3 cm above the top.
+    behind, near, in_front = kernels.wall_behind_and_near(
+        depth,
+        s,
+        h,
+        h if normals_up is None else normals_up,
+        normals is not None,
+        threshold,
+        -(config.walls.max_thickness_m + threshold),
+        -config.walls.cap_depth_m,
+        top - 0.015,
+        top + 0.03,
+        _UP_COS,
+        s_lo,
+        s_hi,
+        config.walls.side_range_m,
+        0.05,
     )
-    if normals is not None:
-        behind &= normals_up > np.cos(np.radians(30.0))
     cap_bin = 0.02
     n_bins = max(1, int(np.ceil((s_hi - s_lo) / cap_bin)))
     capped_counts = np.bincount(
         np.minimum(((s[behind] - s_lo) / cap_bin).astype(np.int64), n_bins - 1), minlength=n_bins
     )
     capped = float(np.mean(capped_counts >= 3))
-    # One-sided: the rest of the scene near the wall lies on one side.
-    slab = (depth < threshold) & (depth > -(config.walls.max_thickness_m + threshold))
-    near = (
-        ~slab & (np.abs(depth) < config.walls.side_range_m) & (s > s_lo - 0.05) & (s < s_hi + 0.05)
-    )
     outside = 0.0
-    if near.any():
-        in_front = float(np.mean(depth[near] > 0))
-        outside = min(in_front, 1.0 - in_front)
+    if near > 0:
+        share_in_front = in_front / near
+        outside = min(share_in_front, 1.0 - share_in_front)
     # The plane's other runs whose top edge is the wall's top: the same wall, cut in two by an
     # object standing in front of it. They join the wall's extent (the static slab and the
     # physics), not the figures above, so they do not change which walls are accepted.
