@@ -52,7 +52,7 @@ from benchmarks.hypothesis_ceiling import MIN_VISIBLE_PX, _iou, _perceive
 def _perceive_true_masks(path: Path, cache: Path | None):
     """Frame 0's objects from the ground-truth visible masks (module doc), free space, planes."""
     from ipr_shapes.config import Config
-    from ipr_shapes.perception import _partial_objects, workspace_grid
+    from ipr_shapes.perception import partial_objects, workspace_grid
     from ipr_shapes.perception.free_space import observe_space
     from ipr_shapes.perception.robot import robot_pixels
     from ipr_shapes.perception.segmentation import segment_frame
@@ -76,7 +76,7 @@ def _perceive_true_masks(path: Path, cache: Path | None):
         if plane.kind == "support":
             height = points.reshape(-1, 3) @ np.asarray(plane.normal, float) + plane.offset
             labels.reshape(-1)[height < config.support.clearance_m] = 0
-    objects, _ = _partial_objects(frame, segmentation, labels, config)
+    objects, _ = partial_objects(frame, segmentation, labels, config)
     grid = workspace_grid([objects], config)
     space = observe_space(
         frame.depth_m,

@@ -29,7 +29,7 @@ from ipr_shapes.perception.types import FrameSegmentation, KnownPlane, PartialOb
 from ipr_shapes.progress import ProgressCallback, report
 from ipr_shapes.scene import Scene
 
-__all__ = ["Perception", "PerceptionConfig", "perceive_scene", "track_scene"]
+__all__ = ["Perception", "PerceptionConfig", "partial_objects", "perceive_scene", "track_scene"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -101,7 +101,7 @@ def perceive_scene(
     facet_seconds, objects, facet_labels = [], [], []
     for frame, segmentation, frame_labels in zip(scene.frames, segmentations, labels, strict=True):
         started = time.perf_counter()
-        frame_objects, frame_facets = _partial_objects(frame, segmentation, frame_labels, config)
+        frame_objects, frame_facets = partial_objects(frame, segmentation, frame_labels, config)
         objects.append(frame_objects)
         facet_labels.append(frame_facets)
         facet_seconds.append(time.perf_counter() - started)
@@ -179,13 +179,15 @@ def track_scene(
     return labels
 
 
-def _partial_objects(
+def partial_objects(
     frame,
     segmentation: FrameSegmentation,
     labels: np.ndarray,
     config: PerceptionConfig,
 ) -> tuple[tuple[PartialObject, ...], np.ndarray]:
-    """Partial objects with facets for one frame's tracked labels; also the facet label image."""
+    """Partial objects with facets for one frame's (H, W) object ``labels`` (tracked ids, or
+    any labelling such as ground-truth masks: ``benchmarks.ceiling_gap``), using the frame's
+    ``segmentation`` for its supervoxels' normals; also the (H, W) int32 facet label image."""
     height, width = labels.shape
     flat_labels = labels.reshape(-1)
     flat_rgb = frame.rgb.reshape(-1, 3)
