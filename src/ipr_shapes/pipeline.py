@@ -46,7 +46,7 @@ from ipr_shapes.config import Config, config_digest, config_to_toml
 from ipr_shapes.errors import IprError
 from ipr_shapes.fusion import fuse_views, tracked_free_spaces
 from ipr_shapes.hypotheses import prepare_hypotheses
-from ipr_shapes.inference import InferenceOutcome, infer_shapes
+from ipr_shapes.inference import InferenceOutcome, default_workers, infer_shapes
 from ipr_shapes.likelihood import observed_frames
 from ipr_shapes.methods import DEFAULT_METHOD, Method, get_method
 from ipr_shapes.perception import Perception, check_objects_found, perceive_scene
@@ -232,13 +232,22 @@ class FusedObjects:
     fused_views: Mapping[str, list[int]] | None = None
 
 
-def fuse(scene: Scene, perception: Perception, method: Method, config: Config) -> FusedObjects:
-    """Register the later frames' views into frame 0 for the methods that use the pushes."""
+def fuse(
+    scene: Scene,
+    perception: Perception,
+    method: Method,
+    config: Config,
+    workers: int | None = None,
+) -> FusedObjects:
+    """Register the later frames' views into frame 0 for the methods that use the pushes;
+    ``workers`` threads share the registrations' k-d tree queries (None: the sampling's, as
+    ``ipr_shapes.inference.infer_shapes`` chooses them; the result is the same for any)."""
     objects = perception.objects[0]
     if not (method.actions and config.fusion.enabled):
         return FusedObjects(objects)
     support = next((p for p in perception.planes[0] if p.kind == "support"), None)
-    fused = fuse_views(perception.objects, perception.free_space, support, config.fusion)
+    workers = workers or config.inference.workers or default_workers()
+    fused = fuse_views(perception.objects, perception.free_space, support, config.fusion, workers)
     object_spaces: dict = {}
     if config.fusion.later_free_space or config.fusion.pusher_free_space:
         object_spaces = tracked_free_spaces(
@@ -348,7 +357,7 @@ def run_pipeline(
         )
     if chosen.actions and config.fusion.enabled:
         report(progress, "fusion", 0, 1)
-    fused = fuse(scene, perception, chosen, config)
+    fused = fuse(scene, perception, chosen, config, workers)
     if chosen.actions and config.fusion.enabled:
         report(progress, "fusion", 1, 1)
     fused_at = time.perf_counter()
