@@ -15,6 +15,7 @@ from ipr_shapes.fusion import (
     TrackedFreeSpace,
     _even_subsample,
     _icp_starts,
+    _Nearest,
     _pca_normals,
     _rotation_about,
     _small_rotation,
@@ -362,7 +363,8 @@ def test_batched_icp_starts_are_each_the_start_run_alone(views, workers):
     translations = [target.mean(axis=0) - r @ source.mean(axis=0) for r in rotations]
     rotations.insert(5, np.eye(3))
     translations.insert(5, np.array([1.0, 0.0, 0.0]))
-    got = _icp_starts(source, target, normals, tree, rotations, translations, config, workers)
+    nearest = _Nearest(target, workers)
+    got = _icp_starts(source, target, normals, nearest, rotations, translations, config)
     stopped = []
     for start, (rotation, translation) in enumerate(zip(rotations, translations, strict=True)):
         expected = _reference_icp(source, target, normals, tree, rotation, translation, config)

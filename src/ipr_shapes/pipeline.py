@@ -175,12 +175,12 @@ def perceive(scene: Scene, config: Config, progress: ProgressCallback | None = N
 def _kernel_cache_marker() -> Path | None:
     """The file saying that the numba kernels (``ipr_shapes.geometry.kernels``,
     ``ipr_shapes.perception.kernels``, ``ipr_shapes.hypotheses.kernels``,
-    ``ipr_shapes.voxel_kernels``) were compiled into numba's cache folder for their present
-    source, this numba and this Python; None when that folder is unknown (e.g. JIT disabled)."""
+    ``ipr_shapes.voxel_kernels``, ``ipr_shapes.fusion_kernels``) were compiled into numba's
+    cache folder for their present source, this numba and this Python; None when that folder is unknown (e.g. JIT disabled)."""
     try:
         import numba
 
-        from ipr_shapes import voxel_kernels
+        from ipr_shapes import fusion_kernels, voxel_kernels
         from ipr_shapes.geometry import kernels as geometry_kernels
         from ipr_shapes.hypotheses import kernels as hypothesis_kernels
         from ipr_shapes.perception import kernels as perception_kernels
@@ -191,7 +191,14 @@ def _kernel_cache_marker() -> Path | None:
             if getattr(getattr(value, "_cache", None), "_cache_path", None)
         )
         digest = hashlib.sha256(f"{numba.__version__} {sys.version}".encode())
-        for module in (geometry_kernels, perception_kernels, hypothesis_kernels, voxel_kernels):
+        modules = (
+            geometry_kernels,
+            perception_kernels,
+            hypothesis_kernels,
+            voxel_kernels,
+            fusion_kernels,
+        )
+        for module in modules:
             digest.update(Path(module.__file__).read_bytes())
         return folder / f"ipr-kernels-{digest.hexdigest()[:16]}.compiled"
     except Exception:  # numba's internals moved, or no cache: say nothing rather than fail
