@@ -33,8 +33,9 @@ _STACK = 128
 def build_tree(points: np.ndarray, leafsize: int):
     """A kd-tree of (N, 3) float64 ``points``: each node splits at the median of its widest
     coordinate (a stable sort), leaves hold at most ``leafsize`` points. Returns (order (N,)
-    point index per slot, dims (K,) split axis or -1 for a leaf, splits (K,), children (K, 2),
-    ranges (K, 2) slots [start, end) of each node)."""
+    point index per slot, slotted (N, 3) the points in slot order (a leaf's points are
+    contiguous in memory), dims (K,) split axis or -1 for a leaf, splits (K,), children
+    (K, 2), ranges (K, 2) slots [start, end) of each node)."""
     n = points.shape[0]
     order = np.arange(n)
     most = 2 * n + 1
@@ -75,13 +76,17 @@ def build_tree(points: np.ndarray, leafsize: int):
         stack[top], stack[top + 1] = count, count + 1
         top += 2
         count += 2
-    return order, dims[:count], splits[:count], children[:count], ranges[:count]
+    slotted = np.empty((n, 3))
+    for slot in range(n):
+        slotted[slot] = points[order[slot]]
+    return order, slotted, dims[:count], splits[:count], children[:count], ranges[:count]
 
 
 @_jit
 def nearest_within(
     points: np.ndarray,
     order: np.ndarray,
+    slotted: np.ndarray,
     dims: np.ndarray,
     splits: np.ndarray,
     children: np.ndarray,
@@ -116,16 +121,15 @@ def nearest_within(
                     top += 1
                 node = children[node, near]
             for slot in range(ranges[node, 0], ranges[node, 1]):
-                j = order[slot]
-                a = points[j, 0] - x
-                b = points[j, 1] - y
-                c = points[j, 2] - z
+                a = slotted[slot, 0] - x
+                b = slotted[slot, 1] - y
+                c = slotted[slot, 2] - z
                 squared = 0.0
                 squared += a * a
                 squared += b * b
                 squared += c * c
-                if squared < best or (squared == best and chosen < n and j < chosen):
-                    best, chosen = squared, j
+                if squared < best or (squared == best and chosen < n and order[slot] < chosen):
+                    best, chosen = squared, order[slot]
         if chosen < n:
             distance[q], index[q] = np.sqrt(best), chosen
         else:
