@@ -30,9 +30,35 @@ _STACK = 128
 
 
 @_jit
+def _select(points: np.ndarray, order: np.ndarray, axis: int, start: int, end: int, k: int):
+    """Reorder ``order[start:end]`` so that slot ``k`` holds the point whose ``axis``
+    coordinate would be there sorted, none before it larger and none after it smaller
+    (Hoare's quickselect, middle pivot)."""
+    low, high = start, end - 1
+    while low < high:
+        pivot = points[order[(low + high) // 2], axis]
+        i, j = low, high
+        while i <= j:
+            while points[order[i], axis] < pivot:
+                i += 1
+            while points[order[j], axis] > pivot:
+                j -= 1
+            if i <= j:
+                order[i], order[j] = order[j], order[i]
+                i += 1
+                j -= 1
+        if k <= j:
+            high = j
+        elif k >= i:
+            low = i
+        else:
+            return
+
+
+@_jit
 def build_tree(points: np.ndarray, leafsize: int):
     """A kd-tree of (N, 3) float64 ``points``: each node splits at the median of its widest
-    coordinate (a stable sort), leaves hold at most ``leafsize`` points. Returns (order (N,)
+    coordinate (``_select``), leaves hold at most ``leafsize`` points. Returns (order (N,)
     point index per slot, slotted (N, 3) the points in slot order (a leaf's points are
     contiguous in memory), dims (K,) split axis or -1 for a leaf, splits (K,), children
     (K, 2), ranges (K, 2) slots [start, end) of each node)."""
@@ -57,17 +83,16 @@ def build_tree(points: np.ndarray, leafsize: int):
             low, high = np.inf, -np.inf
             for slot in range(start, end):
                 value = points[order[slot], d]
-                low = min(low, value)
-                high = max(high, value)
+                if value < low:
+                    low = value
+                if value > high:
+                    high = value
             if high - low > width:
                 axis, width = d, high - low
         if width <= 0.0:
             continue  # all points equal: a leaf
-        values = np.empty(end - start)
-        for slot in range(start, end):
-            values[slot - start] = points[order[slot], axis]
-        order[start:end] = order[start:end][np.argsort(values, kind="mergesort")]
         middle = start + (end - start) // 2
+        _select(points, order, axis, start, end, middle)
         dims[node], splits[node] = axis, points[order[middle], axis]
         # Below: coordinates <= the split; above: >= it.
         children[node, 0], children[node, 1] = count, count + 1
