@@ -217,8 +217,16 @@ class _Nearest:
         if len(edges) <= 2:
             part(0, len(queries))
             return distance, index
+        failures: list[BaseException] = []
+
+        def guarded(first: int, last: int) -> None:
+            try:
+                part(first, last)
+            except BaseException as error:  # raised in the caller, not lost in the thread
+                failures.append(error)
+
         threads = [
-            threading.Thread(target=part, args=(first, last))
+            threading.Thread(target=guarded, args=(first, last))
             for first, last in zip(edges[1:-1], edges[2:], strict=True)
         ]
         for thread in threads:
@@ -226,6 +234,8 @@ class _Nearest:
         part(edges[0], edges[1])
         for thread in threads:
             thread.join()
+        if failures:
+            raise failures[0]
         return distance, index
 
 
@@ -309,7 +319,8 @@ def register_view(
     """Register an object's (N, 3) world points of a later frame (``view``) onto its (M, 3)
     frame-0 points (``reference``); ``up`` (3,) is the support normal, ``reference_space`` and
     ``view_space`` the two frames' free-space maps (None: not checked). Returns the best
-    accepted registration or None (module docstring)."""
+    accepted registration or None (module docstring). ``workers`` threads share each
+    nearest-neighbour query (``_Nearest``); the result is the same for any number."""
     config = config or FusionConfig()
     source = _even_subsample(np.asarray(view, float), config.max_points)
     target = _even_subsample(np.asarray(reference, float), config.max_points)
