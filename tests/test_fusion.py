@@ -10,8 +10,15 @@ from ipr_shapes.camera import backproject
 from ipr_shapes.fusion import (
     FusedViews,
     FusionConfig,
+    Registration,
     SweptCapsule,
     TrackedFreeSpace,
+    _even_subsample,
+    _icp_starts,
+    _Nearest,
+    _pca_normals,
+    _rotation_about,
+    _small_rotation,
     fuse_views,
     pushed_through,
     register_view,
@@ -283,3 +290,106 @@ def test_registration_keeps_frame_0s_points_out_of_the_later_frames_free_space()
     assert registration.overlap == 1.0 and registration.reverse_free_share == 0.0
     rotation = registration.frame0_from_frame[:3, :3]
     assert abs(rotation[0, 0]) < 1e-6 and abs(abs(rotation[0, 1]) - 1.0) < 1e-6
+
+
+def _reference_icp(source, target, target_normals, tree, rotation, translation, config):
+    """One start's point-to-plane ICP as it ran before the starts were batched (one query
+    per start and iteration): the pin of ``_icp_starts``. Returns (rotation, translation,
+    iterations run)."""
+    gates = np.geomspace(config.coarse_gate_m, config.fine_gate_m, config.iterations)
+    for iteration, gate in enumerate(gates):
+        moved = source @ rotation.T + translation
+        distance, index = tree.query(moved, distance_upper_bound=gate)
+        paired = np.isfinite(distance)
+        if paired.sum() < 6:
+            return rotation, translation, iteration
+        p, q, n = moved[paired], target[index[paired]], target_normals[index[paired]]
+        rows = np.hstack([np.cross(p, n), n])
+        rhs = np.einsum("ij,ij->i", q - p, n)
+        solution, *_ = np.linalg.lstsq(rows, rhs, rcond=None)
+        step = _small_rotation(solution[:3])
+        rotation = step @ rotation
+        translation = step @ translation + solution[3:]
+        if np.linalg.norm(solution) < 1e-6:
+            return rotation, translation, iteration + 1
+    return rotation, translation, len(gates)
+
+
+def _reference_register(view, reference, up, reference_space, view_space, config):
+    """``register_view``'s best registration (before acceptance) as it was computed start by
+    start, each scored on its own."""
+    source = _even_subsample(np.asarray(view, float), config.max_points)
+    target = _even_subsample(np.asarray(reference, float), config.max_points)
+    tree = cKDTree(target)
+    normals = _pca_normals(target, tree, config.normal_neighbours)
+    up = np.asarray(up, float) / np.linalg.norm(up)
+    source_centre, target_centre = source.mean(axis=0), target.mean(axis=0)
+    best, best_score = None, -np.inf
+    for angle in np.arange(config.yaw_starts) * (2 * np.pi / config.yaw_starts):
+        rotation = _rotation_about(up, float(angle))
+        translation = target_centre - rotation @ source_centre
+        rotation, translation, _ = _reference_icp(
+            source, target, normals, tree, rotation, translation, config
+        )
+        moved = source @ rotation.T + translation
+        distance, _ = tree.query(moved, distance_upper_bound=config.fine_gate_m)
+        paired = np.isfinite(distance)
+        overlap = float(paired.mean())
+        free = float(np.mean(reference_space.state_at(moved) == FREE))
+        back = (target - translation) @ rotation
+        reverse = float(np.mean(view_space.state_at(back) == FREE))
+        score = overlap - config.free_weight * (free + reverse)
+        if score > best_score:
+            rmse = float(np.sqrt(np.mean(distance[paired] ** 2))) if paired.any() else np.inf
+            transform = np.eye(4)
+            transform[:3, :3], transform[:3, 3] = rotation, translation
+            best, best_score = Registration(transform, overlap, free, reverse, rmse), score
+    return best
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_batched_icp_starts_are_each_the_start_run_alone(views, workers):
+    # The 12 turned starts of a registration, plus one too far away to pair (it stops at
+    # once): in lockstep, each must end bit for bit where it ends alone, whichever iteration
+    # it stops at and however many threads share the queries.
+    reference, _, later, _, _ = views
+    config = FusionConfig()
+    source = _even_subsample(later.points, config.max_points)
+    target = _even_subsample(reference.points, config.max_points)
+    tree = cKDTree(target)
+    normals = _pca_normals(target, tree, config.normal_neighbours)
+    up = SUPPORT.normal
+    rotations = [_rotation_about(up, angle) for angle in np.arange(12) * (np.pi / 6)]
+    translations = [target.mean(axis=0) - r @ source.mean(axis=0) for r in rotations]
+    rotations.insert(5, np.eye(3))
+    translations.insert(5, np.array([1.0, 0.0, 0.0]))
+    nearest = _Nearest(target, workers)
+    got = _icp_starts(source, target, normals, nearest, rotations, translations, config)
+    stopped = []
+    for start, (rotation, translation) in enumerate(zip(rotations, translations, strict=True)):
+        expected = _reference_icp(source, target, normals, tree, rotation, translation, config)
+        assert np.array_equal(got[0][start], expected[0]), start
+        assert np.array_equal(got[1][start], expected[1]), start
+        stopped.append(expected[2])
+    # The case covers starts stopping at different iterations, not only all running to the end.
+    assert stopped[5] == 0 and len(set(stopped)) > 2
+
+
+def test_batched_scoring_chooses_the_registration_of_starts_scored_one_by_one(views):
+    reference, space, later, later_space, _ = views
+    config = FusionConfig(min_overlap=0.0, max_free_share=1.0)  # the best, accepted or not
+    for view in (later.points, later.points[::3] + [0.004, -0.002, 0.0]):
+        expected = _reference_register(
+            view, reference.points, SUPPORT.normal, space, later_space, config
+        )
+        for workers in (1, 2):
+            got = register_view(
+                view, reference.points, SUPPORT.normal, space, later_space, config, workers
+            )
+            assert np.array_equal(got.frame0_from_frame, expected.frame0_from_frame)
+            assert (got.overlap, got.free_share, got.reverse_free_share, got.rmse_m) == (
+                expected.overlap,
+                expected.free_share,
+                expected.reverse_free_share,
+                expected.rmse_m,
+            )

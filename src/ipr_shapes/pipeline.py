@@ -46,7 +46,7 @@ from ipr_shapes.config import Config, config_digest, config_to_toml
 from ipr_shapes.errors import IprError
 from ipr_shapes.fusion import fuse_views, tracked_free_spaces
 from ipr_shapes.hypotheses import prepare_hypotheses
-from ipr_shapes.inference import InferenceOutcome, infer_shapes
+from ipr_shapes.inference import InferenceOutcome, default_workers, infer_shapes
 from ipr_shapes.likelihood import observed_frames
 from ipr_shapes.methods import DEFAULT_METHOD, Method, get_method
 from ipr_shapes.perception import Perception, check_objects_found, perceive_scene
@@ -175,12 +175,12 @@ def perceive(scene: Scene, config: Config, progress: ProgressCallback | None = N
 def _kernel_cache_marker() -> Path | None:
     """The file saying that the numba kernels (``ipr_shapes.geometry.kernels``,
     ``ipr_shapes.perception.kernels``, ``ipr_shapes.hypotheses.kernels``,
-    ``ipr_shapes.voxel_kernels``) were compiled into numba's cache folder for their present
-    source, this numba and this Python; None when that folder is unknown (e.g. JIT disabled)."""
+    ``ipr_shapes.voxel_kernels``, ``ipr_shapes.fusion_kernels``) were compiled into numba's
+    cache folder for their present source, this numba and this Python; None when that folder is unknown (e.g. JIT disabled)."""
     try:
         import numba
 
-        from ipr_shapes import voxel_kernels
+        from ipr_shapes import fusion_kernels, voxel_kernels
         from ipr_shapes.geometry import kernels as geometry_kernels
         from ipr_shapes.hypotheses import kernels as hypothesis_kernels
         from ipr_shapes.perception import kernels as perception_kernels
@@ -191,7 +191,14 @@ def _kernel_cache_marker() -> Path | None:
             if getattr(getattr(value, "_cache", None), "_cache_path", None)
         )
         digest = hashlib.sha256(f"{numba.__version__} {sys.version}".encode())
-        for module in (geometry_kernels, perception_kernels, hypothesis_kernels, voxel_kernels):
+        modules = (
+            geometry_kernels,
+            perception_kernels,
+            hypothesis_kernels,
+            voxel_kernels,
+            fusion_kernels,
+        )
+        for module in modules:
             digest.update(Path(module.__file__).read_bytes())
         return folder / f"ipr-kernels-{digest.hexdigest()[:16]}.compiled"
     except Exception:  # numba's internals moved, or no cache: say nothing rather than fail
@@ -232,13 +239,22 @@ class FusedObjects:
     fused_views: Mapping[str, list[int]] | None = None
 
 
-def fuse(scene: Scene, perception: Perception, method: Method, config: Config) -> FusedObjects:
-    """Register the later frames' views into frame 0 for the methods that use the pushes."""
+def fuse(
+    scene: Scene,
+    perception: Perception,
+    method: Method,
+    config: Config,
+    workers: int | None = None,
+) -> FusedObjects:
+    """Register the later frames' views into frame 0 for the methods that use the pushes;
+    ``workers`` threads share the registrations' k-d tree queries (None: the sampling's, as
+    ``ipr_shapes.inference.infer_shapes`` chooses them; the result is the same for any)."""
     objects = perception.objects[0]
     if not (method.actions and config.fusion.enabled):
         return FusedObjects(objects)
     support = next((p for p in perception.planes[0] if p.kind == "support"), None)
-    fused = fuse_views(perception.objects, perception.free_space, support, config.fusion)
+    workers = workers or config.inference.workers or default_workers()
+    fused = fuse_views(perception.objects, perception.free_space, support, config.fusion, workers)
     object_spaces: dict = {}
     if config.fusion.later_free_space or config.fusion.pusher_free_space:
         object_spaces = tracked_free_spaces(
@@ -348,7 +364,7 @@ def run_pipeline(
         )
     if chosen.actions and config.fusion.enabled:
         report(progress, "fusion", 0, 1)
-    fused = fuse(scene, perception, chosen, config)
+    fused = fuse(scene, perception, chosen, config, workers)
     if chosen.actions and config.fusion.enabled:
         report(progress, "fusion", 1, 1)
     fused_at = time.perf_counter()
