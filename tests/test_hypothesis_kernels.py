@@ -210,3 +210,67 @@ def test_greedy_labels_are_numpy_s_or_give_way_to_them():
     normals = np.array([[0.0, 0.0, 1.0], [0.0, np.sin(0.3), np.cos(0.3)]])
     _, sure = greedy_labels(np.ones(2), normals, normals[1, 2], 0.5, _CERTAIN_BAND)
     assert not sure
+
+
+def test_outside_shares_are_numpy_s_mean():
+    """The compiled share of rays each candidate d violates is numpy's bool mean, bit for bit,
+    ties at a ray's ends (a centre equal to low or high is inside) and NaN ends included."""
+    from ipr_shapes.hypotheses.kernels import outside_shares
+
+    rng = np.random.default_rng(5)
+    for trial in range(200):
+        rays = int(rng.integers(1, 120))
+        low = rng.normal(size=rays) * 0.05
+        high = low + np.abs(rng.normal(size=rays)) * 0.1
+        centres = np.arange(0.0, 0.3, 0.005) + 0.0025
+        if trial % 4 == 0:
+            low[: rays // 2] = centres[rng.integers(0, len(centres), rays // 2)]
+            high[rays // 2 :] = centres[rng.integers(0, len(centres), rays - rays // 2)]
+        if trial % 7 == 0:
+            low[0] = np.nan
+        got = outside_shares(centres, low, high)
+        outside = (centres[:, None] < low[None, :]) | (centres[:, None] > high[None, :])
+        expected = outside.mean(axis=1)
+        assert got.dtype == expected.dtype and got.tobytes() == expected.tobytes()
+
+
+def test_weighted_choice_is_generator_choice():
+    """``_weighted_choice`` draws what ``Generator.choice(n, size, p=p)`` draws and leaves the
+    generator in the same state; an invalid ``p`` gets numpy's own error."""
+    from ipr_shapes.hypotheses.generate import _weighted_choice
+
+    first, second = np.random.default_rng(3), np.random.default_rng(3)
+    for _ in range(500):
+        n = int(first.integers(1, 50))
+        second.integers(1, 50)
+        weights = first.random(n) ** 3
+        second.random(n)
+        p = weights / weights.sum()
+        count = int(first.integers(1, 40))
+        second.integers(1, 40)
+        expected = first.choice(n, size=count, p=p)
+        got = _weighted_choice(second, p, count)
+        assert got.dtype == expected.dtype and np.array_equal(got, expected)
+        assert first.random() == second.random()
+    with pytest.raises(ValueError):
+        _weighted_choice(np.random.default_rng(0), np.array([0.5, np.nan]), 3)
+
+
+def test_unique_rows_are_numpy_s_unique():
+    """``unique_rows`` gives ``np.unique(axis=0)``'s rows, bit for bit: rounded planes with
+    repeats, signed zeros (rows equal but for a zero's sign give way to numpy) and NaN."""
+    from ipr_shapes.geometry.convex import unique_rows
+
+    rng = np.random.default_rng(9)
+    for trial in range(500):
+        rows = rng.normal(size=(int(rng.integers(2, 300)), int(rng.integers(1, 5))))
+        rows = np.round(rows * rng.choice([1e-9, 1e-3, 1.0]), int(rng.integers(0, 10)))
+        rows = np.concatenate([rows, rows[rng.integers(0, len(rows), len(rows) // 2)]])
+        if trial % 5 == 0:
+            rows[rng.random(rows.shape) < 0.2] = -0.0
+        if trial % 11 == 0:
+            rows[0, 0] = np.nan
+        got, expected = unique_rows(rows), np.unique(rows, axis=0)
+        assert got.shape == expected.shape and got.tobytes() == expected.tobytes()
+    signed = np.array([[0.0, 1.0], [-0.0, 1.0], [0.0, 1.0], [2.0, 0.0]])
+    assert unique_rows(signed).tobytes() == np.unique(signed, axis=0).tobytes()

@@ -271,12 +271,13 @@ def scanline_voxels(vertices: np.ndarray, faces: np.ndarray, pitch_m: float) -> 
         raise ValueError("voxel index out of range: the mesh is too far from the origin")
     # Exact predicates: xy in fixed point (2^-bits grid units) so that edge functions are exact
     # int64 arithmetic; ``bits`` is chosen so that no product can overflow.
-    tri_xy = grid[faces][:, :, :2]
+    corners = grid[faces]  # (F, 3, 3), gathered once
+    tri_xy = corners[:, :, :2]
     span = float((tri_xy.max(axis=1) - tri_xy.min(axis=1)).max()) + 2.0
     bits = int(min(24, np.floor(np.log2((2.0**31 - 2) / span))))
-    fixed = np.round(grid[:, :2] * 2.0**bits).astype(np.int64)
-    x, y = fixed[faces][:, :, 0], fixed[faces][:, :, 1]  # (F, 3) each
-    z_corner = grid[faces][:, :, 2]
+    fixed = np.round(grid[:, :2] * 2.0**bits).astype(np.int64)[faces]  # (F, 3, 2)
+    x, y = fixed[:, :, 0], fixed[:, :, 1]  # (F, 3) each
+    z_corner = corners[:, :, 2]
 
     # The scanline proper, compiled (``voxel_kernels.scanline_keys``: the same keys as
     # ``_scanline_keys_numpy``, without its per-column temporaries).
