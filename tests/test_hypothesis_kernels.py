@@ -5,6 +5,8 @@ check of generated hypotheses (``generated_unary_feasible``)."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from scipy.spatial import ConvexHull
@@ -274,3 +276,22 @@ def test_unique_rows_are_numpy_s_unique():
         assert got.shape == expected.shape and got.tobytes() == expected.tobytes()
     signed = np.array([[0.0, 1.0], [-0.0, 1.0], [0.0, 1.0], [2.0, 0.0]])
     assert unique_rows(signed).tobytes() == np.unique(signed, axis=0).tobytes()
+
+
+def test_depths_do_not_depend_on_the_other_meshes_in_the_model():
+    """``prepare_hypotheses`` compiles only the hypotheses some depth query needs: a pair's
+    depth from a model of two meshes is the one from a model of all of them."""
+    from ipr_shapes.hypotheses.constraints import OverlapCache
+
+    view = render_view((0.0, -0.45, 0.40))
+    config = HypothesisConfig(count=6)
+    first = generate_hypotheses(partial_box(view), None, (SUPPORT,), config)
+    # A second object: the same shapes moved 3-4 cm (partly overlapping the first's).
+    second = [
+        dataclasses.replace(h, object_id=7, vertices=h.vertices + [0.03, 0.01, 0.0]) for h in first
+    ]
+    whole = OverlapCache([*first, *second]).depth_matrix(first, second)
+    assert whole.max() > 0.005
+    for a, h in enumerate(first):
+        for b, g in enumerate(second):
+            assert OverlapCache([g, h]).depth(h, g) == whole[a, b]
