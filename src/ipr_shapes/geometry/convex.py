@@ -48,7 +48,21 @@ def row_norms(vectors: np.ndarray) -> np.ndarray:
 
 
 def _oriented_mesh(hull: ConvexHull) -> tuple[np.ndarray, np.ndarray, float]:
-    """Compact, outward-oriented triangle mesh of a scipy hull."""
+    """Compact, outward-oriented triangle mesh of a scipy hull: compiled
+    (``geometry.kernels.oriented_hull_mesh``, the same arrays), numpy's steps
+    (``_oriented_mesh_numpy``) when an orientation is too close to call there."""
+    from ipr_shapes.geometry.kernels import oriented_hull_mesh
+
+    vertices, faces, certain = oriented_hull_mesh(
+        hull.points, np.ascontiguousarray(hull.simplices), np.ascontiguousarray(hull.equations)
+    )
+    if not certain:
+        return _oriented_mesh_numpy(hull)
+    return vertices, faces, float(hull.volume)
+
+
+def _oriented_mesh_numpy(hull: ConvexHull) -> tuple[np.ndarray, np.ndarray, float]:
+    """``_oriented_mesh`` in numpy (the reference, and the fallback)."""
     simplices = hull.simplices.copy()
     tri = hull.points[simplices]
     normals = triangle_cross(tri)
