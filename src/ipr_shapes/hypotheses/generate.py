@@ -76,6 +76,7 @@ Choices made here (the paper leaves them open):
 
 from __future__ import annotations
 
+import bisect
 import functools
 import logging
 import math
@@ -455,10 +456,9 @@ def _ray_limits(
     walls = [r for r in regions if not r.is_support]
     if space is None and not walls:
         return limits
-    t = (np.arange(int(np.ceil(cap / step))) + 1.0) * step
+    t = _ray_samples(cap, step)
     # Index of each ray's first blocked sample (len(t): none). On a ``SpaceMap`` a compiled
     # loop marches each ray and stops at its first free voxel (the same voxels, same bits).
-    first = np.full(len(origins), len(t), dtype=np.int64)
     samples = None
     if isinstance(space, SpaceMap):
         first = first_state_samples(
@@ -473,6 +473,8 @@ def _ray_limits(
     elif space is not None:
         samples = (origins[:, None, :] + t[None, :, None] * direction).reshape(-1, 3)
         first = _first_true((space.state_at(samples) == FREE).reshape(len(origins), len(t)))
+    else:
+        first = np.full(len(origins), len(t), dtype=np.int64)
     if walls:
         in_walls = None
         if samples is None:
@@ -498,6 +500,15 @@ def _ray_limits(
     hit = first < len(t)
     sampled = np.where(hit, t[np.minimum(first, len(t) - 1)] - 0.5 * step, cap)
     return np.minimum(limits, sampled)
+
+
+@functools.lru_cache(maxsize=16)
+def _ray_samples(cap: float, step: float) -> np.ndarray:
+    """Distances (T,) m of a ray's samples: every ``step`` up to ``cap`` (``_ray_limits``),
+    the same for every ray of a frame; remembered, read-only."""
+    t = (np.arange(int(np.ceil(cap / step))) + 1.0) * step
+    t.setflags(write=False)
+    return t
 
 
 @functools.lru_cache(maxsize=16)
@@ -740,7 +751,14 @@ def _distance(facet: _SourceFacet, u: float, config: HypothesisConfig) -> float:
     if table is None:
         lower = np.maximum(facet.cells, config.min_thickness_m)
         lengths = np.clip(facet.cells + facet.width - lower, 0.0, None)
-        table = (lower, lengths, float(lengths.sum()), np.cumsum(lengths))
+        # Python floats: the same IEEE values and arithmetic as numpy's scalars, and
+        # ``bisect_right`` is ``np.searchsorted(side="right")`` on the sorted ends.
+        table = (
+            lower.tolist(),
+            lengths.tolist(),
+            float(lengths.sum()),
+            np.cumsum(lengths).tolist(),
+        )
         facet.tables[config.min_thickness_m] = table
     lower, lengths, total, ends = table
     if total <= 0:
@@ -748,7 +766,7 @@ def _distance(facet: _SourceFacet, u: float, config: HypothesisConfig) -> float:
     # Inverse CDF of the uniform distribution on the union of cells (monotone in u, so the
     # stratification of u carries over to d).
     target = u * total
-    index = min(int(np.searchsorted(ends, target, side="right")), len(ends) - 1)
+    index = min(bisect.bisect_right(ends, target), len(ends) - 1)
     return float(lower[index] + (target - (ends[index] - lengths[index])))
 
 
@@ -836,7 +854,10 @@ def _hull_source(
     tri = hull.points[simplices]
     areas = 0.5 * row_norms(triangle_cross(tri))
     total = areas.sum()
-    centre = (tri.mean(axis=1) * areas[:, None]).sum(axis=0) / max(total, 1e-15)
+    # tri.mean(axis=1): the three corners summed in order, over 3 (the same bits).
+    centre = ((tri[:, 0] + tri[:, 1] + tri[:, 2]) / 3.0 * areas[:, None]).sum(axis=0) / max(
+        total, 1e-15
+    )
     count = ctx.config.hull_facet_rays
     pick = _weighted_choice(rng, areas / total, count)
     r1, r2 = rng.random(count), rng.random(count)
