@@ -316,3 +316,16 @@ def test_oriented_hull_mesh_is_numpy_s():
         assert got[2] == expected[2]
         certain += oriented_hull_mesh(hull.points, hull.simplices, hull.equations)[2]
     assert certain >= 295
+
+
+def test_slice_ranks_are_numpy_s_unique_inverse():
+    """``structure._ranks`` numbers non-negative ints as ``np.unique(return_inverse=True)``."""
+    from ipr_shapes.hypotheses.structure import _ranks
+
+    rng = np.random.default_rng(17)
+    for trial in range(500):
+        values = rng.integers(0, int(rng.integers(1, 80)), size=int(rng.integers(0, 300)))
+        if trial % 50 == 0 and values.size:
+            values[0] = 10**9  # an outlier: numpy's sort
+        got, expected = _ranks(values), np.unique(values, return_inverse=True)[1]
+        assert got.dtype == expected.dtype and np.array_equal(got, expected)
