@@ -221,9 +221,11 @@ class OverlapCache:
             pair = (ka, kb) if ka <= kb else (kb, ka)
             depth = cache.get(pair)
             if depth is None:
-                distance = distance_of(model, data, geom[ka], geom[kb], 0.0, None)
+                negative = -float(distance_of(model, data, geom[ka], geom[kb], 0.0, None))
                 queries += 1
-                depth = max(-float(distance), 0.0)
+                # max(negative, 0.0), without the builtin's call: the first argument unless
+                # the second is larger (signed zeros and NaN as max gives them).
+                depth = 0.0 if negative < 0.0 else negative
                 cache[pair] = depth
             found.append(depth)
         self.queries += queries
