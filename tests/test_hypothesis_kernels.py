@@ -5,6 +5,8 @@ check of generated hypotheses (``generated_unary_feasible``)."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from scipy.spatial import ConvexHull
@@ -210,3 +212,120 @@ def test_greedy_labels_are_numpy_s_or_give_way_to_them():
     normals = np.array([[0.0, 0.0, 1.0], [0.0, np.sin(0.3), np.cos(0.3)]])
     _, sure = greedy_labels(np.ones(2), normals, normals[1, 2], 0.5, _CERTAIN_BAND)
     assert not sure
+
+
+def test_outside_shares_are_numpy_s_mean():
+    """The compiled share of rays each candidate d violates is numpy's bool mean, bit for bit,
+    ties at a ray's ends (a centre equal to low or high is inside) and NaN ends included."""
+    from ipr_shapes.hypotheses.kernels import outside_shares
+
+    rng = np.random.default_rng(5)
+    for trial in range(200):
+        rays = int(rng.integers(1, 120))
+        low = rng.normal(size=rays) * 0.05
+        high = low + np.abs(rng.normal(size=rays)) * 0.1
+        centres = np.arange(0.0, 0.3, 0.005) + 0.0025
+        if trial % 4 == 0:
+            low[: rays // 2] = centres[rng.integers(0, len(centres), rays // 2)]
+            high[rays // 2 :] = centres[rng.integers(0, len(centres), rays - rays // 2)]
+        if trial % 7 == 0:
+            low[0] = np.nan
+        got = outside_shares(centres, low, high)
+        outside = (centres[:, None] < low[None, :]) | (centres[:, None] > high[None, :])
+        expected = outside.mean(axis=1)
+        assert got.dtype == expected.dtype and got.tobytes() == expected.tobytes()
+
+
+def test_weighted_choice_is_generator_choice():
+    """``_weighted_choice`` draws what ``Generator.choice(n, size, p=p)`` draws and leaves the
+    generator in the same state; an invalid ``p`` gets numpy's own error."""
+    from ipr_shapes.hypotheses.generate import _weighted_choice
+
+    first, second = np.random.default_rng(3), np.random.default_rng(3)
+    for _ in range(500):
+        n = int(first.integers(1, 50))
+        second.integers(1, 50)
+        weights = first.random(n) ** 3
+        second.random(n)
+        p = weights / weights.sum()
+        count = int(first.integers(1, 40))
+        second.integers(1, 40)
+        expected = first.choice(n, size=count, p=p)
+        got = _weighted_choice(second, p, count)
+        assert got.dtype == expected.dtype and np.array_equal(got, expected)
+        assert first.random() == second.random()
+    with pytest.raises(ValueError):
+        _weighted_choice(np.random.default_rng(0), np.array([0.5, np.nan]), 3)
+
+
+def test_unique_rows_are_numpy_s_unique():
+    """``unique_rows`` gives ``np.unique(axis=0)``'s rows, bit for bit: rounded planes with
+    repeats, signed zeros (rows equal but for a zero's sign give way to numpy) and NaN."""
+    from ipr_shapes.geometry.convex import unique_rows
+
+    rng = np.random.default_rng(9)
+    for trial in range(500):
+        rows = rng.normal(size=(int(rng.integers(2, 300)), int(rng.integers(1, 5))))
+        rows = np.round(rows * rng.choice([1e-9, 1e-3, 1.0]), int(rng.integers(0, 10)))
+        rows = np.concatenate([rows, rows[rng.integers(0, len(rows), len(rows) // 2)]])
+        if trial % 5 == 0:
+            rows[rng.random(rows.shape) < 0.2] = -0.0
+        if trial % 11 == 0:
+            rows[0, 0] = np.nan
+        got, expected = unique_rows(rows), np.unique(rows, axis=0)
+        assert got.shape == expected.shape and got.tobytes() == expected.tobytes()
+    signed = np.array([[0.0, 1.0], [-0.0, 1.0], [0.0, 1.0], [2.0, 0.0]])
+    assert unique_rows(signed).tobytes() == np.unique(signed, axis=0).tobytes()
+
+
+def test_depths_do_not_depend_on_the_other_meshes_in_the_model():
+    """``prepare_hypotheses`` compiles only the hypotheses some depth query needs: a pair's
+    depth from a model of two meshes is the one from a model of all of them."""
+    from ipr_shapes.hypotheses.constraints import OverlapCache
+
+    view = render_view((0.0, -0.45, 0.40))
+    config = HypothesisConfig(count=6)
+    first = generate_hypotheses(partial_box(view), None, (SUPPORT,), config)
+    # A second object: the same shapes moved 3-4 cm (partly overlapping the first's).
+    second = [
+        dataclasses.replace(h, object_id=7, vertices=h.vertices + [0.03, 0.01, 0.0]) for h in first
+    ]
+    whole = OverlapCache([*first, *second]).depth_matrix(first, second)
+    assert whole.max() > 0.005
+    for a, h in enumerate(first):
+        for b, g in enumerate(second):
+            assert OverlapCache([g, h]).depth(h, g) == whole[a, b]
+
+
+def test_oriented_hull_mesh_is_numpy_s():
+    """The compiled outward mesh of a qhull hull is numpy's, array for array: random hulls,
+    lattice points (coplanar facets split in triangles, slivers), and it is certain on them."""
+    from ipr_shapes.geometry.convex import _oriented_mesh, _oriented_mesh_numpy
+    from ipr_shapes.geometry.kernels import oriented_hull_mesh
+
+    rng = np.random.default_rng(13)
+    certain = 0
+    for trial in range(300):
+        points = rng.normal(size=(int(rng.integers(4, 400)), 3)) * rng.choice([0.01, 0.1])
+        if trial % 2:
+            points = np.round(points / 0.005) * 0.005
+        hull = ConvexHull(points + rng.normal(size=3))
+        got, expected = _oriented_mesh(hull), _oriented_mesh_numpy(hull)
+        assert got[0].tobytes() == expected[0].tobytes() and got[0].shape == expected[0].shape
+        assert got[1].dtype == expected[1].dtype and np.array_equal(got[1], expected[1])
+        assert got[2] == expected[2]
+        certain += oriented_hull_mesh(hull.points, hull.simplices, hull.equations)[2]
+    assert certain >= 295
+
+
+def test_slice_ranks_are_numpy_s_unique_inverse():
+    """``structure._ranks`` numbers non-negative ints as ``np.unique(return_inverse=True)``."""
+    from ipr_shapes.hypotheses.structure import _ranks
+
+    rng = np.random.default_rng(17)
+    for trial in range(500):
+        values = rng.integers(0, int(rng.integers(1, 80)), size=int(rng.integers(0, 300)))
+        if trial % 50 == 0 and values.size:
+            values[0] = 10**9  # an outlier: numpy's sort
+        got, expected = _ranks(values), np.unique(values, return_inverse=True)[1]
+        assert got.dtype == expected.dtype and np.array_equal(got, expected)

@@ -1,4 +1,5 @@
-"""Compiled inner loop (numba) of the voxel occupancy of meshes (``ipr_shapes.voxels``).
+"""Compiled inner loops (numba) of the voxel occupancy of meshes (``ipr_shapes.voxels``): the
+scanline and its set-up (grid coordinates, extents and fixed-point corners in one pass each).
 
 The column-parity scanline voxelises every hypothesis (the unary constraints count its voxels
 in seen-free space) and every mesh the metrics score. In numpy each candidate column of each
@@ -138,3 +139,53 @@ def scanline_keys(x: np.ndarray, y: np.ndarray, z_corner: np.ndarray, bits: int,
             keys[at] = starts[p] + k
             at += 1
     return keys, k_min >= -offset and k_max < offset
+
+
+@_jit
+def scanline_setup(vertices: np.ndarray, faces: np.ndarray, pitch_m: float):
+    """The set-up of ``ipr_shapes.voxels.scanline_voxels`` before its fixed-point scale, in one
+    pass: grid coordinates ``vertices / pitch_m - 0.5`` (V, 3), the corners' z (F, 3), the
+    triangles' largest xy extent in grid units, the largest |grid coordinate| and the mesh's
+    largest extent (m). Finite vertices and faces within [0, V) only (the caller checks).
+    The same divisions and subtractions as numpy's, and max and min are exact in any order."""
+    count = vertices.shape[0]
+    grid = np.empty((count, 3))
+    reach = 0.0
+    extent = 0.0
+    for axis in range(3):
+        low = vertices[0, axis]
+        high = vertices[0, axis]
+        for v in range(count):
+            value = vertices[v, axis]
+            low = min(low, value)
+            high = max(high, value)
+            g = value / pitch_m - 0.5
+            grid[v, axis] = g
+            reach = max(reach, abs(g))
+        extent = max(extent, high - low)
+    z_corner = np.empty((faces.shape[0], 3))
+    span = 0.0
+    for f in range(faces.shape[0]):
+        a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
+        z_corner[f, 0] = grid[a, 2]
+        z_corner[f, 1] = grid[b, 2]
+        z_corner[f, 2] = grid[c, 2]
+        for axis in range(2):
+            high = max(max(grid[a, axis], grid[b, axis]), grid[c, axis])
+            low = min(min(grid[a, axis], grid[b, axis]), grid[c, axis])
+            span = max(span, high - low)
+    return grid, z_corner, span, reach, extent
+
+
+@_jit
+def scanline_fixed(grid: np.ndarray, faces: np.ndarray, scale: float):
+    """The corners' fixed-point xy (F, 3) int64 each: ``np.round(grid[:, :2] * scale)`` (round
+    half to even, numpy's ``rint`` for zero decimals) cast to int64, gathered by ``faces``."""
+    x = np.empty((faces.shape[0], 3), dtype=np.int64)
+    y = np.empty((faces.shape[0], 3), dtype=np.int64)
+    for f in range(faces.shape[0]):
+        for c in range(3):
+            v = faces[f, c]
+            x[f, c] = np.int64(np.rint(grid[v, 0] * scale))
+            y[f, c] = np.int64(np.rint(grid[v, 1] * scale))
+    return x, y

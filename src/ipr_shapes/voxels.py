@@ -259,29 +259,46 @@ def scanline_voxels(vertices: np.ndarray, faces: np.ndarray, pitch_m: float) -> 
         return EMPTY.copy()
     if not np.all(np.isfinite(vertices)):
         raise ValueError("mesh vertices contain NaN or inf")
-    extent = float(np.max(vertices.max(axis=0) - vertices.min(axis=0)))
+    from ipr_shapes.voxel_kernels import scanline_fixed, scanline_keys, scanline_setup
+
+    # Faces within [0, V): the set-up in one compiled pass (``voxel_kernels.scanline_setup``);
+    # numpy's indexing otherwise (negative indices wrap, others raise).
+    compiled = bool(faces.min() >= 0 and faces.max() < len(vertices))
+    if compiled:
+        grid, z_corner, span, reach, extent = scanline_setup(vertices, faces, float(pitch_m))
+    else:
+        columns = vertices.T.copy()
+        extent = float((columns.max(axis=1) - columns.min(axis=1)).max())
     if extent > MAX_MESH_EXTENT_M:
         raise ValueError(
             f"a mesh spans {extent:.4g} m, more than the {MAX_MESH_EXTENT_M:g} m an object may "
             "(are its coordinates in millimetres? meshes are in metres)"
         )
     # Grid units: voxel centre (n + 1/2) p sits at integer coordinate n.
-    grid = vertices / pitch_m - 0.5
-    if np.abs(grid).max() >= _OFFSET:
+    if not compiled:
+        grid = vertices / pitch_m - 0.5
+        reach = np.abs(grid).max()
+    if reach >= _OFFSET:
         raise ValueError("voxel index out of range: the mesh is too far from the origin")
     # Exact predicates: xy in fixed point (2^-bits grid units) so that edge functions are exact
     # int64 arithmetic; ``bits`` is chosen so that no product can overflow.
-    tri_xy = grid[faces][:, :, :2]
-    span = float((tri_xy.max(axis=1) - tri_xy.min(axis=1)).max()) + 2.0
+    if not compiled:
+        corners = grid[faces]  # (F, 3, 3)
+        # The triangles' largest xy extent: max and min over the three corners pairwise
+        # (exact, like ``max(axis=1)``, without its strided reduction).
+        a, b, c = corners[:, 0, :2], corners[:, 1, :2], corners[:, 2, :2]
+        span = float((np.maximum(np.maximum(a, b), c) - np.minimum(np.minimum(a, b), c)).max())
+        z_corner = corners[:, :, 2]
+    span = float(span) + 2.0
     bits = int(min(24, np.floor(np.log2((2.0**31 - 2) / span))))
-    fixed = np.round(grid[:, :2] * 2.0**bits).astype(np.int64)
-    x, y = fixed[faces][:, :, 0], fixed[faces][:, :, 1]  # (F, 3) each
-    z_corner = grid[faces][:, :, 2]
+    if compiled:
+        x, y = scanline_fixed(grid, faces, 2.0**bits)
+    else:
+        fixed = np.round(grid[:, :2] * 2.0**bits).astype(np.int64)[faces]  # (F, 3, 2)
+        x, y = fixed[:, :, 0], fixed[:, :, 1]  # (F, 3) each
 
     # The scanline proper, compiled (``voxel_kernels.scanline_keys``: the same keys as
     # ``_scanline_keys_numpy``, without its per-column temporaries).
-    from ipr_shapes.voxel_kernels import scanline_keys
-
     keys, fits = scanline_keys(
         np.ascontiguousarray(x),
         np.ascontiguousarray(y),

@@ -255,3 +255,59 @@ def large_pieces(mask: np.ndarray, share: float) -> np.ndarray:
             if mask[y, x] and sizes[piece[y, x]] >= share * largest:
                 kept[y, x] = True
     return kept
+
+
+@_jit
+def oriented_hull_mesh(points: np.ndarray, simplices: np.ndarray, equations: np.ndarray):
+    """A qhull hull's triangles as a compact, outward mesh (``convex._oriented_mesh``):
+    vertices (V, 3) (the used ``points`` (N, 3), in their order), faces (F, 3) int64 into
+    them, each simplex (F, 3) reversed when its corners' cross product (b - a) x (c - a)
+    points against its facet's outward normal ``equations[:, :3]`` (F, 4); and whether every
+    such sign is certain. The numpy it replaces::
+
+        flip = np.einsum("ij,ij->i", triangle_cross(points[simplices]), equations[:, :3]) < 0
+        simplices[flip] = simplices[flip][:, [0, 2, 1]]
+        used = np.zeros(len(points), dtype=bool); used[simplices] = True
+        faces = (np.cumsum(used) - 1)[simplices].astype(np.int64); vertices = points[used]
+
+    The products here are summed in this loop's order, einsum's possibly in another: a dot
+    product within 1e-12 of the sum of its terms' magnitudes of zero could take the other
+    sign there, so it returns False and the caller runs numpy's version."""
+    count = simplices.shape[0]
+    faces = np.empty((count, 3), dtype=np.int64)
+    used = np.zeros(points.shape[0], dtype=np.bool_)
+    for f in range(count):
+        i, j, k = simplices[f, 0], simplices[f, 1], simplices[f, 2]
+        u0 = points[j, 0] - points[i, 0]
+        u1 = points[j, 1] - points[i, 1]
+        u2 = points[j, 2] - points[i, 2]
+        v0 = points[k, 0] - points[i, 0]
+        v1 = points[k, 1] - points[i, 1]
+        v2 = points[k, 2] - points[i, 2]
+        p0 = (u1 * v2 - u2 * v1) * equations[f, 0]
+        p1 = (u2 * v0 - u0 * v2) * equations[f, 1]
+        p2 = (u0 * v1 - u1 * v0) * equations[f, 2]
+        dot = p0 + p1 + p2
+        if not abs(dot) > 1e-12 * (abs(p0) + abs(p1) + abs(p2)):
+            return np.empty((0, 3)), faces, False
+        faces[f, 0] = i
+        if dot < 0.0:
+            faces[f, 1], faces[f, 2] = k, j
+        else:
+            faces[f, 1], faces[f, 2] = j, k
+        used[i] = used[j] = used[k] = True
+    number = np.empty(points.shape[0], dtype=np.int64)
+    kept = 0
+    for n in range(points.shape[0]):
+        number[n] = kept
+        kept += used[n]
+    vertices = np.empty((kept, 3))
+    for n in range(points.shape[0]):
+        if used[n]:
+            vertices[number[n], 0] = points[n, 0]
+            vertices[number[n], 1] = points[n, 1]
+            vertices[number[n], 2] = points[n, 2]
+    for f in range(count):
+        for c in range(3):
+            faces[f, c] = number[faces[f, c]]
+    return vertices, faces, True

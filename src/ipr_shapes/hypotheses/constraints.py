@@ -138,6 +138,17 @@ def _box_bounds(lo_a: np.ndarray, hi_a: np.ndarray, lo_b: np.ndarray, hi_b: np.n
     return np.maximum(overlap.min(axis=2), 0.0)
 
 
+def box_depth_bounds(
+    hyps_i: Sequence[ShapeHypothesis], hyps_j: Sequence[ShapeHypothesis]
+) -> np.ndarray:
+    """(m_i, m_j) upper bounds (m) on the penetration depths of two lists of hypotheses from
+    their bounding boxes (module doc): ``OverlapCache.depth_matrix`` queries the pairs whose
+    bound exceeds its ``exact_above_m``."""
+    bounds_i = np.array([h.bounds for h in hyps_i]).reshape(-1, 2, 3)
+    bounds_j = np.array([h.bounds for h in hyps_j]).reshape(-1, 2, 3)
+    return _box_bounds(bounds_i[:, 0], bounds_i[:, 1], bounds_j[:, 0], bounds_j[:, 1])
+
+
 class OverlapCache:
     """Penetration depths between hypotheses, computed once per pair.
 
@@ -192,25 +203,34 @@ class OverlapCache:
         cached = self._matrices.get(signature)
         if cached is not None:
             return cached
-        bounds_i = np.array([h.bounds for h in hyps_i]).reshape(-1, 2, 3)
-        bounds_j = np.array([h.bounds for h in hyps_j]).reshape(-1, 2, 3)
-        depths = _box_bounds(bounds_i[:, 0], bounds_i[:, 1], bounds_j[:, 0], bounds_j[:, 1])
+        depths = box_depth_bounds(hyps_i, hyps_j)
         # ``depth`` per pair, inlined: at thousands of pairs its call overhead outweighs the
         # query itself.
         import mujoco
 
         keys_i, keys_j = signature[0], signature[1]
         cache, geom, model, data = self._depth, self._geom, self._model, self._data
-        for a, b in zip(*np.nonzero(depths > exact_above_m), strict=True):
+        distance_of = mujoco.mj_geomDistance
+        rows, cols = np.nonzero(depths > exact_above_m)
+        found = []
+        queries = 0
+        # Python ints and lists: numpy scalars' indexing and item assignment cost more than
+        # the query (the same pairs, in the same order, as a loop over ``np.nonzero``).
+        for a, b in zip(rows.tolist(), cols.tolist(), strict=True):
             ka, kb = keys_i[a], keys_j[b]
             pair = (ka, kb) if ka <= kb else (kb, ka)
             depth = cache.get(pair)
             if depth is None:
-                distance = mujoco.mj_geomDistance(model, data, geom[ka], geom[kb], 0.0, None)
-                self.queries += 1
-                depth = max(-float(distance), 0.0)
+                negative = -float(distance_of(model, data, geom[ka], geom[kb], 0.0, None))
+                queries += 1
+                # max(negative, 0.0), without the builtin's call: the first argument unless
+                # the second is larger (signed zeros and NaN as max gives them).
+                depth = 0.0 if negative < 0.0 else negative
                 cache[pair] = depth
-            depths[a, b] = depth
+            found.append(depth)
+        self.queries += queries
+        if found:
+            depths[rows, cols] = found
         self._matrices[signature] = depths
         return depths
 

@@ -76,10 +76,12 @@ Choices made here (the paper leaves them open):
 
 from __future__ import annotations
 
+import bisect
 import functools
 import logging
+import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import ClassVar
 
@@ -88,13 +90,20 @@ from scipy.spatial import ConvexHull, HalfspaceIntersection, QhullError
 
 from ipr_shapes import voxels
 from ipr_shapes.checks import Checks, Interval, Options, OrNone, Predicate, check_fields
-from ipr_shapes.geometry.convex import clip_halfspace, convex_mesh, row_norms, triangle_cross
+from ipr_shapes.geometry.convex import (
+    clip_halfspace,
+    convex_mesh,
+    row_norms,
+    triangle_cross,
+    unique_rows,
+)
 from ipr_shapes.hypotheses import structure
 from ipr_shapes.hypotheses.kernels import (
     first_state_samples,
     first_wall_samples,
     greedy_labels,
     hull_parts,
+    outside_shares,
 )
 from ipr_shapes.perception.free_space import FREE, SeenSpace, SpaceMap
 from ipr_shapes.perception.occupancy import PlaneRegion, allowed_voxels, plane_regions, unary_report
@@ -315,6 +324,43 @@ def _observed_extremes(points: np.ndarray) -> np.ndarray:
     return entry[1].copy()
 
 
+#: The last planes (kept alive, so that their ids stay theirs), their key and their regions.
+_LAST_REGIONS: list[tuple[tuple, tuple, tuple[PlaneRegion, ...]]] = [((), (), ())]
+
+
+def _plane_regions(planes: tuple[KnownPlane, ...], thickness_m: float) -> tuple[PlaneRegion, ...]:
+    """``plane_regions(planes, thickness_m)``, remembered for the next call with the same plane
+    objects: every object's set-up and minimum shape ask for the frame's regions again, and a
+    wall's outline is a hull of all its points (4 ms a call on ycb-static). The regions are
+    read-only and a function of the planes alone; sharing them also lets ``_wall_arrays``
+    (keyed by identity) serve every object of a frame. Safe across threads (the entry is
+    read and replaced whole)."""
+    key = (tuple(map(id, planes)), float(thickness_m))
+    entry = _LAST_REGIONS[0]
+    if entry[0] != key:
+        planes = tuple(planes)
+        entry = (key, planes, plane_regions(planes, thickness_m))
+        _LAST_REGIONS[0] = entry
+    return entry[2]
+
+
+#: The last observed hull vertices (as a key) and their mesh (``_observed_hull``).
+_LAST_HULL: list[tuple[tuple, tuple | None]] = [((), None)]
+
+
+def _observed_hull(base: np.ndarray) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """``convex_mesh(base)`` of an object's observed hull vertices, remembered for the next
+    call with the same points: the set-up measures it, then the minimum shape tests and
+    finishes the same hull. Copies (the caller may keep them)."""
+    key = (base.shape, base.dtype.str, base.tobytes())
+    entry = _LAST_HULL[0]
+    if entry[0] != key:
+        entry = (key, convex_mesh(base))
+        _LAST_HULL[0] = entry
+    mesh = entry[1]
+    return None if mesh is None else (mesh[0].copy(), mesh[1].copy(), mesh[2])
+
+
 # --------------------------------------------------------------------------------------------
 # Generation
 
@@ -410,10 +456,9 @@ def _ray_limits(
     walls = [r for r in regions if not r.is_support]
     if space is None and not walls:
         return limits
-    t = (np.arange(int(np.ceil(cap / step))) + 1.0) * step
+    t = _ray_samples(cap, step)
     # Index of each ray's first blocked sample (len(t): none). On a ``SpaceMap`` a compiled
     # loop marches each ray and stops at its first free voxel (the same voxels, same bits).
-    first = np.full(len(origins), len(t), dtype=np.int64)
     samples = None
     if isinstance(space, SpaceMap):
         first = first_state_samples(
@@ -428,6 +473,8 @@ def _ray_limits(
     elif space is not None:
         samples = (origins[:, None, :] + t[None, :, None] * direction).reshape(-1, 3)
         first = _first_true((space.state_at(samples) == FREE).reshape(len(origins), len(t)))
+    else:
+        first = np.full(len(origins), len(t), dtype=np.int64)
     if walls:
         in_walls = None
         if samples is None:
@@ -453,6 +500,15 @@ def _ray_limits(
     hit = first < len(t)
     sampled = np.where(hit, t[np.minimum(first, len(t) - 1)] - 0.5 * step, cap)
     return np.minimum(limits, sampled)
+
+
+@functools.lru_cache(maxsize=16)
+def _ray_samples(cap: float, step: float) -> np.ndarray:
+    """Distances (T,) m of a ray's samples: every ``step`` up to ``cap`` (``_ray_limits``),
+    the same for every ray of a frame; remembered, read-only."""
+    t = (np.arange(int(np.ceil(cap / step))) + 1.0) * step
+    t.setflags(write=False)
+    return t
 
 
 @functools.lru_cache(maxsize=16)
@@ -500,8 +556,12 @@ def _admissible(
     worst = np.zeros(len(centres))
     for low, high in ray_sets:
         if low.size:
-            outside = (centres[:, None] < low[None, :]) | (centres[:, None] > high[None, :])
-            worst = np.maximum(worst, outside.mean(axis=1))
+            # The share of rays each centre violates, compiled (``kernels.outside_shares``:
+            # numpy's ``outside.mean(axis=1)`` is a count over R, the same bits).
+            shares = outside_shares(
+                centres, np.ascontiguousarray(low, float), np.ascontiguousarray(high, float)
+            )
+            worst = np.maximum(worst, shares)
     good = worst <= tolerance
     conflict = not good.any()
     if conflict:
@@ -570,7 +630,7 @@ def _prepare(
     points = points[np.all(np.isfinite(points), axis=1)]
     if len(points) == 0:
         raise ValueError(f"object {obj.id} has no finite observed point")
-    regions = plane_regions(planes, config.unary.wall_min_thickness_m)
+    regions = _plane_regions(planes, config.unary.wall_min_thickness_m)
     cap = config.border_max_depth_m if obj.touches_border else config.max_depth_m
     pitch = space.grid.voxel_size_m if space is not None else voxels.DEFAULT_PITCH_M
     step = config.ray_step_m or pitch
@@ -654,7 +714,7 @@ def _prepare(
             cuts.append(np.append(-facet.normal, reach))
     forced_free = forced_wall = 0
     base = _observed_extremes(points)
-    observed_hull = convex_mesh(base)
+    observed_hull = _observed_hull(base)
     if observed_hull is not None and (space is not None or any(not r.is_support for r in regions)):
         keys = voxels.scanline_voxels(observed_hull[0], observed_hull[1], pitch)
         report = unary_report(observed_hull[0], keys, pitch, space, regions)
@@ -691,7 +751,14 @@ def _distance(facet: _SourceFacet, u: float, config: HypothesisConfig) -> float:
     if table is None:
         lower = np.maximum(facet.cells, config.min_thickness_m)
         lengths = np.clip(facet.cells + facet.width - lower, 0.0, None)
-        table = (lower, lengths, float(lengths.sum()), np.cumsum(lengths))
+        # Python floats: the same IEEE values and arithmetic as numpy's scalars, and
+        # ``bisect_right`` is ``np.searchsorted(side="right")`` on the sorted ends.
+        table = (
+            lower.tolist(),
+            lengths.tolist(),
+            float(lengths.sum()),
+            np.cumsum(lengths).tolist(),
+        )
         facet.tables[config.min_thickness_m] = table
     lower, lengths, total, ends = table
     if total <= 0:
@@ -699,7 +766,7 @@ def _distance(facet: _SourceFacet, u: float, config: HypothesisConfig) -> float:
     # Inverse CDF of the uniform distribution on the union of cells (monotone in u, so the
     # stratification of u carries over to d).
     target = u * total
-    index = min(int(np.searchsorted(ends, target, side="right")), len(ends) - 1)
+    index = min(bisect.bisect_right(ends, target), len(ends) - 1)
     return float(lower[index] + (target - (ends[index] - lengths[index])))
 
 
@@ -736,9 +803,10 @@ def _greedy_labels_numpy(
 
 def _hull_groups(
     hull: ConvexHull, cos_group: float, min_area_m2: float
-) -> list[tuple[np.ndarray, np.ndarray, float]]:
-    """Facets of a hull of at least ``min_area_m2``, largest first: (unit normal (3,), triangle
-    indices, area m^2) each.
+) -> Iterator[tuple[np.ndarray, Callable[[], np.ndarray], float]]:
+    """Facets of a hull of at least ``min_area_m2``, largest first: (unit normal (3,), a
+    function giving its triangle indices, area m^2) each, yielded one at a time (Algorithm 1
+    stops after ``max_hull_facets`` new ones and needs the triangles of those alone).
 
     The largest unassigned triangle claims every unassigned triangle within the angle of its
     normal, repeatedly; each such set is then split into connected parts (triangles sharing an
@@ -758,13 +826,19 @@ def _hull_groups(
     part, part_area, part_normal = hull_parts(
         label, np.ascontiguousarray(hull.neighbors, dtype=np.int64), areas, normals
     )
-    groups = []
-    for index in np.argsort(-part_area, kind="stable"):
-        if part_area[index] < min_area_m2:
-            break
-        normal = part_normal[index] / (np.linalg.norm(part_normal[index]) + 1e-15)
-        groups.append((normal, np.flatnonzero(part == index), float(part_area[index])))
-    return groups
+    for index in np.argsort(-part_area, kind="stable").tolist():
+        area = part_area[index]
+        if area < min_area_m2:
+            return
+        vector = part_normal[index]
+        # np.linalg.norm of a vector is sqrt(x.dot(x)): the same bits without its overhead.
+        normal = vector / (math.sqrt(vector.dot(vector)) + 1e-15)
+        yield normal, functools.partial(_members, part, index), float(area)
+
+
+def _members(part: np.ndarray, index: int) -> np.ndarray:
+    """Indices of the triangles whose part is ``index`` (``_hull_groups``)."""
+    return np.flatnonzero(part == index)
 
 
 def _hull_source(
@@ -779,9 +853,13 @@ def _hull_source(
     simplices = hull.simplices[members]
     tri = hull.points[simplices]
     areas = 0.5 * row_norms(triangle_cross(tri))
-    centre = (tri.mean(axis=1) * areas[:, None]).sum(axis=0) / max(areas.sum(), 1e-15)
+    total = areas.sum()
+    # tri.mean(axis=1): the three corners summed in order, over 3 (the same bits).
+    centre = ((tri[:, 0] + tri[:, 1] + tri[:, 2]) / 3.0 * areas[:, None]).sum(axis=0) / max(
+        total, 1e-15
+    )
     count = ctx.config.hull_facet_rays
-    pick = rng.choice(len(areas), size=count, p=areas / areas.sum())
+    pick = _weighted_choice(rng, areas / total, count)
     r1, r2 = rng.random(count), rng.random(count)
     flip = r1 + r2 > 1
     r1, r2 = np.where(flip, 1 - r1, r1), np.where(flip, 1 - r2, r2)
@@ -797,6 +875,21 @@ def _hull_source(
     used[simplices] = True  # np.unique(simplices) without its sort
     points = hull.points[used]
     return _SourceFacet(normal, centre, points, cells, step, "hull", conflict)
+
+
+def _weighted_choice(rng: np.random.Generator, p: np.ndarray, count: int) -> np.ndarray:
+    """``rng.choice(len(p), size=count, p=p)`` (int64 (count,)): the same draws and the same
+    state afterwards, by the same steps as numpy's ``Generator.choice`` with replacement
+    (cumulative sum normalised by its last entry, ``count`` uniforms, a right-sided search),
+    without its validation of ``p``, which costs more than the draw for a hull facet's few
+    triangles. ``p`` not a distribution (non-finite, negative, not summing to 1): numpy's
+    ``choice`` itself (its error)."""
+    total = float(p.sum()) if p.size else math.nan
+    if not (abs(total - 1.0) <= 1e-8 and p.min() >= 0):
+        return rng.choice(len(p), size=count, p=p)
+    cdf = p.cumsum()
+    cdf /= cdf[-1]
+    return cdf.searchsorted(rng.random(count), side="right").astype(np.int64, copy=False)
 
 
 @dataclass(frozen=True, eq=False)
@@ -858,7 +951,7 @@ def _algorithm1(
                 continue
             if any(f.normal @ normal >= cos_merge for f, _ in todo):
                 continue
-            todo.append((_hull_source(hull, normal, members, ctx, rng), rng.random()))
+            todo.append((_hull_source(hull, normal, members(), ctx, rng), rng.random()))
             if len(todo) >= config.max_hull_facets:
                 break
     points = np.concatenate([ctx.base_points, *hidden])
@@ -883,10 +976,13 @@ def rest_on_support(
     return None
 
 
-def _finish(ctx: _Context, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+def _finish(
+    ctx: _Context, points: np.ndarray, hull: tuple | None = None
+) -> tuple[np.ndarray, np.ndarray, float]:
     """Closed convex mesh of the hypothesis' points: thickened if flat, extended down to a
-    support it nearly touches, cut at the support."""
-    mesh = convex_mesh(points)
+    support it nearly touches, cut at the support. ``hull``: ``convex_mesh(points)`` when the
+    caller has it already (None: computed here)."""
+    mesh = hull if hull is not None else convex_mesh(points)
     if mesh is None:
         logger.info("object %d: flat hypothesis; thickened by D_min", ctx.object_id)
         mesh = convex_mesh(_thicken(points, ctx.fallback_normal, ctx.config.min_thickness_m))
@@ -937,7 +1033,7 @@ def _cut_all(
     cut_array = np.asarray(cuts, float)
     # Rows (a, b): a . x + b <= 0 inside; the hull's coplanar triangles give one plane each.
     halfspaces = np.concatenate([np.column_stack([normals, offsets]), -cut_array])
-    halfspaces = np.unique(np.round(halfspaces, 9), axis=0)
+    halfspaces = unique_rows(np.round(halfspaces, 9))  # np.unique(axis=0), the same rows
     if float((halfspaces[:, :3] @ interior + halfspaces[:, 3]).max()) >= -1e-7:
         return None
     try:
@@ -945,7 +1041,7 @@ def _cut_all(
     except (QhullError, ValueError):
         return None
     # Planes meeting at one corner give copies of it a rounding apart: merge them (10 nm).
-    result = convex_mesh(np.unique(np.round(corners, 8), axis=0))
+    result = convex_mesh(unique_rows(np.round(corners, 8)))
     if result is None:
         return None
     # Corners that stayed a hair apart can leave sliver faces whose planes other vertices
@@ -1277,16 +1373,18 @@ def minimum_shape(
     if extent < config.min_thickness_m:
         thickness = config.min_thickness_m - extent
         base = np.concatenate([base, base - thickness * normal])
-    if convex_mesh(base) is None:
+    # The set-up's hull when nothing was added (``_observed_hull`` remembers it).
+    mesh = _observed_hull(base) if thickness == 0.0 else convex_mesh(base)
+    if mesh is None:
         logger.info("object %d: flat observed hull; minimum shape thickened", obj.id)
         base = _thicken(base, normal, config.min_thickness_m)
-    regions = plane_regions(planes, config.unary.wall_min_thickness_m)
+    regions = _plane_regions(planes, config.unary.wall_min_thickness_m)
     cuts = np.array(_support_cuts(regions, points)).reshape(-1, 4)
     ctx = _Context(
         obj.id, base, base, (), None, regions, cuts, config.max_depth_m, normal, 0, 0,
         voxels.DEFAULT_PITCH_M, config,
     )  # fmt: skip
-    vertices, faces, volume = _finish(ctx, base)
+    vertices, faces, volume = _finish(ctx, base, mesh)
     return ShapeHypothesis(
         object_id=int(obj.id),
         index=-1,

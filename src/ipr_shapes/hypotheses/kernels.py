@@ -211,3 +211,24 @@ def first_wall_samples(
                 first[r] = s
                 break
     return first, True
+
+
+@_jit
+def outside_shares(centres: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+    """Per candidate d in ``centres`` (C,) m, the share (C,) of rays r whose admissible range
+    [``low[r]``, ``high[r]``] (R,) m it lies outside (``generate._admissible``). The numpy
+    expression it replaces (a bool mean is its count of True, exact in float64, over R)::
+
+        outside = (centres[:, None] < low[None, :]) | (centres[:, None] > high[None, :])
+        shares = outside.mean(axis=1)
+    """
+    count = low.shape[0]
+    shares = np.empty(centres.shape[0])
+    for c in range(centres.shape[0]):
+        centre = centres[c]
+        outside = 0
+        for r in range(count):
+            if centre < low[r] or centre > high[r]:
+                outside += 1
+        shares[c] = outside / count
+    return shares

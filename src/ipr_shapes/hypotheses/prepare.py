@@ -19,6 +19,7 @@ import numpy as np
 from ipr_shapes.hypotheses.constraints import (
     ConstraintConfig,
     OverlapCache,
+    box_depth_bounds,
     generated_unary_feasible,
     overlap_threshold,
 )
@@ -114,26 +115,36 @@ def prepare_hypotheses(
     # Pairwise penetration depths between the feasible hypotheses of objects whose hypotheses'
     # bounding boxes overlap by more than the tolerance.
     chosen = {i: [generated[i][k] for k in candidates[i]] for i in ids}
-    cache = OverlapCache([h for i in ids for h in chosen[i]])
     tolerance = constraints.overlap_tolerance_m
     envelopes = {
         i: np.stack([np.min([h.bounds[0] for h in chosen[i]], axis=0),
                      np.max([h.bounds[1] for h in chosen[i]], axis=0)])
         for i in ids
     }  # fmt: skip
-    depths: dict[tuple[int, int], np.ndarray] = {}
-    thresholds: dict[tuple[int, int], float] = {}
+    pairs = []
     for position, a in enumerate(ids):
         for b in ids[position + 1 :]:
             bound = np.min(
                 np.minimum(envelopes[a][1], envelopes[b][1])
                 - np.maximum(envelopes[a][0], envelopes[b][0])
             )
-            if bound <= tolerance:
-                continue
-            matrix = cache.depth_matrix(chosen[a], chosen[b], exact_above_m=tolerance)
-            threshold = overlap_threshold(matrix, constraints, a, b)
-            if (matrix > threshold).any():
-                depths[(a, b)], thresholds[(a, b)] = matrix, threshold
+            if bound > tolerance:
+                pairs.append((a, b))
+    # Only the hypotheses some pair's depth query needs go into the MuJoCo model (the rest keep
+    # their box bounds): compiling costs per mesh, and a geom's depths do not depend on the
+    # other meshes in the model.
+    queried: dict[int, np.ndarray] = {i: np.zeros(len(chosen[i]), dtype=bool) for i in ids}
+    for a, b in pairs:
+        needed = box_depth_bounds(chosen[a], chosen[b]) > tolerance
+        queried[a] |= needed.any(axis=1)
+        queried[b] |= needed.any(axis=0)
+    cache = OverlapCache([h for i in ids for h, q in zip(chosen[i], queried[i], strict=True) if q])
+    depths: dict[tuple[int, int], np.ndarray] = {}
+    thresholds: dict[tuple[int, int], float] = {}
+    for a, b in pairs:
+        matrix = cache.depth_matrix(chosen[a], chosen[b], exact_above_m=tolerance)
+        threshold = overlap_threshold(matrix, constraints, a, b)
+        if (matrix > threshold).any():
+            depths[(a, b)], thresholds[(a, b)] = matrix, threshold
     logger.debug("hypotheses prepared: %d depth queries", cache.queries)
     return PreparedHypotheses(ids, generated, minima, candidates, seconds, depths, thresholds)

@@ -338,9 +338,20 @@ def _slices(pts: np.ndarray, s: StructureSettings) -> tuple[np.ndarray, np.ndarr
     if len(pts) == 0:
         return pts, np.zeros(0, dtype=np.int64)
     slices = np.floor((pts[:, 2] - pts[:, 2].min()) / s.slice_m).astype(np.int64)
-    slices = np.unique(slices, return_inverse=True)[1]
+    slices = _ranks(slices)
     ok = np.bincount(slices)[slices] >= 4
-    return pts[ok], np.unique(slices[ok], return_inverse=True)[1]
+    return pts[ok], _ranks(slices[ok])
+
+
+def _ranks(values: np.ndarray) -> np.ndarray:
+    """``np.unique(values, return_inverse=True)[1]`` of non-negative ints (N,): each value's
+    rank among the distinct values, by counting instead of sorting (the same integers); a
+    range far wider than the count (an outlier kilometres off) sorts, like numpy."""
+    if values.size == 0 or int(values.max()) > 4 * values.size + 1024:
+        return np.unique(values, return_inverse=True)[1]
+    present = np.zeros(int(values.max()) + 1, dtype=np.int64)
+    present[values] = 1
+    return (np.cumsum(present) - 1)[values]
 
 
 def fit_axis(local: np.ndarray, keep: np.ndarray, s: StructureSettings) -> AxisFit | None:
