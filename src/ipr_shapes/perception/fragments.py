@@ -39,8 +39,9 @@ def join_fragments(
     the support and background included, both with depth) and the two mean chromaticities are
     within ``fragment_colour`` (objects packed tightly touch along much of a small one's
     outline; their colours tell them apart). Joined segments add their areas and
-    outlines, so a fragment of a fragment can join through it. Then renumbered 1..k by
-    decreasing pixel count.
+    outlines, so a fragment of a fragment can join through it. A joined fragment takes its
+    neighbour's label; every other label is kept (as ``containers.join_container_insides``
+    does), so objects elsewhere keep their ids.
 
     Args:
         labels: (H, W) int segment labels, 0 = none; segment_of_supervoxel: (M,) the segment of
@@ -100,12 +101,6 @@ def join_fragments(
         colour[best] += colour[piece]
     if np.array_equal(root, np.arange(n)):
         return labels, segment_of_supervoxel
-    joined = root[labels]
-    sizes = np.bincount(joined.reshape(-1), minlength=n)
-    sizes[0] = 0
-    alive = np.flatnonzero(sizes > 0)
-    new_id = np.zeros(n, dtype=np.int32)
-    new_id[alive[np.argsort(-sizes[alive], kind="stable")]] = np.arange(1, len(alive) + 1)
-    segments = np.asarray(segment_of_supervoxel, dtype=np.int64)
-    relabelled = np.where(segments > 0, new_id[root[np.maximum(segments, 0)]], segments)
-    return new_id[joined].astype(labels.dtype), relabelled.astype(segment_of_supervoxel.dtype)
+    segments = np.asarray(segment_of_supervoxel)
+    relabelled = np.where(segments > 0, root[np.maximum(segments, 0)], segments)
+    return root[labels].astype(labels.dtype), relabelled.astype(segment_of_supervoxel.dtype)
