@@ -21,6 +21,7 @@ def generated_scene(tmp_path_factory) -> Path:
     )
 
 
+@pytest.mark.slow  # generates a full scene (7 s): runs in .ci/run's slow stage
 def test_space_inside_ground_truth_objects_is_never_free(generated_scene: Path):
     scene = load_scene(generated_scene)
     frame = scene.frames[0]
@@ -40,6 +41,7 @@ def test_space_inside_ground_truth_objects_is_never_free(generated_scene: Path):
     assert np.count_nonzero(states == UNKNOWN) > 0.3 * states.size
 
 
+@pytest.mark.slow  # generates a full scene (7 s): runs in .ci/run's slow stage
 def test_free_in_front_of_surfaces_and_unknown_behind(generated_scene: Path):
     frame = load_scene(generated_scene).frames[0]
     grid = VoxelGrid.around([-0.35, -0.35, -0.05], [0.35, 0.35, 0.35])

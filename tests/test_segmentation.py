@@ -317,6 +317,7 @@ def wall_pixels(scene_path: Path, frame: Frame) -> np.ndarray:
     return inside & (frame.depth_m > 0) & (points[..., 2] > 0.01)
 
 
+@pytest.mark.slow  # generates a drawer scene (6 s): runs in .ci/run's slow stage
 def test_container_walls_are_found_and_not_objects(container_scene: Path):
     frame = load_scene(container_scene).frames[0]
     result = segment_frame(frame)
