@@ -59,6 +59,7 @@ def suite(tmp_path_factory) -> dict[str, Path]:
 # Scene contract
 
 
+@pytest.mark.slow  # the full-size scene fixture (12 s): .ci/run's slow stage
 def test_scenes_load_with_the_right_frames_and_pushes(suite):
     dynamic = load_scene(suite["dynamic"])
     assert dynamic.world_frame_source == "camera_poses"
@@ -86,6 +87,7 @@ def test_scenes_load_with_the_right_frames_and_pushes(suite):
     assert _json(suite["static"] / "synth.json")["arrangement"] == "drawer"
 
 
+@pytest.mark.slow  # the full-size scene fixture (12 s): .ci/run's slow stage
 def test_ground_truth_ids_and_info_are_consistent(suite):
     for path in (suite["dynamic"], suite["static"]):
         cameras = _json(path / "scene_camera.json")
@@ -113,6 +115,7 @@ def test_ground_truth_ids_and_info_are_consistent(suite):
 
 
 @needs_ycb
+@pytest.mark.slow  # the full-size scene fixture (12 s): .ci/run's slow stage
 def test_models_are_written_in_millimetres(suite):
     models = suite["out"] / "models"
     info = _json(models / "models_info.json")
@@ -138,6 +141,7 @@ def test_models_are_written_in_millimetres(suite):
         assert np.allclose(metres.extents, source.extents, atol=1e-6)
 
 
+@pytest.mark.slow  # the full-size scene fixture (12 s): .ci/run's slow stage
 def test_camera_distance_elevation_and_intrinsics_in_range(suite):
     scene = load_scene(suite["dynamic"])
     target = np.array(_json(suite["dynamic"] / "synth.json")["camera"]["target_m"])
@@ -160,6 +164,7 @@ def test_camera_distance_elevation_and_intrinsics_in_range(suite):
 # Ground truth agrees with the images
 
 
+@pytest.mark.slow  # the full-size scene fixture (12 s): .ci/run's slow stage
 def test_ground_truth_poses_project_onto_matching_depth(suite):
     """Front-facing model vertices, posed by scene_gt and projected with K, land on pixels whose
     depth matches theirs: poses, camera and depth agree."""
@@ -188,6 +193,7 @@ def test_ground_truth_poses_project_onto_matching_depth(suite):
     assert np.median(fractions) > 0.7
 
 
+@pytest.mark.slow  # the full-size scene fixture (12 s): .ci/run's slow stage
 def test_pushes_move_an_object_and_start_outside_all_objects(suite):
     path = suite["dynamic"]
     scene = load_scene(path)
@@ -213,6 +219,7 @@ def test_pushes_move_an_object_and_start_outside_all_objects(suite):
 # Sensor model
 
 
+@pytest.mark.slow  # the full-size scene fixture (12 s): .ci/run's slow stage
 def test_depth_is_noisy_quantised_and_has_holes(suite):
     path = suite["dynamic"]
     written = np.asarray(Image.open(path / "depth" / "000000.png")).astype(np.float64)
