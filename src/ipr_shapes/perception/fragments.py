@@ -7,7 +7,10 @@ surface runs on without a depth step, while an object, however small, is bounded
 (it stands in front of what is behind it) or touches its neighbours along a short contact.
 A segment smaller than ``segmentation.fragment_area_m2`` is joined to the neighbour along which
 its surface continues, when that continuation is at least ``segmentation.fragment_contact_share``
-of its outline (docs/DESIGN_NOTES.md, "Fragments of curved surfaces joined by their outline").
+of its outline. Continuing means no step between neighbouring points and no crease between
+their supervoxels' normals (two objects packed together touch along a crease), and the two
+segments must have alike colours (docs/DESIGN_NOTES.md, "Fragments of curved surfaces joined by
+their outline").
 """
 
 from __future__ import annotations

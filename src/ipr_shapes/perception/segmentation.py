@@ -71,9 +71,10 @@ def segment_frame(
     the walls found there stay (``config.temporal.walls``; ``ipr_shapes.perception.temporal``).
 
     Returns labels (H, W) int32 with 0 for background, support, walls, robot and large depth
-    holes, and 1..k for the k segments (numbered by decreasing size); pixels without depth near
-    a segment take its label (``fill_label_holes``). A frame without any depth reading gives an
-    empty segmentation (all 0, no planes, no supervoxels).
+    holes, and positive labels for the segments (numbered by decreasing size before the
+    container and fragment joins, which give a joined piece its partner's label and so leave
+    gaps); pixels without depth near a segment take its label (``fill_label_holes``). A frame
+    without any depth reading gives an empty segmentation (all 0, no planes, no supervoxels).
 
     The support is the plane the objects rest on (``planes.find_support_plane``), chosen in the
     first frame; later frames keep it.
