@@ -452,6 +452,13 @@ class ContainersConfig:
             not change chromaticity; an inside is darker than the outside).
         rim_radius_m: the container's points this close (m) to the piece's on the support
             are its rim around the piece.
+        join_rims: also join two segments that are together one open container (a circular
+            rim around both, whichever is the inside), as a real sensor's containers need.
+        rim_band_m, rim_inlier_share: two segments are one open container when the points
+            of both within ``rim_band_m`` (m) of their joint top lie on a circle (a rim) around
+            both; the robust circle fit must keep at least ``rim_inlier_share`` of them (the
+            rest: flying pixels, a handle). 1 cm holds a rim a few mm thick and the wall just
+            below it under a real sensor's noise.
         max_front_ratio: the piece stands in front of the container along at most this share
             of the pixel pairs where they meet (an object resting on a box stands in front).
         min_contact_px: the two meet (touch, or the container hides the piece) along at least
@@ -471,6 +478,8 @@ class ContainersConfig:
         "bottom_tolerance_m": _NON_NEGATIVE,
         "max_chroma": _NON_NEGATIVE,
         "rim_radius_m": _NON_NEGATIVE,
+        "rim_band_m": _NON_NEGATIVE,
+        "rim_inlier_share": _SHARE,
         "max_front_ratio": _SHARE,
         "min_contact_px": _COUNT,
         "contact_gap_m": _NON_NEGATIVE,
@@ -478,6 +487,7 @@ class ContainersConfig:
     }
 
     join_insides: bool = True
+    join_rims: bool = True
     footprint_fraction: float = 0.9
     margin_m: float = 0.01
     circle_rms_m: float = 0.004
@@ -486,6 +496,8 @@ class ContainersConfig:
     bottom_tolerance_m: float = 0.005
     max_chroma: float = 0.2
     rim_radius_m: float = 0.02
+    rim_band_m: float = 0.01
+    rim_inlier_share: float = 0.8
     max_front_ratio: float = 0.5
     min_contact_px: int = 3
     contact_gap_m: float = 0.01

@@ -30,6 +30,28 @@ inside of a larger segment C when, measured on the support plane:
   percentile at most ``containers.top_tolerance_m`` below it): a rim surrounds an inside, whereas
   an object resting on a box rises above the box's face.
 
+A real sensor's containers mostly fail those rules (``docs/experiments/2026-11-27-real-containers.md``):
+seen from above, a bowl's or mug's largest segment is its inside (with the far rim), whose
+filled footprint fits no circle, and the pieces are the near outer wall (which reaches below the
+inside's floor) or an inside piece that carries the near rim (which rises above the wall's top).
+The rules above presume the larger segment is the outer wall. So a pair also joins, whichever of
+the two is the inside, when together they are one open container:
+
+- they meet and the smaller does not stand in front of the larger (as above), and they have
+  alike colours (``containers.max_chroma``);
+- their rim is a circle: the points of both within ``containers.rim_band_m`` of their joint top
+  (98th percentile) lie on a circle fitted robustly (Kasa fit, points beyond three robust
+  standard deviations of the residuals, at least ``containers.circle_rms_m``, dropped and the
+  circle refitted: flying pixels at the silhouette and a mug's handle), with at least
+  ``containers.rim_inlier_share`` of them kept, an RMS of at most ``containers.circle_rms_m``
+  and a radius of at most ``containers.max_radius_m``;
+- each of the two lies within that circle: ``containers.footprint_fraction`` of its points
+  within the radius plus ``containers.margin_m`` on the support.
+
+The filled top of a box, a can or an object resting in a bowl above its rim fits no circle
+(a filled disc's RMS is a quarter of its radius), and an object beside a container lies outside
+the container's rim.
+
 Pieces are joined one at a time, the pair that meets along the most pixel pairs first, and the
 container's figures are recomputed after each join, so the inside's pieces that touch only
 each other join in turn. The rules are strict because a looser footprint-only join also
@@ -165,7 +187,12 @@ def join_container_insides(
             if fronts.get((piece, container), 0) > config.containers.max_front_ratio * count:
                 continue
             if (piece, container) not in verdicts:
-                verdicts[piece, container] = _is_inside(summary(piece), summary(container), config)
+                verdicts[piece, container] = _is_inside(
+                    summary(piece), summary(container), config
+                ) or (
+                    config.containers.join_rims
+                    and _one_container(summary(piece), summary(container), config)
+                )
             if verdicts[piece, container]:
                 best = (count, piece, container)
         if best is None:
@@ -312,4 +339,75 @@ def _is_inside(piece: _Segment, container: _Segment, config: PerceptionConfig) -
     return bool(
         around.size > 0
         and np.percentile(around, 98) >= piece.top - config.containers.top_tolerance_m
+    )
+
+
+def _rim_circle(
+    footprint: np.ndarray, heights: np.ndarray, config: PerceptionConfig
+) -> tuple[np.ndarray, float] | None:
+    """(centre (2,), radius) on the support of the circle through the rim of the points with
+    footprint (N, 2) and heights (N,) (metres), or None when their top is no circle.
+
+    The rim is the points within ``containers.rim_band_m`` of the top (98th percentile). The
+    circle is a Kasa fit refitted on its inliers until they stay the same (at most four fits):
+    inliers are within three robust standard deviations (1.4826 x the median absolute residual)
+    of the circle, and never fewer than those within ``containers.circle_rms_m``, so that a
+    sensor's flying pixels at the silhouette and a mug's handle, which rise to the rim's height
+    off its circle, do not bend it. It counts when at least ``containers.rim_inlier_share`` of
+    the rim's points are inliers, their RMS distance to it is at most ``containers.circle_rms_m``
+    and its radius at most ``containers.max_radius_m``.
+    """
+    settings = config.containers
+    top = np.percentile(heights, 98)
+    rim = footprint[heights >= top - settings.rim_band_m]
+    if len(rim) < 10:
+        return None
+    inliers = np.ones(len(rim), dtype=bool)
+    for _ in range(4):
+        kept = rim[inliers]
+        if len(kept) < 10:
+            return None
+        origin = kept.mean(axis=0)
+        local = kept - origin
+        design = np.column_stack([local, np.ones(len(local))])
+        solution, *_ = np.linalg.lstsq(design, (local**2).sum(axis=1), rcond=None)
+        centre = solution[:2] / 2.0
+        squared = solution[2] + centre @ centre
+        if squared <= 0:
+            return None
+        radius = float(np.sqrt(squared))
+        centre = centre + origin
+        residual = np.linalg.norm(rim - centre, axis=1) - radius
+        spread = 1.4826 * np.median(np.abs(residual[inliers]))
+        updated = np.abs(residual) <= max(3.0 * spread, settings.circle_rms_m)
+        if (updated == inliers).all():
+            break
+        inliers = updated
+    if (
+        inliers.mean() < settings.rim_inlier_share
+        or radius > settings.max_radius_m
+        or np.sqrt(np.mean(residual[inliers] ** 2)) > settings.circle_rms_m
+    ):
+        return None
+    return centre, radius
+
+
+def _one_container(first: _Segment, second: _Segment, config: PerceptionConfig) -> bool:
+    """Whether two segments are together one open container whose rim is a circle around
+    both (module doc), whichever of them is the inside."""
+    settings = config.containers
+    if np.abs(first.chroma - second.chroma).sum() > settings.max_chroma:
+        return False
+    circle = _rim_circle(
+        np.concatenate([first.footprint, second.footprint]),
+        np.concatenate([first.heights, second.heights]),
+        config,
+    )
+    if circle is None:
+        return False
+    centre, radius = circle
+    return all(
+        np.mean(np.linalg.norm(part.footprint - centre, axis=1) <= radius + settings.margin_m)
+        >= settings.footprint_fraction
+        for part in (first, second)
     )
