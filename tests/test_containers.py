@@ -1,0 +1,173 @@
+"""Open containers seen by a real sensor (``ipr_shapes.perception.containers``): a bowl's or a
+mug's pieces are one container by their circular rim, whichever piece is the inside, while a
+box's filled top, an object resting in a bowl above its rim and two cups side by side are not.
+
+The segments are built directly on the support (footprint in metres, heights above it), as the
+module summarises them, so each rule is checked without the segmentation in front of it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ipr_shapes.perception.config import PerceptionConfig
+from ipr_shapes.perception.containers import (
+    _is_inside,
+    _one_container,
+    _rim_circle,
+    _Segment,
+    join_container_insides,
+)
+from ipr_shapes.perception.types import KnownPlane
+
+CONFIG = PerceptionConfig()
+TEAL = (0.15, 0.42, 0.43)
+
+
+def _segment(footprint: np.ndarray, heights: np.ndarray, chroma=TEAL) -> _Segment:
+    bottom, top = np.percentile(heights, [2, 98])
+    return _Segment(
+        top=float(top),
+        bottom=float(bottom),
+        footprint=footprint,
+        heights=heights,
+        chroma=np.asarray(chroma, float),
+        circle_rms_m=CONFIG.containers.circle_rms_m,
+        max_radius_m=CONFIG.containers.max_radius_m,
+    )
+
+
+def _bowl_surface(rng, count, angles, heights, radius_at, noise=0.0015):
+    """Points of a surface of revolution about (0.3, 0.1): angle (rad) and height (m) drawn
+    from the given ranges, radius ``radius_at(height)``, noise (m) added on the support."""
+    angle = rng.uniform(*angles, count)
+    height = rng.uniform(*heights, count)
+    radius = radius_at(height)
+    footprint = np.stack([0.3 + radius * np.cos(angle), 0.1 + radius * np.sin(angle)], axis=1)
+    return footprint + rng.normal(0.0, noise, footprint.shape), height
+
+
+def _real_bowl(seed: int = 0, handle: bool = False):
+    """A teal bowl (rim 8 cm radius, 7 cm high, floor 1 cm) as a real sensor segments it from
+    the front (the camera at -y): the inside, its floor and the far rim are the large segment;
+    the near outer wall, which reaches down to the table and up to the rim, is the small one.
+    With ``handle``, flying pixels and a handle at the rim's height stand off the circle."""
+    rng = np.random.default_rng(seed)
+    inner = lambda h: 0.02 + 0.06 * ((h - 0.01) / 0.06) ** 0.5  # noqa: E731
+    outer = lambda h: inner(np.maximum(h, 0.01)) + 0.004  # noqa: E731
+    wall, wall_h = _bowl_surface(rng, 400, (0.0, np.pi), (0.01, 0.07), inner)  # far half
+    near, near_h = _bowl_surface(rng, 100, (np.pi, 2 * np.pi), (0.01, 0.035), inner)
+    floor = np.array([0.3, 0.1]) + rng.uniform(-0.02, 0.02, (100, 2))
+    inside = _segment(
+        np.concatenate([wall, near, floor]),
+        np.concatenate([wall_h, near_h, rng.uniform(0.009, 0.011, 100)]),
+    )
+    front, front_h = _bowl_surface(rng, 250, (1.2 * np.pi, 1.8 * np.pi), (0.003, 0.07), outer)
+    if handle:
+        # 15 points (an eighth of the rim band) 1.5-3 cm beyond the rim, at its height.
+        off = rng.uniform(-0.3, 0.3, 15)
+        reach = 0.08 + rng.uniform(0.015, 0.03, 15)
+        front = np.concatenate(
+            [front, np.stack([0.3 + reach * np.cos(off), 0.1 + reach * np.sin(off)], 1)]
+        )
+        front_h = np.concatenate([front_h, rng.uniform(0.062, 0.07, 15)])
+    return inside, _segment(front, front_h)
+
+
+def test_a_real_bowls_inside_and_near_wall_are_one_container_whichever_is_larger():
+    inside, wall = _real_bowl()
+    # The rules written for a container that is the outer wall do not hold: as a piece of the
+    # inside the wall reaches below its floor, and the inside's filled footprint fits no circle.
+    assert not _is_inside(wall, inside, CONFIG)
+    assert inside.circle is None
+    # Their rim does: one container, in either order.
+    assert _one_container(wall, inside, CONFIG)
+    assert _one_container(inside, wall, CONFIG)
+    centre, radius = _rim_circle(
+        np.concatenate([inside.footprint, wall.footprint]),
+        np.concatenate([inside.heights, wall.heights]),
+        CONFIG,
+    )
+    assert np.allclose(centre, [0.3, 0.1], atol=0.005) and abs(radius - 0.08) < 0.008
+
+
+def test_flying_pixels_and_a_handle_at_the_rims_height_do_not_bend_the_rim():
+    inside, wall = _real_bowl(handle=True)
+    assert _one_container(wall, inside, CONFIG)
+    # Without dropping the outliers (every rim point an inlier) the circle does not fit.
+    strict = PerceptionConfig(containers=CONFIG.containers.__class__(rim_inlier_share=1.0))
+    assert not _one_container(wall, inside, strict)
+
+
+def test_an_object_in_a_bowl_above_its_rim_a_box_top_and_a_cup_beside_are_not_one_container():
+    rng = np.random.default_rng(1)
+    inside, wall = _real_bowl()
+    # A ball of the bowl's colour resting in it, rising 3 cm above the rim: the top is its cap.
+    direction = rng.normal(size=(300, 3))
+    direction[:, 2] = np.abs(direction[:, 2])
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    ball = 0.035 * direction + [0.3, 0.1, 0.065]
+    ball = _segment(ball[:, :2], ball[:, 2])
+    assert not _one_container(ball, inside, CONFIG)
+    # A box's filled top (10 x 6 cm at 5 cm) and its front face below.
+    top = rng.uniform([0.0, 0.0], [0.10, 0.06], (300, 2))
+    face = np.stack([rng.uniform(0.0, 0.10, 150), np.zeros(150)], axis=1)
+    box_top = _segment(top, np.full(300, 0.05) + rng.normal(0, 0.001, 300))
+    box_face = _segment(face, rng.uniform(0.0, 0.05, 150))
+    assert not _one_container(box_face, box_top, CONFIG)
+    # Two cups of one colour side by side (rims 4 cm radius, 10 cm apart, same height).
+    cup = lambda h: np.full_like(h, 0.04)  # noqa: E731
+    first, first_h = _bowl_surface(rng, 300, (0.0, 2 * np.pi), (0.01, 0.09), cup)
+    second, second_h = _bowl_surface(rng, 300, (0.0, 2 * np.pi), (0.01, 0.09), cup)
+    second = second + [0.10, 0.0]
+    assert not _one_container(_segment(first, first_h), _segment(second, second_h), CONFIG)
+    # Each cup alone has its rim (the test above is not failing for want of a circle), and a
+    # lower box of its colour beside it, whose top is below the rim's band, is not its inside.
+    assert _rim_circle(first, first_h, CONFIG) is not None
+    beside = np.array([0.3, 0.1]) + rng.uniform([0.045, -0.03], [0.09, 0.03], (200, 2))
+    low_box = _segment(beside, rng.uniform(0.01, 0.05, 200))
+    assert not _one_container(low_box, _segment(first, first_h), CONFIG)
+
+
+def test_a_different_colour_or_a_piece_outside_the_rim_is_not_the_container():
+    inside, wall = _real_bowl()
+    red = _segment(wall.footprint, wall.heights, chroma=(0.6, 0.2, 0.2))
+    assert not _one_container(red, inside, CONFIG)
+    # The same wall moved 6 cm aside: the rim of the two is then no circle around both.
+    moved = _segment(wall.footprint + [0.0, -0.06], wall.heights)
+    assert not _one_container(moved, inside, CONFIG)
+
+
+def test_the_join_relabels_a_real_bowls_near_wall_with_its_inside():
+    """Through ``join_container_insides``: the two segments of ``_real_bowl`` side by side in a
+    40 x 20 pixel image, meeting along a column of rim points, become one label (and the
+    supervoxels' segments with them); with ``join_rims`` off they stay two."""
+    inside, wall = _real_bowl()
+    height, half = 20, 20
+    rng = np.random.default_rng(2)
+
+    def grid(segment: _Segment) -> np.ndarray:
+        pick = rng.choice(len(segment.heights), height * half, replace=True)
+        return np.column_stack([segment.footprint[pick], segment.heights[pick]])
+
+    left, right = grid(inside).reshape(height, half, 3), grid(wall).reshape(height, half, 3)
+    # Where they meet: the lowest inside points seen over the near wall, 3.5 cm up, and the
+    # wall's outside there, 4 mm apart (the rim above them is the wall's).
+    angle = np.linspace(1.3 * np.pi, 1.7 * np.pi, height)
+    ring = np.column_stack([np.cos(angle), np.sin(angle), np.zeros(height)])
+    left[:, -1] = [0.3, 0.1, 0.035] + 0.0587 * ring
+    right[:, 0] = [0.3, 0.1, 0.035] + 0.0627 * ring
+    points = np.concatenate([left, right], axis=1).reshape(-1, 3)
+    labels = np.zeros((height, 2 * half), np.int32)
+    labels[:, :half], labels[:, half:] = 1, 2
+    depth = np.full(labels.shape, 0.75, np.float32)
+    rgb = np.broadcast_to(np.array([38, 107, 110], np.uint8), (*labels.shape, 3)).copy()
+    support = KnownPlane("support", np.array([0.0, 0.0, 1.0]), 0.0, np.zeros((0, 3)))
+    valid = np.ones(labels.size, bool)
+    arguments = (np.array([0, 1, 2]), points, valid, depth, rgb, support)
+    joined, segments = join_container_insides(labels, *arguments, CONFIG)
+    assert (joined == joined[0, 0]).all() and joined[0, 0] in (1, 2)
+    assert segments.tolist() == [0, joined[0, 0], joined[0, 0]]
+    off = PerceptionConfig(containers=CONFIG.containers.__class__(join_rims=False))
+    apart, _ = join_container_insides(labels, *arguments, off)
+    assert np.array_equal(apart, labels)
