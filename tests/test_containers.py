@@ -83,7 +83,7 @@ def test_a_real_bowls_inside_and_near_wall_are_one_container_whichever_is_larger
     # Their rim does: one container, in either order.
     assert _one_container(wall, inside, CONFIG)
     assert _one_container(inside, wall, CONFIG)
-    centre, radius = _rim_circle(
+    centre, radius, _ = _rim_circle(
         np.concatenate([inside.footprint, wall.footprint]),
         np.concatenate([inside.heights, wall.heights]),
         CONFIG,

@@ -44,7 +44,8 @@ the two is the inside, when together they are one open container:
   standard deviations of the residuals, at least ``containers.circle_rms_m``, dropped and the
   circle refitted: flying pixels at the silhouette and a mug's handle), with at least
   ``containers.rim_inlier_share`` of them kept, an RMS of at most ``containers.circle_rms_m``
-  and a radius of at most ``containers.max_radius_m``;
+  and a radius of at most ``containers.max_radius_m`` (the squared radius may change linearly
+  with the height across the band: a bowl's flaring wall);
 - each of the two lies within that circle: ``containers.footprint_fraction`` of its points
   within the radius plus ``containers.margin_m`` on the support.
 
@@ -132,6 +133,7 @@ def join_container_insides(
     rgb: np.ndarray,
     support: KnownPlane,
     config: PerceptionConfig,
+    viewpoint: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Relabel the pieces of open containers' insides with their container's label.
 
@@ -141,6 +143,8 @@ def join_container_insides(
         points: (H*W, 3) world points, metres; valid: (H*W,) pixels with a depth reading.
         depth_m: (H, W) depth, metres; rgb: (H, W, 3) uint8 colours.
         support: the support plane (heights and footprints are measured on it).
+        viewpoint: (3,) the camera's centre, world (m), if known: a point on the ray from it
+            through a container's rim counts as within the container (``_one_container``).
 
     Returns:
         The relabelled (labels, segment_of_supervoxel); the inputs when nothing is joined.
@@ -161,6 +165,12 @@ def join_container_insides(
     axis_u /= np.linalg.norm(axis_u)
     axis_v = np.cross(normal, axis_u)
     frame = (support, axis_u, axis_v)
+    camera = None
+    if viewpoint is not None:
+        camera = (
+            np.array([viewpoint @ axis_u, viewpoint @ axis_v]),
+            float(support.signed_distance(viewpoint[None])[0]),
+        )
 
     # Pixels with depth of every segment, from one compiled counting sort.
     flat = labels.reshape(-1)
@@ -191,7 +201,7 @@ def join_container_insides(
                     summary(piece), summary(container), config
                 ) or (
                     config.containers.join_rims
-                    and _one_container(summary(piece), summary(container), config)
+                    and _one_container(summary(piece), summary(container), config, camera)
                 )
             if verdicts[piece, container]:
                 best = (count, piece, container)
@@ -344,22 +354,30 @@ def _is_inside(piece: _Segment, container: _Segment, config: PerceptionConfig) -
 
 def _rim_circle(
     footprint: np.ndarray, heights: np.ndarray, config: PerceptionConfig
-) -> tuple[np.ndarray, float] | None:
-    """(centre (2,), radius) on the support of the circle through the rim of the points with
-    footprint (N, 2) and heights (N,) (metres), or None when their top is no circle.
+) -> tuple[np.ndarray, float, float] | None:
+    """(centre (2,), radius, height) on the support of the circle through the rim of the
+    points with footprint (N, 2) and heights (N,) (metres), or None when their top is no
+    circle.
 
-    The rim is the points within ``containers.rim_band_m`` of the top (98th percentile). The
-    circle is a Kasa fit refitted on its inliers until they stay the same (at most four fits):
-    inliers are within three robust standard deviations (1.4826 x the median absolute residual)
-    of the circle, and never fewer than those within ``containers.circle_rms_m``, so that a
-    sensor's flying pixels at the silhouette and a mug's handle, which rise to the rim's height
-    off its circle, do not bend it. It counts when at least ``containers.rim_inlier_share`` of
-    the rim's points are inliers, their RMS distance to it is at most ``containers.circle_rms_m``
+    The rim is the points within ``containers.rim_band_m`` of the top (98th percentile). On a
+    bowl's flaring wall that band is a frustum, a few mm wider at its top than at its bottom, so
+    the fit is Kasa's with the squared radius linear in the height below the top (|p - c|^2 =
+    r^2 + s (h - top), one more linear unknown): the residual is then the sensor's noise and
+    the wall's thickness, not the band's slope; the radius returned is the one at the top (the
+    height returned). A
+    filled top (a box's, a can's lid) stays no circle: its radius does not follow its height.
+    The fit is refitted on its inliers until they stay the same (at most four fits): inliers
+    are within three robust standard deviations (1.4826 x the median absolute residual) of the
+    circle, and never fewer than those within ``containers.circle_rms_m``, so that a sensor's
+    flying pixels at the silhouette and a mug's handle, which rise to the rim's height off its
+    circle, do not bend it. It counts when at least ``containers.rim_inlier_share`` of the
+    rim's points are inliers, their RMS distance to it is at most ``containers.circle_rms_m``
     and its radius at most ``containers.max_radius_m``.
     """
     settings = config.containers
     top = np.percentile(heights, 98)
-    rim = footprint[heights >= top - settings.rim_band_m]
+    band = heights >= top - settings.rim_band_m
+    rim, below = footprint[band], heights[band] - top
     if len(rim) < 10:
         return None
     inliers = np.ones(len(rim), dtype=bool)
@@ -369,7 +387,8 @@ def _rim_circle(
             return None
         origin = kept.mean(axis=0)
         local = kept - origin
-        design = np.column_stack([local, np.ones(len(local))])
+        # |p - c|^2 = r^2 + slope * (h - top): the band of a flaring wall is a frustum.
+        design = np.column_stack([local, np.ones(len(local)), below[inliers]])
         solution, *_ = np.linalg.lstsq(design, (local**2).sum(axis=1), rcond=None)
         centre = solution[:2] / 2.0
         squared = solution[2] + centre @ centre
@@ -377,7 +396,8 @@ def _rim_circle(
             return None
         radius = float(np.sqrt(squared))
         centre = centre + origin
-        residual = np.linalg.norm(rim - centre, axis=1) - radius
+        expected = np.sqrt(np.maximum(squared + solution[3] * below, 0.0))
+        residual = np.linalg.norm(rim - centre, axis=1) - expected
         spread = 1.4826 * np.median(np.abs(residual[inliers]))
         updated = np.abs(residual) <= max(3.0 * spread, settings.circle_rms_m)
         if (updated == inliers).all():
@@ -389,12 +409,24 @@ def _rim_circle(
         or np.sqrt(np.mean(residual[inliers] ** 2)) > settings.circle_rms_m
     ):
         return None
-    return centre, radius
+    return centre, radius, float(top)
 
 
-def _one_container(first: _Segment, second: _Segment, config: PerceptionConfig) -> bool:
+def _one_container(
+    first: _Segment,
+    second: _Segment,
+    config: PerceptionConfig,
+    camera: tuple[np.ndarray, float] | None = None,
+) -> bool:
     """Whether two segments are together one open container whose rim is a circle around
-    both (module doc), whichever of them is the inside."""
+    both (module doc), whichever of them is the inside.
+
+    ``camera``: the camera centre's footprint (2,) and height (m) on the support, if known. A
+    point then also counts as within the rim when the ray from the camera to it crosses the
+    rim's height within the circle: a real sensor's mixed pixels at a silhouette lie on their
+    ray between the rim and what is behind it (measured: 10-20 % of a white bowl's far piece
+    lay up to 3 cm beyond its rim, 1-3 cm above the table).
+    """
     settings = config.containers
     if np.abs(first.chroma - second.chroma).sum() > settings.max_chroma:
         return False
@@ -405,9 +437,18 @@ def _one_container(first: _Segment, second: _Segment, config: PerceptionConfig) 
     )
     if circle is None:
         return False
-    centre, radius = circle
-    return all(
-        np.mean(np.linalg.norm(part.footprint - centre, axis=1) <= radius + settings.margin_m)
-        >= settings.footprint_fraction
-        for part in (first, second)
-    )
+    centre, radius, rim_height = circle
+    reach = radius + settings.margin_m
+
+    def within(part: _Segment) -> float:
+        inside = np.linalg.norm(part.footprint - centre, axis=1) <= reach
+        if camera is not None:
+            eye, eye_height = camera
+            below = part.heights < rim_height
+            # Where the ray from the camera to each point below the rim crosses its height.
+            along = (rim_height - part.heights[below]) / (eye_height - part.heights[below])
+            crossing = part.footprint[below] + along[:, None] * (eye - part.footprint[below])
+            inside[below] |= np.linalg.norm(crossing - centre, axis=1) <= reach
+        return float(np.mean(inside))
+
+    return all(within(part) >= settings.footprint_fraction for part in (first, second))

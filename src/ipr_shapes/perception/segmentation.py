@@ -196,6 +196,7 @@ def segment_frame(
         frame.rgb,
         support,
         config,
+        viewpoint=frame.world_from_camera[:3, 3],
     )
     labels, segment_of_supervoxel = join_fragments(
         labels,
