@@ -44,8 +44,7 @@ the two is the inside, when together they are one open container:
   standard deviations of the residuals, at least ``containers.circle_rms_m``, dropped and the
   circle refitted: flying pixels at the silhouette and a mug's handle), with at least
   ``containers.rim_inlier_share`` of them kept, an RMS of at most ``containers.circle_rms_m``
-  and a radius of at most ``containers.max_radius_m`` (the squared radius may change linearly
-  with the height across the band: a bowl's flaring wall);
+  and a radius of at most ``containers.max_radius_m``;
 - each of the two lies within that circle: ``containers.footprint_fraction`` of its points
   within the radius plus ``containers.margin_m`` on the support.
 
@@ -359,14 +358,9 @@ def _rim_circle(
     points with footprint (N, 2) and heights (N,) (metres), or None when their top is no
     circle.
 
-    The rim is the points within ``containers.rim_band_m`` of the top (98th percentile). On a
-    bowl's flaring wall that band is a frustum, a few mm wider at its top than at its bottom, so
-    the fit is Kasa's with the squared radius linear in the height below the top (|p - c|^2 =
-    r^2 + s (h - top), one more linear unknown): the residual is then the sensor's noise and
-    the wall's thickness, not the band's slope; the radius returned is the one at the top (the
-    height returned). A
-    filled top (a box's, a can's lid) stays no circle: its radius does not follow its height.
-    The fit is refitted on its inliers until they stay the same (at most four fits): inliers
+    The rim is the points within ``containers.rim_band_m`` of the top (98th percentile; the
+    height returned). The circle is a Kasa fit, refitted on its inliers until they stay the
+    same (at most four fits): inliers
     are within three robust standard deviations (1.4826 x the median absolute residual) of the
     circle, and never fewer than those within ``containers.circle_rms_m``, so that a sensor's
     flying pixels at the silhouette and a mug's handle, which rise to the rim's height off its
@@ -376,8 +370,7 @@ def _rim_circle(
     """
     settings = config.containers
     top = np.percentile(heights, 98)
-    band = heights >= top - settings.rim_band_m
-    rim, below = footprint[band], heights[band] - top
+    rim = footprint[heights >= top - settings.rim_band_m]
     if len(rim) < 10:
         return None
     inliers = np.ones(len(rim), dtype=bool)
@@ -387,8 +380,7 @@ def _rim_circle(
             return None
         origin = kept.mean(axis=0)
         local = kept - origin
-        # |p - c|^2 = r^2 + slope * (h - top): the band of a flaring wall is a frustum.
-        design = np.column_stack([local, np.ones(len(local)), below[inliers]])
+        design = np.column_stack([local, np.ones(len(local))])
         solution, *_ = np.linalg.lstsq(design, (local**2).sum(axis=1), rcond=None)
         centre = solution[:2] / 2.0
         squared = solution[2] + centre @ centre
@@ -396,8 +388,7 @@ def _rim_circle(
             return None
         radius = float(np.sqrt(squared))
         centre = centre + origin
-        expected = np.sqrt(np.maximum(squared + solution[3] * below, 0.0))
-        residual = np.linalg.norm(rim - centre, axis=1) - expected
+        residual = np.linalg.norm(rim - centre, axis=1) - radius
         spread = 1.4826 * np.median(np.abs(residual[inliers]))
         updated = np.abs(residual) <= max(3.0 * spread, settings.circle_rms_m)
         if (updated == inliers).all():
@@ -422,10 +413,12 @@ def _one_container(
     both (module doc), whichever of them is the inside.
 
     ``camera``: the camera centre's footprint (2,) and height (m) on the support, if known. A
-    point then also counts as within the rim when the ray from the camera to it crosses the
-    rim's height within the circle: a real sensor's mixed pixels at a silhouette lie on their
-    ray between the rim and what is behind it (measured: 10-20 % of a white bowl's far piece
-    lay up to 3 cm beyond its rim, 1-3 cm above the table).
+    point below the rim then also counts as within it when the ray from the camera to it
+    grazes the rim (crosses the rim's height within ``containers.margin_m`` of the circle): a
+    real sensor's mixed pixels at a silhouette lie on their ray between the rim and what is
+    behind it (measured: 10-20 % of a white bowl's far piece lay up to 3 cm beyond its rim,
+    1-3 cm above the table). A surface behind the container, seen over it, has its rays cross
+    the rim's height beyond the far rim, mostly more than the margin beyond it.
     """
     settings = config.containers
     if np.abs(first.chroma - second.chroma).sum() > settings.max_chroma:
@@ -448,7 +441,8 @@ def _one_container(
             # Where the ray from the camera to each point below the rim crosses its height.
             along = (rim_height - part.heights[below]) / (eye_height - part.heights[below])
             crossing = part.footprint[below] + along[:, None] * (eye - part.footprint[below])
-            inside[below] |= np.linalg.norm(crossing - centre, axis=1) <= reach
+            grazing = np.abs(np.linalg.norm(crossing - centre, axis=1) - radius)
+            inside[below] |= grazing <= settings.margin_m
         return float(np.mean(inside))
 
     return all(within(part) >= settings.footprint_fraction for part in (first, second))
