@@ -197,3 +197,15 @@ def test_mixed_pixels_behind_the_far_rim_are_within_it_only_on_grazing_rays():
     behind = np.array([0.3, 0.1]) + rng.uniform([-0.04, 0.11], [0.04, 0.20], (200, 2))
     box_top = _segment(behind, rng.uniform(0.02, 0.04, 200))
     assert not _one_container(box_top, inside, CONFIG, camera)
+
+
+def test_a_small_filled_top_is_no_rim_but_a_ring_of_its_size_is():
+    """A filled disc of radius R fits a circle of radius 0.71 R at an RMS of 0.24 R: a 1.4 cm
+    cap's top (RMS 3.4 mm) would pass the RMS test, so rims under 1.2 cm are not taken."""
+    rng = np.random.default_rng(4)
+    angle = rng.uniform(0.0, 2 * np.pi, 300)
+    ring = np.column_stack([np.cos(angle), np.sin(angle)])
+    disc = 0.014 * np.sqrt(rng.uniform(0.0, 1.0, (300, 1))) * ring
+    heights = rng.uniform(0.045, 0.05, 300)
+    assert _rim_circle(disc, heights, CONFIG) is None
+    assert _rim_circle(0.014 * ring + rng.normal(0, 0.001, ring.shape), heights, CONFIG)

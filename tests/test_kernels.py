@@ -821,3 +821,52 @@ def test_hough_votes_are_the_numpy_bincount():
     )
     votes = kernels.hough_votes(rows, cols, own, spread, cos_a, sin_a, reach)
     assert np.array_equal(votes, expected)
+
+
+def _robust_circle_numpy(points: np.ndarray, floor_m: float, rounds: int) -> tuple:
+    """``kernels.robust_circle`` in numpy (Kasa by least squares, refitted on its inliers)."""
+    inliers = np.ones(len(points), dtype=bool)
+    for _ in range(rounds):
+        kept = points[inliers]
+        if len(kept) < 10:
+            return 0.0, 0.0, -1.0, 0.0, 0.0
+        origin = kept.mean(axis=0)
+        local = kept - origin
+        design = np.column_stack([local, np.ones(len(local))])
+        solution, *_ = np.linalg.lstsq(design, (local**2).sum(axis=1), rcond=None)
+        centre = solution[:2] / 2.0
+        squared = solution[2] + centre @ centre
+        if squared <= 0:
+            return 0.0, 0.0, -1.0, 0.0, 0.0
+        radius = np.sqrt(squared)
+        centre = centre + origin
+        residual = np.linalg.norm(points - centre, axis=1) - radius
+        spread = 1.4826 * np.median(np.abs(residual[inliers]))
+        updated = np.abs(residual) <= max(3.0 * spread, floor_m)
+        if (updated == inliers).all():
+            break
+        inliers = updated
+    rms = np.sqrt(np.mean(residual[inliers] ** 2))
+    return centre[0], centre[1], radius, rms, inliers.mean()
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_robust_circle_matches_the_numpy_fit(seed):
+    """An arc with noise, a few outliers (a handle) and, for one seed, a filled disc: the same
+    circle, RMS and inlier share as the numpy loop (to rounding: normal equations, not QR)."""
+    rng = np.random.default_rng(seed)
+    angle = rng.uniform(0.2, 0.2 + 2.5 * (seed + 1), 200)
+    arc = np.column_stack([0.3 + 0.05 * np.cos(angle), 0.1 + 0.05 * np.sin(angle)])
+    arc += rng.normal(0.0, 0.002, arc.shape)
+    outliers = np.array([0.3, 0.1]) + rng.uniform(-0.09, 0.09, (20, 2))
+    points = np.concatenate([arc, outliers])
+    if seed == 2:
+        points = np.array([0.3, 0.1]) + 0.04 * np.sqrt(
+            rng.uniform(0, 1, (300, 1))
+        ) * np.column_stack([np.cos(angle := rng.uniform(0, 2 * np.pi, 300)), np.sin(angle)])
+    compiled = kernels.robust_circle(points, 0.004, 4)
+    assert np.allclose(compiled, _robust_circle_numpy(points, 0.004, 4), rtol=1e-9, atol=1e-12)
+    # Too few points, or all on one line: no circle.
+    assert kernels.robust_circle(points[:9], 0.004, 4)[2] == -1.0
+    line = np.column_stack([np.linspace(0, 0.1, 50), np.zeros(50)])
+    assert kernels.robust_circle(line, 0.004, 4)[2] == -1.0

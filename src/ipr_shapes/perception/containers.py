@@ -44,7 +44,8 @@ the two is the inside, when together they are one open container:
   standard deviations of the residuals, at least ``containers.circle_rms_m``, dropped and the
   circle refitted: flying pixels at the silhouette and a mug's handle), with at least
   ``containers.rim_inlier_share`` of them kept, an RMS of at most ``containers.circle_rms_m``
-  and a radius of at most ``containers.max_radius_m``;
+  and a radius of at most ``containers.max_radius_m`` and at least 1.2 cm (below, a small
+  filled blob fits a circle as well);
 - each of the two lies within that circle: ``containers.footprint_fraction`` of its points
   within the radius plus ``containers.margin_m`` on the support.
 
@@ -366,40 +367,34 @@ def _rim_circle(
     flying pixels at the silhouette and a mug's handle, which rise to the rim's height off its
     circle, do not bend it. It counts when at least ``containers.rim_inlier_share`` of the
     rim's points are inliers, their RMS distance to it is at most ``containers.circle_rms_m``
-    and its radius at most ``containers.max_radius_m``.
+    and its radius at most ``containers.max_radius_m`` and at least ``circle_rms_m`` / 0.34
+    (1.2 cm): a filled disc's points lie at an RMS distance of 0.34 r from their fitted circle
+    of radius r, so a smaller blob (a cap, a corner seen from above) would fit as well as a rim.
     """
     settings = config.containers
-    top = np.percentile(heights, 98)
+    # np.percentile(heights, 98) from a partial sort (linear interpolation, as numpy's).
+    position = 0.98 * (len(heights) - 1)
+    low = int(position)
+    high = min(low + 1, len(heights) - 1)
+    ordered = np.partition(heights, [low, high])
+    top = ordered[low] + (position - low) * (ordered[high] - ordered[low])
     rim = footprint[heights >= top - settings.rim_band_m]
     if len(rim) < 10:
         return None
-    inliers = np.ones(len(rim), dtype=bool)
-    for _ in range(4):
-        kept = rim[inliers]
-        if len(kept) < 10:
-            return None
-        origin = kept.mean(axis=0)
-        local = kept - origin
-        design = np.column_stack([local, np.ones(len(local))])
-        solution, *_ = np.linalg.lstsq(design, (local**2).sum(axis=1), rcond=None)
-        centre = solution[:2] / 2.0
-        squared = solution[2] + centre @ centre
-        if squared <= 0:
-            return None
-        radius = float(np.sqrt(squared))
-        centre = centre + origin
-        residual = np.linalg.norm(rim - centre, axis=1) - radius
-        spread = 1.4826 * np.median(np.abs(residual[inliers]))
-        updated = np.abs(residual) <= max(3.0 * spread, settings.circle_rms_m)
-        if (updated == inliers).all():
-            break
-        inliers = updated
+    # Compiled (``kernels``): the fit and its refits in one pass each.
+    cx, cy, radius, rms, share = kernels.robust_circle(
+        np.ascontiguousarray(rim, dtype=np.float64), float(settings.circle_rms_m), 4
+    )
+    # A filled top's points lie at an RMS distance of 0.34 r from their fitted circle of radius
+    # r (a uniform disc), so below circle_rms_m / 0.34 the RMS test cannot tell a rim from one.
     if (
-        inliers.mean() < settings.rim_inlier_share
+        radius < settings.circle_rms_m / 0.34
+        or share < settings.rim_inlier_share
         or radius > settings.max_radius_m
-        or np.sqrt(np.mean(residual[inliers] ** 2)) > settings.circle_rms_m
+        or rms > settings.circle_rms_m
     ):
         return None
+    centre = np.array([cx, cy])
     return centre, radius, float(top)
 
 
