@@ -47,7 +47,9 @@ the two is the inside, when together they are one open container:
   and a radius of at most ``containers.max_radius_m`` and at least 1.2 cm (below, a small
   filled blob fits a circle as well);
 - each of the two lies within that circle: ``containers.footprint_fraction`` of its points
-  within the radius plus ``containers.margin_m`` on the support.
+  within the radius plus ``containers.margin_m`` on the support, a point below the rim also
+  when its ray from the camera grazes the rim (mixed pixels at a far silhouette lie on their
+  ray, behind the rim).
 
 The filled top of a box, a can or an object resting in a bowl above its rim fits no circle
 (a filled disc's RMS is a quarter of its radius), and an object beside a container lies outside
@@ -361,18 +363,17 @@ def _rim_circle(
 
     The rim is the points within ``containers.rim_band_m`` of the top (98th percentile; the
     height returned). The circle is a Kasa fit, refitted on its inliers until they stay the
-    same (at most four fits): inliers
-    are within three robust standard deviations (1.4826 x the median absolute residual) of the
-    circle, and never fewer than those within ``containers.circle_rms_m``, so that a sensor's
-    flying pixels at the silhouette and a mug's handle, which rise to the rim's height off its
-    circle, do not bend it. It counts when at least ``containers.rim_inlier_share`` of the
+    same (at most four fits): inliers are within three robust standard deviations (1.4826 x
+    the median absolute residual) of the circle, and never fewer than those within
+    ``containers.circle_rms_m``, so that a sensor's flying pixels at the silhouette and a mug's
+    handle, which rise to the rim's height off its circle, do not bend it. It counts when at least ``containers.rim_inlier_share`` of the
     rim's points are inliers, their RMS distance to it is at most ``containers.circle_rms_m``
     and its radius at most ``containers.max_radius_m`` and at least ``circle_rms_m`` / 0.34
     (1.2 cm): a filled disc's points lie at an RMS distance of 0.34 r from their fitted circle
     of radius r, so a smaller blob (a cap, a corner seen from above) would fit as well as a rim.
     """
     settings = config.containers
-    # np.percentile(heights, 98) from a partial sort (linear interpolation, as numpy's).
+    # The 98th percentile from a partial sort (linear interpolation between order statistics).
     position = 0.98 * (len(heights) - 1)
     low = int(position)
     high = min(low + 1, len(heights) - 1)
@@ -430,7 +431,7 @@ def _one_container(
 
     def within(part: _Segment) -> float:
         inside = np.linalg.norm(part.footprint - centre, axis=1) <= reach
-        if camera is not None:
+        if camera is not None and camera[1] > rim_height:
             eye, eye_height = camera
             below = part.heights < rim_height
             # Where the ray from the camera to each point below the rim crosses its height.
