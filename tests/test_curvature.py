@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from ipr_shapes.perception.config import PerceptionConfig, SegmentationConfig
+from ipr_shapes.perception.config import ContainersConfig, PerceptionConfig, SegmentationConfig
 from ipr_shapes.perception.curvature import (
     join_curved_segments,
     signed_bends,
@@ -200,14 +200,19 @@ def _segments_on(labels: np.ndarray, pixels: np.ndarray, min_pixels: int = 40) -
 @pytest.mark.parametrize("seed", [0, pytest.param(1, marks=pytest.mark.slow)])
 def test_a_bowl_under_real_sensor_noise_stays_whole(seed):
     """LCCP alone cuts the bowl's inside into a dozen pieces (each 2 cm step bends it by
-    about 14 degrees); with the curvature test it is at most its inside and its outer wall."""
+    about 14 degrees); with the curvature test it is at most its inside and its outer wall, and
+    so it is with the containers' rim join alone (``tests/test_containers.py``)."""
     frame, bowl = _noisy_bowl_frame(seed)
-    lccp = segment_frame(frame, config=OFF).labels
-    curved = segment_frame(frame).labels  # the default
+    no_rims = ContainersConfig(join_rims=False)
+    lccp = segment_frame(frame, config=replace(OFF, containers=no_rims)).labels
+    curved = segment_frame(frame, config=PerceptionConfig(containers=no_rims)).labels
     assert _segments_on(lccp, bowl) >= 8
     assert _segments_on(curved, bowl) <= 2
     # The bowl's pixels are covered: joined, not dropped.
     assert (curved[bowl] > 0).mean() >= 0.9
+    rims = segment_frame(frame, config=OFF).labels
+    assert _segments_on(rims, bowl) <= 2
+    assert (rims[bowl] > 0).mean() >= 0.9
 
 
 def test_a_table_split_by_a_long_object_is_still_one_workspace():
