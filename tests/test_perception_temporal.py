@@ -174,6 +174,30 @@ def test_walls_stay_and_a_new_wall_of_arrived_pixels_is_a_pushed_box():
     assert same_plane(old, again, config) and not same_plane(old, revealed, config)
 
 
+def test_a_new_wall_the_previous_frame_saw_as_an_object_is_that_object():
+    # Two new vertical planes whose pixels did not change since the previous frame: y = 0.1
+    # was unlabelled there (a wall the previous search missed: kept), y = -0.1 was an object
+    # segment (a box pushed against the bin's wall in an earlier frame and still: not a wall).
+    support = KnownPlane("support", np.array([0.0, 0.0, 1.0]), 0.0, np.zeros((0, 3)))
+    z = np.linspace(0.03, 0.12, 10)
+    s = np.linspace(-0.1, 0.1, 10)
+    grid_s, grid_z = (g.ravel() for g in np.meshgrid(s, z))
+    missed = _wall([0, -1, 0], 0.1, np.stack([grid_s, np.full(100, 0.1), grid_z], 1))
+    box_face = _wall([0, 1, 0], 0.1, np.stack([grid_s, np.full(100, -0.1), grid_z], 1))
+    above_points = np.concatenate([missed.points, box_face.points])
+    above = np.arange(200)
+    state = np.full(200, UNCHANGED, dtype=np.int8)
+    previous_label = np.concatenate([np.zeros(100), np.full(100, 3)]).astype(np.int32)
+    config = PerceptionConfig()
+    found = (missed, box_face)
+    args = (support, above, above_points, state, config)
+    assert consistent_walls((), found, *args, previous_label) == (missed,)
+    assert consistent_walls((), found, *args) == found  # without the previous labels
+    # Half of the face an object before: still at most the share allowed, a wall.
+    previous_label[150:] = 0
+    assert consistent_walls((), found, *args, previous_label) == found
+
+
 def test_a_frame_keeps_the_grouping_of_objects_that_did_not_move():
     from dataclasses import replace
 

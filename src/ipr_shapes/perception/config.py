@@ -366,6 +366,15 @@ class SegmentationConfig:
             this (deg): a surface running on, not two objects meeting at a crease.
         fragment_colour: ... and the two segments' mean chromaticities are at most this far
             apart (as ``curved_segment_colour``).
+        thin_radius_m: touching segments are joined when the points of both lie on one
+            cylinder of at most this radius (m; a marker, a pen, a handle: the seen half of its
+            circumference, pi r, at most two supervoxel seeds, where the graph's convexity
+            test is singular; ``ipr_shapes.perception.thin``). 0: off (the default, see
+            docs/DESIGN_NOTES.md "Thin cylinders joined (opt-in)"); 0.0125 joins them.
+        thin_rms_m: ... with an RMS radial residual of at most this (m): the depth noise,
+            1.2-2.3 mm on flat surfaces of the generated and real frames.
+        thin_min_contact_px: ... and they touch along at least this many neighbouring pixel
+            pairs (world points within ``fragment_gap_m``).
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -396,6 +405,9 @@ class SegmentationConfig:
         "fragment_gap_m": _NON_NEGATIVE,
         "fragment_colour": _NON_NEGATIVE,
         "fragment_bend_deg": _ANGLE,
+        "thin_radius_m": _NON_NEGATIVE,
+        "thin_rms_m": _NON_NEGATIVE,
+        "thin_min_contact_px": _COUNT,
     }
 
     concavity_tolerance_deg: float = 10.0
@@ -427,6 +439,9 @@ class SegmentationConfig:
     fragment_gap_m: float = 0.01
     fragment_colour: float = 0.04
     fragment_bend_deg: float = 45.0
+    thin_radius_m: float = 0.0
+    thin_rms_m: float = 0.003
+    thin_min_contact_px: int = 5
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -610,6 +625,8 @@ class TemporalConfig:
         wall_angle_deg, wall_offset_m: two walls within this angle (deg) and offset (m) are
             the same wall (walls do not move).
         wall_max_arrived: largest share of arrived pixels a new wall may have.
+        wall_max_object: largest share of a new wall's compared pixels that may be unchanged
+            pixels of an object segment of the previous frame (1: no limit).
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -621,6 +638,7 @@ class TemporalConfig:
         "wall_angle_deg": _ANGLE,
         "wall_offset_m": _NON_NEGATIVE,
         "wall_max_arrived": _SHARE,
+        "wall_max_object": _SHARE,
     }
 
     anchoring: bool = True
@@ -633,6 +651,7 @@ class TemporalConfig:
     wall_angle_deg: float = 10.0
     wall_offset_m: float = 0.02
     wall_max_arrived: float = 0.1
+    wall_max_object: float = 0.5
 
     def __post_init__(self) -> None:
         check_fields(self)

@@ -46,6 +46,7 @@ from ipr_shapes.perception.temporal import (
     consistent_walls,
     supervoxel_anchors,
 )
+from ipr_shapes.perception.thin import join_thin_pieces
 from ipr_shapes.perception.types import DepthView, FrameSegmentation, KnownPlane, Supervoxels
 from ipr_shapes.perception.workspace import drop_beyond_support
 from ipr_shapes.scene import Frame, Push, Pusher
@@ -155,6 +156,7 @@ def segment_frame(
             above_points,
             frame_change.state,
             config,
+            frame_change.previous_label,
         )
     planes = (support, *walls)
     keep = np.zeros(height * width, dtype=bool)
@@ -206,6 +208,17 @@ def segment_frame(
         frame.K,
         frame.rgb,
         supervoxels,
+        config,
+    )
+    labels, segment_of_supervoxel = join_thin_pieces(
+        labels,
+        segment_of_supervoxel,
+        points,
+        frame.depth_m,
+        frame.K,
+        frame.rgb,
+        supervoxels,
+        frame.world_from_camera[:3, 3],
         config,
     )
     if config.seams.enabled:

@@ -269,20 +269,25 @@ def consistent_walls(
     above_points: np.ndarray,
     state: np.ndarray,
     config: PerceptionConfig,
+    previous_label: np.ndarray | None = None,
 ) -> tuple[KnownPlane, ...]:
     """The walls of frame t given those of frame t-1: walls do not move.
 
     A wall found again (``same_plane``) is kept as found now; a previous wall not found again
     (hidden, or missed by the search) is kept as it was; a wall found for the first time is
     kept unless more than ``temporal.wall_max_arrived`` of its compared pixels arrived since
-    the previous frame: a face of a pushed or toppled box, not a wall revealed by the push (its
-    pixels are revealed) or one the previous search missed (unchanged).
+    the previous frame (a face of a pushed or toppled box, not a wall revealed by the push: its
+    pixels are revealed), or more than ``temporal.wall_max_object`` of them are unchanged
+    pixels of an object segment of the previous frame (a box pushed against a container's
+    wall and at rest since: the previous frame saw it as an object, not as a wall).
 
     Args:
         above: (N,) flat pixel indices of the points above the support; above_points: (N, 3)
-            their world points (m); state: (H, W) ``FrameChange.state``.
+            their world points (m); state: (H, W) ``FrameChange.state``; previous_label: (H,
+            W) ``FrameChange.previous_label`` (None: not used).
     """
     flat_state = state.reshape(-1)
+    flat_previous = None if previous_label is None else previous_label.reshape(-1)
     walls, found_again = [], set()
     for wall in found_walls:
         matches = [i for i, old in enumerate(previous_walls) if same_plane(old, wall, config)]
@@ -294,7 +299,12 @@ def consistent_walls(
         states = flat_state[on_wall]
         compared = int(np.count_nonzero(states != NOT_COMPARED))
         arrived = int(np.count_nonzero(states == ARRIVED))
-        if arrived <= config.temporal.wall_max_arrived * compared:
-            walls.append(wall)
+        if arrived > config.temporal.wall_max_arrived * compared:
+            continue
+        if flat_previous is not None:
+            was_object = int(np.count_nonzero((states == UNCHANGED) & (flat_previous[on_wall] > 0)))
+            if was_object > config.temporal.wall_max_object * compared:
+                continue
+        walls.append(wall)
     walls.extend(old for i, old in enumerate(previous_walls) if i not in found_again)
     return tuple(walls)
