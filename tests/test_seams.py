@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from ipr_shapes.perception.config import PerceptionConfig, SeamsConfig
-from ipr_shapes.perception.seams import _Seam, _undo
+from ipr_shapes.perception.seams import _equally_spaced, _Seam, _undo, _unrepeated
 from ipr_shapes.perception.segmentation import segment_frame
 from ipr_shapes.scene import Frame
 from tests.test_segmentation import box, camera, render, segment_of_point
@@ -284,3 +284,40 @@ def test_a_straight_line_on_a_ball_is_not_a_seam():
     loose = replace(no_strips, seams=replace(no_strips.seams, max_bend_m=1.0))
     labels = segment_frame(frame, config=loose).labels
     assert segment_of_point(frame, labels, left) != segment_of_point(frame, labels, right)
+
+
+def flat_seam(y: float) -> _Seam:
+    """A 20 cm seam along x at ``y`` (m) on the plane z = 0 (one pixel: ``_unrepeated`` reads
+    the 3D line only)."""
+    return _Seam(
+        rows=np.zeros(1, dtype=np.int64), cols=np.zeros(1, dtype=np.int64), cos_a=0.0,
+        sin_a=1.0, middle=np.array([0.0, y, 0.0]), direction=np.array([1.0, 0.0, 0.0]),
+        across=np.array([0.0, 1.0, 0.0]), normal=np.array([0.0, 0.0, 1.0]), half_length_m=0.1,
+    )  # fmt: skip
+
+
+def kept_seams(offsets: tuple[float, ...], config: PerceptionConfig) -> list[float]:
+    """The offsets (m) of the seams ``_unrepeated`` keeps, of seams at ``offsets`` across a
+    flat segment from y = -0.2 to 0.24 m: a row of four boxes whose last strip measures 14 cm
+    to the outline (a side face seen, a leaning box), the others 10 cm."""
+    xs, ys = np.meshgrid(np.linspace(-0.1, 0.1, 41), np.linspace(-0.2, 0.24, 89))
+    cloud = np.stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)], axis=1)
+    found = [flat_seam(y) for y in offsets]
+    dropped = _unrepeated(found, cloud, [True] * len(found), config)
+    return [
+        y for y, seam in zip(offsets, found, strict=True) if all(seam is not d for d in dropped)
+    ]
+
+
+def test_three_seams_at_one_spacing_are_kept_whatever_the_row_ends_measure():
+    # The end seam's strips (10 and 14 cm to the outline) do not agree; it lies at one spacing
+    # with the two seams beside it, a row of boxes of one size. Without that rule the end seam
+    # drops and the others after it (a dropped seam is no bound): the whole row merges.
+    assert kept_seams((-0.1, 0.0, 0.1), ON) == [-0.1, 0.0, 0.1]
+    off = replace(ON, seams=replace(ON.seams, rows_of_three=False))
+    assert kept_seams((-0.1, 0.0, 0.1), off) == []
+    # Seams at no one spacing (10 and 14 cm apart) are not a row of one size.
+    assert kept_seams((-0.1, 0.0, 0.14), ON) == []
+    assert _equally_spaced(np.array([0.1, 0.19]), ON)  # 10 and 9 cm
+    assert not _equally_spaced(np.array([0.1, 0.24]), ON)  # 10 and 14 cm
+    assert not _equally_spaced(np.array([0.1, 0.11]), ON)  # 1 cm: no box

@@ -538,6 +538,10 @@ class SeamsConfig:
             line through one box makes halves nothing else matches).
         size_tolerance_m: the strips' and the face's extents agree within this (m; the error
             of an extent measured to a real outline: side faces, dropouts).
+        rows_of_three: a seam is also repeated when two parallel seams on one side of it lie at
+            one spacing with it (three seams of a row of boxes of one size), whatever the row's
+            end strips measure to the outline (side faces, occluders): without it a row's end
+            seam drops when its end strip is off, and the row's other seams drop after it.
         max_cuts: most cuts per segment (bounds the time on a textured segment).
     """
 
@@ -569,6 +573,7 @@ class SeamsConfig:
     pair_sizes: bool = True
     size_tolerance_m: float = 0.01
     max_cuts: int = 32
+    rows_of_three: bool = True
 
     def __post_init__(self) -> None:
         check_fields(self)

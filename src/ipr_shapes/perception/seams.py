@@ -21,9 +21,10 @@ object's own lines whole:
 - **flat and repeated**: once the segment is cut, the strips on both sides of each seam must
   lie on its plane (a crease shows over a strip, not always in the side bands), and the seam
   must lie midway between a bound on each side (a parallel seam on the same surface, or the
-  segment's outline), within ``seams.strip_tolerance``: packed boxes of one size repeat at one
-  spacing, a printed border (a box's end panel) lies where the print puts it. Cuts that fail
-  are undone;
+  segment's outline), within ``seams.strip_tolerance``, or at one spacing with two parallel
+  seams beside it (``seams.rows_of_three``: a row's end strips to the outline are off by side
+  faces and occluders): packed boxes of one size repeat at one spacing, a printed border (a
+  box's end panel) lies where the print puts it. Cuts that fail are undone;
 - **supported when alone**: a seam midway between the outline on both sides (two boxes, or
   one box with a printed line through its middle) is kept only where it meets a seam that
   lies between seams (a grid of boxes) or its strips have the size of a flat rectangular
@@ -490,7 +491,9 @@ def _repeated(
     measured in 3D across the seam; the narrower strip is at least 1 - ``seams.strip_tolerance``
     of the wider. Packed boxes of one size repeat at one spacing, a printed border lies where
     the print puts it; a bound may lie beyond a nearer seam (a printed line on a box in the
-    row). Returns ``_BY_SEAM`` when a pair of bounds that passes includes a seam,
+    row). With ``seams.rows_of_three`` two parallel seams on one side at one spacing with it
+    (``_equally_spaced``) bound it too, whatever the outline. Returns ``_BY_SEAM`` when a pair
+    of bounds that passes includes a seam, or such a row,
     ``_BY_OUTLINE`` when only the outline on both sides passes, else ``_UNBOUNDED``, and the
     distances (m) from the seam to the outline on its two sides."""
     relative = cloud - seam.middle
@@ -508,10 +511,30 @@ def _repeated(
     ratio = np.minimum.outer(*bounds) / np.maximum(np.maximum.outer(*bounds), 1e-9)
     passes = ratio >= 1.0 - config.seams.strip_tolerance
     widths = (float(bounds[0][0]), float(bounds[1][0]))
+    if config.seams.rows_of_three and any(
+        _equally_spaced(np.sort(side[1:]), config) for side in bounds
+    ):
+        return _BY_SEAM, widths
     if not passes.any():
         return _UNBOUNDED, widths
     passes[0, 0] = False  # the outline on both sides
     return (_BY_SEAM if passes.any() else _BY_OUTLINE), widths
+
+
+def _equally_spaced(offsets: np.ndarray, config: PerceptionConfig) -> bool:
+    """Whether two of the parallel seams at ``offsets`` (sorted, m, on one side of a seam)
+    lie at one spacing with it (the nearer at x, the farther at y: x and y - x within
+    ``seams.strip_tolerance`` of each other): three seams of one row of boxes of one size,
+    which the row's end strips (to an outline that shows side faces, or is cut by an
+    occluder) need not confirm."""
+    for index, near in enumerate(offsets):
+        for far in offsets[index + 1 :]:
+            gap = far - near
+            if gap >= config.seams.min_width_m and min(near, gap) >= (
+                1.0 - config.seams.strip_tolerance
+            ) * max(near, gap):
+                return True
+    return False
 
 
 def _meets_any(seam: _Seam, others: list[_Seam], config: PerceptionConfig) -> bool:
