@@ -18,7 +18,17 @@ import numpy as np
 import pytest
 
 from ipr_shapes.perception.config import PerceptionConfig, SeamsConfig
-from ipr_shapes.perception.seams import _equally_spaced, _Seam, _undo, _unrepeated
+from ipr_shapes.perception.seams import (
+    _equally_spaced,
+    _linked_edges,
+    _Seam,
+    _search_segment,
+    _sized_like,
+    _Sizes,
+    _thin,
+    _undo,
+    _unrepeated,
+)
 from ipr_shapes.perception.segmentation import segment_frame
 from ipr_shapes.scene import Frame
 from tests.test_segmentation import box, camera, render, segment_of_point
@@ -321,3 +331,69 @@ def test_three_seams_at_one_spacing_are_kept_whatever_the_row_ends_measure():
     assert _equally_spaced(np.array([0.1, 0.19]), ON)  # 10 and 9 cm
     assert not _equally_spaced(np.array([0.1, 0.24]), ON)  # 10 and 14 cm
     assert not _equally_spaced(np.array([0.1, 0.11]), ON)  # 1 cm: no box
+
+
+def test_faint_stretches_of_a_strong_edge_are_linked_and_lone_faint_lines_are_not():
+    # A horizontal line of gradient 5 (strong above 4) for 30 px fading to 3 (weak above 2)
+    # for the next 30 px, and a separate line of 3 elsewhere: hysteresis keeps the fade only.
+    magnitude = np.full((40, 100), 0.5, dtype=np.float32)
+    magnitude[10, 10:40], magnitude[10, 40:70] = 5.0, 3.0
+    magnitude[30, 10:70] = 3.0
+    gx, gy = np.zeros_like(magnitude), np.ones_like(magnitude)  # gradients across the lines
+    direction = np.zeros_like(magnitude)
+    strong = np.flatnonzero(magnitude > 4.0)
+    direction.flat[strong] = np.pi / 2
+    edges = _thin(magnitude, direction, strong)
+    near = np.ones(magnitude.shape, dtype=bool)
+    linked = _linked_edges(magnitude, gx, gy, direction, edges, 2.0, near)
+    assert linked[10, 10:70].all()
+    assert not linked[30].any()
+    assert not linked[:, 70:].any() and not linked[:9].any()
+
+
+def test_a_seam_whose_edge_fades_still_cuts_from_outline_to_outline():
+    # A flat 10 x 20 cm face (1 mm pixels at 1 m) with a straight edge across its middle,
+    # strong along its first 40 % and faint (linked) along the rest: counted as strong edges
+    # only, its densest stretch stops short of the outline and cannot cut.
+    height, width = 100, 200
+    mask = np.zeros((height + 24, width + 24), dtype=bool)
+    mask[12:-12, 12:-12] = True
+    rows, cols = np.mgrid[0 : mask.shape[0], 0 : mask.shape[1]]
+    points = np.stack([cols * 0.001, rows * 0.001, np.zeros(mask.shape)], axis=2)
+    normals = np.zeros((*mask.shape, 3))
+    normals[mask] = (0.0, 0.0, 1.0)
+    depth = np.where(mask, 1.0, 0.0)
+    strong = np.zeros(mask.shape, dtype=bool)
+    strong[62, 12 : 12 + 80] = True
+    linked = strong.copy()
+    linked[62, 12:-12] = True
+    direction = np.where(linked, np.pi / 2, 0.0)
+    config = replace(ON, seams=replace(ON.seams, min_length_m=0.04))
+
+    def search(coverage_map: np.ndarray) -> int:
+        _, found = _search_segment(mask, strong, coverage_map, direction, points, normals, depth,
+                                   1000.0, config)  # fmt: skip
+        return len(found)
+
+    assert search(linked) == 1
+    assert search(strong) == 0
+
+
+def test_a_lone_seam_needs_both_strips_of_one_pair_elsewhere_to_match_both_ways():
+    # A can's straight line along its axis (strips 10 x 3 cm each side) against a printed box's
+    # lone seam elsewhere (strips 10.9 x 3.9 and 10.9 x 4.8 cm): one of the box's strips is
+    # within 1 cm of both of the can's, the other of neither. Two pairs of one product match
+    # both ways.
+    seam = flat_seam(0.0)
+    seam = replace(seam, half_length_m=0.05)
+    no_faces = np.zeros((0, 2))
+
+    def sized(pair: tuple) -> bool:
+        pairs = np.array([pair], dtype=np.float64).reshape(-1, 2, 2)
+        return _sized_like(seam, (0.03, 0.03), _Sizes(lambda: (no_faces, pairs)), ON)
+
+    assert not sized(((0.109, 0.039), (0.109, 0.048)))
+    assert sized(((0.105, 0.035), (0.101, 0.028)))
+    # A face of the strips' size still suffices alone.
+    faces = np.array([[0.1, 0.031]])
+    assert _sized_like(seam, (0.03, 0.03), _Sizes(lambda: (faces, np.zeros((0, 2, 2)))), ON)

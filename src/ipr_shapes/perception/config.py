@@ -542,6 +542,11 @@ class SeamsConfig:
             one spacing with it (three seams of a row of boxes of one size), whatever the row's
             end strips measure to the outline (side faces, occluders): without it a row's end
             seam drops when its end strip is off, and the row's other seams drop after it.
+        hysteresis: a seam's coverage also counts the faint edge pixels (gradient above half
+            the edge threshold, thinned) connected to a strong one (Canny's hysteresis at his
+            2:1 ratio): the seam between two boxes of one colour fades along its length, and a
+            stretch that stops short of the outline cannot cut. Candidate lines are still
+            voted by the strong edges only.
         max_cuts: most cuts per segment (bounds the time on a textured segment).
     """
 
@@ -574,6 +579,7 @@ class SeamsConfig:
     size_tolerance_m: float = 0.01
     max_cuts: int = 32
     rows_of_three: bool = True
+    hysteresis: bool = True
 
     def __post_init__(self) -> None:
         check_fields(self)
