@@ -22,12 +22,12 @@ from ipr_shapes.perception.seams import (
     _equally_spaced,
     _linked_edges,
     _Seam,
-    _search_segment,
     _sized_like,
     _Sizes,
     _thin,
     _undo,
     _unrepeated,
+    cut_colour_seams,
 )
 from ipr_shapes.perception.segmentation import segment_frame
 from ipr_shapes.scene import Frame
@@ -351,32 +351,34 @@ def test_faint_stretches_of_a_strong_edge_are_linked_and_lone_faint_lines_are_no
     assert not linked[:, 70:].any() and not linked[:9].any()
 
 
+def faded_seam(strong_end: float) -> tuple:
+    """``cut_colour_seams`` inputs: a flat 10 x 20 cm face (1 mm pixels at 1 m, light grey with
+    +-2 levels of noise) with a 2 px dark line across its middle, ``strong_end`` levels darker
+    at its left end and fading to 4 levels darker (about 3.6 times the frame's median colour
+    gradient: above half the edge threshold, below it) from a third of the way along."""
+    height, width = 124, 224
+    rng = np.random.default_rng(0)
+    rgb = 200.0 + rng.integers(-2, 3, (height, width, 3))
+    contrast = np.interp(np.arange(width), [12, 80, 212], [strong_end, 4.0, 4.0])
+    rgb[61:63] -= contrast[None, :, None]
+    labels = np.zeros((height, width), dtype=np.int32)
+    labels[12:112, 12:212] = 1
+    rows, cols = np.mgrid[0:height, 0:width]
+    points = np.stack([cols * 0.001, rows * 0.001, np.zeros((height, width))], axis=2)
+    normals = np.zeros((height, width, 3), dtype=np.float32)
+    normals[labels > 0] = (0.0, 0.0, 1.0)
+    depth = np.where(labels > 0, 1.0, 0.0).astype(np.float32)
+    K = np.array([[1000.0, 0.0, width / 2], [0.0, 1000.0, height / 2], [0.0, 0.0, 1.0]])
+    return labels, rgb.astype(np.uint8), points.astype(np.float32), normals, depth, K
+
+
 def test_a_seam_whose_edge_fades_still_cuts_from_outline_to_outline():
-    # A flat 10 x 20 cm face (1 mm pixels at 1 m) with a straight edge across its middle,
-    # strong along its first 40 % and faint (linked) along the rest: counted as strong edges
-    # only, its densest stretch stops short of the outline and cannot cut.
-    height, width = 100, 200
-    mask = np.zeros((height + 24, width + 24), dtype=bool)
-    mask[12:-12, 12:-12] = True
-    rows, cols = np.mgrid[0 : mask.shape[0], 0 : mask.shape[1]]
-    points = np.stack([cols * 0.001, rows * 0.001, np.zeros(mask.shape)], axis=2)
-    normals = np.zeros((*mask.shape, 3))
-    normals[mask] = (0.0, 0.0, 1.0)
-    depth = np.where(mask, 1.0, 0.0)
-    strong = np.zeros(mask.shape, dtype=bool)
-    strong[62, 12 : 12 + 80] = True
-    linked = strong.copy()
-    linked[62, 12:-12] = True
-    direction = np.where(linked, np.pi / 2, 0.0)
-    config = replace(ON, seams=replace(ON.seams, min_length_m=0.04))
-
-    def search(coverage_map: np.ndarray) -> int:
-        _, found = _search_segment(mask, strong, coverage_map, direction, points, normals, depth,
-                                   1000.0, config)  # fmt: skip
-        return len(found)
-
-    assert search(linked) == 1
-    assert search(strong) == 0
+    # Strong at one end, faint along the rest: the faint stretch continues the strong edge
+    # (hysteresis), so the seam crosses the face; counted as strong edges only, its stretch
+    # stops a third of the way along and cannot cut.
+    without = replace(PAIRS, seams=replace(PAIRS.seams, hysteresis=False))
+    assert len(np.unique(cut_colour_seams(*faded_seam(80.0), PAIRS))) == 3  # 0 and 2 pieces
+    assert len(np.unique(cut_colour_seams(*faded_seam(80.0), without))) == 2
 
 
 def test_a_lone_seam_needs_both_strips_of_one_pair_elsewhere_to_match_both_ways():

@@ -542,11 +542,10 @@ class SeamsConfig:
             one spacing with it (three seams of a row of boxes of one size), whatever the row's
             end strips measure to the outline (side faces, occluders): without it a row's end
             seam drops when its end strip is off, and the row's other seams drop after it.
-        hysteresis: a seam's coverage also counts the faint edge pixels (gradient above half
-            the edge threshold, thinned) connected to a strong one (Canny's hysteresis at his
-            2:1 ratio): the seam between two boxes of one colour fades along its length, and a
-            stretch that stops short of the outline cannot cut. Candidate lines are still
-            voted by the strong edges only.
+        hysteresis: the edges also take the faint edge pixels (gradient above half the edge
+            threshold, thinned) connected to a strong one (Canny's hysteresis at his 2:1
+            ratio), in the segments and a 3 px ring: the seam between two boxes of one colour
+            fades along its length, and a stretch that stops short of the outline cannot cut.
         max_cuts: most cuts per segment (bounds the time on a textured segment).
     """
 

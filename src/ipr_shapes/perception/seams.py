@@ -7,7 +7,8 @@ side of its outline to the other. A seam here is such a line, with five checks t
 object's own lines whole:
 
 - **straight and long**: edge pixels (non-maximum-suppressed colour gradient above
-  ``seams.edge_factor`` times the frame's median) vote in a Hough transform for lines along
+  ``seams.edge_factor`` times the frame's median, and their faint continuations above half
+  that, ``seams.hysteresis``) vote in a Hough transform for lines along
   their own edge direction; a candidate is the longest stretch of the line inside the segment
   whose pixels lie on edges at least ``seams.coverage`` of the time, and it must be at least
   ``seams.min_length_m`` long in 3D;
@@ -121,14 +122,13 @@ def cut_colour_seams(
     direction = np.zeros(magnitude.shape, dtype=magnitude.dtype)
     direction.flat[strong] = np.arctan2(gy.flat[strong], gx.flat[strong])
     edges = _thin(magnitude, direction, strong)
-    # A seam's coverage counts its faint stretches too, where they continue a strong edge
-    # (Canny's hysteresis): the edge between two boxes of one colour fades along its length.
-    linked = edges
+    # With the faint stretches that continue a strong edge (Canny's hysteresis): the edge
+    # between two boxes of one colour fades along its length.
     if seams.hysteresis:
-        # Only where coverage is counted: the segments and a ring around them.
+        # Only where seams are searched: the segments and a ring around them.
         near = ndimage.binary_dilation(segment_pixels, iterations=3)
         low = 0.5 * seams.edge_factor * max(noise, 1e-6)
-        linked = _linked_edges(magnitude, gx, gy, direction, edges, low, near)
+        edges = _linked_edges(magnitude, gx, gy, direction, edges, low, near)
     focal_px = float(K[0, 0])
     searched = []
     for segment, box in enumerate(ndimage.find_objects(labels), start=1):
@@ -140,7 +140,7 @@ def cut_colour_seams(
         right = min(box[1].stop + _MARGIN_PX, labels.shape[1])
         crop = (slice(top, bottom), slice(left, right))
         mask = labels[crop] == segment
-        cut, found = _search_segment(mask, edges[crop], linked[crop], direction[crop], points[crop],
+        cut, found = _search_segment(mask, edges[crop], direction[crop], points[crop],
                                      normals[crop], depth_m[crop], focal_px, config)  # fmt: skip
         # The segment's points with depth, and which seams have flat strips: measured once,
         # asked by every strip test below.
@@ -408,7 +408,6 @@ def _thin(magnitude: np.ndarray, direction: np.ndarray, at: np.ndarray) -> np.nd
 def _search_segment(
     mask: np.ndarray,
     edges: np.ndarray,
-    linked: np.ndarray,
     direction: np.ndarray,
     points: np.ndarray,
     normals: np.ndarray,
@@ -418,11 +417,9 @@ def _search_segment(
 ) -> tuple[np.ndarray, list[_Seam]]:
     """(h, w) int pieces of one segment's crop cut at every seam found (0 outside, 1 the first
     piece, 2.. the cut-off pieces), and the seams in the order cut (best first, then the
-    pieces searched again). ``edges`` (h, w) bool: the thinned strong edges, which vote for
-    lines; ``linked`` (h, w) bool: the edge pixels a line's coverage counts (``edges`` and
-    their faint continuations, ``_linked_edges``)."""
+    pieces searched again)."""
     pieces = mask.astype(np.int32)
-    near_edge = ndimage.binary_dilation(linked, np.ones((3, 3), dtype=bool))
+    near_edge = ndimage.binary_dilation(edges, np.ones((3, 3), dtype=bool))
     has_normal = np.any(normals != 0, axis=2)
     queue = [1]
     found: list[_Seam] = []
