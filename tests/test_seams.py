@@ -18,7 +18,17 @@ import numpy as np
 import pytest
 
 from ipr_shapes.perception.config import PerceptionConfig, SeamsConfig
-from ipr_shapes.perception.seams import _Seam, _undo
+from ipr_shapes.perception.seams import (
+    _equally_spaced,
+    _linked_edges,
+    _Seam,
+    _sized_like,
+    _Sizes,
+    _thin,
+    _undo,
+    _unrepeated,
+    cut_colour_seams,
+)
 from ipr_shapes.perception.segmentation import segment_frame
 from ipr_shapes.scene import Frame
 from tests.test_segmentation import box, camera, render, segment_of_point
@@ -284,3 +294,108 @@ def test_a_straight_line_on_a_ball_is_not_a_seam():
     loose = replace(no_strips, seams=replace(no_strips.seams, max_bend_m=1.0))
     labels = segment_frame(frame, config=loose).labels
     assert segment_of_point(frame, labels, left) != segment_of_point(frame, labels, right)
+
+
+def flat_seam(y: float) -> _Seam:
+    """A 20 cm seam along x at ``y`` (m) on the plane z = 0 (one pixel: ``_unrepeated`` reads
+    the 3D line only)."""
+    return _Seam(
+        rows=np.zeros(1, dtype=np.int64), cols=np.zeros(1, dtype=np.int64), cos_a=0.0,
+        sin_a=1.0, middle=np.array([0.0, y, 0.0]), direction=np.array([1.0, 0.0, 0.0]),
+        across=np.array([0.0, 1.0, 0.0]), normal=np.array([0.0, 0.0, 1.0]), half_length_m=0.1,
+    )  # fmt: skip
+
+
+def kept_seams(offsets: tuple[float, ...], config: PerceptionConfig) -> list[float]:
+    """The offsets (m) of the seams ``_unrepeated`` keeps, of seams at ``offsets`` across a
+    flat segment from y = -0.2 to 0.24 m: a row of four boxes whose last strip measures 14 cm
+    to the outline (a side face seen, a leaning box), the others 10 cm."""
+    xs, ys = np.meshgrid(np.linspace(-0.1, 0.1, 41), np.linspace(-0.2, 0.24, 89))
+    cloud = np.stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)], axis=1)
+    found = [flat_seam(y) for y in offsets]
+    dropped = _unrepeated(found, cloud, [True] * len(found), config)
+    return [
+        y for y, seam in zip(offsets, found, strict=True) if all(seam is not d for d in dropped)
+    ]
+
+
+def test_three_seams_at_one_spacing_are_kept_whatever_the_row_ends_measure():
+    # The end seam's strips (10 and 14 cm to the outline) do not agree; it lies at one spacing
+    # with the two seams beside it, a row of boxes of one size. Without that rule the end seam
+    # drops and the others after it (a dropped seam is no bound): the whole row merges.
+    assert kept_seams((-0.1, 0.0, 0.1), ON) == [-0.1, 0.0, 0.1]
+    off = replace(ON, seams=replace(ON.seams, rows_of_three=False))
+    assert kept_seams((-0.1, 0.0, 0.1), off) == []
+    # Seams at no one spacing (10 and 14 cm apart) are not a row of one size.
+    assert kept_seams((-0.1, 0.0, 0.14), ON) == []
+    assert _equally_spaced(np.array([0.1, 0.19]), ON)  # 10 and 9 cm
+    assert not _equally_spaced(np.array([0.1, 0.24]), ON)  # 10 and 14 cm
+    assert not _equally_spaced(np.array([0.1, 0.11]), ON)  # 1 cm: no box
+
+
+def test_faint_stretches_of_a_strong_edge_are_linked_and_lone_faint_lines_are_not():
+    # A horizontal line of gradient 5 (strong above 4) for 30 px fading to 3 (weak above 2)
+    # for the next 30 px, and a separate line of 3 elsewhere: hysteresis keeps the fade only.
+    magnitude = np.full((40, 100), 0.5, dtype=np.float32)
+    magnitude[10, 10:40], magnitude[10, 40:70] = 5.0, 3.0
+    magnitude[30, 10:70] = 3.0
+    gx, gy = np.zeros_like(magnitude), np.ones_like(magnitude)  # gradients across the lines
+    direction = np.zeros_like(magnitude)
+    strong = np.flatnonzero(magnitude > 4.0)
+    direction.flat[strong] = np.pi / 2
+    edges = _thin(magnitude, direction, strong)
+    near = np.ones(magnitude.shape, dtype=bool)
+    linked = _linked_edges(magnitude, gx, gy, direction, edges, 2.0, near)
+    assert linked[10, 10:70].all()
+    assert not linked[30].any()
+    assert not linked[:, 70:].any() and not linked[:9].any()
+
+
+def faded_seam(strong_end: float) -> tuple:
+    """``cut_colour_seams`` inputs: a flat 10 x 20 cm face (1 mm pixels at 1 m, light grey with
+    +-2 levels of noise) with a 2 px dark line across its middle, ``strong_end`` levels darker
+    at its left end and fading to 4 levels darker (about 3.6 times the frame's median colour
+    gradient: above half the edge threshold, below it) from a third of the way along."""
+    height, width = 124, 224
+    rng = np.random.default_rng(0)
+    rgb = 200.0 + rng.integers(-2, 3, (height, width, 3))
+    contrast = np.interp(np.arange(width), [12, 80, 212], [strong_end, 4.0, 4.0])
+    rgb[61:63] -= contrast[None, :, None]
+    labels = np.zeros((height, width), dtype=np.int32)
+    labels[12:112, 12:212] = 1
+    rows, cols = np.mgrid[0:height, 0:width]
+    points = np.stack([cols * 0.001, rows * 0.001, np.zeros((height, width))], axis=2)
+    normals = np.zeros((height, width, 3), dtype=np.float32)
+    normals[labels > 0] = (0.0, 0.0, 1.0)
+    depth = np.where(labels > 0, 1.0, 0.0).astype(np.float32)
+    K = np.array([[1000.0, 0.0, width / 2], [0.0, 1000.0, height / 2], [0.0, 0.0, 1.0]])
+    return labels, rgb.astype(np.uint8), points.astype(np.float32), normals, depth, K
+
+
+def test_a_seam_whose_edge_fades_still_cuts_from_outline_to_outline():
+    # Strong at one end, faint along the rest: the faint stretch continues the strong edge
+    # (hysteresis), so the seam crosses the face; counted as strong edges only, its stretch
+    # stops a third of the way along and cannot cut.
+    without = replace(PAIRS, seams=replace(PAIRS.seams, hysteresis=False))
+    assert len(np.unique(cut_colour_seams(*faded_seam(80.0), PAIRS))) == 3  # 0 and 2 pieces
+    assert len(np.unique(cut_colour_seams(*faded_seam(80.0), without))) == 2
+
+
+def test_a_lone_seam_needs_both_strips_of_one_pair_elsewhere_to_match_both_ways():
+    # A can's straight line along its axis (strips 10 x 3 cm each side) against a printed box's
+    # lone seam elsewhere (strips 10.9 x 3.9 and 10.9 x 4.8 cm): one of the box's strips is
+    # within 1 cm of both of the can's, the other of neither. Two pairs of one product match
+    # both ways.
+    seam = flat_seam(0.0)
+    seam = replace(seam, half_length_m=0.05)
+    no_faces = np.zeros((0, 2))
+
+    def sized(pair: tuple) -> bool:
+        pairs = np.array([pair], dtype=np.float64).reshape(-1, 2, 2)
+        return _sized_like(seam, (0.03, 0.03), _Sizes(lambda: (no_faces, pairs)), ON)
+
+    assert not sized(((0.109, 0.039), (0.109, 0.048)))
+    assert sized(((0.105, 0.035), (0.101, 0.028)))
+    # A face of the strips' size still suffices alone.
+    faces = np.array([[0.1, 0.031]])
+    assert _sized_like(seam, (0.03, 0.03), _Sizes(lambda: (faces, np.zeros((0, 2, 2)))), ON)

@@ -531,8 +531,10 @@ class SeamsConfig:
     Off by default for its time, not its accuracy: on the development sets it changes no scene
     (docs/experiments/2026-11-26-packed-boxes.md), but with it on the perception costs 1.4-1.9
     times as much CPU per tabletop frame and about 4 times per bin frame (about 680 ms on a
-    loaded machine; docs/experiments/2026-11-26-seams-speed.md), against a 150 ms budget.
-    Turn it on for packed boxes (bin picking).
+    loaded machine; docs/experiments/2026-11-26-seams-speed.md), against a 150 ms budget,
+    and the hysteresis edges add 1.3-1.8 times to the pass
+    (docs/experiments/2026-11-27-bins-faint-seams.md). Turn it on for packed boxes (bin
+    picking).
 
     Attributes:
         enabled: cut segments along seams (False: labels as the graph gives them).
@@ -565,6 +567,14 @@ class SeamsConfig:
             line through one box makes halves nothing else matches).
         size_tolerance_m: the strips' and the face's extents agree within this (m; the error
             of an extent measured to a real outline: side faces, dropouts).
+        rows_of_three: a seam is also repeated when two parallel seams on one side of it lie at
+            one spacing with it (three seams of a row of boxes of one size), whatever the row's
+            end strips measure to the outline (side faces, occluders): without it a row's end
+            seam drops when its end strip is off, and the row's other seams drop after it.
+        hysteresis: the edges also take the faint edge pixels (gradient above half the edge
+            threshold, thinned) connected to a strong one (Canny's hysteresis at his 2:1
+            ratio), in the segments and a 3 px ring: the seam between two boxes of one colour
+            fades along its length, and a stretch that stops short of the outline cannot cut.
         max_cuts: most cuts per segment (bounds the time on a textured segment).
     """
 
@@ -596,6 +606,8 @@ class SeamsConfig:
     pair_sizes: bool = True
     size_tolerance_m: float = 0.01
     max_cuts: int = 32
+    rows_of_three: bool = True
+    hysteresis: bool = True
 
     def __post_init__(self) -> None:
         check_fields(self)

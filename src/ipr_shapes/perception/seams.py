@@ -7,7 +7,8 @@ side of its outline to the other. A seam here is such a line, with five checks t
 object's own lines whole:
 
 - **straight and long**: edge pixels (non-maximum-suppressed colour gradient above
-  ``seams.edge_factor`` times the frame's median) vote in a Hough transform for lines along
+  ``seams.edge_factor`` times the frame's median, and their faint continuations above half
+  that, ``seams.hysteresis``) vote in a Hough transform for lines along
   their own edge direction; a candidate is the longest stretch of the line inside the segment
   whose pixels lie on edges at least ``seams.coverage`` of the time, and it must be at least
   ``seams.min_length_m`` long in 3D;
@@ -21,9 +22,10 @@ object's own lines whole:
 - **flat and repeated**: once the segment is cut, the strips on both sides of each seam must
   lie on its plane (a crease shows over a strip, not always in the side bands), and the seam
   must lie midway between a bound on each side (a parallel seam on the same surface, or the
-  segment's outline), within ``seams.strip_tolerance``: packed boxes of one size repeat at one
-  spacing, a printed border (a box's end panel) lies where the print puts it. Cuts that fail
-  are undone;
+  segment's outline), within ``seams.strip_tolerance``, or at one spacing with two parallel
+  seams beside it (``seams.rows_of_three``: a row's end strips to the outline are off by side
+  faces and occluders): packed boxes of one size repeat at one spacing, a printed border (a
+  box's end panel) lies where the print puts it. Cuts that fail are undone;
 - **supported when alone**: a seam midway between the outline on both sides (two boxes, or
   one box with a printed line through its middle) is kept only where it meets a seam that
   lies between seams (a grid of boxes) or its strips have the size of a flat rectangular
@@ -120,6 +122,13 @@ def cut_colour_seams(
     direction = np.zeros(magnitude.shape, dtype=magnitude.dtype)
     direction.flat[strong] = np.arctan2(gy.flat[strong], gx.flat[strong])
     edges = _thin(magnitude, direction, strong)
+    # With the faint stretches that continue a strong edge (Canny's hysteresis): the edge
+    # between two boxes of one colour fades along its length.
+    if seams.hysteresis:
+        # Only where seams are searched: the segments and a ring around them.
+        near = ndimage.binary_dilation(segment_pixels, iterations=3)
+        low = 0.5 * seams.edge_factor * max(noise, 1e-6)
+        edges = _linked_edges(magnitude, gx, gy, direction, edges, low, near)
     focal_px = float(K[0, 0])
     searched = []
     for segment, box in enumerate(ndimage.find_objects(labels), start=1):
@@ -173,16 +182,17 @@ def _decide(
 
 
 class _Sizes:
-    """The (M, 2) face sizes (longer, shorter; m) of boxes seen elsewhere in the frame, made by
+    """The (M, 2) face sizes (longer, shorter; m) of boxes seen elsewhere in the frame and the
+    (P, 2, 2) sizes of the two strips of each lone seam elsewhere (``_lone_strips``), made by
     ``make`` on first use (None: no sizes), and whether they were asked for: a segment whose
     strip tests never asked is decided without them (``_pairs_by_size``)."""
 
     def __init__(self, make=None) -> None:
         self._make = make
-        self._sizes: np.ndarray | None = None
+        self._sizes: tuple[np.ndarray, np.ndarray] | None = None
         self.asked = False
 
-    def get(self) -> np.ndarray | None:
+    def get(self) -> tuple[np.ndarray, np.ndarray] | None:
         self.asked = True
         if self._make is not None and self._sizes is None:
             self._sizes = self._make()
@@ -200,12 +210,13 @@ def _pairs_by_size(
 ) -> list[np.ndarray]:
     """``decided`` with each segment's strip tests run again, a lone midway seam now also kept
     when its strips have the size of a box seen elsewhere in the frame (another segment or
-    piece, ``_face_size``, or a strip of a lone seam of another segment, ``_lone_strips``):
+    piece, ``_face_size``, or the strips of a lone seam of another segment, ``_lone_strips``):
     packed boxes repeat across the frame, a printed line through one box's middle makes halves
     that nothing else in the frame matches. Only segments whose first tests asked for sizes
     (``asked``) are run again (the others' tests go the same way), and the frame's faces are
     measured only when one of them asks."""
     faces: list[tuple[int, tuple[float, float]]] = []
+    pairs: list[tuple[int, tuple[tuple[float, float], tuple[float, float]]]] = []
     done = []
 
     def frame_faces() -> list[tuple[int, tuple[float, float]]]:
@@ -219,7 +230,7 @@ def _pairs_by_size(
                     if size is not None:
                         faces.append((index, size))
             for index, (_, _, _, found, cloud, flat) in enumerate(searched):
-                faces.extend((index, size) for size in _lone_strips(found, cloud, flat, config))
+                pairs.extend((index, pair) for pair in _lone_strips(found, cloud, flat, config))
         return faces
 
     result = []
@@ -230,9 +241,12 @@ def _pairs_by_size(
             result.append(pieces)
             continue
 
-        def others(index: int = index) -> np.ndarray:
-            return np.array([size for owner, size in frame_faces() if owner != index]).reshape(
-                -1, 2
+        def others(index: int = index) -> tuple[np.ndarray, np.ndarray]:
+            faces_elsewhere = [size for owner, size in frame_faces() if owner != index]
+            pairs_elsewhere = [pair for owner, pair in pairs if owner != index]
+            return (
+                np.array(faces_elsewhere).reshape(-1, 2),
+                np.array(pairs_elsewhere).reshape(-1, 2, 2),
             )
 
         result.append(_decide(cut, found, cloud, flat, config, _Sizes(others)))
@@ -241,9 +255,9 @@ def _pairs_by_size(
 
 def _lone_strips(
     found: list[_Seam], cloud: np.ndarray, flat: list[bool], config: PerceptionConfig
-) -> list[tuple[float, float]]:
-    """(longer, shorter) sizes (m) of the strips beside the seams of one segment that have flat
-    strips (``flat``, per seam) and lie midway between its outline on both sides
+) -> list[tuple[tuple[float, float], tuple[float, float]]]:
+    """The (longer, shorter) sizes (m) of the two strips beside each seam of one segment that
+    has flat strips (``flat``, per seam) and lies midway between its outline on both sides
     (``_repeated`` among no other seams; ``cloud``: the segment's points): two pairs of one
     size in two segments are two boxes each."""
     sizes = []
@@ -253,7 +267,7 @@ def _lone_strips(
         by, widths = _repeated(seam, [], cloud, config)
         if by == _BY_OUTLINE:
             length = 2.0 * seam.half_length_m
-            sizes.extend((max(length, width), min(length, width)) for width in widths)
+            sizes.append(tuple((max(length, width), min(length, width)) for width in widths))
     return sizes
 
 
@@ -346,6 +360,29 @@ def _colour_gradient(rgb: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarra
         best_x = np.where(larger, gx[..., channel], best_x)
         best_y = np.where(larger, gy[..., channel], best_y)
     return np.hypot(best_x, best_y), best_x, best_y
+
+
+def _linked_edges(
+    magnitude: np.ndarray,
+    gx: np.ndarray,
+    gy: np.ndarray,
+    direction: np.ndarray,
+    edges: np.ndarray,
+    low: float,
+    near: np.ndarray,
+) -> np.ndarray:
+    """(H, W) bool: the thinned pixels (``_thin``) of gradient ``magnitude`` above ``low``
+    within ``near`` ((H, W) bool) that are 8-connected through such pixels to a pixel of
+    ``edges`` ((H, W) bool, the thinned strong edges): Canny's hysteresis, the faint stretches
+    of an edge that is strong somewhere. ``direction`` ((H, W), rad) is filled in at those
+    pixels from ``gx``, ``gy``."""
+    weak = np.flatnonzero((magnitude > low) & near)
+    direction.flat[weak] = np.arctan2(gy.flat[weak], gx.flat[weak])
+    parts, count = ndimage.label(_thin(magnitude, direction, weak), np.ones((3, 3), dtype=bool))
+    anchored = np.zeros(count + 1, dtype=bool)
+    anchored[parts[edges]] = True
+    anchored[0] = False
+    return anchored[parts] | edges
 
 
 def _thin(magnitude: np.ndarray, direction: np.ndarray, at: np.ndarray) -> np.ndarray:
@@ -445,21 +482,27 @@ def _unrepeated(
 def _sized_like(
     seam: _Seam, widths: tuple[float, float], sizes: _Sizes | None, config: PerceptionConfig
 ) -> bool:
-    """Whether both strips beside ``seam`` (its length by each of ``widths``, m) match one
-    face size of ``sizes`` ((M, 2) longer, shorter; m): each extent within
-    ``seams.size_tolerance_m``."""
+    """Whether both strips beside ``seam`` (its length by each of ``widths``, m) match a face
+    size of ``sizes`` (each extent within ``seams.size_tolerance_m``), or match the two strips
+    of one lone seam elsewhere both ways: each strip here matches one there and each there
+    one here (two pairs of one product; a strip of any pair alone would let a can's straight
+    line along its axis match one half of a printed box)."""
     if sizes is None:
         return False
-    sizes = sizes.get()
-    if sizes is None or len(sizes) == 0:
+    known = sizes.get()
+    if known is None:
         return False
+    faces, pairs = known
     length = 2.0 * seam.half_length_m
-    for width in widths:
-        strip = np.array([max(length, width), min(length, width)])
-        close = np.abs(sizes - strip) <= config.seams.size_tolerance_m
-        if not np.any(close.all(axis=1)):
-            return False
-    return True
+    strips = np.array([[max(length, width), min(length, width)] for width in widths])
+    tolerance = config.seams.size_tolerance_m
+    # (2, M): strip i within the tolerance of face j in both extents.
+    on_faces = np.all(np.abs(strips[:, None, :] - faces[None, :, :]) <= tolerance, axis=2)
+    if on_faces.any(axis=1).all():
+        return True
+    # (P, 2, 2): this seam's strip i against strip j of lone pair p.
+    alike = np.all(np.abs(strips[None, :, None, :] - pairs[:, None, :, :]) <= tolerance, axis=3)
+    return bool(np.any(alike.any(axis=2).all(axis=1) & alike.any(axis=1).all(axis=1)))
 
 
 def _flat_strips(seam: _Seam, cloud: np.ndarray, config: PerceptionConfig) -> bool:
@@ -490,7 +533,9 @@ def _repeated(
     measured in 3D across the seam; the narrower strip is at least 1 - ``seams.strip_tolerance``
     of the wider. Packed boxes of one size repeat at one spacing, a printed border lies where
     the print puts it; a bound may lie beyond a nearer seam (a printed line on a box in the
-    row). Returns ``_BY_SEAM`` when a pair of bounds that passes includes a seam,
+    row). With ``seams.rows_of_three`` two parallel seams on one side at one spacing with it
+    (``_equally_spaced``) bound it too, whatever the outline. Returns ``_BY_SEAM`` when a pair
+    of bounds that passes includes a seam, or such a row,
     ``_BY_OUTLINE`` when only the outline on both sides passes, else ``_UNBOUNDED``, and the
     distances (m) from the seam to the outline on its two sides."""
     relative = cloud - seam.middle
@@ -508,10 +553,30 @@ def _repeated(
     ratio = np.minimum.outer(*bounds) / np.maximum(np.maximum.outer(*bounds), 1e-9)
     passes = ratio >= 1.0 - config.seams.strip_tolerance
     widths = (float(bounds[0][0]), float(bounds[1][0]))
+    if config.seams.rows_of_three and any(
+        _equally_spaced(np.sort(side[1:]), config) for side in bounds
+    ):
+        return _BY_SEAM, widths
     if not passes.any():
         return _UNBOUNDED, widths
     passes[0, 0] = False  # the outline on both sides
     return (_BY_SEAM if passes.any() else _BY_OUTLINE), widths
+
+
+def _equally_spaced(offsets: np.ndarray, config: PerceptionConfig) -> bool:
+    """Whether two of the parallel seams at ``offsets`` (sorted, m, on one side of a seam)
+    lie at one spacing with it (the nearer at x, the farther at y: x and y - x within
+    ``seams.strip_tolerance`` of each other): three seams of one row of boxes of one size,
+    which the row's end strips (to an outline that shows side faces, or is cut by an
+    occluder) need not confirm."""
+    for index, near in enumerate(offsets):
+        for far in offsets[index + 1 :]:
+            gap = far - near
+            if gap >= config.seams.min_width_m and min(near, gap) >= (
+                1.0 - config.seams.strip_tolerance
+            ) * max(near, gap):
+                return True
+    return False
 
 
 def _meets_any(seam: _Seam, others: list[_Seam], config: PerceptionConfig) -> bool:
