@@ -369,8 +369,8 @@ class SegmentationConfig:
         thin_radius_m: touching segments are joined when the points of both lie on one
             cylinder of at most this radius (m; a marker, a pen, a handle: the seen half of its
             circumference, pi r, at most two supervoxel seeds, where the graph's convexity
-            test is singular; ``ipr_shapes.perception.thin``). 0: off (the default, see
-            docs/DESIGN_NOTES.md "Thin cylinders joined (opt-in)"); 0.0125 joins them.
+            test is singular; ``ipr_shapes.perception.thin``; docs/DESIGN_NOTES.md "Thin
+            cylinders joined"). 0: off.
         thin_rms_m: ... with an RMS radial residual of at most this (m): the depth noise,
             1.2-2.3 mm on flat surfaces of the generated and real frames.
         thin_min_contact_px: ... and they touch along at least this many neighbouring pixel
@@ -439,7 +439,7 @@ class SegmentationConfig:
     fragment_gap_m: float = 0.01
     fragment_colour: float = 0.04
     fragment_bend_deg: float = 45.0
-    thin_radius_m: float = 0.0
+    thin_radius_m: float = 0.0125
     thin_rms_m: float = 0.003
     thin_min_contact_px: int = 5
 
