@@ -10,8 +10,10 @@ from ipr_shapes.perception.facets import mean_shift_directions, object_facets, p
 from ipr_shapes.perception.tracking import (
     assign_segments,
     contact_pixels,
+    match_costs,
     merge_split_pieces,
     merged_features,
+    pair_cost,
     prefer_larger_objects,
     prefer_larger_pieces,
     segment_features,
@@ -151,17 +153,48 @@ def test_the_larger_piece_of_a_split_object_takes_its_id():
         {1: (60, 100, 6, 30, YELLOW), 2: (66, 100, 24, 30, YELLOW), 3: (10, 200, 20, 20, RED)}
     )
     segments = segment_features(labels, points, rgb)
-    cost = np.array([[0.5, 3.0], [2.0, 3.0], [2.0, 3.0]])  # columns: objects 7 and 8
+    cost = np.array([[1.8, 3.0], [2.0, 3.0], [2.0, 3.0]])  # columns: objects 7 and 8
     config = TrackingConfig()
     assert prefer_larger_pieces({1: 7}, cost, [1, 2, 3], [7, 8], segments, config) == {2: 7}
-    # Not when the larger piece resembles the object less than ``piece_max_cost`` asks...
-    dear = cost.copy()
-    dear[1, 0] = config.piece_max_cost + 0.1
+    # A pushed object's pieces may both cost more than ``piece_max_cost``: the test is
+    # relative, the larger piece resembling the object almost as well as the one holding the id.
+    pushed = cost + np.array([[0.6, 0.0], [0.7, 0.0], [0.0, 0.0]])
+    assert pushed[1, 0] > config.piece_max_cost
+    assert prefer_larger_pieces({1: 7}, pushed, [1, 2, 3], [7, 8], segments, config) == {2: 7}
+    # Not when the larger piece resembles the object clearly less than the matched piece (a
+    # segment holding a sliver of the object and mostly something else), even below
+    # ``piece_max_cost``...
+    sliver = cost.copy()
+    sliver[0, 0] = sliver[1, 0] - config.piece_cost_margin - 0.05
+    assert prefer_larger_pieces({1: 7}, sliver, [1, 2, 3], [7, 8], segments, config) == {1: 7}
+    # ... nor above the assignment's second-stage gate ...
+    dear = cost + np.array([[1.0, 0.0], [1.1, 0.0], [0.0, 0.0]])
+    assert dear[1, 0] > config.elimination_cost
     assert prefer_larger_pieces({1: 7}, dear, [1, 2, 3], [7, 8], segments, config) == {1: 7}
     # ... nor when it is far from the matched piece (segment 3, 12 cm away), nor smaller.
-    far = np.array([[0.5, 3.0], [3.0, 3.0], [2.0, 3.0]])
+    far = np.array([[1.8, 3.0], [3.0, 3.0], [2.0, 3.0]])
     assert prefer_larger_pieces({1: 7}, far, [1, 2, 3], [7, 8], segments, config) == {1: 7}
     assert prefer_larger_pieces({2: 7}, cost, [1, 2, 3], [7, 8], segments, config) == {2: 7}
+
+
+def test_match_costs_count_overlaps_exactly_whatever_the_numbering():
+    # Two known objects seen in different frames overlap each other (object A was where B is
+    # now); the segment covers both sightings. Each object's overlap must be its own, and the
+    # costs must not depend on which object has the larger id.
+    labels, points, rgb = _frame({1: (10, 10, RED)})
+    a_labels, _, a_rgb = _frame({1: (10, 10, RED)})
+    b_labels, _, b_rgb = _frame({1: (14, 14, RED)})
+    segments = segment_features(labels, points, rgb)
+    a = segment_features(a_labels, points, a_rgb)[1]
+    b = segment_features(b_labels, points, b_rgb)[1]
+    config = TrackingConfig()
+    _, _, cost_ab = match_costs({1: a, 2: b}, segments, labels.size, config)
+    _, _, cost_ba = match_costs({1: b, 2: a}, segments, labels.size, config)
+    np.testing.assert_allclose(cost_ab, cost_ba[:, ::-1])
+    # Object A's sighting is the segment itself: a perfect overlap.
+    assert abs(cost_ab[0, 0] - pair_cost(segments[1], a, config)) < 1e-9
+    assert abs(cost_ab[0, 1] - pair_cost(segments[1], b, config)) < 1e-9
+    assert cost_ab[0, 0] < 1e-9
 
 
 def test_a_whole_object_takes_the_id_of_its_larger_earlier_piece():

@@ -369,8 +369,8 @@ class SegmentationConfig:
         thin_radius_m: touching segments are joined when the points of both lie on one
             cylinder of at most this radius (m; a marker, a pen, a handle: the seen half of its
             circumference, pi r, at most two supervoxel seeds, where the graph's convexity
-            test is singular; ``ipr_shapes.perception.thin``). 0: off (the default, see
-            docs/DESIGN_NOTES.md "Thin cylinders joined (opt-in)"); 0.0125 joins them.
+            test is singular; ``ipr_shapes.perception.thin``; docs/DESIGN_NOTES.md "Thin
+            cylinders joined"). 0: off.
         thin_rms_m: ... with an RMS radial residual of at most this (m): the depth noise,
             1.2-2.3 mm on flat surfaces of the generated and real frames.
         thin_min_contact_px: ... and they touch along at least this many neighbouring pixel
@@ -439,7 +439,7 @@ class SegmentationConfig:
     fragment_gap_m: float = 0.01
     fragment_colour: float = 0.04
     fragment_bend_deg: float = 45.0
-    thin_radius_m: float = 0.0
+    thin_radius_m: float = 0.0125
     thin_rms_m: float = 0.003
     thin_min_contact_px: int = 5
 
@@ -690,17 +690,19 @@ class TrackingConfig:
         max_sightings: each object is compared through its last this many sightings (>= 1), so
             that a face turned away by a push can still be recognised.
         larger_piece_takes_id: when an object's id went to a small piece and a segment at
-            least ``piece_area_ratio`` times larger nearby that resembles the object (cost <=
-            ``piece_max_cost``) was left to start a new object, the larger piece takes the id
+            least ``piece_area_ratio`` times larger nearby that resembles the object almost as
+            well (cost <= ``elimination_cost`` and at most ``piece_cost_margin`` more than the
+            small piece's) was left to start a new object, the larger piece takes the id
             (``tracking.prefer_larger_pieces``).
         larger_object_takes_segment: when a segment took the id of a small earlier piece and
             an object left unmatched, at least ``piece_area_ratio`` times larger at its latest
             sighting and nearby, costs at most ``piece_cost_margin`` more, that object takes
             the segment (``tracking.prefer_larger_objects``).
-        piece_max_cost: the larger piece's or object's cost is at most this.
+        piece_max_cost: the larger object's cost (``larger_object_takes_segment``) and a
+            piece's cost (``merge_split_pieces``) are at most this.
         piece_max_gap_m: the two pieces' centroids are at most this far apart (m).
         piece_area_ratio: visible-area ratio a piece or object needs to count as larger.
-        piece_cost_margin: see ``larger_object_takes_segment``.
+        piece_cost_margin: see ``larger_piece_takes_id`` and ``larger_object_takes_segment``.
         merge_split_pieces: two touching segments of similar colour, each unmatched, matched
             to the same known object or to one it resembles less, whose union resembles that
             object better than either alone become one segment with its id (an object split in

@@ -27,7 +27,8 @@ in the last frame is still recognised by an earlier, better view).
 
 Three corrections follow the assignment, all for objects the segmentation splits: an
 unmatched segment clearly larger than the piece that took an object's id, next to it and
-resembling the object, takes the id instead (``prefer_larger_pieces``); an object left
+resembling the object almost as well as that piece, takes the id instead
+(``prefer_larger_pieces``); an object left
 unmatched whose largest recent sighting was clearly larger than the (earlier) piece whose id a
 segment took, next to it and almost as cheap, takes the segment (``prefer_larger_objects``: an
 object split in an earlier frame and whole again); and touching pieces of similar colour whose
@@ -159,19 +160,22 @@ def match_costs(
 ) -> tuple[list[int], list[int], np.ndarray]:
     """Cost matrix (segments x known objects) of explaining each segment as each known object.
 
-    Mask overlaps come from one map of where each known object was seen (the later entry of
-    ``known`` wins where two overlap), so all of them cost a single pass over the segments'
-    pixels. Returns the segment ids, the known ids (sorted) and the (S, K) costs, each in
+    Mask overlaps come from one map of this frame's segments, which are disjoint, so each
+    known object's overlaps with all of them cost one pass over its pixels and are exact. (The
+    known objects' sightings may come from different frames and overlap one another: a map of
+    them would give shared pixels to one of them only, the one later in id order, so an
+    object's overlap, and the assignment, would depend on how the objects happen to be
+    numbered.) Returns the segment ids, the known ids (sorted) and the (S, K) costs, each in
     [0, overlap + colour + distance + size + height weights].
     """
     segment_ids, known_ids = sorted(segments), sorted(known)
-    seen = np.zeros(image_size, dtype=np.int64)  # column + 1 of the known object, 0 = none
-    for column, object_id in enumerate(known_ids):
-        seen[known[object_id].pixels] = column + 1
-    shared = np.zeros((len(segment_ids), len(known_ids)))
+    row_of = np.zeros(image_size, dtype=np.int64)  # row + 1 of the segment, 0 = none
     for row, segment_id in enumerate(segment_ids):
-        counts = np.bincount(seen[segments[segment_id].pixels], minlength=len(known_ids) + 1)
-        shared[row] = counts[1:]
+        row_of[segments[segment_id].pixels] = row + 1
+    shared = np.zeros((len(segment_ids), len(known_ids)))
+    for column, object_id in enumerate(known_ids):
+        counts = np.bincount(row_of[known[object_id].pixels], minlength=len(segment_ids) + 1)
+        shared[:, column] = counts[1:]
     segment_sizes = np.array([segments[s].pixels.size for s in segment_ids], dtype=float)
     known_sizes = np.array([known[o].pixels.size for o in known_ids], dtype=float)
     overlap = shared / (segment_sizes[:, None] + known_sizes[None, :] - shared)
@@ -339,10 +343,15 @@ def prefer_larger_pieces(
     When the segmentation splits an object (usually one that was pushed and shows new faces),
     the assignment may match its id to a small piece that resembles the earlier view in size
     and place and leave the larger piece to start a new object. A segment left unmatched whose
-    cheapest known object costs at most ``piece_max_cost``, whose centroid is within
-    ``piece_max_gap_m`` of the segment matched to that object and whose visible area is larger
-    takes the object's id; the smaller piece becomes a new object. Unmatched segments are
-    visited by decreasing area. Returns the new segment -> object assignment.
+    cheapest known object costs at most ``elimination_cost`` (what the assignment's second
+    stage accepts) and at most ``piece_cost_margin`` more than the segment matched to that
+    object, whose centroid is within ``piece_max_gap_m`` of that segment and whose visible area
+    is ``piece_area_ratio`` times larger takes the object's id; the smaller piece becomes a
+    new object. The cost test is relative (docs/DESIGN_NOTES.md, "The larger piece keeps the
+    id"): a pushed object's pieces may all cost more than an absolute gate, while a segment
+    that holds a sliver of the object and mostly something else costs clearly more than the
+    sliver. Unmatched segments are visited by decreasing area. Returns the new segment ->
+    object assignment.
 
     Args:
         assignment: segment id -> object id; cost: (S, K) costs (rows ``segment_ids``,
@@ -350,10 +359,11 @@ def prefer_larger_pieces(
     """
     result = dict(assignment)
     segment_of = {object_id: segment_id for segment_id, object_id in result.items()}
+    row_of = {segment_id: row for row, segment_id in enumerate(segment_ids)}
     rows = [r for r, s in enumerate(segment_ids) if s not in result]
     for row in sorted(rows, key=lambda r: -segments[segment_ids[r]].area):
         column = int(np.argmin(cost[row]))
-        if cost[row, column] > config.piece_max_cost:
+        if cost[row, column] > config.elimination_cost:
             continue
         object_id, piece = known_ids[column], segment_ids[row]
         matched = segment_of.get(object_id)
@@ -361,6 +371,12 @@ def prefer_larger_pieces(
             matched is None
             or segments[piece].area < config.piece_area_ratio * segments[matched].area
         ):
+            continue
+        # Relative, not absolute: the larger piece resembles the object almost as well as the
+        # piece holding the id (a pushed object's pieces may all cost more than
+        # ``piece_max_cost``; a larger segment that only holds a sliver of the object costs
+        # clearly more than the sliver that took its id).
+        if cost[row, column] > cost[row_of[matched], column] + config.piece_cost_margin:
             continue
         gap = np.linalg.norm(segments[piece].centroid - segments[matched].centroid)
         if gap > config.piece_max_gap_m:
