@@ -258,6 +258,10 @@ def compute_supervoxels(
     # reached, a handful at most, stay unlabelled).
     if step == 1:
         supervoxel_of_pixel = supervoxel_of_point
+    elif voxels.table is not None:  # compiled (``kernels``): lookup and label in one pass
+        supervoxel_of_pixel = kernels.labels_of_keys(
+            voxels.table, all_keys, supervoxel_of_voxel.astype(np.int64, copy=False)
+        )
     else:
         position = voxels.find(all_keys)
         supervoxel_of_pixel = np.where(position >= 0, supervoxel_of_voxel[position], -1)
@@ -310,6 +314,11 @@ class _VoxelIndex:
         self._table = np.full(n_cells, -1, dtype=np.int32)
         self._table[self.keys] = np.arange(len(self.keys), dtype=np.int32)
         self.of_keys = self._table[point_keys].astype(np.int64)
+
+    @property
+    def table(self) -> np.ndarray | None:
+        """The dense (n_cells,) int32 cell -> voxel table (-1 = empty), None for sparse grids."""
+        return self._table
 
     def find(self, targets: np.ndarray) -> np.ndarray:
         """(T,) int64 voxel of each of the (T,) int64 keys ``targets``, -1 where none."""
