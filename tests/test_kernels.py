@@ -923,3 +923,34 @@ def test_labels_of_keys_is_the_table_lookup_and_where():
     assert got.dtype == expected.dtype == np.int64
     np.testing.assert_array_equal(got, expected)
     assert (got == -1).any() and (got >= 0).any()
+
+
+def test_dense_normalised_laplacian_is_the_numpy_expression():
+    from scipy.sparse import coo_matrix
+
+    rng = np.random.default_rng(37)
+    m = 120
+    rows = rng.integers(0, m, 900)
+    cols = rng.integers(0, m, 900)
+    values = np.where(rng.random(900) < 0.7, 1.0, 0.05) * rng.uniform(0.1, 1.0, 900)
+    weights = coo_matrix((values, (rows, cols)), shape=(m, m))
+    weights = (weights + weights.T).tocsr()
+    weights.data[::5] = 0.0  # stored zeros stay zeros
+    degree = np.asarray(weights.sum(axis=1)).ravel()
+    scale = 1.0 / np.sqrt(np.maximum(degree, 1e-12))
+    expected = np.eye(m) - (weights.toarray() * scale[:, None]) * scale[None, :]
+    got = kernels.dense_normalised_laplacian(weights.indptr, weights.indices, weights.data, scale)
+    assert np.array_equal(got, expected)
+    assert np.array_equal(np.signbit(got), np.signbit(expected))  # -0.0 where numpy has it
+    # Duplicate entries (a non-canonical CSR) are summed as scipy's toarray sums them.
+    duplicated = weights.copy()
+    duplicated.indices = duplicated.indices.copy()
+    duplicated.has_canonical_format = False
+    first = duplicated.indptr[3]
+    if duplicated.indptr[4] - first >= 2:
+        duplicated.indices[first + 1] = duplicated.indices[first]
+    expected = np.eye(m) - (duplicated.toarray() * scale[:, None]) * scale[None, :]
+    got = kernels.dense_normalised_laplacian(
+        duplicated.indptr, duplicated.indices, duplicated.data, scale
+    )
+    assert np.array_equal(got, expected)

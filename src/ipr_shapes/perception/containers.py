@@ -306,10 +306,10 @@ def _summary(
     """The rules' figures of a segment from its (N,) flat pixel indices with depth (N >= 1)."""
     support, axis_u, axis_v = frame
     pixels = pixels[:: -(-pixels.size // _MAX_POINTS)]
-    world = points[pixels]
+    world = kernels.rows_at(points, pixels)  # compiled: points[pixels]
     heights = support.signed_distance(world)
     footprint = np.stack([world @ axis_u, world @ axis_v], axis=1)
-    colour = rgb.reshape(-1, 3)[pixels].astype(np.float64) + 1.0
+    colour = kernels.rows_at(rgb.reshape(-1, 3), pixels).astype(np.float64) + 1.0
     bottom, top = order.percentiles(heights, (2, 98))  # one partial sort for both
     return _Segment(
         top=float(top),

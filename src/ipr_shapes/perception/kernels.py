@@ -878,6 +878,29 @@ def labels_of_keys(table: np.ndarray, keys: np.ndarray, label_of_cell: np.ndarra
 
 
 @_jit
+def dense_normalised_laplacian(
+    indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, scale: np.ndarray
+) -> np.ndarray:
+    """(m, m) float64 L_sym = I - D^-1/2 W D^-1/2 of the (m, m) float64 CSR matrix W
+    (``indptr``, ``indices``, ``data``; duplicate entries summed in storage order, as scipy's
+    ``toarray`` sums them) with ``scale`` (m,) = D^-1/2 (``segmentation.spectral_clusters``,
+    dense solver). The numpy expression it replaces::
+
+        np.eye(m) - (W.toarray() * scale[:, None]) * scale[None, :]
+    """
+    m = scale.shape[0]
+    dense = np.zeros((m, m))
+    for row in range(m):
+        for entry in range(indptr[row], indptr[row + 1]):
+            dense[row, indices[entry]] += data[entry]
+    for row in range(m):
+        for col in range(m):
+            value = (dense[row, col] * scale[row]) * scale[col]
+            dense[row, col] = (1.0 if row == col else 0.0) - value
+    return dense
+
+
+@_jit
 def indices_above(
     points: np.ndarray, indices: np.ndarray, normal: np.ndarray, offset: float, clearance: float
 ) -> np.ndarray:

@@ -283,7 +283,7 @@ def find_walls(
         # An even subset: the cues are fractions and percentiles, and a wall has thousands of
         # points, so this bounds the cost on close-up frames without changing the decisions.
         context = context[:: -(-len(context) // config.walls.max_points)]
-    points, height = points[context], height[context]
+    points, height = kernels.rows_at(points, context), height[context]
     unknown = normals_up = None
     if normals is not None:
         # Per-point quantities that every candidate's tests reuse, computed once. float64:
@@ -304,8 +304,8 @@ def find_walls(
         if len(pool) < config.walls.min_points:
             break
         plane = _fit_vertical_plane(
-            points[pool],
-            None if normals is None else normals[pool],
+            kernels.rows_at(points, pool),
+            None if normals is None else kernels.rows_at(normals, pool),
             up,
             config,
             rng,
@@ -425,7 +425,7 @@ def _edge_on_walls(
             if len(region) < config.walls.min_points:
                 continue
             best = None
-            region_points, region_height = points[region], height[region]
+            region_points, region_height = kernels.rows_at(points, region), height[region]
             region_normals = region_unknown = region_up = None
             if normals is not None:  # what every position's cues would compute again
                 region_normals = normals[region]

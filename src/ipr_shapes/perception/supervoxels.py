@@ -146,14 +146,15 @@ def compute_supervoxels(
     # of at most supervoxels.max_points pixels, and every pixel then joins its voxel's label.
     step = -(-len(pixels) // config.supervoxels.max_points)
     sample = np.arange(0, len(pixels), step)
-    points = flat_points[pixels[sample]]
+    # Compiled row gathers (``kernels.rows_at``: numpy's fancy indexing, same values).
+    points = kernels.rows_at(flat_points, pixels[sample])
     keys = all_keys[sample]
     if normals_camera is None:
         camera_normals = organised_normals_at(frame.depth_m, frame.K, pixels[sample], config)
     else:
-        camera_normals = normals_camera.reshape(-1, 3)[pixels[sample]]
+        camera_normals = kernels.rows_at(normals_camera.reshape(-1, 3), pixels[sample])
     pixel_normals = camera_normals.astype(np.float64) @ rotation.T
-    colours = frame.rgb.reshape(-1, 3)[pixels[sample]].astype(np.float64)
+    colours = kernels.rows_at(frame.rgb.reshape(-1, 3), pixels[sample]).astype(np.float64)
     colours /= 255.0
 
     # 1. Voxels.
