@@ -870,3 +870,87 @@ def test_robust_circle_matches_the_numpy_fit(seed):
     assert kernels.robust_circle(points[:9], 0.004, 4)[2] == -1.0
     line = np.column_stack([np.linspace(0, 0.1, 50), np.zeros(50)])
     assert kernels.robust_circle(line, 0.004, 4)[2] == -1.0
+
+
+def test_wall_slab_marks_are_the_numpy_masks():
+    rng = np.random.default_rng(17)
+    count = 5000
+    depth = rng.uniform(-0.06, 0.03, count)
+    position = rng.uniform(-0.4, 0.4, count)
+    heights = rng.uniform(-0.05, 0.4, count)
+    depth[:50] = 0.01  # on the bounds: excluded, as numpy's strict tests exclude them
+    position[50:100] = -0.3
+    start, columns = -0.3, 31
+    end = start + columns * 0.02
+    column_top = rng.uniform(0.05, 0.3, columns)
+    column_top[::7] = -np.inf  # columns without wall points
+    mask = rng.random(count) < 0.2  # marks already set stay set
+    initial = mask.copy()
+    expected = mask.copy()
+    candidate = np.flatnonzero(
+        (depth < 0.01) & (depth > -0.04) & (position > start) & (position < end)
+    )
+    local_top = column_top[((position[candidate] - start) / 0.02).astype(np.int64)]
+    expected[candidate[heights[candidate] < local_top + 0.01]] = True
+    kernels.mark_wall_slab(
+        depth, position, heights, 0.01, -0.04, start, end, column_top, 0.01, mask
+    )
+    np.testing.assert_array_equal(mask, expected)
+    assert (mask & ~initial).sum() > 100  # the kernel marked points of its own
+
+
+def test_rows_at_keeps_the_dtype_and_is_the_fancy_index():
+    rng = np.random.default_rng(23)
+    indices = rng.integers(0, 2000, 700)
+    colours = rng.integers(0, 256, (2000, 3), dtype=np.uint8)
+    points = rng.normal(size=(2000, 3))
+    for values in (colours, points):
+        got = kernels.rows_at(values, indices)
+        assert got.dtype == values.dtype
+        np.testing.assert_array_equal(got, values[indices])
+
+
+def test_labels_of_keys_is_the_table_lookup_and_where():
+    rng = np.random.default_rng(29)
+    table = np.full(5000, -1, dtype=np.int32)
+    cells = rng.choice(5000, 800, replace=False)
+    table[cells] = np.arange(800, dtype=np.int32)
+    label_of_cell = rng.integers(0, 60, 800).astype(np.int64)
+    keys = rng.integers(0, 5000, 20000).astype(np.int64)
+    position = table[keys].astype(np.int64)
+    expected = np.where(position >= 0, label_of_cell[position], -1)
+    got = kernels.labels_of_keys(table, keys, label_of_cell)
+    assert got.dtype == expected.dtype == np.int64
+    np.testing.assert_array_equal(got, expected)
+    assert (got == -1).any() and (got >= 0).any()
+
+
+def test_dense_normalised_laplacian_is_the_numpy_expression():
+    from scipy.sparse import coo_matrix
+
+    rng = np.random.default_rng(37)
+    m = 120
+    rows = rng.integers(0, m, 900)
+    cols = rng.integers(0, m, 900)
+    values = np.where(rng.random(900) < 0.7, 1.0, 0.05) * rng.uniform(0.1, 1.0, 900)
+    weights = coo_matrix((values, (rows, cols)), shape=(m, m))
+    weights = (weights + weights.T).tocsr()
+    weights.data[::5] = 0.0  # stored zeros stay zeros
+    degree = np.asarray(weights.sum(axis=1)).ravel()
+    scale = 1.0 / np.sqrt(np.maximum(degree, 1e-12))
+    expected = np.eye(m) - (weights.toarray() * scale[:, None]) * scale[None, :]
+    got = kernels.dense_normalised_laplacian(weights.indptr, weights.indices, weights.data, scale)
+    assert np.array_equal(got, expected)
+    assert np.array_equal(np.signbit(got), np.signbit(expected))  # -0.0 where numpy has it
+    # Duplicate entries (a non-canonical CSR) are summed as scipy's toarray sums them.
+    duplicated = weights.copy()
+    duplicated.indices = duplicated.indices.copy()
+    duplicated.has_canonical_format = False
+    first = duplicated.indptr[3]
+    if duplicated.indptr[4] - first >= 2:
+        duplicated.indices[first + 1] = duplicated.indices[first]
+    expected = np.eye(m) - (duplicated.toarray() * scale[:, None]) * scale[None, :]
+    got = kernels.dense_normalised_laplacian(
+        duplicated.indptr, duplicated.indices, duplicated.data, scale
+    )
+    assert np.array_equal(got, expected)

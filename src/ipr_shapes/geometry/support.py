@@ -50,6 +50,7 @@ import numpy as np
 from scipy import ndimage
 from scipy.spatial import ConvexHull, QhullError
 
+from ipr_shapes.geometry import order
 from ipr_shapes.geometry.planes import Plane, fit_plane_ransac
 
 #: 8-connectivity for the image-space components of a plane's inliers.
@@ -191,7 +192,7 @@ def choose_support(
     heights = np.full(shape[0] * shape[1], np.nan)
     heights[flat_valid] = points @ up + dominant.offset
     heights = heights.reshape(shape)
-    level_height = [float(np.median(heights[c.mask])) for c in levels]
+    level_height = [order.median(heights[c.mask]) for c in levels]
 
     def assess(index: int) -> dict:
         """See-through share, extent, walls around and container of level ``index``."""
@@ -414,7 +415,7 @@ def _walls_around(
         if not (piece & near).any() or (piece & extent).sum() > 0.5 * piece.sum():
             continue
         wall_heights = heights[piece & valid]
-        if wall_heights.size < 10 or np.percentile(wall_heights, 98.0) <= config.drop_m:
+        if wall_heights.size < 10 or order.percentile(wall_heights, 98.0) <= config.drop_m:
             continue
         around.append({"normal": wall.normal, "offset": wall.offset, "piece": piece})
     return around
@@ -466,7 +467,7 @@ def _below_tops(
             f"the largest plane lies between walls rising around it and "
             f"{assessed['container_share']:.1%} of the space between them is below it"
         )
-    level = float(np.percentile(below, config.low_percentile)) if below.size else -config.drop_m
+    level = order.percentile(below, config.low_percentile) if below.size else -config.drop_m
     measures["support_level_m"] = round(level, 4)
     offset = float(dominant.offset) - level
     inliers = _usable_inliers(grid, usable, up, offset, config.threshold_m)

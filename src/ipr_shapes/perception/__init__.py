@@ -21,6 +21,7 @@ from ipr_shapes.perception.kernels import (
     distinct_per_slice,
     labelled_order,
     object_pixel_geometry,
+    rows_at,
 )
 from ipr_shapes.perception.robot import robot_pixels
 from ipr_shapes.perception.segmentation import segment_frame
@@ -224,7 +225,7 @@ def partial_objects(
         supervoxel_all,
         np.ascontiguousarray(supervoxels.normals, dtype=np.float64),
     )
-    rgb_all = flat_rgb[order]
+    rgb_all = rows_at(flat_rgb, order)  # compiled gather (``kernels``): flat_rgb[order]
     border_all = border[order]
     # Each object's distinct supervoxels (sorted), all objects in one compiled pass.
     distinct, distinct_bounds = distinct_per_slice(

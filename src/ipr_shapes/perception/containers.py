@@ -70,6 +70,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError, cKDTree
 
+from ipr_shapes.geometry import order
 from ipr_shapes.perception import kernels
 from ipr_shapes.perception.config import PerceptionConfig
 from ipr_shapes.perception.types import KnownPlane
@@ -305,11 +306,11 @@ def _summary(
     """The rules' figures of a segment from its (N,) flat pixel indices with depth (N >= 1)."""
     support, axis_u, axis_v = frame
     pixels = pixels[:: -(-pixels.size // _MAX_POINTS)]
-    world = points[pixels]
+    world = kernels.rows_at(points, pixels)  # compiled: points[pixels]
     heights = support.signed_distance(world)
     footprint = np.stack([world @ axis_u, world @ axis_v], axis=1)
-    colour = rgb.reshape(-1, 3)[pixels].astype(np.float64) + 1.0
-    bottom, top = np.percentile(heights, [2, 98])  # one sort for both
+    colour = kernels.rows_at(rgb.reshape(-1, 3), pixels).astype(np.float64) + 1.0
+    bottom, top = order.percentiles(heights, (2, 98))  # one partial sort for both
     return _Segment(
         top=float(top),
         bottom=float(bottom),
@@ -350,7 +351,7 @@ def _is_inside(piece: _Segment, container: _Segment, config: PerceptionConfig) -
     around = container.heights[np.isfinite(distance)]
     return bool(
         around.size > 0
-        and np.percentile(around, 98) >= piece.top - config.containers.top_tolerance_m
+        and order.percentile(around, 98) >= piece.top - config.containers.top_tolerance_m
     )
 
 

@@ -850,13 +850,54 @@ def lloyd_iterations(points: np.ndarray, centres: np.ndarray, max_iterations: in
 
 @_jit
 def rows_at(values: np.ndarray, indices: np.ndarray) -> np.ndarray:
-    """``values[indices]`` for (N, 3) float64 ``values`` and (K,) indices: numpy's fancy
-    indexing of rows costs several times this loop on hundreds of thousands of rows."""
-    out = np.empty((indices.shape[0], 3))
+    """``values[indices]`` for (N, 3) ``values`` (float64 points, uint8 colours; the result
+    keeps their dtype) and (K,) indices: numpy's fancy indexing of rows costs several times
+    this loop on hundreds of thousands of rows."""
+    out = np.empty((indices.shape[0], 3), dtype=values.dtype)
     for k in range(indices.shape[0]):
         for axis in range(3):
             out[k, axis] = values[indices[k], axis]
     return out
+
+
+@_jit
+def labels_of_keys(table: np.ndarray, keys: np.ndarray, label_of_cell: np.ndarray) -> np.ndarray:
+    """(K,) int64 label of each of the (K,) int64 cell ``keys`` through a dense cell ->
+    voxel ``table`` (-1 = no voxel) and the voxels' (V,) int64 labels, -1 where the cell has no
+    voxel (``supervoxels.compute_supervoxels``: every kept pixel takes its voxel's label).
+    The numpy expression it replaces::
+
+        position = table[keys].astype(np.int64)
+        np.where(position >= 0, label_of_cell[position], -1)
+    """
+    out = np.empty(keys.shape[0], dtype=np.int64)
+    for k in range(keys.shape[0]):
+        voxel = table[keys[k]]
+        out[k] = label_of_cell[voxel] if voxel >= 0 else -1
+    return out
+
+
+@_jit
+def dense_normalised_laplacian(
+    indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, scale: np.ndarray
+) -> np.ndarray:
+    """(m, m) float64 L_sym = I - D^-1/2 W D^-1/2 of the (m, m) float64 CSR matrix W
+    (``indptr``, ``indices``, ``data``; duplicate entries summed in storage order, as scipy's
+    ``toarray`` sums them) with ``scale`` (m,) = D^-1/2 (``segmentation.spectral_clusters``,
+    dense solver). The numpy expression it replaces::
+
+        np.eye(m) - (W.toarray() * scale[:, None]) * scale[None, :]
+    """
+    m = scale.shape[0]
+    dense = np.zeros((m, m))
+    for row in range(m):
+        for entry in range(indptr[row], indptr[row + 1]):
+            dense[row, indices[entry]] += data[entry]
+    for row in range(m):
+        for col in range(m):
+            value = (dense[row, col] * scale[row]) * scale[col]
+            dense[row, col] = (1.0 if row == col else 0.0) - value
+    return dense
 
 
 @_jit
@@ -965,6 +1006,42 @@ def vertical_plane_coordinates(
             inside = abs(_dot(point_normals, p, normal)) > min_cos
         on_plane[p] = inside
     return depth, position, on_plane
+
+
+@_jit
+def mark_wall_slab(
+    depth: np.ndarray,
+    position: np.ndarray,
+    heights: np.ndarray,
+    front_m: float,
+    back_m: float,
+    start: float,
+    end: float,
+    column_top: np.ndarray,
+    top_margin_m: float,
+    mask: np.ndarray,
+) -> None:
+    """Set ``mask`` (N,) bool True, in place, at the points in a wall's static slab
+    (``planes.static_geometry_mask``): signed ``depth`` (N,) in (``back_m``, ``front_m``),
+    ``position`` (N,) along the wall in (``start``, ``end``) and height (``heights`` (N,) above
+    the support) below ``column_top`` (C,) of their 2 cm column (from ``start``) plus
+    ``top_margin_m``. The depths and positions stay numpy's products (OpenBLAS's fused
+    multiply-adds, whose order a loop does not reproduce bit for bit). The numpy expression it
+    replaces::
+
+        candidate = np.flatnonzero(
+            (depth < front_m) & (depth > back_m) & (position > start) & (position < end)
+        )
+        local_top = column_top[((position[candidate] - start) / 0.02).astype(np.int64)]
+        mask[candidate[heights[candidate] < local_top + top_margin_m]] = True
+
+    (a column index past the table, where numpy would raise, reads the last column)."""
+    last = column_top.shape[0] - 1
+    for p in range(depth.shape[0]):
+        if depth[p] < front_m and depth[p] > back_m and position[p] > start and position[p] < end:
+            column = min(int((position[p] - start) / 0.02), last)
+            if heights[p] < column_top[column] + top_margin_m:
+                mask[p] = True
 
 
 @_jit

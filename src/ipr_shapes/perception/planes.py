@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ipr_shapes.geometry import kernels as geometry_kernels
+from ipr_shapes.geometry import order
 from ipr_shapes.geometry.planes import Plane, fit_plane_ransac
 from ipr_shapes.geometry.support import SupportChoiceConfig, choose_support
 from ipr_shapes.perception import kernels
@@ -134,7 +135,7 @@ def _same_plane(
     settings = SupportChoiceConfig()
     if float(normal @ support.normal) < np.cos(np.radians(settings.level_tilt_deg)):
         return False
-    return bool(abs(float(np.median(support.signed_distance(inliers)))) < settings.drop_m)
+    return bool(abs(order.median(support.signed_distance(inliers))) < settings.drop_m)
 
 
 def static_geometry_mask(
@@ -173,16 +174,19 @@ def static_geometry_mask(
         )
         padded = np.pad(column_top, 1, constant_values=-np.inf)
         column_top = np.maximum(np.maximum(padded[:-2], padded[2:]), column_top)
-        s = points @ along
-        depth = wall.signed_distance(points)
-        candidate = np.flatnonzero(
-            (depth < margin)
-            & (depth > -wall.thickness_m)
-            & (s > start)
-            & (s < start + columns * 0.02)
+        # Compiled (``kernels``): the slab, extent and column-top tests in one pass.
+        kernels.mark_wall_slab(
+            wall.signed_distance(points),
+            points @ along,
+            height,
+            margin,
+            -wall.thickness_m,
+            start,
+            start + columns * 0.02,
+            column_top,
+            config.walls.top_margin_m,
+            mask,
         )
-        local_top = column_top[((s[candidate] - start) / 0.02).astype(np.int64)]
-        mask[candidate[height[candidate] < local_top + config.walls.top_margin_m]] = True
     return mask
 
 
@@ -279,7 +283,7 @@ def find_walls(
         # An even subset: the cues are fractions and percentiles, and a wall has thousands of
         # points, so this bounds the cost on close-up frames without changing the decisions.
         context = context[:: -(-len(context) // config.walls.max_points)]
-    points, height = points[context], height[context]
+    points, height = kernels.rows_at(points, context), height[context]
     unknown = normals_up = None
     if normals is not None:
         # Per-point quantities that every candidate's tests reuse, computed once. float64:
@@ -300,8 +304,8 @@ def find_walls(
         if len(pool) < config.walls.min_points:
             break
         plane = _fit_vertical_plane(
-            points[pool],
-            None if normals is None else normals[pool],
+            kernels.rows_at(points, pool),
+            None if normals is None else kernels.rows_at(normals, pool),
             up,
             config,
             rng,
@@ -395,6 +399,13 @@ def _edge_on_walls(
     added: list[dict] = []
     gap = config.walls.corner_gap_m
     tops = [wall["top"] for wall in walls]
+    # The tests below that the cues can apply as soon as they know the top (``_wall_cues``).
+    partner = (
+        tops,
+        config.walls.partner_top_match_m,
+        config.walls.min_top_agreement,
+        config.walls.min_points,
+    )
     for wall in walls:
         if not any(_square(wall, other) for other in walls if other is not wall):
             continue  # a lone wall is not known to be part of a container frame
@@ -414,7 +425,7 @@ def _edge_on_walls(
             if len(region) < config.walls.min_points:
                 continue
             best = None
-            region_points, region_height = points[region], height[region]
+            region_points, region_height = kernels.rows_at(points, region), height[region]
             region_normals = region_unknown = region_up = None
             if normals is not None:  # what every position's cues would compute again
                 region_normals = normals[region]
@@ -436,6 +447,7 @@ def _edge_on_walls(
                     unknown=region_unknown,
                     normals_up=region_up,
                     edge_on=True,
+                    partner=partner,
                 )
                 if cues is None or len(cues["run_points"]) < config.walls.min_points:
                     continue
@@ -686,6 +698,7 @@ def _wall_cues(
     normals_up: np.ndarray | None = None,
     edge_on: bool = False,
     frame: tuple[DepthView, KnownPlane] | None = None,
+    partner: tuple[list[float], float, float, int] | None = None,
 ) -> dict | None:
     """Measurements of the vertical plane (normal, offset) used by ``_select_walls``.
 
@@ -705,6 +718,11 @@ def _wall_cues(
     not tell the wall's top, and the top and its agreement are measured over the other
     columns (the far wall of a bin often leaves the image at the top); and upward-facing points
     more than 2 cm below that top are not the wall's rim (the tops of objects against its face).
+    ``partner``: (the accepted walls' tops (m), the top tolerance (m), the least top agreement,
+    the least face points): None as soon as the plane fails one of these tests of
+    ``_edge_on_walls`` (a top within the tolerance of an accepted wall's, a straight top and
+    enough face points below it), which would reject it anyway: most planes tried there do,
+    and this spares their remaining cues.
     """
     threshold = config.planes.threshold_m
     along = _cross_rows(up, normal[None])[0]
@@ -729,7 +747,9 @@ def _wall_cues(
     )
     if on_plane.sum() < config.walls.min_points:
         return None
-    s_in, h_in = s[on_plane], h[on_plane]
+    # The face's indices: the gathers below by index, not by chains of boolean masks.
+    plane_index = np.flatnonzero(on_plane)
+    s_in, h_in = s[plane_index], h[plane_index]
     # Largest run of occupied bins along the plane, bridging gaps up to walls.max_gap_m.
     bin_m = 0.01
     first = float(s_in.min())
@@ -770,7 +790,7 @@ def _wall_cues(
         cut = ~view.in_image(above_top)
         if not cut.all():
             telling[np.flatnonzero(telling)[cut]] = False
-    top = float(np.median(column_top[telling]))
+    top = order.median(column_top[telling])
     thickness = config.walls.max_thickness_m
     if normals is not None:
         # Compiled (``kernels``): the rim's indices in one pass.
@@ -790,22 +810,31 @@ def _wall_cues(
         # A face does not rise above its own rim: upward-facing points well below the top
         # edges of the face (objects' tops against it) are not the rim.
         if rim_bins.size >= max(2, 0.2 * np.isfinite(column_top).sum()) and (
-            frame is None or float(np.median(h[rim])) >= top - 0.02
+            frame is None or order.median(h[rim]) >= top - 0.02
         ):
-            top = float(np.median(h[rim]))
+            top = order.median(h[rim])
             # Thickness: twice the median depth of the rim behind the face (its points spread
             # evenly over the thickness; objects just behind the wall barely move the median),
             # plus 3 mm of noise.
             rim = rim[np.abs(h[rim] - top) < 0.015]
             if rim.size >= 10:
-                thickness = 2.0 * float(np.median(np.maximum(-depth[rim], 0.0))) + 0.003
+                thickness = 2.0 * order.median(np.maximum(-depth[rim], 0.0)) + 0.003
                 thickness = float(np.clip(thickness, 0.005, config.walls.max_thickness_m))
     if not config.walls.min_height_m <= top <= config.walls.max_height_m:
         return None  # no wall rule accepts this top (``_select_walls``)
-    bottom = float(np.percentile(heights, 2))
     # Straight top and solid face (the lone-wall rule): the share of columns whose top edge is
     # at the wall's top, and of the face's 2 cm cells from its bottom to its top with inliers.
     top_agreement = float(np.mean(np.abs(column_top[telling] - top) < 0.02))
+    below_top = heights <= top + threshold  # the face's points (``run_points``)
+    if partner is not None:
+        partner_tops, tolerance, min_agreement, min_points = partner
+        if (
+            min(abs(top - other) for other in partner_tops) > tolerance
+            or top_agreement < min_agreement
+            or int(below_top.sum()) < min_points
+        ):
+            return None  # ``_edge_on_walls`` rejects it whatever its other cues
+    bottom = order.percentile(heights, 2)
     floor = max(bottom, 0.0)
     rows = max(1, int(np.ceil((top - floor) / 0.02)))
     on_face = heights <= top
@@ -877,8 +906,8 @@ def _wall_cues(
         "top_agreement": top_agreement,
         "face_fill": face_fill,
         # The face below its top (objects leaning on the wall and rising above it excluded).
-        "run_points": pts[on_plane][in_run][heights <= top + threshold],
-        "extra_points": pts[on_plane][extra],
+        "run_points": pts[plane_index[in_run][below_top]],
+        "extra_points": pts[plane_index[extra]],
         # The extent along the wall of the run and the extra runs (m).
         "span": span,
         # The run's 2 cm columns: centres along the wall and lowest inlier heights (m; inf =

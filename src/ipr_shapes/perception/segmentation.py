@@ -138,7 +138,7 @@ def segment_frame(
     wall_sample = above[:: -(-len(above) // config.walls.max_points)] if len(above) else above
     wall_normals = organised_normals_at(frame.depth_m, frame.K, wall_sample, config)
     walls = find_walls(
-        flat_points[wall_sample],
+        kernels.rows_at(flat_points, wall_sample),
         support,
         config,
         rng,
@@ -302,7 +302,7 @@ def drop_support_residue(
     if labelled.size == 0:
         return labels, segment_of_supervoxel
     # Every segment's 90th percentile (lower value), compiled: a sort per segment.
-    heights = support.signed_distance(points[labelled])
+    heights = support.signed_distance(kernels.rows_at(points, labelled))
     segments, p90 = kernels.grouped_order_statistic(flat[labelled], heights, 0.9)
     residue = segments[p90 < config.segmentation.min_object_height_m]
     if residue.size == 0:
@@ -585,8 +585,14 @@ def spectral_clusters(weights: csr_matrix, config: PerceptionConfig) -> np.ndarr
     scale = 1.0 / np.sqrt(np.maximum(degree, 1e-12))
     wanted = min(config.segmentation.max_objects + 1, m - 1)
     if m <= config.segmentation.dense_eigen_limit:
-        normalised = (weights.toarray() * scale[:, None]) * scale[None, :]
-        laplacian = np.eye(m) - normalised
+        if weights.format == "csr" and weights.data.dtype == np.float64:
+            # Compiled (``kernels``): the dense L_sym in one pass, the same arithmetic.
+            laplacian = kernels.dense_normalised_laplacian(
+                weights.indptr, weights.indices, weights.data, scale
+            )
+        else:
+            normalised = (weights.toarray() * scale[:, None]) * scale[None, :]
+            laplacian = np.eye(m) - normalised
         values, vectors = eigh(laplacian, subset_by_index=[0, wanted - 1])
     else:
         normalised = csr_matrix(weights.multiply(scale[:, None]).multiply(scale[None, :]))

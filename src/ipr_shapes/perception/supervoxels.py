@@ -146,14 +146,15 @@ def compute_supervoxels(
     # of at most supervoxels.max_points pixels, and every pixel then joins its voxel's label.
     step = -(-len(pixels) // config.supervoxels.max_points)
     sample = np.arange(0, len(pixels), step)
-    points = flat_points[pixels[sample]]
+    # Compiled row gathers (``kernels.rows_at``: numpy's fancy indexing, same values).
+    points = kernels.rows_at(flat_points, pixels[sample])
     keys = all_keys[sample]
     if normals_camera is None:
         camera_normals = organised_normals_at(frame.depth_m, frame.K, pixels[sample], config)
     else:
-        camera_normals = normals_camera.reshape(-1, 3)[pixels[sample]]
+        camera_normals = kernels.rows_at(normals_camera.reshape(-1, 3), pixels[sample])
     pixel_normals = camera_normals.astype(np.float64) @ rotation.T
-    colours = frame.rgb.reshape(-1, 3)[pixels[sample]].astype(np.float64)
+    colours = kernels.rows_at(frame.rgb.reshape(-1, 3), pixels[sample]).astype(np.float64)
     colours /= 255.0
 
     # 1. Voxels.
@@ -258,6 +259,10 @@ def compute_supervoxels(
     # reached, a handful at most, stay unlabelled).
     if step == 1:
         supervoxel_of_pixel = supervoxel_of_point
+    elif voxels.table is not None:  # compiled (``kernels``): lookup and label in one pass
+        supervoxel_of_pixel = kernels.labels_of_keys(
+            voxels.table, all_keys, supervoxel_of_voxel.astype(np.int64, copy=False)
+        )
     else:
         position = voxels.find(all_keys)
         supervoxel_of_pixel = np.where(position >= 0, supervoxel_of_voxel[position], -1)
@@ -310,6 +315,11 @@ class _VoxelIndex:
         self._table = np.full(n_cells, -1, dtype=np.int32)
         self._table[self.keys] = np.arange(len(self.keys), dtype=np.int32)
         self.of_keys = self._table[point_keys].astype(np.int64)
+
+    @property
+    def table(self) -> np.ndarray | None:
+        """The dense (n_cells,) int32 cell -> voxel table (-1 = empty), None for sparse grids."""
+        return self._table
 
     def find(self, targets: np.ndarray) -> np.ndarray:
         """(T,) int64 voxel of each of the (T,) int64 keys ``targets``, -1 where none."""
