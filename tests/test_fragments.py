@@ -187,3 +187,15 @@ def test_the_border_kernel_matches_its_numpy_expression():
         for g, w in zip(got, want, strict=True):
             np.testing.assert_allclose(g, w, rtol=1e-12)
         assert got[3].sum() > 0 and got[3].sum() < got[2].sum()
+
+
+def test_merged_counts_are_those_of_the_joined_labels():
+    # Pair counts of 4 labels; joining label 3 into 1 must give the counts the relabelled
+    # image would have: rows and columns added, pairs within the joined segment dropped.
+    from ipr_shapes.perception.fragments import merge_counts
+
+    counts = np.array([[0, 4, 1, 2], [4, 0, 3, 5], [1, 3, 0, 7], [2, 5, 7, 0]])
+    merge_counts(counts, 3, 1)
+    expected = np.array([[0, 6, 1, 0], [6, 0, 10, 0], [1, 10, 0, 0], [0, 0, 0, 0]])
+    np.testing.assert_array_equal(counts, expected)
+    np.testing.assert_array_equal(counts, counts.T)

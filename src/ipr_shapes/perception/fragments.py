@@ -60,25 +60,13 @@ def join_fragments(
     if seg.fragment_area_m2 <= 0 or labels.max() < 2:
         return labels, segment_of_supervoxel
     n = int(labels.max()) + 1
-    area, colour, outline, continuous = kernels.fragment_borders(
-        labels,
-        points,
-        depth_m,
-        rgb,
-        supervoxels.labels,
-        supervoxels.normals.astype(np.float64),
-        float(seg.fragment_gap_m),
-        float(np.cos(np.radians(seg.fragment_bend_deg))),
-        1.0 / (float(K[0, 0]) * float(K[1, 1])),
-        n,
+    area, colour, outline, continuous = segment_borders(
+        labels, points, depth_m, K, rgb, supervoxels, seg.fragment_gap_m, seg.fragment_bend_deg
     )
     order = [int(s) for s in np.argsort(area, kind="stable") if s > 0 and area[s] > 0]
     small = [s for s in order if area[s] < seg.fragment_area_m2]
     if not small:
         return labels, segment_of_supervoxel
-    # Symmetric counts (label 0 included in the outline, never a partner).
-    outline = outline + outline.T
-    continuous = continuous + continuous.T
     root = np.arange(n)
     for piece in small:
         if area[piece] >= seg.fragment_area_m2:
@@ -95,14 +83,62 @@ def join_fragments(
             continue
         root[root == piece] = best
         for counts in (outline, continuous):
-            counts[best] += counts[piece]
-            counts[:, best] += counts[:, piece]
-            counts[best, best] = 0
-            counts[piece] = 0
-            counts[:, piece] = 0
+            merge_counts(counts, piece, best)
         area[best] += area[piece]
         colour[best] += colour[piece]
-    if np.array_equal(root, np.arange(n)):
+    return relabelled_by_root(labels, segment_of_supervoxel, root)
+
+
+def segment_borders(
+    labels: np.ndarray,
+    points: np.ndarray,
+    depth_m: np.ndarray,
+    K: np.ndarray,
+    rgb: np.ndarray,
+    supervoxels: Supervoxels,
+    gap_m: float,
+    bend_deg: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Each segment's area and colour sum and, between every two labels, the neighbouring pixel
+    pairs, from one compiled pass (``kernels.fragment_borders``).
+
+    Returns ``area`` (L,) m^2 facing the camera, ``colour`` (L, 3) RGB sums, and the symmetric
+    (L, L) counts ``outline`` (pixel pairs of two labels, both with depth; label 0 included)
+    and ``continuous`` (those whose world points are closer than ``gap_m`` and whose
+    supervoxels' normals differ by at most ``bend_deg``; 180: any normals), L = labels.max() + 1.
+    Arguments as ``join_fragments``'.
+    """
+    area, colour, outline, continuous = kernels.fragment_borders(
+        labels,
+        points,
+        depth_m,
+        rgb,
+        supervoxels.labels,
+        supervoxels.normals.astype(np.float64),
+        float(gap_m),
+        float(np.cos(np.radians(bend_deg))),
+        1.0 / (float(K[0, 0]) * float(K[1, 1])),
+        int(labels.max()) + 1,
+    )
+    return area, colour, outline + outline.T, continuous + continuous.T
+
+
+def merge_counts(counts: np.ndarray, piece: int, into: int) -> None:
+    """Add row and column ``piece`` of the symmetric (L, L) pair ``counts`` to ``into``'s, in
+    place, and clear ``piece``'s (the pairs within the joined segment drop)."""
+    counts[into] += counts[piece]
+    counts[:, into] += counts[:, piece]
+    counts[into, into] = 0
+    counts[piece] = 0
+    counts[:, piece] = 0
+
+
+def relabelled_by_root(
+    labels: np.ndarray, segment_of_supervoxel: np.ndarray, root: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(labels, segment_of_supervoxel) with every label l replaced by ``root[l]`` (the inputs
+    themselves when ``root`` joins nothing); supervoxel segments <= 0 stay."""
+    if np.array_equal(root, np.arange(len(root))):
         return labels, segment_of_supervoxel
     segments = np.asarray(segment_of_supervoxel)
     relabelled = np.where(segments > 0, root[np.maximum(segments, 0)], segments)

@@ -22,6 +22,7 @@ import numpy as np
 
 from ipr_shapes.perception import kernels
 from ipr_shapes.perception.config import PerceptionConfig
+from ipr_shapes.perception.fragments import merge_counts, relabelled_by_root, segment_borders
 from ipr_shapes.perception.types import Supervoxels
 
 #: Points of a segment used for the cylinder fit (an even subset).
@@ -181,20 +182,10 @@ def join_thin_pieces(
     if len(slender) < 2:
         return labels, segment_of_supervoxel
     n = int(labels.max()) + 1
-    # Touching pixel pairs of every two segments, whatever their normals (bend cosine -1).
-    area, _, _, touching = kernels.fragment_borders(
-        labels,
-        points,
-        depth_m,
-        rgb,
-        supervoxels.labels,
-        supervoxels.normals.astype(np.float64),
-        float(seg.fragment_gap_m),
-        -1.0,
-        1.0 / (float(K[0, 0]) * float(K[1, 1])),
-        n,
+    # Touching pixel pairs of every two segments, whatever their normals.
+    area, _, _, touching = segment_borders(
+        labels, points, depth_m, K, rgb, supervoxels, seg.fragment_gap_m, 180.0
     )
-    touching = touching + touching.T
     outside = np.array([s not in slender for s in range(n)])
     touching[outside] = 0
     touching[:, outside] = 0
@@ -222,17 +213,9 @@ def join_thin_pieces(
         keep, gone = (a, b) if area[a] >= area[b] else (b, a)
         root[root == gone] = keep
         area[keep] += area[gone]
-        touching[keep] += touching[gone]
-        touching[:, keep] += touching[:, gone]
-        touching[keep, keep] = 0
-        touching[gone] = 0
-        touching[:, gone] = 0
+        merge_counts(touching, gone, keep)
         joined = np.concatenate([members.pop(keep), members.pop(gone)])
         members[keep] = joined[:: -(-len(joined) // _MAX_POINTS)]
         moments[keep] = _moments(members[keep])
         fits = {pair: value for pair, value in fits.items() if keep not in pair}
-    if np.array_equal(root, np.arange(n)):
-        return labels, segment_of_supervoxel
-    segments = np.asarray(segment_of_supervoxel)
-    relabelled = np.where(segments > 0, root[np.maximum(segments, 0)], segments)
-    return root[labels].astype(labels.dtype), relabelled.astype(segment_of_supervoxel.dtype)
+    return relabelled_by_root(labels, segment_of_supervoxel, root)
