@@ -39,8 +39,11 @@ demo: $(STAMP)
 	$(PY) -m ipr_shapes.demo $(DEMO_OUT)
 
 # The default tests (under 3 minutes on 2 cores); .ci/run also runs the slow ones (test-slow).
+# Two pytest-xdist workers: CI has 2 cores, and each worker compiles the numba kernels it needs on
+# a cold cache, so more workers than cores only repeat that work. TEST_WORKERS=0 runs in one process.
+TEST_WORKERS ?= 2
 test: $(STAMP)
-	$(PY) -m pytest -q -m "not slow" tests
+	$(PY) -m pytest -q -m "not slow" -n $(TEST_WORKERS) tests
 
 # The slow tests include a Ray cluster on this machine: Ray is installed first.
 test-slow: $(STAMP) $(RAY_STAMP) $(PYBULLET_STAMP)
