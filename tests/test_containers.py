@@ -209,3 +209,16 @@ def test_a_small_filled_top_is_no_rim_but_a_ring_of_its_size_is():
     heights = rng.uniform(0.045, 0.05, 300)
     assert _rim_circle(disc, heights, CONFIG) is None
     assert _rim_circle(0.014 * ring + rng.normal(0, 0.001, ring.shape), heights, CONFIG)
+
+
+def test_a_ring_wider_than_any_container_is_no_rim():
+    """A round table's or a tray's edge is a circle too: a ring of 25 cm radius (beyond
+    ``containers.max_radius_m``, 15 cm) is not taken for a rim, one of 10 cm is."""
+    rng = np.random.default_rng(5)
+    angle = rng.uniform(0.0, 2 * np.pi, 300)
+    ring = np.column_stack([np.cos(angle), np.sin(angle)])
+    heights = rng.uniform(0.065, 0.07, 300)
+    assert CONFIG.containers.max_radius_m < 0.25
+    assert _rim_circle(0.25 * ring + rng.normal(0, 0.001, ring.shape), heights, CONFIG) is None
+    found = _rim_circle(0.10 * ring + rng.normal(0, 0.001, ring.shape), heights, CONFIG)
+    assert found is not None and abs(found[1] - 0.10) < 0.005
