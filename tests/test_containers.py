@@ -16,6 +16,7 @@ from ipr_shapes.perception.containers import (
     _one_container,
     _rim_circle,
     _Segment,
+    _summary,
     join_container_insides,
 )
 from ipr_shapes.perception.types import KnownPlane
@@ -222,3 +223,33 @@ def test_a_ring_wider_than_any_container_is_no_rim():
     assert _rim_circle(0.25 * ring + rng.normal(0, 0.001, ring.shape), heights, CONFIG) is None
     found = _rim_circle(0.10 * ring + rng.normal(0, 0.001, ring.shape), heights, CONFIG)
     assert found is not None and abs(found[1] - 0.10) < 0.005
+
+
+def test_a_dark_cups_inside_and_outside_have_alike_colours_but_dark_red_and_blue_do_not():
+    """Near black a channel is the camera's noise: a navy cup's outside and its shaded inside,
+    pixel by pixel as a real sensor gives them (the inside's channels down to 0-3 levels),
+    differ by 0.3 in mean chromaticity with 1 level added to each channel, beyond
+    ``max_chroma``; with ``chroma_floor`` (10 levels) they are alike, while dark red and dark
+    blue, and a bright red and blue, stay apart."""
+    support = KnownPlane("support", np.array([0.0, 0.0, 1.0]), 0.0, np.zeros((0, 3)))
+    frame = (support, np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]))
+    points = np.zeros((4, 3))
+
+    def chroma(colours, config):
+        rgb = np.array(colours, np.uint8)[None]
+        return _summary(np.arange(4), points, rgb, frame, config).chroma
+
+    def distance(first, second, config=CONFIG):
+        return float(np.abs(chroma(first, config) - chroma(second, config)).sum())
+
+    inside = [(1, 11, 21), (0, 8, 20), (25, 32, 40), (3, 12, 22)]
+    outside = [(15, 20, 26), (20, 26, 33), (12, 18, 25), (26, 31, 38)]
+    dark_red = [(40, 10, 10), (30, 6, 8), (50, 14, 12), (35, 9, 9)]
+    dark_blue = [(10, 10, 40), (8, 6, 30), (12, 14, 50), (9, 9, 35)]
+    limit = CONFIG.containers.max_chroma
+    assert distance(inside, outside) <= limit
+    assert distance(dark_red, dark_blue) > limit
+    assert distance([(200, 60, 60)] * 4, [(170, 50, 50)] * 4) <= limit  # one colour, shaded
+    assert distance([(200, 60, 60)] * 4, [(60, 60, 200)] * 4) > limit
+    floorless = PerceptionConfig(containers=CONFIG.containers.__class__(chroma_floor=1.0))
+    assert distance(inside, outside, floorless) > limit

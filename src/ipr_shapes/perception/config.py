@@ -465,6 +465,9 @@ class ContainersConfig:
             rim and above the container's floor).
         max_chroma: largest L1 distance between the two mean chromaticities (shading does
             not change chromaticity; an inside is darker than the outside).
+        chroma_floor: added to each 8-bit channel before the chromaticity: near black a
+            channel is the camera's noise and black level (a few to ten levels), so a dark
+            surface's chromaticity is noise unless it is pulled towards grey there.
         rim_radius_m: the container's points this close (m) to the piece's on the support
             are its rim around the piece.
         join_rims: also join two segments that are together one open container (a circular
@@ -492,6 +495,7 @@ class ContainersConfig:
         "top_tolerance_m": _NON_NEGATIVE,
         "bottom_tolerance_m": _NON_NEGATIVE,
         "max_chroma": _NON_NEGATIVE,
+        "chroma_floor": _NON_NEGATIVE,
         "rim_radius_m": _NON_NEGATIVE,
         "rim_band_m": _NON_NEGATIVE,
         "rim_inlier_share": _SHARE,
@@ -510,6 +514,7 @@ class ContainersConfig:
     top_tolerance_m: float = 0.005
     bottom_tolerance_m: float = 0.005
     max_chroma: float = 0.2
+    chroma_floor: float = 10.0
     rim_radius_m: float = 0.02
     rim_band_m: float = 0.01
     rim_inlier_share: float = 0.8

@@ -309,7 +309,8 @@ def _summary(
     world = kernels.rows_at(points, pixels)  # compiled: points[pixels]
     heights = support.signed_distance(world)
     footprint = np.stack([world @ axis_u, world @ axis_v], axis=1)
-    colour = kernels.rows_at(rgb.reshape(-1, 3), pixels).astype(np.float64) + 1.0
+    colour = kernels.rows_at(rgb.reshape(-1, 3), pixels).astype(np.float64)
+    colour += max(config.containers.chroma_floor, 1e-3)
     bottom, top = order.percentiles(heights, (2, 98))  # one partial sort for both
     return _Segment(
         top=float(top),
