@@ -694,6 +694,13 @@ class TrackingConfig:
             unmatched: pairs up to this cost are matched (objects that moved far or toppled).
         max_sightings: each object is compared through its last this many sightings (>= 1), so
             that a face turned away by a push can still be recognised.
+        gated_elimination: opt-in: the second stage is solved, as the first, with the gate
+            inside the optimisation (a leftover segment may stay unmatched at
+            ``elimination_cost``) instead of pairing every leftover segment and dropping the
+            pairs above the gate afterwards, which can leave an object that one segment matched
+            within the gate to another segment above it (``tracking.assign_segments``). Off by
+            default: held-out set 8050 +1 pair, ycb-dynamic -1 (docs/DESIGN_NOTES.md, "The
+            elimination stage").
         larger_piece_takes_id: when an object's id went to a small piece and a segment at
             least ``piece_area_ratio`` times larger nearby that resembles the object almost as
             well (cost <= ``elimination_cost`` and at most ``piece_cost_margin`` more than the
@@ -790,6 +797,7 @@ class TrackingConfig:
     max_match_cost: float = 1.5
     elimination_cost: float = 3.0
     max_sightings: int = 3
+    gated_elimination: bool = False
     larger_piece_takes_id: bool = True
     piece_max_cost: float = 2.5
     piece_max_gap_m: float = 0.1

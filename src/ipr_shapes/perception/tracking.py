@@ -303,31 +303,55 @@ def contact_pixels(
     return count
 
 
-def assign_segments(cost: np.ndarray, new_cost: float, elimination_cost: float) -> np.ndarray:
+def assign_segments(
+    cost: np.ndarray,
+    new_cost: float,
+    elimination_cost: float,
+    gated_elimination: bool = False,
+) -> np.ndarray:
     """(P, 2) (segment row, known column) pairs of a (S, K) cost matrix, in two stages.
 
     Stage 1 solves the augmented assignment problem in which every segment may instead start
     a new object at ``new_cost`` and every known object may stay unmatched at no cost, so no
     pair dearer than ``new_cost`` is used. Stage 2 matches the segments and objects stage 1 left
-    alone, among themselves, with pairs up to ``elimination_cost`` (module doc).
+    alone, among themselves, with pairs up to ``elimination_cost`` (module doc). With
+    ``gated_elimination`` stage 2 is the same augmented problem with ``elimination_cost`` as
+    the gate (opt-in); without it (the default) it pairs every leftover segment it can and then
+    drops the pairs above the gate, so a segment that matches nothing within the gate can
+    take, and waste, the one object another leftover segment matched within it
+    (docs/DESIGN_NOTES.md, "The elimination stage").
     """
     n_segments, n_known = cost.shape
-    augmented = np.full((n_segments + n_known, n_known + n_segments), _FORBIDDEN)
-    augmented[:n_segments, :n_known] = np.where(cost <= new_cost, cost, _FORBIDDEN)
-    augmented[:n_segments, n_known:][np.eye(n_segments, dtype=bool)] = new_cost
-    augmented[n_segments:, :n_known][np.eye(n_known, dtype=bool)] = 0.0
-    augmented[n_segments:, n_known:] = 0.0
-    rows, cols = linear_sum_assignment(augmented)
-    matched = (rows < n_segments) & (cols < n_known)
-    pairs = [np.stack([rows[matched], cols[matched]], axis=1)]
-    left_rows = np.setdiff1d(np.arange(n_segments), rows[matched])
-    left_cols = np.setdiff1d(np.arange(n_known), cols[matched])
+    rows, cols = _gated_assignment(cost, new_cost)
+    pairs = [np.stack([rows, cols], axis=1)]
+    left_rows = np.setdiff1d(np.arange(n_segments), rows)
+    left_cols = np.setdiff1d(np.arange(n_known), cols)
     if left_rows.size and left_cols.size:
         rest = cost[np.ix_(left_rows, left_cols)]
-        rows, cols = linear_sum_assignment(rest)
-        keep = rest[rows, cols] <= elimination_cost
-        pairs.append(np.stack([left_rows[rows[keep]], left_cols[cols[keep]]], axis=1))
+        if gated_elimination:
+            rows, cols = _gated_assignment(rest, elimination_cost)
+        else:
+            rows, cols = linear_sum_assignment(rest)
+            keep = rest[rows, cols] <= elimination_cost
+            rows, cols = rows[keep], cols[keep]
+        pairs.append(np.stack([left_rows[rows], left_cols[cols]], axis=1))
     return np.concatenate(pairs).astype(np.int64)
+
+
+def _gated_assignment(cost: np.ndarray, gate: float) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, cols) of the pairs of the cheapest assignment of a (S, K) cost matrix in which
+    each row may instead stay unmatched at ``gate`` and each column at no cost: no pair dearer
+    than ``gate`` is used, and a pair is left out only when that lowers the total (the gate is
+    part of the optimisation rather than applied to its result)."""
+    n_rows, n_cols = cost.shape
+    augmented = np.full((n_rows + n_cols, n_cols + n_rows), _FORBIDDEN)
+    augmented[:n_rows, :n_cols] = np.where(cost <= gate, cost, _FORBIDDEN)
+    augmented[:n_rows, n_cols:][np.eye(n_rows, dtype=bool)] = gate
+    augmented[n_rows:, :n_cols][np.eye(n_cols, dtype=bool)] = 0.0
+    augmented[n_rows:, n_cols:] = 0.0
+    rows, cols = linear_sum_assignment(augmented)
+    matched = (rows < n_rows) & (cols < n_cols)
+    return rows[matched], cols[matched]
 
 
 def prefer_larger_pieces(
@@ -746,7 +770,12 @@ def track_segments(
                 _, layer_ids, layer_cost = match_costs(layer, segments, labels.size, config)
                 columns = np.searchsorted(known_ids, layer_ids)
                 cost[:, columns] = np.minimum(cost[:, columns], layer_cost)
-            for row, col in assign_segments(cost, config.max_match_cost, config.elimination_cost):
+            for row, col in assign_segments(
+                cost,
+                config.max_match_cost,
+                config.elimination_cost,
+                config.gated_elimination,
+            ):
                 assignment[segment_ids[row]] = known_ids[col]
             if config.larger_piece_takes_id:
                 assignment = prefer_larger_pieces(
