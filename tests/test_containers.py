@@ -178,7 +178,9 @@ def test_mixed_pixels_behind_the_far_rim_are_within_it_only_on_grazing_rays():
     """A white bowl's far piece with a veil of mixed pixels: 15 % of its points on the rays from
     the camera (60 cm in front of the bowl, 50 cm up) through the far rim, beyond it and down to
     1 cm above the table. Seen along their rays they are within the rim; without the camera they
-    are not, and a low box of the bowl's colour behind the bowl, seen over it, is not either."""
+    are not (each piece held whole by the rim, ``piece_within_share`` as ``footprint_fraction``;
+    by default a piece 85 % within is held like a mug with its handle), and a low box of the
+    bowl's colour behind the bowl, seen over it, is not either."""
     inside, wall = _real_bowl()
     rng = np.random.default_rng(3)
     eye, eye_height = np.array([0.3, -0.5]), 0.5
@@ -191,8 +193,10 @@ def test_mixed_pixels_behind_the_far_rim_are_within_it_only_on_grazing_rays():
         np.concatenate([inside.footprint, veil]), np.concatenate([inside.heights, heights])
     )
     camera = (eye, eye_height)
-    assert not _one_container(wall, veiled, CONFIG)
-    assert _one_container(wall, veiled, CONFIG, camera)
+    whole = PerceptionConfig(containers=CONFIG.containers.__class__(piece_within_share=0.9))
+    assert not _one_container(wall, veiled, whole)
+    assert _one_container(wall, veiled, whole, camera)
+    assert _one_container(wall, veiled, CONFIG)
     # A box 2-4 cm high, 3-12 cm behind the far rim: its rays cross the rim's height beyond
     # the rim, not at it.
     behind = np.array([0.3, 0.1]) + rng.uniform([-0.04, 0.11], [0.04, 0.20], (200, 2))
@@ -253,3 +257,33 @@ def test_a_dark_cups_inside_and_outside_have_alike_colours_but_dark_red_and_blue
     assert distance([(200, 60, 60)] * 4, [(60, 60, 200)] * 4) > limit
     floorless = PerceptionConfig(containers=CONFIG.containers.__class__(chroma_floor=1.0))
     assert distance(inside, outside, floorless) > limit
+
+
+def test_a_mugs_handle_sticks_out_of_its_rim_but_a_cup_beside_it_is_not_the_mug():
+    """A mug (rim 4.5 cm, 9 cm high) seen from the front: its inside with the far rim, and its
+    outer wall with the handle (a fifth of that piece 1-5 cm outside the rim, below it). The
+    two are one container: together the rim holds 90 % of their points and each lies mostly
+    within it. A cup of the mug's colour touching it, 3.5 cm across, is not part of it though
+    it is small beside the mug; nor, with each piece held whole by the rim, is the handle."""
+    rng = np.random.default_rng(7)
+    inner = lambda h: 0.041 + 0.0 * h  # noqa: E731
+    outer = lambda h: 0.045 + 0.0 * h  # noqa: E731
+    inside, inside_h = _bowl_surface(rng, 500, (0.0, 2 * np.pi), (0.01, 0.09), inner)
+    wall, wall_h = _bowl_surface(rng, 320, (1.1 * np.pi, 1.9 * np.pi), (0.0, 0.09), outer)
+    # The handle: a loop at the side (angle 0) from 2 to 8 cm high, 1-5 cm beyond the wall.
+    t = rng.uniform(0.0, np.pi, 80)
+    reach = 0.045 + 0.01 + 0.04 * np.sin(t)
+    handle = np.column_stack([0.3 + reach, 0.1 + rng.normal(0.0, 0.004, 80)])
+    handle_h = 0.05 + 0.03 * np.cos(t)
+    mug_inside = _segment(inside, inside_h)
+    mug_wall = _segment(np.concatenate([wall, handle]), np.concatenate([wall_h, handle_h]))
+    assert _one_container(mug_wall, mug_inside, CONFIG)
+    whole = PerceptionConfig(containers=CONFIG.containers.__class__(piece_within_share=0.9))
+    assert not _one_container(mug_wall, mug_inside, whole)
+    # Seen small (40 points against the mug's 500): together the rim still holds 90 % of them.
+    cup_angle = rng.uniform(0.0, 2 * np.pi, 40)
+    cup = np.array([0.3, 0.1 - 0.045 - 0.0175]) + 0.0175 * np.column_stack(
+        [np.cos(cup_angle), np.sin(cup_angle)]
+    )
+    beside = _segment(cup, rng.uniform(0.0, 0.06, 40))
+    assert not _one_container(beside, mug_inside, CONFIG)

@@ -472,6 +472,9 @@ class ContainersConfig:
             are its rim around the piece.
         join_rims: also join two segments that are together one open container (a circular
             rim around both, whichever is the inside), as a real sensor's containers need.
+        piece_within_share: with ``join_rims``, each of the two must lie at least this share
+            within the rim (and the two together ``footprint_fraction``): a mug's handle
+            sticks out of the rim, a neighbour of the same colour lies beside it.
         rim_band_m, rim_inlier_share: two segments are one open container when the points
             of both within ``rim_band_m`` (m) of their joint top lie on a circle (a rim) around
             both; the robust circle fit must keep at least ``rim_inlier_share`` of them (the
@@ -499,6 +502,7 @@ class ContainersConfig:
         "rim_radius_m": _NON_NEGATIVE,
         "rim_band_m": _NON_NEGATIVE,
         "rim_inlier_share": _SHARE,
+        "piece_within_share": _SHARE,
         "max_front_ratio": _SHARE,
         "min_contact_px": _COUNT,
         "contact_gap_m": _NON_NEGATIVE,
@@ -518,6 +522,7 @@ class ContainersConfig:
     rim_radius_m: float = 0.02
     rim_band_m: float = 0.01
     rim_inlier_share: float = 0.8
+    piece_within_share: float = 0.5
     max_front_ratio: float = 0.5
     min_contact_px: int = 3
     contact_gap_m: float = 0.01

@@ -95,6 +95,12 @@ class _Segment:
     chroma: np.ndarray
     circle_rms_m: float
     max_radius_m: float
+    pixels: int = 0
+
+    @property
+    def size(self) -> int:
+        """Pixels with depth of the segment (its subset's size when not given)."""
+        return self.pixels or len(self.footprint)
 
     @functools.cached_property
     def hull(self) -> np.ndarray | None:
@@ -305,6 +311,7 @@ def _summary(
 ) -> _Segment:
     """The rules' figures of a segment from its (N,) flat pixel indices with depth (N >= 1)."""
     support, axis_u, axis_v = frame
+    count = int(pixels.size)
     pixels = pixels[:: -(-pixels.size // _MAX_POINTS)]
     world = kernels.rows_at(points, pixels)  # compiled: points[pixels]
     heights = support.signed_distance(world)
@@ -320,6 +327,7 @@ def _summary(
         chroma=(colour / colour.sum(axis=1, keepdims=True)).mean(axis=0),
         circle_rms_m=config.containers.circle_rms_m,
         max_radius_m=config.containers.max_radius_m,
+        pixels=count,
     )
 
 
@@ -443,4 +451,9 @@ def _one_container(
             inside[below] |= grazing <= settings.margin_m
         return float(np.mean(inside))
 
-    return all(within(part) >= settings.footprint_fraction for part in (first, second))
+    # The container holds the pair (``footprint_fraction`` of their points together) and each
+    # lies mostly within it: a mug's handle sticks out of its rim, a neighbour lies beside it.
+    shares = [within(part) for part in (first, second)]
+    sizes = [part.size for part in (first, second)]
+    held = (shares[0] * sizes[0] + shares[1] * sizes[1]) / max(sizes[0] + sizes[1], 1)
+    return held >= settings.footprint_fraction and min(shares) >= settings.piece_within_share
