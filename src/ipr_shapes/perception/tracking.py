@@ -735,6 +735,12 @@ def track_segments(
     for frame_index, (labels, points, rgb, depth) in enumerate(
         zip(frames_labels, frames_points, frames_rgb, depths, strict=True)
     ):
+        if not sightings and frame_index == len(frames_labels) - 1:
+            # No object known and no frame after this one (a single-frame scene): nothing is
+            # matched, so the segments take ids in label order and their features, which only
+            # matching reads, are not computed.
+            tracked.append(numbered_in_order(labels, next_id))
+            continue
         segments = segment_features(labels, points, rgb, depth)
         assignment: dict[int, int] = {}
         if sightings and segments:
@@ -810,6 +816,23 @@ def track_segments(
             final[absorbed] = target
         tracked = [final[labels] for labels in tracked]
     return tracked
+
+
+def numbered_in_order(labels: np.ndarray, first: int = 1) -> np.ndarray:
+    """(H, W) int32: the segments (labels k >= 1) of a (H, W) int label image renumbered
+    ``first``, ``first + 1``, ... in increasing label, 0 elsewhere: what ``track_segments``
+    gives a frame with no known object to match (each segment a new object, in label
+    order)."""
+    flat = labels.reshape(-1)
+    sizes = np.bincount(flat[flat > 0], minlength=1)
+    sizes[0] = 0
+    present = np.flatnonzero(sizes)
+    lookup = np.zeros(len(sizes), dtype=np.int32)
+    lookup[present] = np.arange(first, first + len(present), dtype=np.int32)
+    relabelled = np.zeros(flat.size, dtype=np.int32)
+    labelled = flat > 0
+    relabelled[labelled] = lookup[flat[labelled]]
+    return relabelled.reshape(labels.shape)
 
 
 def split_merged_objects(
