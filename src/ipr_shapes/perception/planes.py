@@ -709,8 +709,10 @@ def _wall_cues(
     points, the face points of the plane's other runs with the wall's top (``extra_points``, a
     wall cut by an occluder; ``walls.max_span_m``) and the extent of both along the wall
     (``span``); None when the plane has too few inliers or cannot be a wall (a run shorter than
-    ``walls.partner_min_length_m`` or a top outside the wall heights, which ``_select_walls``
-    rejects anyway; most candidates are faces of objects, and this spares their costly cues).
+    ``walls.partner_min_length_m``, a top outside the wall heights or more than
+    ``walls.max_outside_fraction`` of the scene near it on its minority side, which
+    ``_select_walls`` and ``_edge_on_walls`` reject anyway; most candidates are faces of
+    objects, and this spares their costly cues and ``_bottom_hidden``'s probes).
     ``edge_on``: every point in the plane's slab is an inlier whatever its normal (a wall seen
     along its length shows its rim, which faces up; ``_edge_on_walls``).
     ``frame``: the frame's ``DepthView`` and the support; with it, a column whose highest inlier
@@ -865,16 +867,18 @@ def _wall_cues(
         config.walls.side_range_m,
         0.05,
     )
+    outside = 0.0
+    if near > 0:
+        share_in_front = in_front / near
+        outside = min(share_in_front, 1.0 - share_in_front)
+    if outside > config.walls.max_outside_fraction:
+        return None  # not one-sided: every wall rule rejects it (nor is its bottom probed)
     cap_bin = 0.02
     n_bins = max(1, int(np.ceil((s_hi - s_lo) / cap_bin)))
     capped_counts = np.bincount(
         np.minimum(((s[behind] - s_lo) / cap_bin).astype(np.int64), n_bins - 1), minlength=n_bins
     )
     capped = float(np.mean(capped_counts >= 3))
-    outside = 0.0
-    if near > 0:
-        share_in_front = in_front / near
-        outside = min(share_in_front, 1.0 - share_in_front)
     # The plane's other runs whose top edge is the wall's top: the same wall, cut in two by an
     # object standing in front of it. They join the wall's extent (the static slab and the
     # physics), not the figures above, so they do not change which walls are accepted.
