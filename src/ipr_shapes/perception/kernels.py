@@ -1647,19 +1647,22 @@ def fragment_borders(
     supervoxel_normals: np.ndarray,
     gap_m: float,
     min_cos: float,
+    touch_min_cos: float,
     pixel_area: float,
     n_labels: int,
 ):
-    """One pass over a (H, W) label image for ``fragments.join_fragments``.
+    """One pass over a (H, W) label image for ``fragments.join_fragments`` and
+    ``thin.join_thin_pieces``.
 
     ``points`` (H, W, 3) world (m); ``depth_m`` (H, W), 0 = no reading; ``rgb`` (H, W, 3);
     ``supervoxel_labels`` (H, W), -1 = none, indexing (M, 3) ``supervoxel_normals``;
     ``pixel_area`` = 1 / (fx fy). Returns (L,) float64 areas (sum of depth^2 x
     ``pixel_area`` over a label's pixels with depth, m^2), (L, 3) float64 colour sums over all
-    its pixels, and (L, L) int64 ``outline`` and ``continuous`` counts at [min(a, b), max(a, b)]
-    of 4-neighbour pixel pairs with labels a != b, both with depth: every such pair, and those
-    with both labels > 0 whose points are closer than ``gap_m`` and whose supervoxels' normals
-    (a pixel of none counts as (0, 0, 0)) have a cosine of at least ``min_cos``. Replaces the
+    its pixels, and (L, L) int64 ``outline``, ``continuous`` and ``touching`` counts at
+    [min(a, b), max(a, b)] of 4-neighbour pixel pairs with labels a != b, both with depth:
+    every such pair, and those with both labels > 0 whose points are closer than ``gap_m``
+    and whose supervoxels' normals (a pixel of none counts as (0, 0, 0)) have a cosine of at
+    least ``min_cos`` (``continuous``) or ``touch_min_cos`` (``touching``). Replaces the
     numpy ``np.bincount`` of areas and colours and the masked pair counts of
     ``fragments._pair_counts``."""
     height, width = labels.shape
@@ -1667,6 +1670,7 @@ def fragment_borders(
     colour = np.zeros((n_labels, 3))
     outline = np.zeros((n_labels, n_labels), dtype=np.int64)
     continuous = np.zeros((n_labels, n_labels), dtype=np.int64)
+    touching = np.zeros((n_labels, n_labels), dtype=np.int64)
     for row in range(height):
         for col in range(width):
             a = labels[row, col]
@@ -1702,7 +1706,9 @@ def fragment_borders(
                     )
                 if cosine >= min_cos:
                     continuous[low, high] += 1
-    return area, colour, outline, continuous
+                if cosine >= touch_min_cos:
+                    touching[low, high] += 1
+    return area, colour, outline, continuous, touching
 
 
 @_jit

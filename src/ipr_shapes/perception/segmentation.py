@@ -35,7 +35,7 @@ from ipr_shapes.perception import kernels
 from ipr_shapes.perception.config import PerceptionConfig
 from ipr_shapes.perception.containers import join_container_insides
 from ipr_shapes.perception.curvature import join_curved_segments, smooth_concave_edges
-from ipr_shapes.perception.fragments import join_fragments
+from ipr_shapes.perception.fragments import fragment_borders, join_fragments
 from ipr_shapes.perception.planes import find_support_plane, find_walls, static_geometry_mask
 from ipr_shapes.perception.robot import robot_pixels
 from ipr_shapes.perception.seams import cut_colour_seams
@@ -200,6 +200,14 @@ def segment_frame(
         config,
         viewpoint=frame.world_from_camera[:3, 3],
     )
+    # The fragments' border pass serves the thin-cylinder join too when no fragment joins
+    # (the same labels): one pass over the image instead of two.
+    borders = None
+    if config.segmentation.fragment_area_m2 > 0 and labels.max() >= 2:
+        borders = fragment_borders(
+            labels, points, frame.depth_m, frame.K, frame.rgb, supervoxels, config
+        )
+    before_fragments = labels
     labels, segment_of_supervoxel = join_fragments(
         labels,
         segment_of_supervoxel,
@@ -209,7 +217,10 @@ def segment_frame(
         frame.rgb,
         supervoxels,
         config,
+        borders=borders,
     )
+    if labels is not before_fragments:
+        borders = None  # joined: its counts no longer those of the labels
     labels, segment_of_supervoxel = join_thin_pieces(
         labels,
         segment_of_supervoxel,
@@ -220,6 +231,7 @@ def segment_frame(
         supervoxels,
         frame.world_from_camera[:3, 3],
         config,
+        borders=borders,
     )
     if config.seams.enabled:
         labels, segment_of_supervoxel = _cut_seams(labels, supervoxels, frame, points, config)
