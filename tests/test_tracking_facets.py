@@ -467,3 +467,6 @@ def test_a_single_frame_is_numbered_in_label_order_as_the_full_tracker_numbers_i
     shifted = numbered_in_order(labels, 5)
     np.testing.assert_array_equal(shifted[labels > 0], alone[0][labels > 0] + 4)
     np.testing.assert_array_equal(numbered_in_order(np.zeros((3, 4), np.int32)), 0)
+    negative = np.where(labels == 2, -1, labels)  # negative labels are no segment
+    np.testing.assert_array_equal(numbered_in_order(negative)[labels == 2], 0)
+    assert numbered_in_order(negative)[12, 12] == 3

@@ -824,15 +824,14 @@ def numbered_in_order(labels: np.ndarray, first: int = 1) -> np.ndarray:
     gives a frame with no known object to match (each segment a new object, in label
     order)."""
     flat = labels.reshape(-1)
-    sizes = np.bincount(flat[flat > 0], minlength=1)
+    if flat.size and flat.min() < 0:
+        flat = np.maximum(flat, 0)  # negative labels are no segment either
+    sizes = np.bincount(flat, minlength=1)
     sizes[0] = 0
     present = np.flatnonzero(sizes)
     lookup = np.zeros(len(sizes), dtype=np.int32)
     lookup[present] = np.arange(first, first + len(present), dtype=np.int32)
-    relabelled = np.zeros(flat.size, dtype=np.int32)
-    labelled = flat > 0
-    relabelled[labelled] = lookup[flat[labelled]]
-    return relabelled.reshape(labels.shape)
+    return lookup[flat].reshape(labels.shape)
 
 
 def split_merged_objects(
@@ -871,6 +870,8 @@ def split_merged_objects(
     """
     tracking = config.tracking
     result = [np.asarray(labels, dtype=np.int32) for labels in tracked]  # copied on change
+    if len(result) < 2:
+        return result  # no later frame to show a split
     # Ids present in each frame (np.unique over whole images would cost more than the rest).
     sizes = [np.bincount(labels.reshape(-1)) for labels in result]
     present = [{int(i) for i in np.flatnonzero(size)} - {0} for size in sizes]
