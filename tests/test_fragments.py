@@ -133,7 +133,7 @@ def test_a_piece_meeting_at_a_crease_is_kept():
     assert len(np.unique(joined[joined > 0])) == 3
 
 
-def _numpy_borders(labels, points, depth, rgb, sv_labels, sv_normals, gap_m, min_cos, n):
+def _numpy_borders(labels, points, depth, rgb, sv_labels, sv_normals, gap_m, min_cos, touch, n):
     """The numpy expression ``kernels.fragment_borders`` replaces."""
     valid = depth > 0
     area = np.bincount(labels[valid], weights=depth[valid] ** 2 / (K[0, 0] * K[1, 1]), minlength=n)
@@ -144,6 +144,7 @@ def _numpy_borders(labels, points, depth, rgb, sv_labels, sv_normals, gap_m, min
     normals = np.append(sv_normals, np.zeros((1, 3)), axis=0)[sv_labels]
     outline = np.zeros((n, n), dtype=np.int64)
     continuous = np.zeros((n, n), dtype=np.int64)
+    touching = np.zeros((n, n), dtype=np.int64)
     height, width = labels.shape
     for d_row, d_col in ((0, 1), (1, 0)):
         first = (slice(0, height - d_row), slice(0, width - d_col))
@@ -156,7 +157,9 @@ def _numpy_borders(labels, points, depth, rgb, sv_labels, sv_normals, gap_m, min
         cosine = np.einsum("ij,ij->i", normals[first][border], normals[second][border])
         keep = (low > 0) & (gap < gap_m) & (cosine >= min_cos)
         np.add.at(continuous, (low[keep], high[keep]), 1)
-    return area, colour, outline, continuous
+        keep = (low > 0) & (gap < gap_m) & (cosine >= touch)
+        np.add.at(touching, (low[keep], high[keep]), 1)
+    return area, colour, outline, continuous, touching
 
 
 def test_the_border_kernel_matches_its_numpy_expression():
@@ -170,7 +173,8 @@ def test_the_border_kernel_matches_its_numpy_expression():
     sv_normals = rng.standard_normal((9, 3))
     sv_normals /= np.linalg.norm(sv_normals, axis=1, keepdims=True)
     points = _points(depth)
-    for gap_m, min_cos in ((0.01, 0.5), (0.003, -1.0), (0.02, 0.9)):
+    # touch 0.0: pixels of no supervoxel (cosine exactly 0) lie on the bound.
+    for gap_m, min_cos, touch in ((0.01, 0.5, -1.0), (0.003, -1.0, 0.5), (0.02, 0.9, 0.0)):
         got = kernels.fragment_borders(
             labels,
             points,
@@ -180,13 +184,17 @@ def test_the_border_kernel_matches_its_numpy_expression():
             sv_normals,
             gap_m,
             min_cos,
+            touch,
             1.0 / (K[0, 0] * K[1, 1]),
             6,
         )
-        want = _numpy_borders(labels, points, depth, rgb, sv_labels, sv_normals, gap_m, min_cos, 6)
+        want = _numpy_borders(
+            labels, points, depth, rgb, sv_labels, sv_normals, gap_m, min_cos, touch, 6
+        )
         for g, w in zip(got, want, strict=True):
             np.testing.assert_allclose(g, w, rtol=1e-12)
         assert got[3].sum() > 0 and got[3].sum() < got[2].sum()
+        assert got[4].sum() > 0 and got[4].sum() != got[3].sum()
 
 
 def test_merged_counts_are_those_of_the_joined_labels():

@@ -387,6 +387,67 @@ def test_lloyd_iterations_match_the_numpy_iterations():
     assert len(np.unique(found)) == 5
 
 
+def test_pairwise_sum_is_numpy_s_sum_bit_for_bit():
+    # numpy sums contiguous float64 pairwise (8 accumulators, halves above 128 values): the
+    # kernel's sum must be numpy's to the bit, for every count around the block sizes.
+    rng = np.random.default_rng(23)
+    for count in [*range(0, 40), 127, 128, 129, 255, 256, 257, 655, 1031]:
+        values = rng.standard_normal(count) * 10.0 ** rng.uniform(-6, 6, count)
+        assert kernels._pairwise_sum(values, 0, count) == values.sum()
+        start = count // 3
+        assert kernels._pairwise_sum(values, start, count - start) == values[start:].sum()
+        for width in (7, 13, 21):  # numpy's row sums (axis 1), as the seeding takes them
+            rows = values[: count - count % width].reshape(-1, width)
+            for row, expected in zip(rows, np.sum(rows, axis=1), strict=True):
+                assert 0.0 + kernels._pairwise_sum(row, 0, width) == expected
+
+
+@pytest.mark.parametrize("k", [2, 5, 9, 17])
+def test_kmeans_plus_plus_kernel_is_the_numpy_seeding(k):
+    # The compiled seeding must place the centres numpy's draws place: the same first index
+    # and one uniform per further centre, the same squared distances, cumulative shares and
+    # search. Embeddings like the spectral ones (unit rows, up to 21 columns) and plain data.
+    from ipr_shapes.perception.segmentation import kmeans_plus_plus
+
+    rng = np.random.default_rng(k)
+    for m, d in ((k + 1, k), (60, k), (300, k), (655, 21)):
+        points = rng.standard_normal((m, d)) ** 3
+        if d == k:
+            points /= np.linalg.norm(points, axis=1, keepdims=True)
+        for seed in range(3):
+            expected = kmeans_plus_plus(points, k, np.random.default_rng(seed))
+            draws = np.random.default_rng(seed)
+            first = draws.integers(m)
+            found, placed = kernels.kmeans_plus_plus(points, int(first), draws.random(k - 1))
+            assert placed == k
+            np.testing.assert_array_equal(found, expected)
+
+
+def test_kmeans_labels_with_all_points_on_one_centre_redo_the_numpy_draws():
+    # Three distinct points for k = 5: the distances sum to 0 before the last centres, where
+    # numpy draws an index, not a uniform; the compiled seeding stops and the restart is
+    # redone in numpy from the same generator state, so the labels stay numpy's.
+    from ipr_shapes.perception.segmentation import kmeans_labels, kmeans_plus_plus
+
+    points = np.repeat(np.eye(3), [4, 3, 2], axis=0)
+    found, placed = kernels.kmeans_plus_plus(points, 0, np.full(4, 0.5))
+    assert placed == 3
+    # A draw exactly on a cumulative share takes the next point (searchsorted side="right").
+    line = np.array([[0.0], [1.0], [-1.0], [1.0], [-1.0]])
+    shares = np.cumsum(np.sum((line - line[0]) ** 2, axis=1) / 4.0)
+    assert shares[2] == 0.5 and int(shares.searchsorted(0.5, side="right")) == 3
+    found, placed = kernels.kmeans_plus_plus(line, 0, np.array([0.5]))
+    assert placed == 2 and found[1, 0] == 1.0
+    rng = np.random.default_rng(7)
+    expected_labels, best = None, np.inf
+    for _ in range(3):
+        centres = kmeans_plus_plus(points, 5, rng)
+        labels, inertia = kernels.lloyd_iterations(points, centres, 100)
+        if inertia < best:
+            expected_labels, best = labels, inertia
+    np.testing.assert_array_equal(kmeans_labels(points, 5, restarts=3, seed=7), expected_labels)
+
+
 def test_supervoxel_anchor_counts_match_the_numpy_counts():
     rng = np.random.default_rng(17)
     size, count, n_labels = 6000, 50, 7

@@ -197,3 +197,27 @@ def test_scene_and_perception_agree_on_the_table_and_keep_it_in_later_frames(tmp
     assert later is first  # the largest plane (the floor) is not the earlier support
     alone = find_support_plane(flat, config)  # no grid: the largest plane, as before
     assert alone.offset > 0.4  # the floor, 0.5 m below the table
+
+
+def test_candidate_pieces_are_found_when_read_and_are_the_large_pieces_of_their_mask():
+    # The support choice reads only some candidates' pieces (the dominant plane's and the
+    # walls' when the dominant plane is the tops of objects): each is found when first read,
+    # and is _largest_piece of the candidate's mask with the configured share.
+    from ipr_shapes.geometry.support import SupportChoiceConfig, _candidates, _largest_piece
+
+    depth = render(bin_scene(), BIN_CAMERA)
+    grid = backproject(depth, K)
+    _, dominant = choose(depth)
+    config = SupportChoiceConfig(piece_share=0.01)
+    valid = depth > 0  # the analysis grid at full resolution (a 160-column image)
+    flat_valid = np.flatnonzero(valid.ravel())
+    points = grid.reshape(-1, 3)[flat_valid]
+    candidates = _candidates(points, flat_valid, valid.shape, dominant, np.zeros(3), config)
+    assert len(candidates) >= 3
+    assert all("piece" not in vars(candidate) for candidate in candidates)
+    for candidate in candidates:
+        expected = _largest_piece(candidate.mask, 0.01)
+        np.testing.assert_array_equal(candidate.piece, expected)
+        assert "piece" in vars(candidate)  # kept once found
+    # The share matters here (small pieces kept at 0.01, only the largest at 1.0).
+    assert any(not np.array_equal(_largest_piece(c.mask, 1.0), c.piece) for c in candidates)

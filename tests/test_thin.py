@@ -184,3 +184,37 @@ def test_a_flat_patch_at_a_markers_tip_stays_apart():
     labels, depth, points = _scene([marker, patch], noise_m=0.0005)
     joined, _ = _join(labels, depth, points)
     np.testing.assert_array_equal(joined, labels)
+
+
+def test_borders_shared_from_the_fragments_pass_give_the_same_join():
+    # segment_frame hands the fragments' border pass to the thin join when no fragment joined:
+    # its area and touching counts must be those of the thin join's own pass.
+    from ipr_shapes.perception.fragments import fragment_borders, segment_borders
+
+    marker = _cylinder_depth(0.0, 0.5, 0.008, (-0.05, 0.05))
+    block = np.where(_rays()[..., 1] > 0.03, 0.45, np.inf)
+    labels, depth, points = _scene([marker, block])
+    labels = _split_along_x(labels, points, 1, -0.015, 3)
+    labels = _split_along_x(labels, points, 3, 0.02, 4)
+    config = _thin()
+    # The pieces' normals 60 degrees apart: beyond the fragments' bend, so the fragments'
+    # continuous counts are not the thin join's contacts (any normals).
+    supervoxels = _supervoxels(labels)
+    tilted = [0.0, np.sin(np.radians(60.0)), -np.cos(np.radians(60.0))]
+    supervoxels.normals[2] = tilted  # label 3's supervoxel
+    assert config.segmentation.fragment_bend_deg < 60.0
+    shared = fragment_borders(labels, points, depth, K, RGB, supervoxels, config)
+    own = segment_borders(
+        labels, points, depth, K, RGB, supervoxels, config.segmentation.fragment_gap_m, 180.0
+    )
+    np.testing.assert_array_equal(shared[0], own[0])
+    np.testing.assert_array_equal(shared[4], own[4])
+    np.testing.assert_array_equal(own[4], own[3])  # any normals: touching is continuous
+    assert shared[3][1, 3] == 0 and shared[4][1, 3] > 0  # the bend matters for continuous
+    segments = np.arange(1, int(labels.max()) + 1, dtype=np.int32)
+    arguments = (labels, segments, points, depth, K, RGB, supervoxels, np.zeros(3), config)
+    with_shared, _ = join_thin_pieces(*arguments, borders=shared)
+    alone, _ = join_thin_pieces(*arguments)
+    np.testing.assert_array_equal(with_shared, alone)
+    assert len(np.unique(alone[alone > 0])) < len(np.unique(labels[labels > 0]))
+    np.testing.assert_array_equal(shared[4], own[4])  # the shared counts are not modified

@@ -13,6 +13,7 @@ from ipr_shapes.perception.tracking import (
     match_costs,
     merge_split_pieces,
     merged_features,
+    numbered_in_order,
     pair_cost,
     prefer_larger_objects,
     prefer_larger_pieces,
@@ -469,3 +470,22 @@ def test_a_pushed_object_is_not_split_by_an_unlike_object_appearing():
     first = _depth_frame({1: (35, 40, RED)})
     second = _depth_frame({1: (35, 50, RED), 2: (35, 150, BLUE)})
     assert np.array_equal(_split([first, second])[0], first[0])
+
+
+def test_a_single_frame_is_numbered_in_label_order_as_the_full_tracker_numbers_it():
+    # A single-frame scene skips the features (nothing to match): its ids must be those the
+    # tracker gives the first frame of a longer scene, segments in increasing label order.
+    labels, points, rgb = _frame({9: (10, 10, RED), 2: (10, 50, GREEN), 5: (50, 90, BLUE)})
+    labels[0, :3] = 7  # a segment of three pixels
+    alone = track_segments([labels], [points], [rgb])
+    first_of_two = track_segments([labels, labels], [points, points], [rgb, rgb])[0]
+    assert alone[0].dtype == np.int32 and first_of_two.dtype == np.int32
+    np.testing.assert_array_equal(alone[0], first_of_two)
+    assert [alone[0][12, 52], alone[0][52, 92], alone[0][0, 0], alone[0][12, 12]] == [1, 2, 3, 4]
+    assert (alone[0][labels == 0] == 0).all()
+    shifted = numbered_in_order(labels, 5)
+    np.testing.assert_array_equal(shifted[labels > 0], alone[0][labels > 0] + 4)
+    np.testing.assert_array_equal(numbered_in_order(np.zeros((3, 4), np.int32)), 0)
+    negative = np.where(labels == 2, -1, labels)  # negative labels are no segment
+    np.testing.assert_array_equal(numbered_in_order(negative)[labels == 2], 0)
+    assert numbered_in_order(negative)[12, 12] == 3

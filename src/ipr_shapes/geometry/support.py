@@ -44,6 +44,7 @@ docs/experiments/2026-11-26-support-choice.md.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -138,12 +139,19 @@ class SupportChoice:
 @dataclass(eq=False)
 class _Candidate:
     """A plane found on the coarse grid: unit normal oriented towards the viewpoint, offset,
-    (h, w) inlier mask and the mask of its largest connected piece."""
+    (h, w) inlier mask and ``share``, the piece share of ``_largest_piece``."""
 
     normal: np.ndarray
     offset: float
     mask: np.ndarray
-    piece: np.ndarray
+    share: float
+
+    @functools.cached_property
+    def piece(self) -> np.ndarray:
+        """(h, w) its large connected pieces (``_largest_piece``), found when first asked:
+        only levels and walls have theirs read (a tilted plane's never, a level's other than
+        the dominant one's only when the dominant plane is opaque)."""
+        return _largest_piece(self.mask, self.share)
 
 
 def choose_support(
@@ -326,7 +334,8 @@ def _candidates(
     config: SupportChoiceConfig,
 ) -> list[_Candidate]:
     """The dominant plane then up to ``config.candidates`` further planes (RANSAC with removal)
-    on the coarse points, each with its inlier mask and largest connected piece."""
+    on the coarse points, each with its inlier mask (its largest connected piece is found when
+    first asked, ``_Candidate.piece``)."""
     rng = np.random.default_rng(config.seed)
     count = shape[0] * shape[1]
 
@@ -334,7 +343,7 @@ def _candidates(
         mask = np.zeros(count, dtype=bool)
         mask[flat_valid[members]] = True
         mask = mask.reshape(shape)
-        return _Candidate(normal, float(offset), mask, _largest_piece(mask, config.piece_share))
+        return _Candidate(normal, float(offset), mask, config.piece_share)
 
     distance = points @ dominant.normal + dominant.offset
     on_dominant = np.abs(distance) < config.threshold_m

@@ -31,6 +31,8 @@ def join_fragments(
     rgb: np.ndarray,
     supervoxels: Supervoxels,
     config: PerceptionConfig,
+    *,
+    borders: tuple | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Join small segments to the neighbour their surface continues into.
 
@@ -52,6 +54,8 @@ def join_fragments(
         points: (H, W, 3) world points (m); depth_m: (H, W) depth (m), 0 = no reading;
         K: (3, 3) camera intrinsics (px); rgb: (H, W, 3) colours; supervoxels: the frame's
             supervoxels (their normals; ``labels`` (H, W), -1 = none).
+        borders: ``fragment_borders(labels, ...)`` if already computed (its arrays change in
+            place when a fragment joins).
 
     Returns:
         The relabelled (labels, segment_of_supervoxel); the inputs when nothing is joined.
@@ -60,9 +64,9 @@ def join_fragments(
     if seg.fragment_area_m2 <= 0 or labels.max() < 2:
         return labels, segment_of_supervoxel
     n = int(labels.max()) + 1
-    area, colour, outline, continuous = segment_borders(
-        labels, points, depth_m, K, rgb, supervoxels, seg.fragment_gap_m, seg.fragment_bend_deg
-    )
+    if borders is None:
+        borders = fragment_borders(labels, points, depth_m, K, rgb, supervoxels, config)
+    area, colour, outline, continuous, _ = borders
     order = [int(s) for s in np.argsort(area, kind="stable") if s > 0 and area[s] > 0]
     small = [s for s in order if area[s] < seg.fragment_area_m2]
     if not small:
@@ -89,6 +93,24 @@ def join_fragments(
     return relabelled_by_root(labels, segment_of_supervoxel, root)
 
 
+def fragment_borders(
+    labels: np.ndarray,
+    points: np.ndarray,
+    depth_m: np.ndarray,
+    K: np.ndarray,
+    rgb: np.ndarray,
+    supervoxels: Supervoxels,
+    config: PerceptionConfig,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``segment_borders`` with the fragments' gap and bend (``segmentation.fragment_gap_m``,
+    ``fragment_bend_deg``): the border pass ``join_fragments`` needs and, when it joins
+    nothing, ``join_thin_pieces`` too (its ``touching`` and ``area``), computed once."""
+    seg = config.segmentation
+    return segment_borders(
+        labels, points, depth_m, K, rgb, supervoxels, seg.fragment_gap_m, seg.fragment_bend_deg
+    )
+
+
 def segment_borders(
     labels: np.ndarray,
     points: np.ndarray,
@@ -98,17 +120,18 @@ def segment_borders(
     supervoxels: Supervoxels,
     gap_m: float,
     bend_deg: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Each segment's area and colour sum and, between every two labels, the neighbouring pixel
     pairs, from one compiled pass (``kernels.fragment_borders``).
 
     Returns ``area`` (L,) m^2 facing the camera, ``colour`` (L, 3) RGB sums, and the symmetric
-    (L, L) counts ``outline`` (pixel pairs of two labels, both with depth; label 0 included)
-    and ``continuous`` (those whose world points are closer than ``gap_m`` and whose
-    supervoxels' normals differ by at most ``bend_deg``; 180: any normals), L = labels.max() + 1.
+    (L, L) counts ``outline`` (pixel pairs of two labels, both with depth; label 0 included),
+    ``continuous`` (those whose world points are closer than ``gap_m`` and whose supervoxels'
+    normals differ by at most ``bend_deg``; 180: any normals) and ``touching`` (as
+    ``continuous`` with any normals: the thin-cylinder join's contacts), L = labels.max() + 1.
     Arguments as ``join_fragments``'.
     """
-    area, colour, outline, continuous = kernels.fragment_borders(
+    area, colour, outline, continuous, touching = kernels.fragment_borders(
         labels,
         points,
         depth_m,
@@ -117,10 +140,16 @@ def segment_borders(
         supervoxels.normals.astype(np.float64),
         float(gap_m),
         float(np.cos(np.radians(bend_deg))),
+        _ANY_NORMALS_COS,
         1.0 / (float(K[0, 0]) * float(K[1, 1])),
         int(labels.max()) + 1,
     )
-    return area, colour, outline + outline.T, continuous + continuous.T
+    return area, colour, outline + outline.T, continuous + continuous.T, touching + touching.T
+
+
+#: The least cosine of "any normals" (a bend of 180 degrees), as ``segment_borders`` computes
+#: a bend's cosine.
+_ANY_NORMALS_COS = float(np.cos(np.radians(180.0)))
 
 
 def merge_counts(counts: np.ndarray, piece: int, into: int) -> None:

@@ -794,6 +794,133 @@ def connected_components(pairs: np.ndarray, count: int) -> np.ndarray:
 
 
 @_jit
+def _block_sum(values: np.ndarray, start: int, count: int) -> float:
+    """numpy's pairwise summation of at most 128 contiguous float64 ``values[start:start +
+    count]``: below 8 values in order (from -0.0), else eight accumulators combined as a tree
+    and the rest added in order (``_pairwise_sum``)."""
+    if count < 8:
+        result = -0.0
+        for i in range(start, start + count):
+            result += values[i]
+        return result
+    r0, r1, r2, r3 = values[start], values[start + 1], values[start + 2], values[start + 3]
+    r4, r5, r6, r7 = values[start + 4], values[start + 5], values[start + 6], values[start + 7]
+    i = 8
+    while i < count - (count % 8):
+        r0 += values[start + i]
+        r1 += values[start + i + 1]
+        r2 += values[start + i + 2]
+        r3 += values[start + i + 3]
+        r4 += values[start + i + 4]
+        r5 += values[start + i + 5]
+        r6 += values[start + i + 6]
+        r7 += values[start + i + 7]
+        i += 8
+    result = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < count:
+        result += values[start + i]
+        i += 1
+    return result
+
+
+@_jit
+def _pairwise_sum(values: np.ndarray, start: int, count: int) -> float:
+    """numpy's pairwise summation (``np.add.reduce`` of contiguous float64) of
+    ``values[start:start + count]``: up to 128 values ``_block_sum``, beyond that the sum of
+    the two halves' sums (the first half a multiple of 8 long); the same additions in the
+    same order, so the same bits. numpy recurses; here an explicit stack does (a cached numba
+    kernel calling a recursive one crashed)."""
+    if count <= 128:
+        return _block_sum(values, start, count)
+    starts = np.empty(64, dtype=np.int64)
+    counts = np.empty(64, dtype=np.int64)
+    stages = np.empty(64, dtype=np.int64)  # 0: new, 1: left half pending, 2: right pending
+    lefts = np.empty(64)
+    starts[0], counts[0], stages[0] = start, count, 0
+    top = 1
+    value = 0.0
+    returned = False  # ``value`` holds the sum of the node just finished
+    while top > 0:
+        node = top - 1
+        size = counts[node]
+        half = size // 2
+        half -= half % 8
+        if size <= 128:
+            value = _block_sum(values, starts[node], size)
+            returned = True
+            top -= 1
+        elif not returned:  # a new node: its left half first
+            stages[node] = 1
+            starts[top], counts[top], stages[top] = starts[node], half, 0
+            top += 1
+        elif stages[node] == 1:  # the left half's sum: keep it, then the right half
+            lefts[node] = value
+            stages[node] = 2
+            starts[top], counts[top], stages[top] = starts[node] + half, size - half, 0
+            top += 1
+            returned = False
+        else:  # both halves done
+            value = lefts[node] + value
+            top -= 1
+    return value
+
+
+@_jit
+def kmeans_plus_plus(points: np.ndarray, first: int, uniforms: np.ndarray):
+    """k-means++ centres ((k, d), k = len(uniforms) + 1) of (m, d) points, from the first
+    centre ``points[first]`` and one uniform draw in [0, 1) per further centre: each next
+    centre is the point where the cumulative share of the squared distances to the nearest
+    centre so far first exceeds the draw. ``segmentation.kmeans_labels``' numpy seeding, the
+    same arithmetic in the same order (``np.sum(axis=1)`` and ``sum()`` by ``_pairwise_sum``,
+    ``np.cumsum`` in order, ``searchsorted(side="right")``), in one pass. Returns the centres
+    and how many were placed: fewer than k when the squared distances sum to 0 (every point
+    on a centre), where numpy draws an index instead of a uniform (the caller redoes it)."""
+    m, d = points.shape
+    k = uniforms.shape[0] + 1
+    centres = np.empty((k, d))
+    for j in range(d):
+        centres[0, j] = points[first, j]
+    row = np.empty(d)
+    closest = np.empty(m)
+    for i in range(m):
+        for j in range(d):
+            difference = points[i, j] - centres[0, j]
+            row[j] = difference * difference
+        closest[i] = 0.0 + _pairwise_sum(row, 0, d)
+    cdf = np.empty(m)
+    for c in range(1, k):
+        total = 0.0 + _pairwise_sum(closest, 0, m)
+        if not total > 0:
+            return centres, c
+        running = 0.0
+        for i in range(m):
+            share = closest[i] / total
+            running = share if i == 0 else running + share
+            cdf[i] = running
+        last = cdf[m - 1]
+        for i in range(m):
+            cdf[i] /= last
+        draw = uniforms[c - 1]
+        low, high = 0, m
+        while low < high:  # the first entry above the draw (side="right")
+            middle = (low + high) // 2
+            if cdf[middle] <= draw:
+                low = middle + 1
+            else:
+                high = middle
+        for j in range(d):
+            centres[c, j] = points[low, j]
+        for i in range(m):
+            for j in range(d):
+                difference = points[i, j] - centres[c, j]
+                row[j] = difference * difference
+            distance = 0.0 + _pairwise_sum(row, 0, d)
+            if distance < closest[i]:
+                closest[i] = distance
+    return centres, k
+
+
+@_jit
 def lloyd_iterations(points: np.ndarray, centres: np.ndarray, max_iterations: int):
     """Lloyd's k-means from the (k, d) ``centres`` (updated in place) on (m, d) ``points``:
     assign each point to its nearest centre (the first of equals), move each centre that kept
@@ -1647,19 +1774,22 @@ def fragment_borders(
     supervoxel_normals: np.ndarray,
     gap_m: float,
     min_cos: float,
+    touch_min_cos: float,
     pixel_area: float,
     n_labels: int,
 ):
-    """One pass over a (H, W) label image for ``fragments.join_fragments``.
+    """One pass over a (H, W) label image for ``fragments.join_fragments`` and
+    ``thin.join_thin_pieces``.
 
     ``points`` (H, W, 3) world (m); ``depth_m`` (H, W), 0 = no reading; ``rgb`` (H, W, 3);
     ``supervoxel_labels`` (H, W), -1 = none, indexing (M, 3) ``supervoxel_normals``;
     ``pixel_area`` = 1 / (fx fy). Returns (L,) float64 areas (sum of depth^2 x
     ``pixel_area`` over a label's pixels with depth, m^2), (L, 3) float64 colour sums over all
-    its pixels, and (L, L) int64 ``outline`` and ``continuous`` counts at [min(a, b), max(a, b)]
-    of 4-neighbour pixel pairs with labels a != b, both with depth: every such pair, and those
-    with both labels > 0 whose points are closer than ``gap_m`` and whose supervoxels' normals
-    (a pixel of none counts as (0, 0, 0)) have a cosine of at least ``min_cos``. Replaces the
+    its pixels, and (L, L) int64 ``outline``, ``continuous`` and ``touching`` counts at
+    [min(a, b), max(a, b)] of 4-neighbour pixel pairs with labels a != b, both with depth:
+    every such pair, and those with both labels > 0 whose points are closer than ``gap_m``
+    and whose supervoxels' normals (a pixel of none counts as (0, 0, 0)) have a cosine of at
+    least ``min_cos`` (``continuous``) or ``touch_min_cos`` (``touching``). Replaces the
     numpy ``np.bincount`` of areas and colours and the masked pair counts of
     ``fragments._pair_counts``."""
     height, width = labels.shape
@@ -1667,6 +1797,7 @@ def fragment_borders(
     colour = np.zeros((n_labels, 3))
     outline = np.zeros((n_labels, n_labels), dtype=np.int64)
     continuous = np.zeros((n_labels, n_labels), dtype=np.int64)
+    touching = np.zeros((n_labels, n_labels), dtype=np.int64)
     for row in range(height):
         for col in range(width):
             a = labels[row, col]
@@ -1702,7 +1833,9 @@ def fragment_borders(
                     )
                 if cosine >= min_cos:
                     continuous[low, high] += 1
-    return area, colour, outline, continuous
+                if cosine >= touch_min_cos:
+                    touching[low, high] += 1
+    return area, colour, outline, continuous, touching
 
 
 @_jit

@@ -709,8 +709,10 @@ def _wall_cues(
     points, the face points of the plane's other runs with the wall's top (``extra_points``, a
     wall cut by an occluder; ``walls.max_span_m``) and the extent of both along the wall
     (``span``); None when the plane has too few inliers or cannot be a wall (a run shorter than
-    ``walls.partner_min_length_m`` or a top outside the wall heights, which ``_select_walls``
-    rejects anyway; most candidates are faces of objects, and this spares their costly cues).
+    ``walls.partner_min_length_m``, a top outside the wall heights or more than
+    ``walls.max_outside_fraction`` of the scene near it on its minority side, which
+    ``_select_walls`` and ``_edge_on_walls`` reject anyway; most candidates are faces of
+    objects, and this spares their costly cues and ``_bottom_hidden``'s probes).
     ``edge_on``: every point in the plane's slab is an inlier whatever its normal (a wall seen
     along its length shows its rim, which faces up; ``_edge_on_walls``).
     ``frame``: the frame's ``DepthView`` and the support; with it, a column whose highest inlier
@@ -725,7 +727,9 @@ def _wall_cues(
     and this spares their remaining cues.
     """
     threshold = config.planes.threshold_m
-    along = _cross_rows(up, normal[None])[0]
+    # up x normal by _cross_rows' formulas on scalars (the same products, without its arrays).
+    (a0, a1, a2), (b0, b1, b2) = (float(c) for c in up), (float(c) for c in normal)
+    along = np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
     if normals is not None and normals_up is None:
         normals_up = normals @ up
     if normals is not None and unknown is None:
@@ -776,8 +780,6 @@ def _wall_cues(
     column = ((s_in[in_run] - s_lo) / 0.02).astype(np.int64)
     column_top = np.full(int(column.max()) + 1, -np.inf)
     np.maximum.at(column_top, column, heights)
-    column_bottom = np.full(column_top.size, np.inf)
-    np.minimum.at(column_bottom, column, heights)
     column_s = s_lo + 0.02 * (np.arange(column_top.size) + 0.5)
     telling = np.isfinite(column_top)  # columns whose highest inlier is the wall's top edge
     if frame is not None:
@@ -791,7 +793,7 @@ def _wall_cues(
         if not cut.all():
             telling[np.flatnonzero(telling)[cut]] = False
     top = order.median(column_top[telling])
-    thickness = config.walls.max_thickness_m
+    thickness_rim = None  # the rim points the thickness is measured on, once the top is kept
     if normals is not None:
         # Compiled (``kernels``): the rim's indices in one pass.
         rim = kernels.wall_rim_points(
@@ -806,20 +808,15 @@ def _wall_cues(
             _UP_COS,
             config.walls.min_height_m - threshold,
         )
-        rim_bins = np.unique(((s[rim] - s_lo) / 0.02).astype(np.int64))
+        # The rim's occupied 2 cm bins (positions from s_lo on: non-negative), counted.
+        rim_bins = np.count_nonzero(np.bincount(((s[rim] - s_lo) / 0.02).astype(np.int64)))
         # A face does not rise above its own rim: upward-facing points well below the top
         # edges of the face (objects' tops against it) are not the rim.
-        if rim_bins.size >= max(2, 0.2 * np.isfinite(column_top).sum()) and (
+        if rim_bins >= max(2, 0.2 * np.isfinite(column_top).sum()) and (
             frame is None or order.median(h[rim]) >= top - 0.02
         ):
             top = order.median(h[rim])
-            # Thickness: twice the median depth of the rim behind the face (its points spread
-            # evenly over the thickness; objects just behind the wall barely move the median),
-            # plus 3 mm of noise.
-            rim = rim[np.abs(h[rim] - top) < 0.015]
-            if rim.size >= 10:
-                thickness = 2.0 * order.median(np.maximum(-depth[rim], 0.0)) + 0.003
-                thickness = float(np.clip(thickness, 0.005, config.walls.max_thickness_m))
+            thickness_rim = rim
     if not config.walls.min_height_m <= top <= config.walls.max_height_m:
         return None  # no wall rule accepts this top (``_select_walls``)
     # Straight top and solid face (the lone-wall rule): the share of columns whose top edge is
@@ -834,6 +831,18 @@ def _wall_cues(
             or int(below_top.sum()) < min_points
         ):
             return None  # ``_edge_on_walls`` rejects it whatever its other cues
+    # The figures only an accepted plane needs, after the tests that stop most planes.
+    thickness = config.walls.max_thickness_m
+    if thickness_rim is not None:
+        # Thickness: twice the median depth of the rim behind the face (its points spread
+        # evenly over the thickness; objects just behind the wall barely move the median),
+        # plus 3 mm of noise.
+        rim = thickness_rim[np.abs(h[thickness_rim] - top) < 0.015]
+        if rim.size >= 10:
+            thickness = 2.0 * order.median(np.maximum(-depth[rim], 0.0)) + 0.003
+            thickness = float(np.clip(thickness, 0.005, config.walls.max_thickness_m))
+    column_bottom = np.full(column_top.size, np.inf)
+    np.minimum.at(column_bottom, column, heights)
     bottom = order.percentile(heights, 2)
     floor = max(bottom, 0.0)
     rows = max(1, int(np.ceil((top - floor) / 0.02)))
@@ -865,16 +874,18 @@ def _wall_cues(
         config.walls.side_range_m,
         0.05,
     )
+    outside = 0.0
+    if near > 0:
+        share_in_front = in_front / near
+        outside = min(share_in_front, 1.0 - share_in_front)
+    if outside > config.walls.max_outside_fraction:
+        return None  # not one-sided: every wall rule rejects it (nor is its bottom probed)
     cap_bin = 0.02
     n_bins = max(1, int(np.ceil((s_hi - s_lo) / cap_bin)))
     capped_counts = np.bincount(
         np.minimum(((s[behind] - s_lo) / cap_bin).astype(np.int64), n_bins - 1), minlength=n_bins
     )
     capped = float(np.mean(capped_counts >= 3))
-    outside = 0.0
-    if near > 0:
-        share_in_front = in_front / near
-        outside = min(share_in_front, 1.0 - share_in_front)
     # The plane's other runs whose top edge is the wall's top: the same wall, cut in two by an
     # object standing in front of it. They join the wall's extent (the static slab and the
     # physics), not the figures above, so they do not change which walls are accepted.

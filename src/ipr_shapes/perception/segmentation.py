@@ -35,7 +35,7 @@ from ipr_shapes.perception import kernels
 from ipr_shapes.perception.config import PerceptionConfig
 from ipr_shapes.perception.containers import join_container_insides
 from ipr_shapes.perception.curvature import join_curved_segments, smooth_concave_edges
-from ipr_shapes.perception.fragments import join_fragments
+from ipr_shapes.perception.fragments import fragment_borders, join_fragments
 from ipr_shapes.perception.planes import find_support_plane, find_walls, static_geometry_mask
 from ipr_shapes.perception.robot import robot_pixels
 from ipr_shapes.perception.seams import cut_colour_seams
@@ -200,6 +200,14 @@ def segment_frame(
         config,
         viewpoint=frame.world_from_camera[:3, 3],
     )
+    # The fragments' border pass serves the thin-cylinder join too when no fragment joins
+    # (the same labels): one pass over the image instead of two.
+    borders = None
+    if config.segmentation.fragment_area_m2 > 0 and labels.max() >= 2:
+        borders = fragment_borders(
+            labels, points, frame.depth_m, frame.K, frame.rgb, supervoxels, config
+        )
+    before_fragments = labels
     labels, segment_of_supervoxel = join_fragments(
         labels,
         segment_of_supervoxel,
@@ -209,7 +217,10 @@ def segment_frame(
         frame.rgb,
         supervoxels,
         config,
+        borders=borders,
     )
+    if labels is not before_fragments:
+        borders = None  # joined: its counts no longer those of the labels
     labels, segment_of_supervoxel = join_thin_pieces(
         labels,
         segment_of_supervoxel,
@@ -220,6 +231,7 @@ def segment_frame(
         supervoxels,
         frame.world_from_camera[:3, 3],
         config,
+        borders=borders,
     )
     if config.seams.enabled:
         labels, segment_of_supervoxel = _cut_seams(labels, supervoxels, frame, points, config)
@@ -639,30 +651,48 @@ def kmeans_labels(
         return np.zeros(m, dtype=np.int64)
     if m <= k:
         return np.arange(m, dtype=np.int64)
+    points = np.ascontiguousarray(points)
     rng = np.random.default_rng(seed)
     best_labels, best_inertia = np.zeros(m, dtype=np.int64), np.inf
     for _ in range(max(restarts, 1)):
-        # k-means++: each next centre drawn with probability proportional to the squared
-        # distance to the nearest centre so far.
-        centres = np.empty((k, points.shape[1]))
-        centres[0] = points[rng.integers(m)]
-        closest = np.sum((points - centres[0]) ** 2, axis=1)
-        for c in range(1, k):
-            total = closest.sum()
-            if total > 0:
-                # rng.choice(m, p=closest / total), same draw, without its checks of p.
-                cdf = np.cumsum(closest / total)
-                cdf /= cdf[-1]
-                index = int(cdf.searchsorted(rng.random(), side="right"))
-            else:
-                index = rng.integers(m)
-            centres[c] = points[index]
-            closest = np.minimum(closest, np.sum((points - centres[c]) ** 2, axis=1))
+        # k-means++ compiled (``kernels``; k numpy passes of small calls each): the same
+        # draws, a first index and then one uniform per centre, taken up front. Where the
+        # squared distances sum to 0 numpy draws an index instead: that restart is redone
+        # from the same generator state by ``kmeans_plus_plus``.
+        state = rng.bit_generator.state
+        first = rng.integers(m)
+        centres, placed = kernels.kmeans_plus_plus(points, int(first), rng.random(k - 1))
+        if placed < k:
+            rng.bit_generator.state = state
+            centres = kmeans_plus_plus(points, k, rng)
         # Lloyd iterations compiled (``kernels``): tens of small numpy calls per iteration.
         labels, inertia = kernels.lloyd_iterations(points, centres, max_iterations)
         if inertia < best_inertia:
             best_labels, best_inertia = labels, inertia
     return best_labels
+
+
+def kmeans_plus_plus(points: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
+    """(k, d) k-means++ centres of (m, d) float64 ``points``: the first a uniformly drawn
+    point, each next one drawn with probability proportional to the squared distance to the
+    nearest centre so far (``kernels.kmeans_plus_plus`` is the same, compiled, where those
+    distances do not all vanish)."""
+    m = len(points)
+    centres = np.empty((k, points.shape[1]))
+    centres[0] = points[rng.integers(m)]
+    closest = np.sum((points - centres[0]) ** 2, axis=1)
+    for c in range(1, k):
+        total = closest.sum()
+        if total > 0:
+            # rng.choice(m, p=closest / total), same draw, without its checks of p.
+            cdf = np.cumsum(closest / total)
+            cdf /= cdf[-1]
+            index = int(cdf.searchsorted(rng.random(), side="right"))
+        else:
+            index = rng.integers(m)
+        centres[c] = points[index]
+        closest = np.minimum(closest, np.sum((points - centres[c]) ** 2, axis=1))
+    return centres
 
 
 def choose_cluster_count(eigenvalues: np.ndarray, config: PerceptionConfig) -> int:

@@ -142,6 +142,8 @@ def join_thin_pieces(
     supervoxels: Supervoxels,
     viewpoint: np.ndarray,
     config: PerceptionConfig,
+    *,
+    borders: tuple | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Join touching segments whose points lie on one thin cylinder (module doc).
 
@@ -158,6 +160,8 @@ def join_thin_pieces(
         K: (3, 3) camera intrinsics (px); rgb: (H, W, 3) colours; supervoxels: the frame's
             supervoxels (``labels`` (H, W), -1 = none); viewpoint: (3,) the camera's position
             in the points' frame (m).
+        borders: ``fragments.segment_borders`` of these labels with the fragments' gap, if
+            already computed (``fragments.fragment_borders``; not modified).
 
     Returns:
         The relabelled (labels, segment_of_supervoxel); the inputs when nothing is joined.
@@ -183,9 +187,11 @@ def join_thin_pieces(
         return labels, segment_of_supervoxel
     n = int(labels.max()) + 1
     # Touching pixel pairs of every two segments, whatever their normals.
-    area, _, _, touching = segment_borders(
-        labels, points, depth_m, K, rgb, supervoxels, seg.fragment_gap_m, 180.0
-    )
+    if borders is None:
+        borders = segment_borders(
+            labels, points, depth_m, K, rgb, supervoxels, seg.fragment_gap_m, 180.0
+        )
+    area, touching = borders[0].copy(), borders[4].copy()
     outside = np.array([s not in slender for s in range(n)])
     touching[outside] = 0
     touching[:, outside] = 0

@@ -759,6 +759,12 @@ def track_segments(
     for frame_index, (labels, points, rgb, depth) in enumerate(
         zip(frames_labels, frames_points, frames_rgb, depths, strict=True)
     ):
+        if not sightings and frame_index == len(frames_labels) - 1:
+            # No object known and no frame after this one (a single-frame scene): nothing is
+            # matched, so the segments take ids in label order and their features, which only
+            # matching reads, are not computed.
+            tracked.append(numbered_in_order(labels, next_id))
+            continue
         segments = segment_features(labels, points, rgb, depth)
         assignment: dict[int, int] = {}
         if sightings and segments:
@@ -841,6 +847,22 @@ def track_segments(
     return tracked
 
 
+def numbered_in_order(labels: np.ndarray, first: int = 1) -> np.ndarray:
+    """(H, W) int32: the segments (labels k >= 1) of a (H, W) int label image renumbered
+    ``first``, ``first + 1``, ... in increasing label, 0 elsewhere: what ``track_segments``
+    gives a frame with no known object to match (each segment a new object, in label
+    order)."""
+    flat = labels.reshape(-1)
+    if flat.size and flat.min() < 0:
+        flat = np.maximum(flat, 0)  # negative labels are no segment either
+    sizes = np.bincount(flat, minlength=1)
+    sizes[0] = 0
+    present = np.flatnonzero(sizes)
+    lookup = np.zeros(len(sizes), dtype=np.int32)
+    lookup[present] = np.arange(first, first + len(present), dtype=np.int32)
+    return lookup[flat].reshape(labels.shape)
+
+
 def split_merged_objects(
     tracked: list[np.ndarray],
     frames_points: list[np.ndarray],
@@ -877,6 +899,8 @@ def split_merged_objects(
     """
     tracking = config.tracking
     result = [np.asarray(labels, dtype=np.int32) for labels in tracked]  # copied on change
+    if len(result) < 2:
+        return result  # no later frame to show a split
     # Ids present in each frame (np.unique over whole images would cost more than the rest).
     sizes = [np.bincount(labels.reshape(-1)) for labels in result]
     present = [{int(i) for i in np.flatnonzero(size)} - {0} for size in sizes]
