@@ -34,9 +34,14 @@ class ShapeHypothesis:
         rounds: rounds of the repeat loop used.
         attempts: samples drawn before this one was kept.
         feasible: passed the unary checks at generation (support, walls, free space).
-        free_voxels: voxels in seen-free space beyond ``forced_free_voxels``.
+        free_voxels: voxels in seen-free space beyond ``forced_free_voxels`` and
+            ``excused_free_voxels``.
         wall_voxels: voxels inside known walls beyond those the observed hull has.
-        forced_free_voxels: seen-free voxels of the observed points' own hull (forced).
+        forced_free_voxels: seen-free voxels of the observed points' own hull (forced), beyond
+            those the object's surface allowance excuses.
+        excused_free_voxels: its seen-free voxels within the object's surface allowance of its
+            observed points (``ipr_shapes.hypotheses.allowance``), not counted; 0 unless none of
+            the object's hypotheses passed the seen-free check without the allowance.
         forced_wall_voxels: wall voxels of the observed points' own hull (forced).
         voxel_keys: sorted ``ipr_shapes.voxels`` keys of its voxels at ``voxel_pitch_m`` (None when
             not voxelised, e.g. without a free-space map).
@@ -61,6 +66,7 @@ class ShapeHypothesis:
     free_voxels: int = 0
     wall_voxels: int = 0
     forced_free_voxels: int = 0
+    excused_free_voxels: int = 0
     forced_wall_voxels: int = 0
     voxel_keys: np.ndarray | None = None
     voxel_pitch_m: float = voxels.DEFAULT_PITCH_M

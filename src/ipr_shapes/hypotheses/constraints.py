@@ -286,7 +286,9 @@ def unary_feasible(
 ) -> bool:
     """True when ``h`` is not below the support (beyond ``support_tolerance_m``) and has at most
     the tolerated voxels in seen-free space and in walls, beyond those its observed points'
-    own hull has (``h.forced_*_voxels``). Voxels at the space grid's pitch (5 mm default)."""
+    own hull has (``h.forced_*_voxels``) and those its object's surface allowance excuses
+    (``h.excused_free_voxels``, measured at generation against the same space). Voxels at the
+    space grid's pitch (5 mm default)."""
     config = tolerances or UnaryTolerances()
     regions = plane_regions(planes, config.wall_min_thickness_m)
     needs_voxels = space is not None or any(not r.is_support for r in regions)
@@ -298,7 +300,7 @@ def unary_feasible(
     allowed = allowed_voxels(
         report.voxel_count, config.free_space_tolerance, config.free_space_tolerance_voxels
     )
-    free = report.free_voxels - h.forced_free_voxels
+    free = report.free_voxels - h.excused_free_voxels - h.forced_free_voxels
     walls = report.wall_voxels - h.forced_wall_voxels
     return free <= allowed and walls <= allowed
 

@@ -58,7 +58,11 @@ Choices made here (the paper leaves them open):
   lies on that facet, so nothing of the object is in front of it. A hypothesis that fails is
   resampled with its observed facets' variates halved each attempt (pulling d towards D_min), at
   most ``max_attempts`` times; if every attempt fails, the one with the fewest offending voxels is
-  kept with ``feasible=False`` (logged) for the constraint stage to reject.
+  kept with ``feasible=False`` (logged) for the constraint stage to reject. When *no* hypothesis
+  of the object passes, they are checked again with the seen-free voxels within the object's
+  surface allowance excused (``ipr_shapes.hypotheses.allowance``; ``surface_allowance_quantile``):
+  a real sensor's depth bent behind the true surface, measured on the object's own points
+  (docs/DESIGN_NOTES.md, "A second seen-free check within the object's own surface allowance").
 - Structure-aware candidates (``ipr_shapes.hypotheses.structure``; docs/DESIGN_NOTES.md,
   "Structure-aware candidates beside Algorithm 1"): ``structure_share`` of the m hypotheses
   (rounded) are made by the structure-aware generators that apply to the object, taking turns
@@ -77,6 +81,7 @@ Choices made here (the paper leaves them open):
 from __future__ import annotations
 
 import bisect
+import dataclasses
 import functools
 import logging
 import math
@@ -97,7 +102,7 @@ from ipr_shapes.geometry.convex import (
     triangle_cross,
     unique_rows,
 )
-from ipr_shapes.hypotheses import structure
+from ipr_shapes.hypotheses import allowance, structure
 from ipr_shapes.hypotheses.kernels import (
     first_state_samples,
     first_wall_samples,
@@ -126,6 +131,12 @@ class UnaryTolerances:
             point when lower (every observed point stays inside); points more than this below
             the plane are logged as outliers, and a shape reaching further below is infeasible.
         wall_min_thickness_m: walls without a measured thickness are slabs this thick (m).
+        surface_allowance_quantile: when none of an object's hypotheses passes the seen-free
+            check, the seen-free voxels within its *surface allowance* of its own observed
+            points are excused and its hypotheses checked again; the allowance is this quantile
+            (0-1) of how deep its points lie inside their own convex hull, how far the sensor
+            bent the measured surface behind a convex solid (``ipr_shapes.hypotheses.allowance``).
+            None: no second check (an object with no feasible hypothesis keeps its minimum shape).
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -133,12 +144,14 @@ class UnaryTolerances:
         "free_space_tolerance_voxels": Interval(0, None, integer=True),
         "support_tolerance_m": Interval(0, None),
         "wall_min_thickness_m": Interval(0, None),
+        "surface_allowance_quantile": OrNone(Interval(0, 1)),
     }
 
     free_space_tolerance: float = 0.02
     free_space_tolerance_voxels: int = 20
     support_tolerance_m: float = 0.005
     wall_min_thickness_m: float = 0.005
+    surface_allowance_quantile: float | None = 0.95
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -1338,6 +1351,10 @@ def generate_hypotheses(
                 generator=generator,
             )
         )
+    if config.unary.surface_allowance_quantile is not None and not any(
+        h.feasible for h in hypotheses
+    ):
+        hypotheses = _within_allowance(obj, ctx, hypotheses)
     logger.debug(
         "object %d: %d hypotheses in %.3f s, volumes %s",
         obj.id,
@@ -1346,6 +1363,57 @@ def generate_hypotheses(
         volume_spread(hypotheses),
     )
     return tuple(hypotheses)
+
+
+def _within_allowance(
+    obj: PartialObject, ctx: _Context, hypotheses: list[ShapeHypothesis]
+) -> list[ShapeHypothesis]:
+    """The hypotheses of an object none of which passed the seen-free check, checked again
+    with the seen-free voxels within the object's surface allowance excused (``allowance``;
+    ``UnaryTolerances.surface_allowance_quantile``), in the observed hull's count as in each
+    hypothesis'. The same shapes; their voxel counts and ``feasible`` updated."""
+    points = np.asarray(obj.points, float).reshape(-1, 3)
+    points = points[np.all(np.isfinite(points), axis=1)]
+    hull = _observed_hull(_observed_extremes(points))
+    quantile = ctx.config.unary.surface_allowance_quantile
+    if ctx.space is None or hull is None or quantile is None:
+        return hypotheses
+    allowed_m = allowance.surface_allowance(points, quantile, hull[0])
+    excused = allowance.excused_keys(points, ctx.space, ctx.pitch_m, allowed_m)
+    if excused.size == 0:
+        return hypotheses
+    hull_keys = voxels.scanline_voxels(hull[0], hull[1], ctx.pitch_m)
+    forced_free = ctx.forced_free - voxels.intersection_count(hull_keys, excused)
+    checked = []
+    for h in hypotheses:
+        keys = h.keys(ctx.pitch_m)
+        report = unary_report(h.vertices, keys, ctx.pitch_m, ctx.space, ctx.regions)
+        excused_here = voxels.intersection_count(keys, excused)
+        free = max(report.free_voxels - excused_here - forced_free, 0)
+        allowed = allowed_voxels(
+            report.voxel_count,
+            ctx.config.unary.free_space_tolerance,
+            ctx.config.unary.free_space_tolerance_voxels,
+        )
+        checked.append(
+            dataclasses.replace(
+                h,
+                free_voxels=free,
+                forced_free_voxels=forced_free,
+                excused_free_voxels=excused_here,
+                feasible=free <= allowed and h.wall_voxels <= allowed,
+            )
+        )
+    logger.info(
+        "object %d: no hypothesis passed the seen-free check; with its surface allowance of "
+        "%.1f mm (%d seen-free voxels excused) %d of %d do",
+        obj.id,
+        allowed_m * 1e3,
+        excused.size,
+        sum(h.feasible for h in checked),
+        len(checked),
+    )
+    return checked
 
 
 def minimum_shape(
