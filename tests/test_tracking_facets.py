@@ -10,6 +10,7 @@ from ipr_shapes.perception.facets import mean_shift_directions, object_facets, p
 from ipr_shapes.perception.tracking import (
     assign_segments,
     contact_pixels,
+    extent_m,
     match_costs,
     merge_split_pieces,
     merged_features,
@@ -195,6 +196,68 @@ def test_the_larger_piece_of_a_split_object_takes_its_id():
     far = np.array([[1.8, 3.0], [3.0, 3.0], [2.0, 3.0]])
     assert prefer_larger_pieces({1: 7}, far, [1, 2, 3], [7, 8], segments, config) == {1: 7}
     assert prefer_larger_pieces({2: 7}, cost, [1, 2, 3], [7, 8], segments, config) == {2: 7}
+
+
+def test_the_larger_piece_gap_is_relative_to_the_objects_size():
+    # Object 7's id went to a small piece (segment 1); a piece 22 times larger (segment 2)
+    # lies 13 cm from it (1 px = 1 mm): a large box whose larger piece was pushed away.
+    labels, points, rgb = _boxes(
+        {1: (60, 0, 20, 20, YELLOW), 2: (40, 80, 60, 120, YELLOW), 3: (0, 0, 10, 10, RED)}
+    )
+    segments = segment_features(labels, points, rgb)
+    gap = np.linalg.norm(segments[2].centroid - segments[1].centroid)
+    assert 0.12 < gap < 0.14
+    cost = np.array([[2.3, 3.0], [2.6, 3.0], [3.5, 3.5]])  # columns: objects 7 and 8
+    config = TrackingConfig()
+    ids = [1, 2, 3], [7, 8]
+    # An object 20 cm across: its pieces may lie 13 cm apart, beyond ``piece_max_gap_m``.
+    assert gap > config.piece_max_gap_m
+    assert prefer_larger_pieces({1: 7}, cost, *ids, segments, config, lambda o, p: 0.2) == {2: 7}
+    # Not for an object 10 cm across (or with the absolute gap) ...
+    assert prefer_larger_pieces({1: 7}, cost, *ids, segments, config, lambda o, p: 0.1) == {1: 7}
+    absolute = TrackingConfig(piece_gap_relative=False)
+    assert prefer_larger_pieces({1: 7}, cost, *ids, segments, absolute, lambda o, p: 0.2) == {1: 7}
+    # ... and for a small object even a gap within ``piece_max_gap_m`` is too far: two
+    # 5 cm objects 8 cm apart are not one.
+    near, _, _ = _boxes({1: (60, 0, 20, 20, YELLOW), 2: (40, 50, 60, 60, YELLOW)})
+    near_segments = segment_features(near, points, rgb)
+    near_gap = np.linalg.norm(near_segments[2].centroid - near_segments[1].centroid)
+    assert 0.05 < near_gap < config.piece_max_gap_m
+    small = prefer_larger_pieces(
+        {1: 7}, cost[:2], [1, 2], [7, 8], near_segments, config, lambda o, p: 0.05
+    )
+    assert small == {1: 7}
+    assert prefer_larger_pieces({1: 7}, cost[:2], [1, 2], [7, 8], near_segments, absolute) == {2: 7}
+
+
+def test_a_large_box_gets_its_id_back_from_a_strip_13_cm_away():
+    # As above at the size of a large box (15 x 6 cm): frame 1 shows only its top strip; in
+    # frame 2 it is whole again 7 cm lower and a strip-like yellow object lies 13.7 cm from
+    # it. With the last sighting only, the strip takes the box's id in the assignment; the
+    # larger piece takes it back because the gap is within the box's size, though beyond
+    # ``piece_max_gap_m`` (the absolute gap leaves the id on the strip).
+    shape = (200, 240)
+    red = {1: (180, 220, 15, 15, RED)}
+    first = _boxes({**red, 2: (40, 20, 60, 150, YELLOW)}, shape)
+    second = _boxes({**red, 2: (40, 20, 6, 150, YELLOW)}, shape)
+    third = _boxes({**red, 2: (110, 20, 60, 150, YELLOW), 3: (0, 20, 6, 150, YELLOW)}, shape)
+    box = _track([first, second, third])[0][60, 90]
+    relative = _track([first, second, third], TrackingConfig(max_sightings=1))
+    assert relative[2][140, 90] == box and relative[2][3, 90] != box
+    absolute = TrackingConfig(max_sightings=1, piece_gap_relative=False)
+    assert _track([first, second, third], absolute)[2][140, 90] != box
+
+
+def test_extent_is_the_diagonal_of_a_segments_points_without_depth_holes():
+    labels, points, rgb = _boxes({1: (10, 10, 30, 40, RED)})
+    pixels = np.flatnonzero(labels.reshape(-1) == 1)
+    # A 30 x 40 mm rectangle: diagonal 50 mm, less the 2nd-98th percentile trim.
+    assert 0.046 < extent_m(pixels, points, None) <= 0.05
+    # Pixels without depth back-project to the camera centre and must not count.
+    depth = np.ones(labels.shape)
+    depth[10:40, 30:50] = 0.0
+    assert 0.033 < extent_m(pixels, points, depth) < 0.037  # the 30 x 20 mm half left
+    assert extent_m(pixels[:2], points, None) == 0.0
 
 
 def test_match_costs_count_overlaps_exactly_whatever_the_numbering():

@@ -717,7 +717,16 @@ class TrackingConfig:
             the segment (``tracking.prefer_larger_objects``).
         piece_max_cost: the larger object's cost (``larger_object_takes_segment``) and a
             piece's cost (``merge_split_pieces``) are at most this.
-        piece_max_gap_m: the two pieces' centroids are at most this far apart (m).
+        piece_max_gap_m: the two pieces' centroids are at most this far apart (m;
+            ``larger_object_takes_segment``, and ``larger_piece_takes_id`` when
+            ``piece_gap_relative`` is off).
+        piece_gap_relative: ``larger_piece_takes_id``'s gap is relative to the object's size
+            rather than ``piece_max_gap_m``: the two pieces' centroids are at most
+            ``piece_gap_extent_share`` times the object's size apart, the largest size
+            (``tracking.extent_m``, the diagonal of the points' principal-axes box, m) of its
+            recent sightings and of the larger piece (pieces of one object lie within it,
+            whatever its size).
+        piece_gap_extent_share: see ``piece_gap_relative``.
         piece_area_ratio: visible-area ratio a piece or object needs to count as larger.
         piece_cost_margin: see ``larger_piece_takes_id`` and ``larger_object_takes_segment``.
         merge_split_pieces: two touching segments of similar colour, each unmatched, matched
@@ -775,6 +784,7 @@ class TrackingConfig:
         "max_sightings": _AT_LEAST_ONE,
         "piece_max_cost": _NON_NEGATIVE,
         "piece_max_gap_m": _NON_NEGATIVE,
+        "piece_gap_extent_share": _NON_NEGATIVE,
         "piece_area_ratio": Interval(1, None),
         "piece_cost_margin": _ANY,
         "merge_max_colour": _SHARE,
@@ -806,6 +816,8 @@ class TrackingConfig:
     larger_piece_takes_id: bool = True
     piece_max_cost: float = 2.5
     piece_max_gap_m: float = 0.1
+    piece_gap_relative: bool = True
+    piece_gap_extent_share: float = 1.0
     piece_area_ratio: float = 2.0
     larger_object_takes_segment: bool = True
     piece_cost_margin: float = 0.6

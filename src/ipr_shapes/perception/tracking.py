@@ -54,7 +54,9 @@ again"; the defaults' figures are in docs/experiments/perception-config-notes.md
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from itertools import combinations
 
 import numpy as np
@@ -251,6 +253,24 @@ def _shared_count(first: np.ndarray, second: np.ndarray) -> int:
     return int(np.count_nonzero(haystack[found] == needles))
 
 
+def extent_m(pixels: np.ndarray, points: np.ndarray, depth_m: np.ndarray | None) -> float:
+    """A segment's size (m): the diagonal of the box spanned along its principal axes by the
+    2nd to 98th percentiles of its world points, for (N,) flat pixel indices of a frame with
+    (H, W, 3) world points (m) and (H, W) depth (m, 0 = no reading; None = all valid). The
+    percentiles keep a few flying pixels at the outline from setting the size; 0 for fewer than
+    three points with depth."""
+    if depth_m is not None:
+        pixels = pixels[depth_m.reshape(-1)[pixels] > 0]
+    if pixels.size < 3:
+        return 0.0
+    points_k = points.reshape(-1, 3)[pixels]
+    centred = points_k - points_k.mean(axis=0)
+    _, axes = np.linalg.eigh(centred.T @ centred)
+    along = centred @ axes
+    low, high = np.percentile(along, [2.0, 98.0], axis=0)
+    return float(np.linalg.norm(high - low))
+
+
 def merged_features(first: SegmentFeatures, second: SegmentFeatures) -> SegmentFeatures:
     """Features of the union of two disjoint segments of one frame.
 
@@ -361,6 +381,7 @@ def prefer_larger_pieces(
     known_ids: list[int],
     segments: dict[int, SegmentFeatures],
     config: TrackingConfig,
+    extent_of: Callable[[int, int], float] | None = None,
 ) -> dict[int, int]:
     """Give an object's id to the larger of two pieces it was split into.
 
@@ -369,17 +390,24 @@ def prefer_larger_pieces(
     and place and leave the larger piece to start a new object. A segment left unmatched whose
     cheapest known object costs at most ``elimination_cost`` (what the assignment's second
     stage accepts) and at most ``piece_cost_margin`` more than the segment matched to that
-    object, whose centroid is within ``piece_max_gap_m`` of that segment and whose visible area
-    is ``piece_area_ratio`` times larger takes the object's id; the smaller piece becomes a
-    new object. The cost test is relative (docs/DESIGN_NOTES.md, "The larger piece keeps the
-    id"): a pushed object's pieces may all cost more than an absolute gate, while a segment
-    that holds a sliver of the object and mostly something else costs clearly more than the
-    sliver. Unmatched segments are visited by decreasing area. Returns the new segment ->
-    object assignment.
+    object, whose centroid is within ``piece_gap_extent_share`` times the object's size
+    (``extent_of``: at least its own recent sightings' and, if the piece is part of it, the
+    piece's) of that segment's (``piece_max_gap_m`` when ``piece_gap_relative`` is off
+    or no size is given) and whose visible area is ``piece_area_ratio`` times larger takes the
+    object's id; the smaller piece becomes a new object. The cost and gap tests are relative
+    (docs/DESIGN_NOTES.md, "The larger piece keeps the id"): a pushed object's pieces may all
+    cost more than an absolute gate, while a segment that holds a sliver of the object and
+    mostly something else costs clearly more than the sliver; the pieces of a large box lie
+    farther apart than those of a can. Unmatched segments are visited by decreasing area.
+    Returns the new segment -> object assignment.
 
     Args:
         assignment: segment id -> object id; cost: (S, K) costs (rows ``segment_ids``,
-            columns ``known_ids``); segments: the frame's segment features.
+            columns ``known_ids``); segments: the frame's segment features; extent_of: (object
+            id, piece's segment id) -> the object's size (m; ``track_segments`` gives the
+            largest ``extent_m`` of its recent sightings and of the piece: a recent sighting
+            may show only a strip of it), called only for a candidate that passed the other
+            tests, or None.
     """
     result = dict(assignment)
     segment_of = {object_id: segment_id for segment_id, object_id in result.items()}
@@ -402,8 +430,14 @@ def prefer_larger_pieces(
         # clearly more than the sliver that took its id).
         if cost[row, column] > cost[row_of[matched], column] + config.piece_cost_margin:
             continue
-        gap = np.linalg.norm(segments[piece].centroid - segments[matched].centroid)
-        if gap > config.piece_max_gap_m:
+        gap = float(np.linalg.norm(segments[piece].centroid - segments[matched].centroid))
+        # Relative to the object's own size: two pieces of one object lie within it, whatever
+        # its size (a large box's larger piece may lie more than 10 cm from the piece holding
+        # its id, two 5 cm objects 8 cm apart are not one).
+        if extent_of is not None and config.piece_gap_relative:
+            if gap > config.piece_gap_extent_share * extent_of(object_id, piece):
+                continue
+        elif gap > config.piece_max_gap_m:
             continue
         del result[matched]
         result[piece] = object_id
@@ -784,8 +818,17 @@ def track_segments(
             ):
                 assignment[segment_ids[row]] = known_ids[col]
             if config.larger_piece_takes_id:
+                extent_of = partial(
+                    _object_size,
+                    sightings=sightings,
+                    sighting_frames=sighting_frames,
+                    frames_points=frames_points,
+                    frames_depth=depths,
+                    segments=segments,
+                    frame=frame_index,
+                )
                 assignment = prefer_larger_pieces(
-                    assignment, cost, segment_ids, known_ids, segments, config
+                    assignment, cost, segment_ids, known_ids, segments, config, extent_of
                 )
             if config.larger_object_takes_segment:
                 # Each object's largest recent view: its latest may be half hidden.
@@ -861,6 +904,29 @@ def numbered_in_order(labels: np.ndarray, first: int = 1) -> np.ndarray:
     lookup = np.zeros(len(sizes), dtype=np.int32)
     lookup[present] = np.arange(first, first + len(present), dtype=np.int32)
     return lookup[flat].reshape(labels.shape)
+
+
+def _object_size(
+    object_id: int,
+    piece: int,
+    *,
+    sightings: dict[int, list[SegmentFeatures]],
+    sighting_frames: dict[int, list[int]],
+    frames_points: list[np.ndarray],
+    frames_depth: list[np.ndarray | None],
+    segments: dict[int, SegmentFeatures],
+    frame: int,
+) -> float:
+    """A known object's size (m) for ``prefer_larger_pieces``: the largest ``extent_m`` of its
+    recent sightings (each in its own frame of ``frames_points`` / ``frames_depth``) and of the
+    segment ``piece`` of frame ``frame`` (``segments``). A recent sighting may show only a
+    strip of the object, so the larger piece, if it is part of it, bounds its size too."""
+    sizes = [
+        extent_m(seen.pixels, frames_points[seen_in], frames_depth[seen_in])
+        for seen, seen_in in zip(sightings[object_id], sighting_frames[object_id], strict=True)
+    ]
+    piece_size = extent_m(segments[piece].pixels, frames_points[frame], frames_depth[frame])
+    return max(*sizes, piece_size)
 
 
 def split_merged_objects(
