@@ -19,6 +19,7 @@ from ipr_shapes.perception.tracking import (
     prefer_larger_objects,
     prefer_larger_pieces,
     segment_features,
+    separated_pieces,
     split_merged_objects,
     track_segments,
 )
@@ -552,3 +553,81 @@ def test_a_single_frame_is_numbered_in_label_order_as_the_full_tracker_numbers_i
     negative = np.where(labels == 2, -1, labels)  # negative labels are no segment
     np.testing.assert_array_equal(numbered_in_order(negative)[labels == 2], 0)
     assert numbered_in_order(negative)[12, 12] == 3
+
+
+def _union_pushed_apart(hidden_before: bool):
+    """Frame 0 (or 1) segments a red box and a small blue box beside it as one object, and a
+    blue and green box elsewhere as another; next, the red box is pushed 15 mm away from the
+    blue one, which stays in place as its own segment, and the blue and green box is hidden.
+    With ``hidden_before`` the blue and green box is already hidden in the frame before."""
+    union = {1: (60, 100, 30, 30, RED)}
+    elsewhere = {2: (10, 200, 15, 15, (BLUE, GREEN, 0.6))}
+    first = _boxes({**union, **elsewhere})
+    first[0][60:75, 130:145] = 1
+    first[2][60:75, 130:145] = BLUE
+    frames = [first]
+    if hidden_before:
+        frames.append(tuple(np.copy(a) for a in first))
+        frames[-1][0][frames[-1][0] == 2] = 0
+    frames.append(_boxes({1: (60, 85, 30, 30, RED), 3: (60, 130, 15, 15, BLUE)}))
+    return frames
+
+
+def test_a_piece_left_in_place_by_a_push_does_not_take_a_free_id_seen_elsewhere():
+    # The blue box's surface is where it was, and was the union's: it is a piece newly
+    # separated from the union, not the blue and green box, seen elsewhere the frame before.
+    # The second stage would pair them (cost 2.09, the red box takes the union's id at 1.44).
+    frames = _union_pushed_apart(hidden_before=False)
+    guarded = _track(frames, TrackingConfig(separated_piece_guard=True))
+    assert guarded[1][62, 90] == 1 and guarded[1][62, 132] not in (1, 2)
+    assert _track(frames, TrackingConfig(separated_piece_guard=False))[1][62, 132] == 2
+    # The blue and green box hidden the frame before may have been inside the union's segment:
+    # the guard leaves the pair to the cost.
+    frames = _union_pushed_apart(hidden_before=True)
+    assert _track(frames, TrackingConfig(separated_piece_guard=True))[2][62, 132] == 2
+
+
+def test_a_surface_of_another_colour_in_place_is_not_a_separated_piece():
+    # Same depth, same pixels, but the colour changed (a flat top slid over the spot): the
+    # segment is not the piece of the union that stood there; the same colour is. A moved
+    # camera (every surface shifted) refuses nothing.
+    before, after = _union_pushed_apart(hidden_before=False)
+    segments = segment_features(after[0], after[1], after[2], None)
+    config = TrackingConfig(separated_piece_guard=True)
+
+    def refused(rgb):
+        return separated_pieces(
+            segments,
+            [1, 3],
+            [1, 2],
+            {1, 2},
+            before[0],
+            before[1],
+            after[1],
+            before[2],
+            rgb,
+            None,
+            None,
+            config,
+        )
+
+    # The red box kept half its pixels in place (the union's too): neither takes id 2.
+    assert refused(after[2]).tolist() == [[False, True], [False, True]]
+    recoloured = after[2].copy()
+    recoloured[60:75, 130:145] = YELLOW
+    assert refused(recoloured).tolist() == [[False, True], [False, False]]
+    moved_camera = after[1] + np.array([0.0, 0.0, 0.05])
+    assert not separated_pieces(
+        segments,
+        [1, 3],
+        [1, 2],
+        {1, 2},
+        before[0],
+        before[1],
+        moved_camera,
+        before[2],
+        after[2],
+        None,
+        None,
+        config,
+    ).any()

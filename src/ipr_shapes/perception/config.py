@@ -706,6 +706,18 @@ class TrackingConfig:
             within the gate to another segment above it (``tracking.assign_segments``). Off by
             default: held-out set 8050 +1 pair, ycb-dynamic -1 (docs/DESIGN_NOTES.md, "The
             elimination stage").
+        separated_piece_guard: opt-in: the second stage does not give a segment the id of an
+            object seen in the previous frame when at least ``separated_min_share`` of the
+            segment's pixels with depth show, in place, the surface they showed in the previous
+            frame (world points at most ``separated_unchanged_m`` apart, m, and each colour
+            channel within ``separated_unchanged_rgb`` of 255) and were then another tracked
+            object's: the segment is a piece a push left in place out of that object's segment
+            (a frame-0 union pushed apart), not the free object, which was elsewhere
+            (``tracking.separated_pieces``). Off by default: it refuses 2 wrong pairs and no
+            right one on the development sets but moves no figure (docs/DESIGN_NOTES.md, "The
+            elimination stage").
+        separated_unchanged_m, separated_unchanged_rgb, separated_min_share: see
+            ``separated_piece_guard``.
         larger_piece_takes_id: when an object's id went to a small piece and a segment at
             least ``piece_area_ratio`` times larger nearby that resembles the object almost as
             well (cost <= ``elimination_cost`` and at most ``piece_cost_margin`` more than the
@@ -782,6 +794,9 @@ class TrackingConfig:
         "max_match_cost": _NON_NEGATIVE,
         "elimination_cost": _NON_NEGATIVE,
         "max_sightings": _AT_LEAST_ONE,
+        "separated_unchanged_m": _NON_NEGATIVE,
+        "separated_unchanged_rgb": _COUNT,
+        "separated_min_share": _SHARE,
         "piece_max_cost": _NON_NEGATIVE,
         "piece_max_gap_m": _NON_NEGATIVE,
         "piece_gap_extent_share": _NON_NEGATIVE,
@@ -813,6 +828,10 @@ class TrackingConfig:
     elimination_cost: float = 3.0
     max_sightings: int = 3
     gated_elimination: bool = False
+    separated_piece_guard: bool = False
+    separated_unchanged_m: float = 0.01
+    separated_unchanged_rgb: int = 30
+    separated_min_share: float = 0.5
     larger_piece_takes_id: bool = True
     piece_max_cost: float = 2.5
     piece_max_gap_m: float = 0.1

@@ -20,7 +20,8 @@ move, or moved a little, are settled here. Then the objects left without a segme
 segments left without an object are matched among themselves with the looser
 ``elimination_cost`` gate: an object that was pushed far, or toppled and now shows other faces
 and colours, is usually the one known object still unaccounted for, and the large segment in a
-new place is usually it. Objects that find no segment keep their id for later frames (they may
+new place is usually it. (Opt-in, ``separated_piece_guard``: the second stage refuses a segment
+whose surface stayed in place under another object's id while the object was seen elsewhere.) Objects that find no segment keep their id for later frames (they may
 reappear). Each object is remembered by its last ``max_sightings`` sightings, and a segment's
 cost to an object is its lowest cost to any of them (an object that was split or partly hidden
 in the last frame is still recognised by an earlier, better view).
@@ -328,6 +329,7 @@ def assign_segments(
     new_cost: float,
     elimination_cost: float,
     gated_elimination: bool = False,
+    refused: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> np.ndarray:
     """(P, 2) (segment row, known column) pairs of a (S, K) cost matrix, in two stages.
 
@@ -339,7 +341,9 @@ def assign_segments(
     the gate (opt-in); without it (the default) it pairs every leftover segment it can and then
     drops the pairs above the gate, so a segment that matches nothing within the gate can
     take, and waste, the one object another leftover segment matched within it
-    (docs/DESIGN_NOTES.md, "The elimination stage").
+    (docs/DESIGN_NOTES.md, "The elimination stage"). ``refused``, None or a function of
+    stage 2's (L,) segment rows giving an (L, K) bool mask: pairs stage 2 may not make
+    (``separated_pieces``, evaluated for the leftover segments only); stage 1 is unaffected.
     """
     n_segments, n_known = cost.shape
     rows, cols = _gated_assignment(cost, new_cost)
@@ -348,6 +352,11 @@ def assign_segments(
     left_cols = np.setdiff1d(np.arange(n_known), cols)
     if left_rows.size and left_cols.size:
         rest = cost[np.ix_(left_rows, left_cols)]
+        if refused is not None:
+            # Just above the gate, not forbidden: a refused pair the optimum would have left
+            # dropped anyway (above the gate) must not reshuffle the others' pairs.
+            above = np.maximum(rest, np.nextafter(elimination_cost, np.inf))
+            rest = np.where(refused(left_rows)[:, left_cols], above, rest)
         if gated_elimination:
             rows, cols = _gated_assignment(rest, elimination_cost)
         else:
@@ -356,6 +365,83 @@ def assign_segments(
             rows, cols = rows[keep], cols[keep]
         pairs.append(np.stack([left_rows[rows], left_cols[cols]], axis=1))
     return np.concatenate(pairs).astype(np.int64)
+
+
+def separated_pieces(
+    segments: dict[int, SegmentFeatures],
+    segment_ids: list[int],
+    known_ids: list[int],
+    seen_last_frame: set[int],
+    previous_labels: np.ndarray,
+    previous_points: np.ndarray,
+    points: np.ndarray,
+    previous_rgb: np.ndarray,
+    rgb: np.ndarray,
+    depth_m: np.ndarray | None,
+    previous_depth_m: np.ndarray | None,
+    config: TrackingConfig,
+) -> np.ndarray:
+    """(len(segment_ids), K) bool: the second-stage pairs refused because the segment is a
+    piece a push left in place out of another object's segment, not the free object
+    (``TrackingConfig.separated_piece_guard``, opt-in).
+
+    The pair (segment, known object ``k``) is refused when at least ``separated_min_share`` of
+    the segment's pixels with depth show, at the same pixel, a surface within
+    ``separated_unchanged_m`` of the previous frame's and of its colour (each channel within
+    ``separated_unchanged_rgb``: a flat top slid along itself keeps its depth, not the colour
+    of what lay there) and were labelled, in the previous frame, with a tracked id other than
+    ``k`` (and not 0), and ``k`` itself was seen in the previous frame (``seen_last_frame``):
+    ``k`` was then elsewhere, and a surface that stayed in place cannot be it. An object not
+    seen the frame before may have been inside the other's segment, so its pairs are left to
+    the cost. Pixels are compared in place, so a moved camera makes surfaces differ and
+    refuses nothing.
+
+    Args:
+        segments: this frame's segments by id; segment_ids: those to check (the mask's rows);
+            known_ids: the cost matrix's columns; seen_last_frame: ids seen in the previous
+            frame; previous_labels: (H, W) int tracked ids of the previous frame;
+            previous_points, points: (H, W, 3) world points (m) of the previous and this
+            frame; previous_rgb, rgb: their (H, W, 3) uint8 colours; depth_m,
+            previous_depth_m: (H, W) depth (m, 0 = no reading) or None (all valid).
+    """
+    refused = np.zeros((len(segment_ids), len(known_ids)), dtype=bool)
+    columns = [c for c, k in enumerate(known_ids) if k in seen_last_frame]
+    if not columns or previous_labels.shape != points.shape[:2]:
+        return refused
+    flat_previous = previous_labels.reshape(-1)
+    flat_points, flat_previous_points = points.reshape(-1, 3), previous_points.reshape(-1, 3)
+    valid = np.ones(flat_previous.size, dtype=bool)
+    for depth in (depth_m, previous_depth_m):
+        if depth is not None:
+            valid &= depth.reshape(-1) > 0
+    limit = config.separated_unchanged_m**2
+    flat_rgb, flat_previous_rgb = rgb.reshape(-1, 3), previous_rgb.reshape(-1, 3)
+    for row, segment_id in enumerate(segment_ids):
+        pixels = segments[segment_id].pixels
+        pixels = pixels[valid[pixels]]
+        if not pixels.size:
+            continue
+        least = config.separated_min_share * pixels.size
+        moved = ((flat_points[pixels] - flat_previous_points[pixels]) ** 2).sum(axis=1)
+        pixels = pixels[moved <= limit]
+        recoloured = np.abs(
+            flat_rgb[pixels].astype(np.int16) - flat_previous_rgb[pixels].astype(np.int16)
+        ).max(axis=1)
+        stayed = flat_previous[pixels[recoloured <= config.separated_unchanged_rgb]]
+        stayed = stayed[stayed > 0]
+        if stayed.size < least:
+            continue
+        ids, counts = np.unique(stayed, return_counts=True)
+        for column in columns:
+            others = stayed.size - counts[ids == known_ids[column]].sum()
+            refused[row, column] = others >= least
+    return refused
+
+
+def _separated_rows(rows: np.ndarray, *, segment_ids: list[int], **kwargs) -> np.ndarray:
+    """``separated_pieces`` for the (L,) cost-matrix ``rows`` of ``segment_ids`` only (the
+    segments the first stage left): (L, K) bool."""
+    return separated_pieces(segment_ids=[segment_ids[r] for r in rows], **kwargs)
 
 
 def _gated_assignment(cost: np.ndarray, gate: float) -> tuple[np.ndarray, np.ndarray]:
@@ -810,11 +896,31 @@ def track_segments(
                 _, layer_ids, layer_cost = match_costs(layer, segments, labels.size, config)
                 columns = np.searchsorted(known_ids, layer_ids)
                 cost[:, columns] = np.minimum(cost[:, columns], layer_cost)
+            refused = None
+            if config.separated_piece_guard and tracked:
+                refused = partial(
+                    _separated_rows,
+                    segments=segments,
+                    segment_ids=segment_ids,
+                    known_ids=known_ids,
+                    seen_last_frame={
+                        o for o, f in sighting_frames.items() if f[-1] == frame_index - 1
+                    },
+                    previous_labels=tracked[-1],
+                    previous_points=frames_points[frame_index - 1],
+                    points=points,
+                    previous_rgb=frames_rgb[frame_index - 1],
+                    rgb=rgb,
+                    depth_m=depth,
+                    previous_depth_m=depths[frame_index - 1],
+                    config=config,
+                )
             for row, col in assign_segments(
                 cost,
                 config.max_match_cost,
                 config.elimination_cost,
                 config.gated_elimination,
+                refused,
             ):
                 assignment[segment_ids[row]] = known_ids[col]
             if config.larger_piece_takes_id:
