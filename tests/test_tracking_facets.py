@@ -595,7 +595,7 @@ def test_a_surface_of_another_colour_in_place_is_not_a_separated_piece():
     segments = segment_features(after[0], after[1], after[2], None)
     config = TrackingConfig(separated_piece_guard=True)
 
-    def refused(rgb):
+    def refused(rgb, points=after[1]):
         return separated_pieces(
             segments,
             [1, 3],
@@ -603,7 +603,7 @@ def test_a_surface_of_another_colour_in_place_is_not_a_separated_piece():
             {1, 2},
             before[0],
             before[1],
-            after[1],
+            points,
             before[2],
             rgb,
             None,
@@ -617,17 +617,4 @@ def test_a_surface_of_another_colour_in_place_is_not_a_separated_piece():
     recoloured[60:75, 130:145] = YELLOW
     assert refused(recoloured).tolist() == [[False, True], [False, False]]
     moved_camera = after[1] + np.array([0.0, 0.0, 0.05])
-    assert not separated_pieces(
-        segments,
-        [1, 3],
-        [1, 2],
-        {1, 2},
-        before[0],
-        before[1],
-        moved_camera,
-        before[2],
-        after[2],
-        None,
-        None,
-        config,
-    ).any()
+    assert not refused(after[2], moved_camera).any()
