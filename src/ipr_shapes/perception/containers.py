@@ -221,7 +221,9 @@ def join_container_insides(
         for segment, target in owner.items():
             if target == piece:
                 owner[segment] = container
-        members[container] = np.concatenate([members[container], members.pop(piece)])
+        # In pixel order, as the counting sort gives a segment's pixels: a summary's subset (every
+        # k-th pixel) is then the same whichever joins made the segment.
+        members[container] = np.sort(np.concatenate([members[container], members.pop(piece)]))
         summaries.pop(piece, None)
         summaries.pop(container, None)
         verdicts = {pair: v for pair, v in verdicts.items() if container not in pair}
