@@ -65,7 +65,7 @@ from scipy.optimize import linear_sum_assignment
 
 from ipr_shapes.perception import kernels
 from ipr_shapes.perception.config import PerceptionConfig, TrackingConfig
-from ipr_shapes.perception.temporal import ARRIVED, UNCHANGED, compare_frames
+from ipr_shapes.perception.temporal import ARRIVED, UNCHANGED, FrameChange, compare_frames
 
 #: Histogram bins per RGB channel.
 COLOUR_BINS = 6
@@ -442,6 +442,168 @@ def _separated_rows(rows: np.ndarray, *, segment_ids: list[int], **kwargs) -> np
     """``separated_pieces`` for the (L,) cost-matrix ``rows`` of ``segment_ids`` only (the
     segments the first stage left): (L, K) bool."""
     return separated_pieces(segment_ids=[segment_ids[r] for r in rows], **kwargs)
+
+
+def pushed_out_pieces(
+    assignment: dict[int, int],
+    cost: np.ndarray,
+    segment_ids: list[int],
+    known_ids: list[int],
+    segments: dict[int, SegmentFeatures],
+    seen_last_frame: set[int],
+    previous_labels: np.ndarray,
+    previous_frame: tuple[np.ndarray, np.ndarray, np.ndarray | None],
+    change: Callable[[], FrameChange],
+    config: TrackingConfig,
+) -> tuple[dict[int, int], list[tuple[int, int, np.ndarray]]]:
+    """Take a free old id back from a part pushed out of another object's segment.
+
+    A frame-0 segment often holds two touching objects; a push separates them, one keeps the
+    union's id and the assignment's second stage may hand the other, which no known object
+    resembles within ``max_match_cost``, the free id of some object hidden now
+    (docs/DESIGN_NOTES.md, "The elimination stage"). Its earlier pixels then stay under the
+    union's id for good: ``split_merged_objects`` splits only for objects first seen later.
+
+    A segment ``s`` matched to an object ``k`` seen in the previous frame at a cost above
+    ``max_match_cost`` (a pair only the second stage makes) is taken as a part pushed out of
+    another matched object ``x`` labelled in the previous frame when splitting ``x`` explains
+    this frame better than the pair, by ``split_merged_objects``' own test (``_split_gain``)
+    with the pair's cost where that test has a new object's: ``x``'s previous-frame pixels
+    with depth, followed into this frame (``change``), split into the part now seen as ``s``
+    (or also gone) and the rest, each at least ``split_min_share`` of them (and
+    ``split_min_px``), and **each side better on its own**: ``x``'s segment costs less
+    against the rest than against all of them (the part was not ``x``'s own surface: an
+    object that merely moved explains its old place no worse whole), and ``s`` costs less
+    against the part than against ``k`` (the sum then gains, more than ``split_margin``).
+    ``s`` then starts a new object and ``k``, seen elsewhere the frame before, stays
+    unmatched; ``track_segments`` gives the part of ``x``'s previous-frame pixels to the new
+    object and ``split_merged_objects`` carries it back to frame 0. An object not seen in the
+    previous frame may have been inside ``x``'s segment there, so its pairs are left alone, as
+    are segments below ``split_min_px`` (``split_merged_objects`` would not split them).
+
+    Args:
+        assignment: segment id -> object id; cost: (S, K) costs (rows ``segment_ids``,
+            columns ``known_ids``); segments: this frame's segment features by (untracked)
+            segment id; seen_last_frame: ids seen in the previous frame; previous_labels:
+            (H, W) int tracked ids of the previous frame; previous_frame: its (H, W, 3) world
+            points (m), (H, W, 3) uint8 colours and (H, W) depth (m, 0 = no reading; None =
+            all valid); change: called at most once (only when a pair is a candidate), frame
+            t-1's pixels followed into this frame's segments (``follow_previous_frame``: a
+            ``FrameChange`` of frame t-1's shape whose ``previous_label`` holds this frame's
+            segment ids).
+
+    Returns:
+        The new segment -> object assignment, and per segment unmatched here (piece segment
+        id, object ``x``, (M,) flat previous-frame pixels of the part).
+    """
+    row_of = {segment_id: row for row, segment_id in enumerate(segment_ids)}
+    column_of = {object_id: column for column, object_id in enumerate(known_ids)}
+    pieces = {
+        segment_id: float(cost[row_of[segment_id], column_of[object_id]])
+        for segment_id, object_id in assignment.items()
+        if object_id in seen_last_frame
+        and cost[row_of[segment_id], column_of[object_id]] > config.max_match_cost
+        and segments[segment_id].pixels.size >= config.split_min_px
+    }
+    if not pieces:
+        return assignment, []
+    points, rgb, depth = previous_frame
+    flat = previous_labels.reshape(-1)
+    with_depth = np.ones(flat.size, dtype=bool) if depth is None else depth.reshape(-1) > 0
+    order, ids, starts = kernels.labelled_order(flat, with_depth)
+    ends = np.append(starts[1:], order.size)
+    following = change()
+    state, label_in_t = following.state.reshape(-1), following.previous_label.reshape(-1)
+    best: dict[int, tuple[float, int, np.ndarray]] = {}  # piece -> (gain, object, part)
+    for segment_id, object_id in sorted(assignment.items()):
+        where = int(np.searchsorted(ids, object_id))
+        if where == ids.size or ids[where] != object_id:
+            continue  # not labelled in the previous frame
+        pixels = order[starts[where] : ends[where]]
+        gone = state[pixels] == ARRIVED
+        seen_in_place = state[pixels] == UNCHANGED
+        whole = None
+        for piece, pair in pieces.items():
+            if piece == segment_id:
+                continue
+            found = _split_gain(
+                pixels,
+                seen_in_place & (label_in_t[pixels] == piece),
+                gone,
+                segments[segment_id],
+                segments[piece],
+                previous_frame,
+                config,
+                pair,
+                whole,
+            )
+            if found is None:
+                continue
+            whole = found.whole
+            # Each side of the split explains this frame better than the pairing it replaces:
+            # the object's segment its own pixels without the part, the piece the part than
+            # the object it was paired with.
+            if found.rest_cost >= whole or found.part_cost >= pair:
+                continue
+            if found.gain > config.split_margin and (
+                piece not in best or found.gain > best[piece][0]
+            ):
+                best[piece] = (found.gain, object_id, found.part)
+    result = {s: o for s, o in assignment.items() if s not in best}
+    return result, [(piece, object_id, part) for piece, (_, object_id, part) in best.items()]
+
+
+def _split_gain(
+    pixels: np.ndarray,
+    seen_as_new: np.ndarray,
+    gone: np.ndarray,
+    x_t: SegmentFeatures,
+    z_t: SegmentFeatures,
+    previous_frame: tuple[np.ndarray, np.ndarray, np.ndarray | None],
+    config: TrackingConfig,
+    alternative: float,
+    whole: float | None = None,
+) -> _Split | None:
+    """``split_merged_objects``' test of one split of an object ``x`` seen in frames t-1 and
+    t: its (N,) previous-frame pixels with depth, (N,) bool those seen as ``z`` in place in
+    frame t and those whose surface is gone, its segment ``x_t`` and ``z``'s ``z_t`` in frame
+    t, and the previous frame's (points, colours, depth). The candidate parts (seen as ``z`` or
+    gone; seen as ``z``) with at least ``split_min_share`` of the pixels (and
+    ``split_min_px``) on each side are costed. Returns the one of highest gain, the gain being
+    ``whole`` (``pair_cost(x_t, all)``, computed when None) + ``alternative`` (what ``z_t``
+    costs otherwise: ``max_match_cost`` as a new object) less ``pair_cost(x_t, rest) +
+    pair_cost(z_t, part)``, or None when no part has the size."""
+    least = max(config.split_min_share * pixels.size, config.split_min_px)
+    parts = [
+        part
+        for part in (seen_as_new | gone, seen_as_new)
+        if least <= np.count_nonzero(part) <= pixels.size - least
+    ]
+    if not parts:
+        return None
+    if whole is None:
+        whole = pair_cost(x_t, _pixel_features(pixels, *previous_frame), config)
+    best = None
+    for part in parts:
+        rest_cost = pair_cost(x_t, _pixel_features(pixels[~part], *previous_frame), config)
+        part_cost = pair_cost(z_t, _pixel_features(pixels[part], *previous_frame), config)
+        gain = whole + alternative - rest_cost - part_cost
+        if best is None or gain > best.gain:
+            best = _Split(gain, pixels[part], whole, rest_cost, part_cost)
+    return best
+
+
+@dataclass(frozen=True, eq=False)
+class _Split:
+    """One split of an object's previous-frame pixels (``_split_gain``): the gain (cost units),
+    the (M,) flat pixels of the part, and ``pair_cost`` of the object's segment to all of its
+    pixels (``whole``) and to the rest, and of the other segment to the part."""
+
+    gain: float
+    part: np.ndarray
+    whole: float
+    rest_cost: float
+    part_cost: float
 
 
 def _gated_assignment(cost: np.ndarray, gate: float) -> tuple[np.ndarray, np.ndarray]:
@@ -855,6 +1017,7 @@ def track_segments(
     frames_rgb: list[np.ndarray],
     config: TrackingConfig | None = None,
     frames_depth: list[np.ndarray] | None = None,
+    follow: Callable[[int, np.ndarray], FrameChange] | None = None,
 ) -> list[np.ndarray]:
     """Relabel per-frame segments (H, W) int so that one object keeps one id in every frame.
 
@@ -867,7 +1030,9 @@ def track_segments(
     Args:
         frames_labels: per frame, (H, W) int segment labels (0 = none); frames_points: (H, W, 3)
             world points (m); frames_rgb: (H, W, 3) uint8; frames_depth: (H, W) depth (m, 0 =
-            no reading), or None (all valid).
+            no reading), or None (all valid); follow: (t, frame t's (H, W) segment labels) ->
+            frame t-1's pixels followed into frame t (``follow_previous_frame`` with the
+            frames' cameras), for ``pushed_out_guard``; None: that guard does not act.
     """
     config = config or TrackingConfig()
     tracked: list[np.ndarray] = []
@@ -887,6 +1052,7 @@ def track_segments(
             continue
         segments = segment_features(labels, points, rgb, depth)
         assignment: dict[int, int] = {}
+        pushed_out: list[tuple[int, int, np.ndarray]] = []
         if sightings and segments:
             segment_ids, known_ids = sorted(segments), sorted(sightings)
             cost = np.full((len(segment_ids), len(known_ids)), np.inf)
@@ -896,6 +1062,7 @@ def track_segments(
                 _, layer_ids, layer_cost = match_costs(layer, segments, labels.size, config)
                 columns = np.searchsorted(known_ids, layer_ids)
                 cost[:, columns] = np.minimum(cost[:, columns], layer_cost)
+            seen_last_frame = {o for o, f in sighting_frames.items() if f[-1] == frame_index - 1}
             refused = None
             if config.separated_piece_guard and tracked:
                 refused = partial(
@@ -903,9 +1070,7 @@ def track_segments(
                     segments=segments,
                     segment_ids=segment_ids,
                     known_ids=known_ids,
-                    seen_last_frame={
-                        o for o, f in sighting_frames.items() if f[-1] == frame_index - 1
-                    },
+                    seen_last_frame=seen_last_frame,
                     previous_labels=tracked[-1],
                     previous_points=frames_points[frame_index - 1],
                     points=points,
@@ -923,6 +1088,23 @@ def track_segments(
                 refused,
             ):
                 assignment[segment_ids[row]] = known_ids[col]
+            if config.pushed_out_guard and tracked and follow is not None:
+                assignment, pushed_out = pushed_out_pieces(
+                    assignment,
+                    cost,
+                    segment_ids,
+                    known_ids,
+                    segments,
+                    seen_last_frame,
+                    tracked[-1],
+                    (
+                        frames_points[frame_index - 1],
+                        frames_rgb[frame_index - 1],
+                        depths[frame_index - 1],
+                    ),
+                    partial(follow, frame_index, labels),
+                    config,
+                )
             if config.larger_piece_takes_id:
                 extent_of = partial(
                     _object_size,
@@ -970,10 +1152,11 @@ def track_segments(
                     assignment, segments, sightings, labels.shape, points, rgb, depth, config
                 )
         relabelled = np.zeros(labels.size, dtype=np.int32)
+        started: dict[int, int] = {}  # segment id -> the new object it starts
         for segment_id in sorted(segments):
             object_id = assignment.get(segment_id)
             if object_id is None:
-                object_id = next_id
+                object_id = started[segment_id] = next_id
                 next_id += 1
             next_id = max(next_id, object_id + 1)
             relabelled[segments[segment_id].pixels] = object_id
@@ -984,6 +1167,16 @@ def track_segments(
             frames_seen.append(frame_index)
             del frames_seen[: -config.max_sightings]
         tracked.append(relabelled.reshape(labels.shape))
+        for piece, object_id, part in pushed_out:
+            # The part of the previous frame's object the piece was pushed out of becomes the
+            # piece's new object there (``split_merged_objects`` carries it back to frame 0).
+            if piece in started:
+                valid = (
+                    np.ones(labels.size, dtype=bool)
+                    if depths[frame_index - 1] is None
+                    else (depths[frame_index - 1].reshape(-1) > 0)
+                )
+                tracked[-2] = _relabel_part(tracked[-2], object_id, started[piece], part, valid)
     if joined:
         # Every frame shows a joined object under the id it finally joined (joins may chain).
         final = np.arange(next_id, dtype=np.int32)
@@ -1083,17 +1276,14 @@ def split_merged_objects(
         if not new_ids:
             continue
         previous_ids = sorted(present[t - 1] & present[t])
-        # Frame t-1 against frame t: ARRIVED here means frame t's surface lies behind (gone).
-        change = compare_frames(
-            frames_points[t - 1],
-            frames_depth[t - 1],
-            frames_depth[t],
+        change = follow_previous_frame(
+            t,
             result[t],
-            frames_K[t],
-            frames_world_from_camera[t],
-            config,
-            K=frames_K[t - 1],
-            world_from_camera=frames_world_from_camera[t - 1],
+            frames_points=frames_points,
+            frames_depth=frames_depth,
+            frames_K=frames_K,
+            frames_world_from_camera=frames_world_from_camera,
+            config=config,
         )
         state, label_in_t = change.state.reshape(-1), change.previous_label.reshape(-1)
         segments_t = segment_features(result[t], frames_points[t], frames_rgb[t], frames_depth[t])
@@ -1105,28 +1295,24 @@ def split_merged_objects(
             z_t = segments_t[new_id]
             for object_id in previous_ids:
                 pixels = np.flatnonzero((previous_flat == object_id) & with_depth)
-                least = max(tracking.split_min_share * pixels.size, tracking.split_min_px)
                 seen_as_new = (state[pixels] == UNCHANGED) & (label_in_t[pixels] == new_id)
                 gone = state[pixels] == ARRIVED
-                parts = [
-                    part
-                    for part in (seen_as_new | gone, seen_as_new)
-                    if least <= np.count_nonzero(part) <= pixels.size - least
-                ]
-                if not parts:
-                    continue
-                x_t = segments_t[object_id]
-                unsplit = (
-                    pair_cost(x_t, _pixel_features(pixels, *previous_frame), tracking)
-                    + tracking.max_match_cost
+                found = _split_gain(
+                    pixels,
+                    seen_as_new,
+                    gone,
+                    segments_t[object_id],
+                    z_t,
+                    previous_frame,
+                    tracking,
+                    tracking.max_match_cost,
                 )
-                for part in parts:
-                    split = pair_cost(
-                        x_t, _pixel_features(pixels[~part], *previous_frame), tracking
-                    ) + pair_cost(z_t, _pixel_features(pixels[part], *previous_frame), tracking)
-                    gain = unsplit - split
-                    if gain > tracking.split_margin and (best is None or gain > best[0]):
-                        best = (gain, object_id, new_id, pixels[part])
+                if (
+                    found is not None
+                    and found.gain > tracking.split_margin
+                    and (best is None or found.gain > best[0])
+                ):
+                    best = (found.gain, object_id, new_id, found.part)
             if best is not None:
                 _, object_id, new_id, part = best
                 result[t - 1] = _relabel_part(result[t - 1], object_id, new_id, part, with_depth)
@@ -1135,6 +1321,35 @@ def split_merged_objects(
                 previous_flat = result[t - 1].reshape(-1)
                 best = None
     return result
+
+
+def follow_previous_frame(
+    t: int,
+    labels_t: np.ndarray,
+    *,
+    frames_points: list[np.ndarray],
+    frames_depth: list[np.ndarray],
+    frames_K: list[np.ndarray],
+    frames_world_from_camera: list[np.ndarray],
+    config: PerceptionConfig,
+) -> FrameChange:
+    """Frame t-1's pixels followed into frame t (``temporal.compare_frames`` with the frames
+    swapped): per pixel of frame t-1, ``UNCHANGED`` with ``previous_label`` the (H, W) int
+    ``labels_t`` there (the surface is seen in place in frame t), ``ARRIVED`` when frame t's
+    surface lies behind it (the surface is gone), ``REVEALED`` when frame t's lies in front
+    (hidden now). The frames' (H, W, 3) world points (m), (H, W) depth (m, 0 = no reading),
+    (3, 3) intrinsics (px) and (4, 4) poses (world from OpenCV camera, m)."""
+    return compare_frames(
+        frames_points[t - 1],
+        frames_depth[t - 1],
+        frames_depth[t],
+        labels_t,
+        frames_K[t],
+        frames_world_from_camera[t],
+        config,
+        K=frames_K[t - 1],
+        world_from_camera=frames_world_from_camera[t - 1],
+    )
 
 
 def _pixel_features(
