@@ -453,7 +453,7 @@ def pushed_out_pieces(
     seen_last_frame: set[int],
     previous_labels: np.ndarray,
     previous_frame: tuple[np.ndarray, np.ndarray, np.ndarray | None],
-    change: Callable[[], FrameChange],
+    change: Callable[..., FrameChange],
     config: TrackingConfig,
 ) -> tuple[dict[int, int], list[tuple[int, int, np.ndarray]]]:
     """Take a free old id back from a part pushed out of another object's segment.
@@ -487,10 +487,11 @@ def pushed_out_pieces(
             segment id; seen_last_frame: ids seen in the previous frame; previous_labels:
             (H, W) int tracked ids of the previous frame; previous_frame: its (H, W, 3) world
             points (m), (H, W, 3) uint8 colours and (H, W) depth (m, 0 = no reading; None =
-            all valid); change: called at most once (only when a pair is a candidate), frame
-            t-1's pixels followed into this frame's segments (``follow_previous_frame``: a
-            ``FrameChange`` of frame t-1's shape whose ``previous_label`` holds this frame's
-            segment ids).
+            all valid); change: called at most once (only when a pair is a candidate) with
+            ``compared``, an (H, W) bool mask of the previous frame's pixels needed: frame t-1's
+            pixels followed
+            into this frame's segments (``follow_previous_frame``: a ``FrameChange`` of frame
+            t-1's shape whose ``previous_label`` holds this frame's segment ids).
 
     Returns:
         The new segment -> object assignment, and per segment unmatched here (piece segment
@@ -510,9 +511,13 @@ def pushed_out_pieces(
     points, rgb, depth = previous_frame
     flat = previous_labels.reshape(-1)
     with_depth = np.ones(flat.size, dtype=bool) if depth is None else depth.reshape(-1) > 0
-    order, ids, starts = kernels.labelled_order(flat, with_depth)
+    # Only the pixels of the matched objects are followed into this frame.
+    candidate = np.zeros(max(int(flat.max()), max(assignment.values())) + 1, dtype=bool)
+    candidate[list(assignment.values())] = True
+    compared = candidate[flat] & with_depth
+    order, ids, starts = kernels.labelled_order(flat, compared)
     ends = np.append(starts[1:], order.size)
-    following = change()
+    following = change(compared=compared.reshape(previous_labels.shape))
     state, label_in_t = following.state.reshape(-1), following.previous_label.reshape(-1)
     best: dict[int, tuple[float, int, np.ndarray]] = {}  # piece -> (gain, object, part)
     for segment_id, object_id in sorted(assignment.items()):
@@ -522,88 +527,74 @@ def pushed_out_pieces(
         pixels = order[starts[where] : ends[where]]
         gone = state[pixels] == ARRIVED
         seen_in_place = state[pixels] == UNCHANGED
-        whole = None
+        x_t, whole = segments[segment_id], None
         for piece, pair in pieces.items():
             if piece == segment_id:
                 continue
-            found = _split_gain(
-                pixels,
-                seen_in_place & (label_in_t[pixels] == piece),
-                gone,
-                segments[segment_id],
-                segments[piece],
-                previous_frame,
-                config,
-                pair,
-                whole,
+            parts = _split_parts(
+                pixels, seen_in_place & (label_in_t[pixels] == piece), gone, config
             )
-            if found is None:
-                continue
-            whole = found.whole
-            # Each side of the split explains this frame better than the pairing it replaces:
-            # the object's segment its own pixels without the part, the piece the part than
-            # the object it was paired with.
-            if found.rest_cost >= whole or found.part_cost >= pair:
-                continue
-            if found.gain > config.split_margin and (
-                piece not in best or found.gain > best[piece][0]
-            ):
-                best[piece] = (found.gain, object_id, found.part)
+            for part in parts:
+                # Each side of the split explains this frame better than the pairing it
+                # replaces: the piece the part than the object it was paired with (checked
+                # first: it fails most often), the object's segment its own pixels without the
+                # part than with it.
+                part_cost = pair_cost(
+                    segments[piece], _pixel_features(pixels[part], *previous_frame), config
+                )
+                if part_cost >= pair:
+                    continue
+                if whole is None:
+                    whole = pair_cost(x_t, _pixel_features(pixels, *previous_frame), config)
+                rest_cost = pair_cost(x_t, _pixel_features(pixels[~part], *previous_frame), config)
+                gain = whole + pair - rest_cost - part_cost
+                if rest_cost >= whole or gain <= config.split_margin:
+                    continue
+                if piece not in best or gain > best[piece][0]:
+                    best[piece] = (gain, object_id, pixels[part])
     result = {s: o for s, o in assignment.items() if s not in best}
     return result, [(piece, object_id, part) for piece, (_, object_id, part) in best.items()]
 
 
-def _split_gain(
-    pixels: np.ndarray,
-    seen_as_new: np.ndarray,
-    gone: np.ndarray,
-    x_t: SegmentFeatures,
-    z_t: SegmentFeatures,
-    previous_frame: tuple[np.ndarray, np.ndarray, np.ndarray | None],
-    config: TrackingConfig,
-    alternative: float,
-    whole: float | None = None,
-) -> _Split | None:
-    """``split_merged_objects``' test of one split of an object ``x`` seen in frames t-1 and
-    t: its (N,) previous-frame pixels with depth, (N,) bool those seen as ``z`` in place in
-    frame t and those whose surface is gone, its segment ``x_t`` and ``z``'s ``z_t`` in frame
-    t, and the previous frame's (points, colours, depth). The candidate parts (seen as ``z`` or
-    gone; seen as ``z``) with at least ``split_min_share`` of the pixels (and
-    ``split_min_px``) on each side are costed. Returns the one of highest gain, the gain being
-    ``whole`` (``pair_cost(x_t, all)``, computed when None) + ``alternative`` (what ``z_t``
-    costs otherwise: ``max_match_cost`` as a new object) less ``pair_cost(x_t, rest) +
-    pair_cost(z_t, part)``, or None when no part has the size."""
+def _split_parts(
+    pixels: np.ndarray, seen_as_new: np.ndarray, gone: np.ndarray, config: TrackingConfig
+) -> list[np.ndarray]:
+    """The candidate parts ((N,) bool) of an object's (N,) previous-frame pixels with depth
+    that a later object ``z`` may take (``split_merged_objects``): those seen as ``z`` in place
+    or gone, and those seen as ``z``, each kept when it and the rest hold at least
+    ``split_min_share`` of the pixels and ``split_min_px``."""
     least = max(config.split_min_share * pixels.size, config.split_min_px)
-    parts = [
+    return [
         part
         for part in (seen_as_new | gone, seen_as_new)
         if least <= np.count_nonzero(part) <= pixels.size - least
     ]
-    if not parts:
-        return None
-    if whole is None:
-        whole = pair_cost(x_t, _pixel_features(pixels, *previous_frame), config)
+
+
+def _split_gain(
+    pixels: np.ndarray,
+    parts: list[np.ndarray],
+    x_t: SegmentFeatures,
+    z_t: SegmentFeatures,
+    previous_frame: tuple[np.ndarray, np.ndarray, np.ndarray | None],
+    config: TrackingConfig,
+) -> tuple[float, np.ndarray]:
+    """``split_merged_objects``' test of the candidate ``parts`` (non-empty, ``_split_parts``)
+    of an object ``x``'s (N,) previous-frame pixels with depth, given its segment ``x_t`` and
+    the new object's ``z_t`` in frame t and the previous frame's (points, colours, depth):
+    the best (gain, part's pixels), the gain being ``pair_cost(x_t, all) + max_match_cost``
+    (``z`` as a new object) less ``pair_cost(x_t, rest) + pair_cost(z_t, part)``."""
+    unsplit = (
+        pair_cost(x_t, _pixel_features(pixels, *previous_frame), config) + config.max_match_cost
+    )
     best = None
     for part in parts:
-        rest_cost = pair_cost(x_t, _pixel_features(pixels[~part], *previous_frame), config)
-        part_cost = pair_cost(z_t, _pixel_features(pixels[part], *previous_frame), config)
-        gain = whole + alternative - rest_cost - part_cost
-        if best is None or gain > best.gain:
-            best = _Split(gain, pixels[part], whole, rest_cost, part_cost)
+        split = pair_cost(x_t, _pixel_features(pixels[~part], *previous_frame), config) + (
+            pair_cost(z_t, _pixel_features(pixels[part], *previous_frame), config)
+        )
+        if best is None or unsplit - split > best[0]:
+            best = (unsplit - split, pixels[part])
     return best
-
-
-@dataclass(frozen=True, eq=False)
-class _Split:
-    """One split of an object's previous-frame pixels (``_split_gain``): the gain (cost units),
-    the (M,) flat pixels of the part, and ``pair_cost`` of the object's segment to all of its
-    pixels (``whole``) and to the rest, and of the other segment to the part."""
-
-    gain: float
-    part: np.ndarray
-    whole: float
-    rest_cost: float
-    part_cost: float
 
 
 def _gated_assignment(cost: np.ndarray, gate: float) -> tuple[np.ndarray, np.ndarray]:
@@ -1017,7 +1008,7 @@ def track_segments(
     frames_rgb: list[np.ndarray],
     config: TrackingConfig | None = None,
     frames_depth: list[np.ndarray] | None = None,
-    follow: Callable[[int, np.ndarray], FrameChange] | None = None,
+    follow: Callable[..., FrameChange] | None = None,
 ) -> list[np.ndarray]:
     """Relabel per-frame segments (H, W) int so that one object keeps one id in every frame.
 
@@ -1030,9 +1021,10 @@ def track_segments(
     Args:
         frames_labels: per frame, (H, W) int segment labels (0 = none); frames_points: (H, W, 3)
             world points (m); frames_rgb: (H, W, 3) uint8; frames_depth: (H, W) depth (m, 0 =
-            no reading), or None (all valid); follow: (t, frame t's (H, W) segment labels) ->
-            frame t-1's pixels followed into frame t (``follow_previous_frame`` with the
-            frames' cameras), for ``pushed_out_guard``; None: that guard does not act.
+            no reading), or None (all valid); follow: (t, frame t's (H, W) segment labels,
+            keyword ``compared``: (H, W) bool pixels of frame t-1 to follow) -> frame t-1's
+            pixels followed into frame t (``follow_previous_frame`` with the frames' cameras),
+            for ``pushed_out_guard``; None: that guard does not act.
     """
     config = config or TrackingConfig()
     tracked: list[np.ndarray] = []
@@ -1296,23 +1288,14 @@ def split_merged_objects(
             for object_id in previous_ids:
                 pixels = np.flatnonzero((previous_flat == object_id) & with_depth)
                 seen_as_new = (state[pixels] == UNCHANGED) & (label_in_t[pixels] == new_id)
-                gone = state[pixels] == ARRIVED
-                found = _split_gain(
-                    pixels,
-                    seen_as_new,
-                    gone,
-                    segments_t[object_id],
-                    z_t,
-                    previous_frame,
-                    tracking,
-                    tracking.max_match_cost,
+                parts = _split_parts(pixels, seen_as_new, state[pixels] == ARRIVED, tracking)
+                if not parts:
+                    continue
+                gain, part = _split_gain(
+                    pixels, parts, segments_t[object_id], z_t, previous_frame, tracking
                 )
-                if (
-                    found is not None
-                    and found.gain > tracking.split_margin
-                    and (best is None or found.gain > best[0])
-                ):
-                    best = (found.gain, object_id, new_id, found.part)
+                if gain > tracking.split_margin and (best is None or gain > best[0]):
+                    best = (gain, object_id, new_id, part)
             if best is not None:
                 _, object_id, new_id, part = best
                 result[t - 1] = _relabel_part(result[t - 1], object_id, new_id, part, with_depth)
@@ -1332,13 +1315,16 @@ def follow_previous_frame(
     frames_K: list[np.ndarray],
     frames_world_from_camera: list[np.ndarray],
     config: PerceptionConfig,
+    compared: np.ndarray | None = None,
 ) -> FrameChange:
     """Frame t-1's pixels followed into frame t (``temporal.compare_frames`` with the frames
     swapped): per pixel of frame t-1, ``UNCHANGED`` with ``previous_label`` the (H, W) int
     ``labels_t`` there (the surface is seen in place in frame t), ``ARRIVED`` when frame t's
     surface lies behind it (the surface is gone), ``REVEALED`` when frame t's lies in front
     (hidden now). The frames' (H, W, 3) world points (m), (H, W) depth (m, 0 = no reading),
-    (3, 3) intrinsics (px) and (4, 4) poses (world from OpenCV camera, m)."""
+    (3, 3) intrinsics (px) and (4, 4) poses (world from OpenCV camera, m); ``compared``: (H, W)
+    bool, the only pixels of frame t-1 to follow (the others ``NOT_COMPARED``), or None
+    (all)."""
     return compare_frames(
         frames_points[t - 1],
         frames_depth[t - 1],
@@ -1349,6 +1335,7 @@ def follow_previous_frame(
         config,
         K=frames_K[t - 1],
         world_from_camera=frames_world_from_camera[t - 1],
+        compared=compared,
     )
 
 
@@ -1374,7 +1361,7 @@ def _pixel_features(
         pixels,
         points_k.mean(axis=0),
         histogram / histogram.sum(),
-        float(np.percentile(points_k[:, 2], 98)),
+        float(_grouped_percentile(points_k[:, 2], np.array([len(points_k)]), 98.0)[0]),
         area if area > 0 else float(pixels.size),
     )
 
