@@ -21,8 +21,12 @@ segments left without an object are matched among themselves with the looser
 ``elimination_cost`` gate: an object that was pushed far, or toppled and now shows other faces
 and colours, is usually the one known object still unaccounted for, and the large segment in a
 new place is usually it. (Opt-in, ``separated_piece_guard``: the second stage refuses a segment
-whose surface stayed in place under another object's id while the object was seen elsewhere.) Objects that find no segment keep their id for later frames (they may
-reappear). Each object is remembered by its last ``max_sightings`` sightings, and a segment's
+whose surface stayed in place under another object's id while the object was seen elsewhere.)
+A second-stage pair whose segment is a part pushed out of another matched object's previous
+segment (a frame-0 union of two objects pushed apart) is undone: the segment starts a new
+object and the part of the previous frame takes its id (``pushed_out_pieces``), which
+``split_merged_objects`` carries back to frame 0. Objects that find no segment keep their id
+for later frames (they may reappear). Each object is remembered by its last ``max_sightings`` sightings, and a segment's
 cost to an object is its lowest cost to any of them (an object that was split or partly hidden
 in the last frame is still recognised by an earlier, better view).
 
