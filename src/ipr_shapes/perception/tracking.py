@@ -515,26 +515,35 @@ def pushed_out_pieces(
     points, rgb, depth = previous_frame
     flat = previous_labels.reshape(-1)
     with_depth = np.ones(flat.size, dtype=bool) if depth is None else depth.reshape(-1) > 0
-    # Only the pixels of the matched objects are followed into this frame.
-    candidate = np.zeros(max(int(flat.max()), max(assignment.values())) + 1, dtype=bool)
-    candidate[list(assignment.values())] = True
-    compared = candidate[flat] & with_depth
-    order, ids, starts = kernels.labelled_order(flat, compared)
+    order, ids, starts = kernels.labelled_order(flat, with_depth)
     ends = np.append(starts[1:], order.size)
-    following = change(compared=compared.reshape(previous_labels.shape))
-    state, label_in_t = following.state.reshape(-1), following.previous_label.reshape(-1)
-    best: dict[int, tuple[float, int, np.ndarray]] = {}  # piece -> (gain, object, part)
+    # (object, its segment, its previous-frame pixels with depth, the pieces it may have lost)
+    splits = []
     for segment_id, object_id in sorted(assignment.items()):
         where = int(np.searchsorted(ids, object_id))
         if where == ids.size or ids[where] != object_id:
             continue  # not labelled in the previous frame
         pixels = order[starts[where] : ends[where]]
+        least = max(config.split_min_share * pixels.size, config.split_min_px)
+        if pixels.size < 2 * least:
+            continue  # no part and rest of the size
+        candidates = [(piece, pair) for piece, pair in pieces.items() if piece != segment_id]
+        if candidates:
+            splits.append((object_id, segments[segment_id], pixels, candidates))
+    if not splits:
+        return assignment, []
+    # Only the pixels of the objects that may have lost a part are followed into this frame.
+    compared = np.zeros(flat.size, dtype=bool)
+    for _, _, pixels, _ in splits:
+        compared[pixels] = True
+    following = change(compared=compared.reshape(previous_labels.shape))
+    state, label_in_t = following.state.reshape(-1), following.previous_label.reshape(-1)
+    best: dict[int, tuple[float, int, np.ndarray]] = {}  # piece -> (gain, object, part)
+    for object_id, x_t, pixels, candidates in splits:
         gone = state[pixels] == ARRIVED
         seen_in_place = state[pixels] == UNCHANGED
-        x_t, whole = segments[segment_id], None
-        for piece, pair in pieces.items():
-            if piece == segment_id:
-                continue
+        whole = None
+        for piece, pair in candidates:
             parts = _split_parts(
                 pixels, seen_in_place & (label_in_t[pixels] == piece), gone, config
             )
