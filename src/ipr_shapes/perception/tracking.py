@@ -471,11 +471,11 @@ def pushed_out_pieces(
     A segment ``s`` matched to an object ``k`` seen in the previous frame at a cost above
     ``max_match_cost`` (a pair only the second stage makes) is taken as a part pushed out of
     another matched object ``x`` labelled in the previous frame when splitting ``x`` explains
-    this frame better than the pair, by ``split_merged_objects``' own test (``_split_gain``)
-    with the pair's cost where that test has a new object's: ``x``'s previous-frame pixels
-    with depth, followed into this frame (``change``), split into the part now seen as ``s``
-    (or also gone) and the rest, each at least ``split_min_share`` of them (and
-    ``split_min_px``), and **each side better on its own**: ``x``'s segment costs less
+    this frame better than the pair, by ``split_merged_objects``' own test (its parts,
+    ``_split_parts``, and costs) with the pair's cost where that test has a new object's:
+    ``x``'s previous-frame pixels with depth, followed into this frame (``change``), split into
+    the part now seen as ``s`` (or also gone) and the rest, each at least ``split_min_share``
+    of them (and ``split_min_px``), and **each side better on its own**: ``x``'s segment costs less
     against the rest than against all of them (the part was not ``x``'s own surface: an
     object that merely moved explains its old place no worse whole), and ``s`` costs less
     against the part than against ``k`` (the sum then gains, more than ``split_margin``).
@@ -492,10 +492,10 @@ def pushed_out_pieces(
             (H, W) int tracked ids of the previous frame; previous_frame: its (H, W, 3) world
             points (m), (H, W, 3) uint8 colours and (H, W) depth (m, 0 = no reading; None =
             all valid); change: called at most once (only when a pair is a candidate) with
-            ``compared``, an (H, W) bool mask of the previous frame's pixels needed: frame t-1's
-            pixels followed
-            into this frame's segments (``follow_previous_frame``: a ``FrameChange`` of frame
-            t-1's shape whose ``previous_label`` holds this frame's segment ids).
+            ``compared``, an (H, W) bool mask of the previous frame's pixels needed: frame
+            t-1's pixels followed into this frame's segments (``follow_previous_frame``: a
+            ``FrameChange`` of frame t-1's shape whose ``previous_label`` holds this frame's
+            segment ids).
 
     Returns:
         The new segment -> object assignment, and per segment unmatched here (piece segment
@@ -512,7 +512,7 @@ def pushed_out_pieces(
     }
     if not pieces:
         return assignment, []
-    points, rgb, depth = previous_frame
+    depth = previous_frame[2]
     flat = previous_labels.reshape(-1)
     with_depth = np.ones(flat.size, dtype=bool) if depth is None else depth.reshape(-1) > 0
     order, ids, starts = kernels.labelled_order(flat, with_depth)
