@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 
 from ipr_shapes.camera import backproject
@@ -11,6 +13,7 @@ from ipr_shapes.perception.tracking import (
     assign_segments,
     contact_pixels,
     extent_m,
+    follow_previous_frame,
     match_costs,
     merge_split_pieces,
     merged_features,
@@ -18,6 +21,7 @@ from ipr_shapes.perception.tracking import (
     pair_cost,
     prefer_larger_objects,
     prefer_larger_pieces,
+    pushed_out_pieces,
     segment_features,
     separated_pieces,
     split_merged_objects,
@@ -618,3 +622,123 @@ def test_a_surface_of_another_colour_in_place_is_not_a_separated_piece():
     assert refused(recoloured).tolist() == [[False, True], [False, False]]
     moved_camera = after[1] + np.array([0.0, 0.0, 0.05])
     assert not refused(after[2], moved_camera).any()
+
+
+def _box_frame(boxes, shape=(100, 200)):
+    """``_depth_frame`` with boxes of any size, several per label: {label: [(row, col,
+    height, width, colour), ...]}, each 5 cm tall on a table 1 m below the camera."""
+    labels = np.zeros(shape, np.int32)
+    depth = np.full(shape, 1.0, np.float32)
+    rgb = np.full((*shape, 3), 128, np.uint8)
+    for label, parts in boxes.items():
+        for row, col, height, width, colour in parts:
+            labels[row : row + height, col : col + width] = label
+            depth[row : row + height, col : col + width] = 0.95
+            rgb[row : row + height, col : col + width] = colour
+    K = np.array([[500.0, 0.0, shape[1] / 2], [0.0, 500.0, shape[0] / 2], [0.0, 0.0, 1.0]])
+    return labels, depth, backproject(depth, K), rgb, K, np.eye(4)
+
+
+def _follow(frames, config=None):
+    """``follow_previous_frame`` over ``_box_frame`` frames."""
+    _, depth, points, _, K, pose = map(list, zip(*frames, strict=True))
+    return partial(
+        follow_previous_frame,
+        frames_points=points,
+        frames_depth=depth,
+        frames_K=K,
+        frames_world_from_camera=pose,
+        config=config or PerceptionConfig(),
+    )
+
+
+def _track_scene(frames, **tracking):
+    """``track_segments`` with the frames' cameras, and its labels after
+    ``split_merged_objects``, as ``perception.track_scene`` runs them."""
+    labels, depth, points, rgb, K, pose = map(list, zip(*frames, strict=True))
+    config = PerceptionConfig(tracking=TrackingConfig(**tracking))
+    tracked = track_segments(labels, points, rgb, config.tracking, depth, _follow(frames, config))
+    return tracked, split_merged_objects(tracked, points, rgb, depth, K, pose, config)
+
+
+UNION = [(35, 40, 30, 30, RED), (35, 70, 30, 30, BLUE)]  # a red and a blue box, one segment
+HIDDEN_LATER = [(35, 150, 15, 30, BLUE), (50, 150, 15, 30, GREEN)]  # a blue and green box
+
+
+def test_a_part_pushed_out_of_a_union_starts_a_new_object_split_back_to_frame_0():
+    # Frames 0 and 1 see a red and a blue box as one segment, and a blue and green box. Then
+    # the blue box is pushed 4 cm away and the blue and green box is hidden: the red box
+    # keeps the union's id, and the second stage would give the blue box the blue and green
+    # box's free id (costs 1.8 and 2.2, both above max_match_cost).
+    before = _box_frame({1: UNION, 2: HIDDEN_LATER})
+    after = _box_frame({1: [UNION[0]], 2: [(35, 110, 30, 30, BLUE)]})
+    frames = [before, before, after]
+    tracked, guarded = _track_scene(frames, pushed_out_guard=True)
+    blue = guarded[2][40, 115]
+    assert guarded[2][40, 45] == 1 and blue not in (1, 2)
+    # Frame 1's blue pixels take the new id in the tracker, frame 0's in split_merged_objects.
+    assert (tracked[1][35:65, 70:100] == blue).all() and (tracked[0][35:65, 70:100] == 1).all()
+    for labels in guarded[:2]:
+        assert (labels[35:65, 40:70] == 1).all() and (labels[35:65, 70:100] == blue).all()
+    _, plain = _track_scene(frames, pushed_out_guard=False)
+    assert plain[2][40, 115] == 2 and (plain[0][35:65, 40:100] == 1).all()
+    # Without the cameras (no ``follow``) the guard does not act.
+    labels, depth, points, rgb, _, _ = map(list, zip(*frames, strict=True))
+    config = TrackingConfig(pushed_out_guard=True)
+    assert track_segments(labels, points, rgb, config, depth)[2][40, 115] == 2
+
+
+def _pushed_out(after, pair_cost, seen=(1, 2)):
+    """``pushed_out_pieces`` for frame ``after`` following ``_box_frame({1: UNION, 2:
+    HIDDEN_LATER})``, its segment 1 matched to object 1 at cost 1.8 and segment 2 to object 2
+    at ``pair_cost``: the (piece, object) splits found."""
+    before = _box_frame({1: UNION, 2: HIDDEN_LATER})
+    segments = segment_features(after[0], after[2], after[3], after[1])
+    cost = np.array([[1.8, 3.5], [2.4, pair_cost]])
+    assignment, splits = pushed_out_pieces(
+        {1: 1, 2: 2},
+        cost,
+        [1, 2],
+        [1, 2],
+        segments,
+        set(seen),
+        before[0],
+        (before[2], before[3], before[1]),
+        partial(_follow([before, after]), 1, after[0]),
+        TrackingConfig(pushed_out_guard=True),
+    )
+    assert set(assignment) == {1, 2} - {piece for piece, _, _ in splits}
+    return [(piece, object_id) for piece, object_id, _ in splits]
+
+
+def test_a_pushed_out_part_explains_its_old_place_better_than_the_object_it_was_paired_with():
+    # The blue box pushed out, half of it turned to show a yellow face: it costs about 2.2
+    # against its old place in the union. A pair with the free object dearer than that is
+    # replaced by the split; a cheaper one is kept (the split as a whole still gains: the red
+    # box explains its own old pixels much better without the blue ones), and so is a pair
+    # with an object not seen in the previous frame or one the first stage made.
+    turned = [(35, 110, 15, 30, BLUE), (50, 110, 15, 30, YELLOW)]
+    after = _box_frame({1: [UNION[0]], 2: turned})
+    before = _box_frame({1: UNION, 2: HIDDEN_LATER})
+    blue_before = np.where(before[3][..., 2] == BLUE[2], before[0], 0)
+    old_place = segment_features(blue_before, before[2], before[3], before[1])[1]
+    pushed = segment_features(after[0], after[2], after[3], after[1])[2]
+    part_cost = pair_cost(pushed, old_place, TrackingConfig())
+    assert 1.9 < part_cost < 2.6
+    assert _pushed_out(after, part_cost + 0.1) == [(2, 1)]
+    assert _pushed_out(after, part_cost - 0.1) == []
+    assert _pushed_out(after, part_cost + 0.1, seen=(1,)) == []
+    assert _pushed_out(after, 1.45) == []
+
+
+def test_an_object_whose_segment_still_resembles_its_whole_old_place_is_not_split():
+    # The red box's segment now also holds a blue box on its other side: it resembles the old
+    # red and blue union better whole than without the blue box's old place, so that place
+    # was not a part pushed out of it, even though the pushed blue box explains it well.
+    after = _box_frame({1: [(35, 10, 30, 30, BLUE), UNION[0]], 2: [(35, 110, 30, 30, BLUE)]})
+    assert _pushed_out(after, 2.5) == []
+    alone = _box_frame({1: [UNION[0]], 2: [(35, 110, 30, 30, BLUE)]})
+    assert _pushed_out(alone, 2.5) == [(2, 1)]
+    # A pair within max_match_cost is the first stage's: left alone, however well the pushed
+    # box explains its old place (about 1.1).
+    assert _pushed_out(alone, 1.45) == []

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 
@@ -25,7 +26,11 @@ from ipr_shapes.perception.kernels import (
 )
 from ipr_shapes.perception.robot import robot_pixels
 from ipr_shapes.perception.segmentation import segment_frame
-from ipr_shapes.perception.tracking import split_merged_objects, track_segments
+from ipr_shapes.perception.tracking import (
+    follow_previous_frame,
+    split_merged_objects,
+    track_segments,
+)
 from ipr_shapes.perception.types import FrameSegmentation, KnownPlane, PartialObject
 from ipr_shapes.progress import ProgressCallback, report
 from ipr_shapes.scene import Scene
@@ -160,12 +165,21 @@ def track_scene(
     (``track_segments``, then ``split_merged_objects`` when enabled); ``points`` are the
     frames' (H, W, 3) world points (m)."""
     frames = scene.frames
+    follow = partial(
+        follow_previous_frame,
+        frames_points=points,
+        frames_depth=[f.depth_m for f in frames],
+        frames_K=[f.K for f in frames],
+        frames_world_from_camera=[f.world_from_camera for f in frames],
+        config=config,
+    )
     labels = track_segments(
         untracked,
         points,
         [f.rgb for f in frames],
         config.tracking,
         frames_depth=[f.depth_m for f in frames],
+        follow=follow,
     )
     if config.tracking.split_merged_objects:
         labels = split_merged_objects(

@@ -718,6 +718,17 @@ class TrackingConfig:
             elimination stage").
         separated_unchanged_m, separated_unchanged_rgb, separated_min_share: see
             ``separated_piece_guard``.
+        pushed_out_guard: a segment matched, above ``max_match_cost`` (by the second stage),
+            to an object seen in the previous frame starts a new object instead when it is a
+            part pushed out of another matched object's previous-frame segment (a frame-0
+            union of two objects pushed apart): ``split_merged_objects``' test with the pair's
+            cost in place of a new object's, each side of the split better on its own (the
+            other object's segment resembles its previous pixels better without the part,
+            the segment resembles the part better than the paired object). The part of the
+            previous frame takes the new object's id, and ``split_merged_objects`` carries it
+            back to frame 0 (``tracking.pushed_out_pieces``; needs the frames' cameras,
+            ``track_segments``' ``follow``). On: development ids 947 -> 949 of 977, every
+            other set unchanged (docs/DESIGN_NOTES.md, "The elimination stage").
         larger_piece_takes_id: when an object's id went to a small piece and a segment at
             least ``piece_area_ratio`` times larger nearby that resembles the object almost as
             well (cost <= ``elimination_cost`` and at most ``piece_cost_margin`` more than the
@@ -832,6 +843,7 @@ class TrackingConfig:
     separated_unchanged_m: float = 0.01
     separated_unchanged_rgb: int = 30
     separated_min_share: float = 0.5
+    pushed_out_guard: bool = True
     larger_piece_takes_id: bool = True
     piece_max_cost: float = 2.5
     piece_max_gap_m: float = 0.1

@@ -79,6 +79,7 @@ def compare_frames(
     *,
     K: np.ndarray | None = None,
     world_from_camera: np.ndarray | None = None,
+    compared: np.ndarray | None = None,
 ) -> FrameChange:
     """Compare frame t with frame t-1 pixel by pixel (module doc).
 
@@ -90,10 +91,15 @@ def compare_frames(
             (4, 4) its camera pose (world from OpenCV camera, m).
         K, world_from_camera: frame t's intrinsics and pose, if known: when both equal the
             previous frame's (a fixed camera), pixels are compared in place (no projection).
+        compared: (H, W) bool, the only pixels of frame t to compare (the others are
+            ``NOT_COMPARED``; each compared pixel's result is the same), or None (all).
     """
     height, width = depth_m.shape
     flat_depth = depth_m.reshape(-1)
-    valid = np.flatnonzero(flat_depth > 0)
+    if compared is None:
+        valid = np.flatnonzero(flat_depth > 0)
+    else:
+        valid = np.flatnonzero((flat_depth > 0) & compared.reshape(-1))
     fixed_camera = (
         K is not None
         and world_from_camera is not None

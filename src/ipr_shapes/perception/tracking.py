@@ -21,8 +21,12 @@ segments left without an object are matched among themselves with the looser
 ``elimination_cost`` gate: an object that was pushed far, or toppled and now shows other faces
 and colours, is usually the one known object still unaccounted for, and the large segment in a
 new place is usually it. (Opt-in, ``separated_piece_guard``: the second stage refuses a segment
-whose surface stayed in place under another object's id while the object was seen elsewhere.) Objects that find no segment keep their id for later frames (they may
-reappear). Each object is remembered by its last ``max_sightings`` sightings, and a segment's
+whose surface stayed in place under another object's id while the object was seen elsewhere.)
+A second-stage pair whose segment is a part pushed out of another matched object's previous
+segment (a frame-0 union of two objects pushed apart) is undone: the segment starts a new
+object and the part of the previous frame takes its id (``pushed_out_pieces``), which
+``split_merged_objects`` carries back to frame 0. Objects that find no segment keep their id
+for later frames (they may reappear). Each object is remembered by its last ``max_sightings`` sightings, and a segment's
 cost to an object is its lowest cost to any of them (an object that was split or partly hidden
 in the last frame is still recognised by an earlier, better view).
 
@@ -65,7 +69,7 @@ from scipy.optimize import linear_sum_assignment
 
 from ipr_shapes.perception import kernels
 from ipr_shapes.perception.config import PerceptionConfig, TrackingConfig
-from ipr_shapes.perception.temporal import ARRIVED, UNCHANGED, compare_frames
+from ipr_shapes.perception.temporal import ARRIVED, UNCHANGED, FrameChange, compare_frames
 
 #: Histogram bins per RGB channel.
 COLOUR_BINS = 6
@@ -442,6 +446,168 @@ def _separated_rows(rows: np.ndarray, *, segment_ids: list[int], **kwargs) -> np
     """``separated_pieces`` for the (L,) cost-matrix ``rows`` of ``segment_ids`` only (the
     segments the first stage left): (L, K) bool."""
     return separated_pieces(segment_ids=[segment_ids[r] for r in rows], **kwargs)
+
+
+def pushed_out_pieces(
+    assignment: dict[int, int],
+    cost: np.ndarray,
+    segment_ids: list[int],
+    known_ids: list[int],
+    segments: dict[int, SegmentFeatures],
+    seen_last_frame: set[int],
+    previous_labels: np.ndarray,
+    previous_frame: tuple[np.ndarray, np.ndarray, np.ndarray | None],
+    change: Callable[..., FrameChange],
+    config: TrackingConfig,
+) -> tuple[dict[int, int], list[tuple[int, int, np.ndarray]]]:
+    """Take a free old id back from a part pushed out of another object's segment.
+
+    A frame-0 segment often holds two touching objects; a push separates them, one keeps the
+    union's id and the assignment's second stage may hand the other, which no known object
+    resembles within ``max_match_cost``, the free id of some object hidden now
+    (docs/DESIGN_NOTES.md, "The elimination stage"). Its earlier pixels then stay under the
+    union's id for good: ``split_merged_objects`` splits only for objects first seen later.
+
+    A segment ``s`` matched to an object ``k`` seen in the previous frame at a cost above
+    ``max_match_cost`` (a pair only the second stage makes) is taken as a part pushed out of
+    another matched object ``x`` labelled in the previous frame when splitting ``x`` explains
+    this frame better than the pair, by ``split_merged_objects``' own test (its parts,
+    ``_split_parts``, and costs) with the pair's cost where that test has a new object's:
+    ``x``'s previous-frame pixels with depth, followed into this frame (``change``), split into
+    the part now seen as ``s`` (or also gone) and the rest, each at least ``split_min_share``
+    of them (and ``split_min_px``), and **each side better on its own**: ``x``'s segment costs less
+    against the rest than against all of them (the part was not ``x``'s own surface: an
+    object that merely moved explains its old place no worse whole), and ``s`` costs less
+    against the part than against ``k`` (the sum then gains, more than ``split_margin``).
+    ``s`` then starts a new object and ``k``, seen elsewhere the frame before, stays
+    unmatched; ``track_segments`` gives the part of ``x``'s previous-frame pixels to the new
+    object and ``split_merged_objects`` carries it back to frame 0. An object not seen in the
+    previous frame may have been inside ``x``'s segment there, so its pairs are left alone, as
+    are segments below ``split_min_px`` (``split_merged_objects`` would not split them).
+
+    Args:
+        assignment: segment id -> object id; cost: (S, K) costs (rows ``segment_ids``,
+            columns ``known_ids``); segments: this frame's segment features by (untracked)
+            segment id; seen_last_frame: ids seen in the previous frame; previous_labels:
+            (H, W) int tracked ids of the previous frame; previous_frame: its (H, W, 3) world
+            points (m), (H, W, 3) uint8 colours and (H, W) depth (m, 0 = no reading; None =
+            all valid); change: called at most once (only when a pair is a candidate) with
+            ``compared``, an (H, W) bool mask of the previous frame's pixels needed: frame
+            t-1's pixels followed into this frame's segments (``follow_previous_frame``: a
+            ``FrameChange`` of frame t-1's shape whose ``previous_label`` holds this frame's
+            segment ids).
+
+    Returns:
+        The new segment -> object assignment, and per segment unmatched here (piece segment
+        id, object ``x``, (M,) flat previous-frame pixels of the part).
+    """
+    row_of = {segment_id: row for row, segment_id in enumerate(segment_ids)}
+    column_of = {object_id: column for column, object_id in enumerate(known_ids)}
+    pieces = {
+        segment_id: float(cost[row_of[segment_id], column_of[object_id]])
+        for segment_id, object_id in assignment.items()
+        if object_id in seen_last_frame
+        and cost[row_of[segment_id], column_of[object_id]] > config.max_match_cost
+        and segments[segment_id].pixels.size >= config.split_min_px
+    }
+    if not pieces:
+        return assignment, []
+    depth = previous_frame[2]
+    flat = previous_labels.reshape(-1)
+    with_depth = np.ones(flat.size, dtype=bool) if depth is None else depth.reshape(-1) > 0
+    order, ids, starts = kernels.labelled_order(flat, with_depth)
+    ends = np.append(starts[1:], order.size)
+    # (object, its segment, its previous-frame pixels with depth, the pieces it may have lost)
+    splits = []
+    for segment_id, object_id in sorted(assignment.items()):
+        where = int(np.searchsorted(ids, object_id))
+        if where == ids.size or ids[where] != object_id:
+            continue  # not labelled in the previous frame
+        pixels = order[starts[where] : ends[where]]
+        least = max(config.split_min_share * pixels.size, config.split_min_px)
+        if pixels.size < 2 * least:
+            continue  # no part and rest of the size
+        candidates = [(piece, pair) for piece, pair in pieces.items() if piece != segment_id]
+        if candidates:
+            splits.append((object_id, segments[segment_id], pixels, candidates))
+    if not splits:
+        return assignment, []
+    # Only the pixels of the objects that may have lost a part are followed into this frame.
+    compared = np.zeros(flat.size, dtype=bool)
+    for _, _, pixels, _ in splits:
+        compared[pixels] = True
+    following = change(compared=compared.reshape(previous_labels.shape))
+    state, label_in_t = following.state.reshape(-1), following.previous_label.reshape(-1)
+    best: dict[int, tuple[float, int, np.ndarray]] = {}  # piece -> (gain, object, part)
+    for object_id, x_t, pixels, candidates in splits:
+        gone = state[pixels] == ARRIVED
+        seen_in_place = state[pixels] == UNCHANGED
+        whole = None
+        for piece, pair in candidates:
+            parts = _split_parts(
+                pixels, seen_in_place & (label_in_t[pixels] == piece), gone, config
+            )
+            for part in parts:
+                # Each side of the split explains this frame better than the pairing it
+                # replaces: the piece the part than the object it was paired with (checked
+                # first: it fails most often), the object's segment its own pixels without the
+                # part than with it.
+                part_cost = pair_cost(
+                    segments[piece], _pixel_features(pixels[part], *previous_frame), config
+                )
+                if part_cost >= pair:
+                    continue
+                if whole is None:
+                    whole = pair_cost(x_t, _pixel_features(pixels, *previous_frame), config)
+                rest_cost = pair_cost(x_t, _pixel_features(pixels[~part], *previous_frame), config)
+                gain = whole + pair - rest_cost - part_cost
+                if rest_cost >= whole or gain <= config.split_margin:
+                    continue
+                if piece not in best or gain > best[piece][0]:
+                    best[piece] = (gain, object_id, pixels[part])
+    result = {s: o for s, o in assignment.items() if s not in best}
+    return result, [(piece, object_id, part) for piece, (_, object_id, part) in best.items()]
+
+
+def _split_parts(
+    pixels: np.ndarray, seen_as_new: np.ndarray, gone: np.ndarray, config: TrackingConfig
+) -> list[np.ndarray]:
+    """The candidate parts ((N,) bool) of an object's (N,) previous-frame pixels with depth
+    that a later object ``z`` may take (``split_merged_objects``): those seen as ``z`` in place
+    or gone, and those seen as ``z``, each kept when it and the rest hold at least
+    ``split_min_share`` of the pixels and ``split_min_px``."""
+    least = max(config.split_min_share * pixels.size, config.split_min_px)
+    return [
+        part
+        for part in (seen_as_new | gone, seen_as_new)
+        if least <= np.count_nonzero(part) <= pixels.size - least
+    ]
+
+
+def _split_gain(
+    pixels: np.ndarray,
+    parts: list[np.ndarray],
+    x_t: SegmentFeatures,
+    z_t: SegmentFeatures,
+    previous_frame: tuple[np.ndarray, np.ndarray, np.ndarray | None],
+    config: TrackingConfig,
+) -> tuple[float, np.ndarray]:
+    """``split_merged_objects``' test of the candidate ``parts`` (non-empty, ``_split_parts``)
+    of an object ``x``'s (N,) previous-frame pixels with depth, given its segment ``x_t`` and
+    the new object's ``z_t`` in frame t and the previous frame's (points, colours, depth):
+    the best (gain, part's pixels), the gain being ``pair_cost(x_t, all) + max_match_cost``
+    (``z`` as a new object) less ``pair_cost(x_t, rest) + pair_cost(z_t, part)``."""
+    unsplit = (
+        pair_cost(x_t, _pixel_features(pixels, *previous_frame), config) + config.max_match_cost
+    )
+    best = None
+    for part in parts:
+        split = pair_cost(x_t, _pixel_features(pixels[~part], *previous_frame), config) + (
+            pair_cost(z_t, _pixel_features(pixels[part], *previous_frame), config)
+        )
+        if best is None or unsplit - split > best[0]:
+            best = (unsplit - split, pixels[part])
+    return best
 
 
 def _gated_assignment(cost: np.ndarray, gate: float) -> tuple[np.ndarray, np.ndarray]:
@@ -855,6 +1021,7 @@ def track_segments(
     frames_rgb: list[np.ndarray],
     config: TrackingConfig | None = None,
     frames_depth: list[np.ndarray] | None = None,
+    follow: Callable[..., FrameChange] | None = None,
 ) -> list[np.ndarray]:
     """Relabel per-frame segments (H, W) int so that one object keeps one id in every frame.
 
@@ -867,7 +1034,10 @@ def track_segments(
     Args:
         frames_labels: per frame, (H, W) int segment labels (0 = none); frames_points: (H, W, 3)
             world points (m); frames_rgb: (H, W, 3) uint8; frames_depth: (H, W) depth (m, 0 =
-            no reading), or None (all valid).
+            no reading), or None (all valid); follow: (t, frame t's (H, W) segment labels,
+            keyword ``compared``: (H, W) bool pixels of frame t-1 to follow) -> frame t-1's
+            pixels followed into frame t (``follow_previous_frame`` with the frames' cameras),
+            for ``pushed_out_guard``; None: that guard does not act.
     """
     config = config or TrackingConfig()
     tracked: list[np.ndarray] = []
@@ -887,6 +1057,7 @@ def track_segments(
             continue
         segments = segment_features(labels, points, rgb, depth)
         assignment: dict[int, int] = {}
+        pushed_out: list[tuple[int, int, np.ndarray]] = []
         if sightings and segments:
             segment_ids, known_ids = sorted(segments), sorted(sightings)
             cost = np.full((len(segment_ids), len(known_ids)), np.inf)
@@ -896,6 +1067,7 @@ def track_segments(
                 _, layer_ids, layer_cost = match_costs(layer, segments, labels.size, config)
                 columns = np.searchsorted(known_ids, layer_ids)
                 cost[:, columns] = np.minimum(cost[:, columns], layer_cost)
+            seen_last_frame = {o for o, f in sighting_frames.items() if f[-1] == frame_index - 1}
             refused = None
             if config.separated_piece_guard and tracked:
                 refused = partial(
@@ -903,9 +1075,7 @@ def track_segments(
                     segments=segments,
                     segment_ids=segment_ids,
                     known_ids=known_ids,
-                    seen_last_frame={
-                        o for o, f in sighting_frames.items() if f[-1] == frame_index - 1
-                    },
+                    seen_last_frame=seen_last_frame,
                     previous_labels=tracked[-1],
                     previous_points=frames_points[frame_index - 1],
                     points=points,
@@ -923,6 +1093,23 @@ def track_segments(
                 refused,
             ):
                 assignment[segment_ids[row]] = known_ids[col]
+            if config.pushed_out_guard and tracked and follow is not None:
+                assignment, pushed_out = pushed_out_pieces(
+                    assignment,
+                    cost,
+                    segment_ids,
+                    known_ids,
+                    segments,
+                    seen_last_frame,
+                    tracked[-1],
+                    (
+                        frames_points[frame_index - 1],
+                        frames_rgb[frame_index - 1],
+                        depths[frame_index - 1],
+                    ),
+                    partial(follow, frame_index, labels),
+                    config,
+                )
             if config.larger_piece_takes_id:
                 extent_of = partial(
                     _object_size,
@@ -970,10 +1157,11 @@ def track_segments(
                     assignment, segments, sightings, labels.shape, points, rgb, depth, config
                 )
         relabelled = np.zeros(labels.size, dtype=np.int32)
+        started: dict[int, int] = {}  # segment id -> the new object it starts
         for segment_id in sorted(segments):
             object_id = assignment.get(segment_id)
             if object_id is None:
-                object_id = next_id
+                object_id = started[segment_id] = next_id
                 next_id += 1
             next_id = max(next_id, object_id + 1)
             relabelled[segments[segment_id].pixels] = object_id
@@ -984,6 +1172,16 @@ def track_segments(
             frames_seen.append(frame_index)
             del frames_seen[: -config.max_sightings]
         tracked.append(relabelled.reshape(labels.shape))
+        for piece, object_id, part in pushed_out:
+            # The part of the previous frame's object the piece was pushed out of becomes the
+            # piece's new object there (``split_merged_objects`` carries it back to frame 0).
+            if piece in started:
+                valid = (
+                    np.ones(labels.size, dtype=bool)
+                    if depths[frame_index - 1] is None
+                    else (depths[frame_index - 1].reshape(-1) > 0)
+                )
+                tracked[-2] = _relabel_part(tracked[-2], object_id, started[piece], part, valid)
     if joined:
         # Every frame shows a joined object under the id it finally joined (joins may chain).
         final = np.arange(next_id, dtype=np.int32)
@@ -1083,17 +1281,14 @@ def split_merged_objects(
         if not new_ids:
             continue
         previous_ids = sorted(present[t - 1] & present[t])
-        # Frame t-1 against frame t: ARRIVED here means frame t's surface lies behind (gone).
-        change = compare_frames(
-            frames_points[t - 1],
-            frames_depth[t - 1],
-            frames_depth[t],
+        change = follow_previous_frame(
+            t,
             result[t],
-            frames_K[t],
-            frames_world_from_camera[t],
-            config,
-            K=frames_K[t - 1],
-            world_from_camera=frames_world_from_camera[t - 1],
+            frames_points=frames_points,
+            frames_depth=frames_depth,
+            frames_K=frames_K,
+            frames_world_from_camera=frames_world_from_camera,
+            config=config,
         )
         state, label_in_t = change.state.reshape(-1), change.previous_label.reshape(-1)
         segments_t = segment_features(result[t], frames_points[t], frames_rgb[t], frames_depth[t])
@@ -1105,28 +1300,15 @@ def split_merged_objects(
             z_t = segments_t[new_id]
             for object_id in previous_ids:
                 pixels = np.flatnonzero((previous_flat == object_id) & with_depth)
-                least = max(tracking.split_min_share * pixels.size, tracking.split_min_px)
                 seen_as_new = (state[pixels] == UNCHANGED) & (label_in_t[pixels] == new_id)
-                gone = state[pixels] == ARRIVED
-                parts = [
-                    part
-                    for part in (seen_as_new | gone, seen_as_new)
-                    if least <= np.count_nonzero(part) <= pixels.size - least
-                ]
+                parts = _split_parts(pixels, seen_as_new, state[pixels] == ARRIVED, tracking)
                 if not parts:
                     continue
-                x_t = segments_t[object_id]
-                unsplit = (
-                    pair_cost(x_t, _pixel_features(pixels, *previous_frame), tracking)
-                    + tracking.max_match_cost
+                gain, part = _split_gain(
+                    pixels, parts, segments_t[object_id], z_t, previous_frame, tracking
                 )
-                for part in parts:
-                    split = pair_cost(
-                        x_t, _pixel_features(pixels[~part], *previous_frame), tracking
-                    ) + pair_cost(z_t, _pixel_features(pixels[part], *previous_frame), tracking)
-                    gain = unsplit - split
-                    if gain > tracking.split_margin and (best is None or gain > best[0]):
-                        best = (gain, object_id, new_id, pixels[part])
+                if gain > tracking.split_margin and (best is None or gain > best[0]):
+                    best = (gain, object_id, new_id, part)
             if best is not None:
                 _, object_id, new_id, part = best
                 result[t - 1] = _relabel_part(result[t - 1], object_id, new_id, part, with_depth)
@@ -1135,6 +1317,39 @@ def split_merged_objects(
                 previous_flat = result[t - 1].reshape(-1)
                 best = None
     return result
+
+
+def follow_previous_frame(
+    t: int,
+    labels_t: np.ndarray,
+    *,
+    frames_points: list[np.ndarray],
+    frames_depth: list[np.ndarray],
+    frames_K: list[np.ndarray],
+    frames_world_from_camera: list[np.ndarray],
+    config: PerceptionConfig,
+    compared: np.ndarray | None = None,
+) -> FrameChange:
+    """Frame t-1's pixels followed into frame t (``temporal.compare_frames`` with the frames
+    swapped): per pixel of frame t-1, ``UNCHANGED`` with ``previous_label`` the (H, W) int
+    ``labels_t`` there (the surface is seen in place in frame t), ``ARRIVED`` when frame t's
+    surface lies behind it (the surface is gone), ``REVEALED`` when frame t's lies in front
+    (hidden now). The frames' (H, W, 3) world points (m), (H, W) depth (m, 0 = no reading),
+    (3, 3) intrinsics (px) and (4, 4) poses (world from OpenCV camera, m); ``compared``: (H, W)
+    bool, the only pixels of frame t-1 to follow (the others ``NOT_COMPARED``), or None
+    (all)."""
+    return compare_frames(
+        frames_points[t - 1],
+        frames_depth[t - 1],
+        frames_depth[t],
+        labels_t,
+        frames_K[t],
+        frames_world_from_camera[t],
+        config,
+        K=frames_K[t - 1],
+        world_from_camera=frames_world_from_camera[t - 1],
+        compared=compared,
+    )
 
 
 def _pixel_features(
@@ -1159,7 +1374,7 @@ def _pixel_features(
         pixels,
         points_k.mean(axis=0),
         histogram / histogram.sum(),
-        float(np.percentile(points_k[:, 2], 98)),
+        float(_grouped_percentile(points_k[:, 2], np.array([len(points_k)]), 98.0)[0]),
         area if area > 0 else float(pixels.size),
     )
 
