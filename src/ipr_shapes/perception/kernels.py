@@ -2027,3 +2027,49 @@ def robust_circle(points: np.ndarray, floor_m: float, rounds: int) -> tuple:
     if count == 0:
         return cx, cy, radius, np.inf, 0.0
     return cx, cy, radius, np.sqrt(total / count), count / n
+
+
+@_jit
+def segment_pixel_pairs(
+    supervoxel_labels: np.ndarray,
+    segment_of_supervoxel: np.ndarray,
+    points: np.ndarray,
+    gap_m: float,
+):
+    """The 4-neighbour pixel pairs of two supervoxels of one segment, for
+    ``contours.split_at_occluding_contours``.
+
+    ``supervoxel_labels`` (H, W), -1 = none; ``segment_of_supervoxel`` (M,), 0 = none;
+    ``points`` (H, W, 3) world (m). Returns (P, 2) int64 supervoxel pairs (one row per pixel
+    pair, both supervoxels in the same segment > 0 and different) and (P,) bool: the two
+    pixels' points are closer than ``gap_m`` (the surface runs on across the pair)."""
+    height, width = supervoxel_labels.shape
+    count = 0
+    for phase in range(2):
+        if phase == 1:
+            pairs = np.empty((count, 2), dtype=np.int64)
+            close = np.empty(count, dtype=np.bool_)
+            count = 0
+        for row in range(height):
+            for col in range(width):
+                a = supervoxel_labels[row, col]
+                if a < 0 or segment_of_supervoxel[a] <= 0:
+                    continue
+                for direction in range(2):
+                    r = row + (1 if direction == 1 else 0)
+                    c = col + (1 if direction == 0 else 0)
+                    if r >= height or c >= width:
+                        continue
+                    b = supervoxel_labels[r, c]
+                    if b < 0 or b == a or segment_of_supervoxel[b] != segment_of_supervoxel[a]:
+                        continue
+                    if phase == 1:
+                        pairs[count, 0] = a
+                        pairs[count, 1] = b
+                        squared = 0.0
+                        for k in range(3):
+                            delta = points[row, col, k] - points[r, c, k]
+                            squared += delta * delta
+                        close[count] = squared < gap_m * gap_m
+                    count += 1
+    return pairs, close

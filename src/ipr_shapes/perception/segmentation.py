@@ -34,6 +34,7 @@ from ipr_shapes.errors import IprError
 from ipr_shapes.perception import kernels
 from ipr_shapes.perception.config import PerceptionConfig
 from ipr_shapes.perception.containers import join_container_insides
+from ipr_shapes.perception.contours import split_at_occluding_contours
 from ipr_shapes.perception.curvature import join_curved_segments, smooth_concave_edges
 from ipr_shapes.perception.fragments import fragment_borders, join_fragments
 from ipr_shapes.perception.planes import find_support_plane, find_walls, static_geometry_mask
@@ -170,6 +171,10 @@ def segment_frame(
     segment_of_supervoxel = cluster_supervoxels(supervoxels, config, change)
     if config.segmentation.curved_segment_vote > 0:
         segment_of_supervoxel = join_curved_segments(segment_of_supervoxel, supervoxels, config)
+    if config.segmentation.contour_split_px > 0:
+        segment_of_supervoxel = split_at_occluding_contours(
+            segment_of_supervoxel, supervoxels, points, frame.world_from_camera[:3, 3], config
+        )
     lookup = np.append(segment_of_supervoxel, 0).astype(np.int32)  # label -1 -> last -> 0
     labels = fill_label_holes(
         lookup[supervoxels.labels], valid | robot, config.segmentation.label_fill_px
