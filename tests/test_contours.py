@@ -8,11 +8,13 @@ import numpy as np
 
 from ipr_shapes.perception.config import PerceptionConfig
 from ipr_shapes.perception.contours import split_at_occluding_contours
-from ipr_shapes.perception.types import Supervoxels
+from ipr_shapes.perception.types import KnownPlane, Supervoxels
 
 K = np.array([[600.0, 0.0, 80.0], [0.0, 600.0, 60.0], [0.0, 0.0, 1.0]])
 HEIGHT, WIDTH = 120, 160
 BLOCK = 10  # supervoxels: 10 x 10 pixel blocks (1 cm at 0.6 m), split by the objects' outlines
+#: The camera frame is the world frame: up is -y (the image's rows run down).
+SUPPORT = KnownPlane("support", np.array([0.0, -1.0, 0.0]), 0.2, np.zeros((0, 3)))
 
 
 def _rays() -> np.ndarray:
@@ -76,7 +78,12 @@ def _split(objects, points, config=None):
     supervoxels = _supervoxels(objects, points)
     segments = np.ones(supervoxels.count, dtype=np.int32)
     result = split_at_occluding_contours(
-        segments, supervoxels, points, np.zeros(3), config if config is not None else _config()
+        segments,
+        supervoxels,
+        points,
+        np.zeros(3),
+        SUPPORT,
+        config if config is not None else _config(),
     )
     labels = supervoxels.labels
     return np.where(labels >= 0, result[labels], -1)
@@ -132,6 +139,39 @@ def test_a_face_seen_edge_on_is_not_split_from_its_neighbour():
         base, segmentation=dataclasses.replace(base.segmentation, contour_facing_cos=-1.0)
     )
     assert len(np.unique(_split(objects, points, any_normal)[objects >= 0])) == 2
+
+
+def _cylinder_depth(radius: float, centre_z: float, far: bool) -> np.ndarray:
+    """(H, W) depth of an upright cylinder (axis along the image's rows) of ``radius`` around
+    (0, *, ``centre_z``): its near or ``far`` side (inf where the ray misses it)."""
+    rays = _rays()
+    a = rays[..., 0] ** 2 + 1.0
+    b = -2.0 * centre_z
+    disc = b**2 - 4 * a * (centre_z**2 - radius**2)
+    root = np.sqrt(np.maximum(disc, 0.0))
+    t = ((-b + root) if far else (-b - root)) / (2 * a)
+    return np.where(disc >= 0, t, np.inf)
+
+
+def test_a_cups_inside_seen_over_its_front_wall_is_not_split():
+    """A cup (4 cm radius, 3 mm wall): the image's lower half sees its front wall, the upper
+    half, over the rim, the inside's far wall 8 cm behind. The wall occludes the inside as one
+    object occludes another, but the inside lies within the circle fitted to the wall's
+    footprint on the support (the containers' rule), so the segment stays whole; without the
+    circle (neither part within the other's convex hull) it would be cut."""
+    rows = np.arange(HEIGHT)[:, None].repeat(WIDTH, 1)
+    front = _cylinder_depth(0.04, 0.6, far=False)
+    inside = _cylinder_depth(0.037, 0.6, far=True)
+    depth = np.where(rows >= HEIGHT // 2, front, inside)
+    objects = np.where(np.isfinite(depth), np.where(rows >= HEIGHT // 2, 0, 1), -1)
+    points = _rays() * np.where(np.isfinite(depth), depth, 0.0)[..., None]
+    segments = _split(objects, points)
+    assert len(np.unique(segments[objects >= 0])) == 1
+    base = _config()
+    no_circle = dataclasses.replace(
+        base, containers=dataclasses.replace(base.containers, circle_rms_m=0.0)
+    )
+    assert len(np.unique(_split(objects, points, no_circle)[objects >= 0])) == 2
 
 
 def test_an_object_seen_on_both_sides_of_an_occluder_stays_whole():

@@ -20,10 +20,12 @@ docs/experiments/2026-11-27-touching-objects.md has the measurements.
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import ConvexHull, QhullError
 
 from ipr_shapes.perception import kernels
 from ipr_shapes.perception.config import PerceptionConfig
-from ipr_shapes.perception.types import Supervoxels
+from ipr_shapes.perception.containers import footprint_circle
+from ipr_shapes.perception.types import KnownPlane, Supervoxels
 
 
 def split_at_occluding_contours(
@@ -31,6 +33,7 @@ def split_at_occluding_contours(
     supervoxels: Supervoxels,
     points: np.ndarray,
     viewpoint: np.ndarray,
+    support: KnownPlane,
     config: PerceptionConfig,
 ) -> np.ndarray:
     """(M,) int32 segments with each segment cut in two where its surface is two surfaces
@@ -57,24 +60,20 @@ def split_at_occluding_contours(
     if seg.contour_split_px <= 0 or len(segment_of_supervoxel) == 0:
         return segment_of_supervoxel
     segment_of_supervoxel = np.asarray(segment_of_supervoxel)
-    pairs, close = kernels.segment_pixel_pairs(
+    part, pairs = kernels.segment_surface_parts(
         supervoxels.labels, segment_of_supervoxel, points, float(seg.contour_gap_m)
     )
     if len(pairs) == 0:
         return segment_of_supervoxel
     count = len(segment_of_supervoxel)
-    part = kernels.connected_components(pairs[close], count)
     # Only segments with more than one part: a part is within one segment by construction.
-    first_part = np.full(int(segment_of_supervoxel.max()) + 1, -1, dtype=np.int64)
-    several = np.zeros(len(first_part), dtype=bool)
-    for node in range(count):
-        s = segment_of_supervoxel[node]
-        if s <= 0:
-            continue
-        if first_part[s] < 0:
-            first_part[s] = part[node]
-        elif first_part[s] != part[node]:
-            several[s] = True
+    labelled = segment_of_supervoxel > 0
+    n_segments = int(segment_of_supervoxel.max()) + 1
+    lowest = np.full(n_segments, count, dtype=np.int64)
+    highest = np.full(n_segments, -1, dtype=np.int64)
+    np.minimum.at(lowest, segment_of_supervoxel[labelled], part[labelled])
+    np.maximum.at(highest, segment_of_supervoxel[labelled], part[labelled])
+    several = highest > lowest
     if not several.any():
         return segment_of_supervoxel
     result = segment_of_supervoxel.astype(np.int32).copy()
@@ -85,9 +84,10 @@ def split_at_occluding_contours(
     )
     facing = facing_cos >= seg.contour_facing_cos
     seen_step = facing[pairs[:, 0]] & facing[pairs[:, 1]]
-    part_a, part_b = part[pairs[:, 0]], part[pairs[:, 1]]
+    part_a, part_b = part[pairs[:, 0]], part[pairs[:, 1]]  # every pair here is a step
     between = part_a != part_b
     next_label = int(segment_of_supervoxel.max()) + 1
+    pixel_part = None
     for s in np.flatnonzero(several):
         nodes = np.flatnonzero(segment_of_supervoxel == s)
         parts = np.unique(part[nodes])
@@ -99,6 +99,10 @@ def split_at_occluding_contours(
         across = ((a == large[0]) & (b == large[1])) | ((a == large[1]) & (b == large[0]))
         shared = int(np.sum(across & seen_step[in_segment]))
         if shared < seg.contour_min_pairs:
+            continue
+        if pixel_part is None:
+            pixel_part = np.where(supervoxels.labels >= 0, part[supervoxels.labels], -1).reshape(-1)
+        if _one_within_other(pixel_part, large, points.reshape(-1, 3), support, config):
             continue
         # Smaller parts follow the large part they border most (in pixel pairs; ties and
         # parts bordering neither stay with the first large part, the one with the smallest
@@ -115,3 +119,55 @@ def split_at_occluding_contours(
         result[nodes[moved]] = next_label
         next_label += 1
     return result
+
+
+#: Points of a part used for its footprint (an even subset).
+_MAX_POINTS = 2000
+
+
+def _one_within_other(
+    pixel_part: np.ndarray,
+    large: np.ndarray,
+    points: np.ndarray,
+    support: KnownPlane,
+    config: PerceptionConfig,
+) -> bool:
+    """Whether one of the two parts lies within the other's footprint on the support: at least
+    ``containers.footprint_fraction`` of its points project into the circle fitted to the
+    other's footprint (``containers.footprint_circle``) or its convex hull, grown by
+    ``containers.margin_m`` (the containers' rule: an open container's inside, seen over its
+    front wall, is within the wall's circle, and the wall occludes it as one object occludes
+    another).
+
+    ``pixel_part`` (H * W,) part of each pixel (-1 = none); ``large`` the two parts;
+    ``points`` (H * W, 3) world (m)."""
+    normal = np.asarray(support.normal, dtype=np.float64)
+    axis_u = np.cross(normal, [1.0, 0.0, 0.0])
+    if np.linalg.norm(axis_u) < 0.1:
+        axis_u = np.cross(normal, [0.0, 1.0, 0.0])
+    axis_u /= np.linalg.norm(axis_u)
+    axis_v = np.cross(normal, axis_u)
+    footprints = []
+    for p in large:
+        pixels = np.flatnonzero(pixel_part == p)
+        pixels = pixels[:: -(-pixels.size // _MAX_POINTS)]
+        world = kernels.rows_at(points, pixels)
+        footprints.append(np.stack([world @ axis_u, world @ axis_v], axis=1))
+    containers = config.containers
+    fraction, margin = containers.footprint_fraction, containers.margin_m
+    for inner, outer in ((0, 1), (1, 0)):
+        circle = footprint_circle(
+            footprints[outer], containers.circle_rms_m, containers.max_radius_m
+        )
+        if circle is not None:
+            distance = np.linalg.norm(footprints[inner] - circle[0], axis=1)
+            if np.mean(distance <= circle[1] + margin) >= fraction:
+                return True
+        try:
+            hull = ConvexHull(footprints[outer]).equations
+        except QhullError:
+            continue
+        outside = footprints[inner] @ hull[:, :2].T + hull[:, 2]
+        if np.mean(outside.max(axis=1) <= margin) >= fraction:
+            return True
+    return False

@@ -173,7 +173,12 @@ def segment_frame(
         segment_of_supervoxel = join_curved_segments(segment_of_supervoxel, supervoxels, config)
     if config.segmentation.contour_split_px > 0:
         segment_of_supervoxel = split_at_occluding_contours(
-            segment_of_supervoxel, supervoxels, points, frame.world_from_camera[:3, 3], config
+            segment_of_supervoxel,
+            supervoxels,
+            points,
+            frame.world_from_camera[:3, 3],
+            support,
+            config,
         )
     lookup = np.append(segment_of_supervoxel, 0).astype(np.int32)  # label -1 -> last -> 0
     labels = fill_label_holes(
