@@ -41,7 +41,7 @@ def split_at_occluding_contours(
 
     ``segment_of_supervoxel`` (M,) int, 0 = none; ``supervoxels`` their pixels, sizes,
     centres and normals (world); ``points`` (H, W, 3) world (m); ``viewpoint`` (3,) the
-    camera's centre (world, m).
+    camera's centre (world, m); ``support`` the support plane (footprints are measured on it).
 
     Within a segment, supervoxels are connected when some 4-neighbour pixel pair between them
     has points closer than ``segmentation.contour_gap_m`` (the surface runs on). A segment
@@ -54,7 +54,9 @@ def split_at_occluding_contours(
     angle are centimetres apart. Smaller parts go with the large part they share most pixel
     pairs with. The new segment takes the next free label (so labels are no longer by
     decreasing size); the others keep theirs. With three or more large parts the segment is
-    left alone (which of them belong together is not asked here).
+    left alone (which of them belong together is not asked here), and so is a pair of which one
+    lies within the other's footprint on the support (``_one_within_other``: a container's
+    inside).
     """
     seg = config.segmentation
     if seg.contour_split_px <= 0 or len(segment_of_supervoxel) == 0:

@@ -10,7 +10,8 @@ Steps, as in the paper:
    eigengap, k-means on the row-normalised eigenvectors (``cluster_supervoxels``).
 
 Then, beyond the paper, for real sensors: segments meeting along a smoothly curved concave
-surface are joined (``curvature.py``), support residue and clutter beyond the table dropped
+surface are joined (``curvature.py``), opt-in a segment of two parts seen only across depth
+steps is split in two (``contours.py``), support residue and clutter beyond the table dropped
 (``workspace.py``), open containers' insides joined to them (``containers.py``), small fragments
 joined to the surface they continue (``fragments.py``) and, opt-in, packed boxes cut at colour
 seams (``seams.py``).
@@ -75,7 +76,7 @@ def segment_frame(
     Returns labels (H, W) int32 with 0 for background, support, walls, robot and large depth
     holes, and positive labels for the segments (numbered by decreasing size before the
     container and fragment joins, which give a joined piece its partner's label and so leave
-    gaps); pixels without depth near a segment take its label (``fill_label_holes``). A frame
+    gaps; a segment split at an occluding contour gives its second part the next free label); pixels without depth near a segment take its label (``fill_label_holes``). A frame
     without any depth reading gives an empty segmentation (all 0, no planes, no supervoxels).
 
     The support is the plane the objects rest on (``planes.find_support_plane``), chosen in the
