@@ -375,6 +375,18 @@ class SegmentationConfig:
             1.2-2.3 mm on flat surfaces of the generated and real frames.
         thin_min_contact_px: ... and they touch along at least this many neighbouring pixel
             pairs (world points within ``fragment_gap_m``).
+        contour_split_px: after the clustering, a segment whose supervoxels fall into exactly
+            two parts of at least this many pixels that meet in the image only across depth
+            steps is split between them (one object in front of another; the surface of a
+            convex object has no step; ``ipr_shapes.perception.contours``). 0: off.
+        contour_min_pairs: ... when the two parts are image neighbours along at least this
+            many pixel pairs (an outline, not a corner: parts on both sides of an occluder
+            share none and stay together) whose supervoxels both face the camera:
+        contour_facing_cos: ... the cosine of the supervoxel's normal with the ray to the
+            camera at least this (0.25: within 75 degrees; next to a surface seen edge-on,
+            neighbouring pixels of one surface are centimetres apart).
+        contour_gap_m: two neighbouring pixels whose world points are closer than this (m)
+            connect their supervoxels into one part (as ``fragment_gap_m``).
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -408,6 +420,10 @@ class SegmentationConfig:
         "thin_radius_m": _NON_NEGATIVE,
         "thin_rms_m": _NON_NEGATIVE,
         "thin_min_contact_px": _COUNT,
+        "contour_split_px": _COUNT,
+        "contour_min_pairs": _AT_LEAST_ONE,
+        "contour_facing_cos": Interval(-1, 1),
+        "contour_gap_m": _POSITIVE,
     }
 
     concavity_tolerance_deg: float = 10.0
@@ -442,6 +458,10 @@ class SegmentationConfig:
     thin_radius_m: float = 0.0125
     thin_rms_m: float = 0.003
     thin_min_contact_px: int = 5
+    contour_split_px: int = 0
+    contour_min_pairs: int = 10
+    contour_facing_cos: float = 0.25
+    contour_gap_m: float = 0.01
 
     def __post_init__(self) -> None:
         check_fields(self)

@@ -115,22 +115,32 @@ class _Segment:
     def circle(self) -> tuple[np.ndarray, float] | None:
         """(centre (2,), radius) of the least-squares (Kasa) circle through the footprint, or
         None when it does not fit (RMS distance above ``circle_rms_m``) or is larger than
-        ``max_radius_m``."""
-        if len(self.footprint) < 10:
-            return None
-        origin = self.footprint.mean(axis=0)
-        local = self.footprint - origin
-        design = np.column_stack([local, np.ones(len(local))])
-        solution, *_ = np.linalg.lstsq(design, (local**2).sum(axis=1), rcond=None)
-        centre = solution[:2] / 2.0
-        squared = solution[2] + centre @ centre
-        if squared <= 0:
-            return None
-        radius = float(np.sqrt(squared))
-        residual = np.linalg.norm(local - centre, axis=1) - radius
-        if radius > self.max_radius_m or np.sqrt(np.mean(residual**2)) > self.circle_rms_m:
-            return None
-        return centre + origin, radius
+        ``max_radius_m`` (``footprint_circle``)."""
+        return footprint_circle(self.footprint, self.circle_rms_m, self.max_radius_m)
+
+
+def footprint_circle(
+    footprint: np.ndarray, circle_rms_m: float, max_radius_m: float
+) -> tuple[np.ndarray, float] | None:
+    """(centre (2,), radius) of the least-squares (Kasa) circle through the (N, 2) footprint
+    (m, on the support), or None for fewer than 10 points, a circle fitted with an RMS
+    distance above ``circle_rms_m`` or a radius above ``max_radius_m``: a round wall (mug,
+    cup, bowl) seen from one side."""
+    if len(footprint) < 10:
+        return None
+    origin = footprint.mean(axis=0)
+    local = footprint - origin
+    design = np.column_stack([local, np.ones(len(local))])
+    solution, *_ = np.linalg.lstsq(design, (local**2).sum(axis=1), rcond=None)
+    centre = solution[:2] / 2.0
+    squared = solution[2] + centre @ centre
+    if squared <= 0:
+        return None
+    radius = float(np.sqrt(squared))
+    residual = np.linalg.norm(local - centre, axis=1) - radius
+    if radius > max_radius_m or np.sqrt(np.mean(residual**2)) > circle_rms_m:
+        return None
+    return centre + origin, radius
 
 
 def join_container_insides(

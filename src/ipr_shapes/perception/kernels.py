@@ -2027,3 +2027,73 @@ def robust_circle(points: np.ndarray, floor_m: float, rounds: int) -> tuple:
     if count == 0:
         return cx, cy, radius, np.inf, 0.0
     return cx, cy, radius, np.sqrt(total / count), count / n
+
+
+@_jit
+def _root(parent: np.ndarray, node: int) -> int:
+    """Union-find root of ``node`` with path halving."""
+    while parent[node] != node:
+        parent[node] = parent[parent[node]]
+        node = parent[node]
+    return node
+
+
+@_jit
+def segment_surface_parts(
+    supervoxel_labels: np.ndarray,
+    segment_of_supervoxel: np.ndarray,
+    points: np.ndarray,
+    gap_m: float,
+):
+    """The parts of each segment along which its surface runs on, and the steps between them,
+    for ``contours.split_at_occluding_contours``; one pass over the image.
+
+    ``supervoxel_labels`` (H, W), -1 = none; ``segment_of_supervoxel`` (M,), 0 = none;
+    ``points`` (H, W, 3) world (m). Two supervoxels of one segment (> 0) are in one part when
+    some 4-neighbour pixel pair between them has points closer than ``gap_m``. Returns (M,)
+    int64 part of each supervoxel (numbered as ``connected_components`` numbers them) and
+    (S, 2) int64 supervoxel pairs of the other pixel pairs between two supervoxels of one
+    segment (one row per pixel pair: the steps)."""
+    height, width = supervoxel_labels.shape
+    count = segment_of_supervoxel.shape[0]
+    parent = np.arange(count)
+    steps = np.empty((2 * height * width, 2), dtype=np.int64)
+    n_steps = 0
+    limit = gap_m * gap_m
+    for row in range(height):
+        for col in range(width):
+            a = supervoxel_labels[row, col]
+            if a < 0 or segment_of_supervoxel[a] <= 0:
+                continue
+            for direction in range(2):
+                r = row + (1 if direction == 1 else 0)
+                c = col + (1 if direction == 0 else 0)
+                if r >= height or c >= width:
+                    continue
+                b = supervoxel_labels[r, c]
+                if b < 0 or b == a or segment_of_supervoxel[b] != segment_of_supervoxel[a]:
+                    continue
+                squared = 0.0
+                for k in range(3):
+                    delta = points[row, col, k] - points[r, c, k]
+                    squared += delta * delta
+                if squared < limit:
+                    ra, rb = _root(parent, a), _root(parent, b)
+                    if ra < rb:
+                        parent[rb] = ra
+                    elif rb < ra:
+                        parent[ra] = rb
+                else:
+                    steps[n_steps, 0] = a
+                    steps[n_steps, 1] = b
+                    n_steps += 1
+    part = np.empty(count, dtype=np.int64)
+    n_parts = 0
+    for node in range(count):  # a root is its component's smallest node
+        root = _root(parent, node)
+        if root == node:
+            part[node] = n_parts
+            n_parts += 1
+        else:
+            part[node] = part[root]
+    return part, steps[:n_steps].copy()
