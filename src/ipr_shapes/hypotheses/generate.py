@@ -102,7 +102,7 @@ from ipr_shapes.geometry.convex import (
     triangle_cross,
     unique_rows,
 )
-from ipr_shapes.hypotheses import allowance, structure
+from ipr_shapes.hypotheses import allowance, structure, superquadric
 from ipr_shapes.hypotheses.kernels import (
     first_state_samples,
     first_wall_samples,
@@ -209,6 +209,10 @@ class HypothesisConfig:
             the unary checks still use the frame's free space alone. Off by default: it raises
             the best candidate but not the Collision Checker's choice (docs/DESIGN_NOTES.md,
             "Other objects' seen surfaces bound the hidden extent: opt-in").
+        superquadric_count: of the structure-aware candidates, how many are superquadrics
+            fitted to the observed points with the seen-free space kept out
+            (``ipr_shapes.hypotheses.superquadric``) when the fit applies; the other
+            structure-aware generators take turns over the rest. 0: none.
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -240,6 +244,7 @@ class HypothesisConfig:
         "budget_share": Interval(0, 1, closed="neither"),
         "structure_share": Interval(0, 1),
         "neighbour_surfaces": Options(True, False),
+        "superquadric_count": Interval(0, None, integer=True),
     }
 
     count: int = 32
@@ -268,6 +273,7 @@ class HypothesisConfig:
     budget_share: float = 0.6
     structure_share: float = 0.5
     neighbour_surfaces: bool = False
+    superquadric_count: int = 0
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -1178,7 +1184,30 @@ def _structure_makers(
         makers["sphere"] = lambda t, k: structure.sphere_points(
             ctx.base_points, points, sphere, float(t[0]), settings, towards
         )
-    return makers, {"symmetry": len(fitted), "box": len(fitted)}
+    fits = {"symmetry": len(fitted), "box": len(fitted)}
+    if config.superquadric_count > 0 and fitted:
+        sq_settings = superquadric.SuperquadricSettings()
+        # The fit's bounds: a high quantile of the rays (a curved side's hidden part reaches
+        # past its silhouette's rays); the seen-free voxels in the fit keep it out of free space.
+        loose = dataclasses.replace(settings, quantile=sq_settings.room_quantile)
+        found = []
+        for frame, _, _, _ in fitted:
+            if found and found[0].residual <= 0.5 * sq_settings.residual:
+                break  # the first frame's fit is good: the object's own frame is not needed
+            room = structure.reaches(frame, frame.local(points), points, reach, loose)
+            f = superquadric.fit(frame, points, room, ctx.rays, sq_settings)
+            if f is not None:
+                found.append(f)
+        if found:
+
+            def superquadric_points(t: np.ndarray, k: int) -> np.ndarray:
+                return superquadric.surface_points(
+                    found[k % len(found)], t, ctx.base_points, sq_settings
+                )
+
+            makers["superquadric"] = superquadric_points
+            fits["superquadric"] = len(found)
+    return makers, fits
 
 
 def _structure_plan(
@@ -1196,12 +1225,19 @@ def _structure_plan(
     if not order or count <= 0:
         return []
     counts = dict.fromkeys(order, 0)
-    for slot in range(count):
+    if "superquadric" in counts:
+        # Its own share first (``HypothesisConfig.superquadric_count``); the others take turns.
+        counts["superquadric"] = min(ctx.config.superquadric_count, count)
+        order.remove("superquadric")
+        if not order:
+            order = ["superquadric"]
+    for slot in range(count - sum(counts.values())):
         counts[order[slot % len(order)]] += 1
     plan = []
-    for name in order:
+    for name in counts:
         n = counts[name]
-        variates = structure.variates(name, n, rng, fits.get(name, 1))
+        width = superquadric.PARAMETERS if name == "superquadric" else structure.DIRECTIONS
+        variates = structure.variates(name, n, rng, fits.get(name, 1), width)
         for k in range(n):
 
             def make(scale: float, name=name, t=variates[k], k=k) -> _Sample:
