@@ -69,7 +69,10 @@ Choices made here (the paper leaves them open):
   (symmetry, revolution, box, cylinder, sphere); Algorithm 1 makes the rest, and all of them
   when none applies. Each is labelled with its generator (``ShapeHypothesis.generator``), goes
   through the same hull, support snap, cuts and unary checks, and has two attempts: its
-  variates, then the family's own fit with no hidden extension.
+  variates, then the family's own fit with no hidden extension. With
+  ``superquadric_count`` > 0 that many of them are superquadrics
+  (``ipr_shapes.hypotheses.superquadric``; second attempt: its smallest variant) when the
+  fit applies, and the other families take turns over the rest.
 - Work and time: an object costs at most ``count * max_attempts * max_rounds`` rounds of
   Algorithm 1, so by default there is no wall-clock limit and the output is a function of the
   inputs and the rng alone, on any machine and under any load (docs/DESIGN_NOTES.md, "No

@@ -16,8 +16,10 @@ cross-section), its inside-outside function is
 (e1 near 0: a cylinder), e1 = e2 = 1 an ellipsoid; exponents in [``min_exponent``, 1] keep it
 convex and between those.
 
-Fit (``fit``): in a frame of the object (the upright frame on the support, or the object's own
-frame from its faces), the parameters are the six extents along +-a, +-b, +-up and e1, e2;
+Fit (``fit``): in a frame of the object (the upright frame on the support; the object's own
+frame from its faces too, for a box leaning or an object lying on its side, when the upright
+fit fails or its residual is above half the gate), the parameters are the six extents along
++-a, +-b, +-up and e1, e2;
 bounded least squares (``scipy.optimize.least_squares``) of
 
 - each observed point's radial distance from the surface, |p - c| (1 - F(p)^(-e1/2)) (Jaklic
@@ -29,7 +31,8 @@ bounded least squares (``scipy.optimize.least_squares``) of
 
 with each extent bounded below by the observed points' extent and above by the observed
 extent plus the direction's reach (rays from the extreme points through the free space,
-support and walls: ``structure.reaches``), so the bottom is never below the support. The fit
+support and walls: ``structure.reaches``), so the bottom is never below the support, and
+plus at most the points' largest extent (``extrapolation``). The fit
 applies when the points' RMS distance is at most ``residual`` of the mean semi-axis.
 
 Candidates (``surface_points``): the fit, then variants whose extension beyond the observed
@@ -76,6 +79,8 @@ class SuperquadricSettings:
         spread_m: the smallest move of a hidden extension between candidates.
         exponent_spread: the largest move of an exponent between candidates.
         rings: samples of the profile angle of the tessellation (the cross-section has twice).
+        extrapolation: a direction's extent grows beyond the observed points' by at most
+            this share of their largest extent (the shadow behind a small patch is no bound).
         room_quantile: the quantile of a direction's rays that bounds the fit's extent along
             it (``structure.reaches``; the other families use 0.1): the hidden part of a
             curved side reaches past the rays from its silhouette, which end in seen-free
@@ -84,15 +89,16 @@ class SuperquadricSettings:
 
     min_exponent: float = 0.1
     residual: float = 0.1
-    fit_points: int = 150
-    free_points: int = 300
+    fit_points: int = 100
+    free_points: int = 240
     free_weight: float = 2.0
-    max_evaluations: int = 100
+    max_evaluations: int = 50
     tolerance: float = 1e-6
     spread_m: float = 0.01
-    exponent_spread: float = 0.2
+    exponent_spread: float = 0.1
     rings: int = 8
     room_quantile: float = 0.9
+    extrapolation: float = 1.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -183,7 +189,12 @@ def fit(
         points = points[np.linspace(0, len(points) - 1, s.fit_points).round().astype(np.int64)]
     local = frame.local(points)
     seen_lo, seen_hi = local.min(axis=0), local.max(axis=0)
-    room = np.maximum(np.asarray(room, float), 0.0)
+    # No direction extrapolates further than the points' largest extent times
+    # ``extrapolation``: the reach of a hidden side is mostly the object's shadow, and a fit to
+    # a small patch would otherwise fill it.
+    largest = float(np.ptp(local, axis=0).max())
+    cap = max(s.extrapolation * largest, s.spread_m)
+    room = np.minimum(np.maximum(np.asarray(room, float), 0.0), cap)
     max_lo, max_hi = seen_lo - room[1::2], seen_hi + room[0::2]
     free = _free_near(space, frame, max_lo - 0.01, max_hi + 0.01, local, s.free_points)
     # Start: the observed extents, each hidden side grown to half its room (at most the
