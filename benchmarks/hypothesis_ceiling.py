@@ -248,7 +248,8 @@ def main(argv: list[str] | None = None) -> int:
         type=int,
         default=None,
         metavar="N",
-        help="N of the structure-aware candidates are superquadrics (opt-in; 0: none)",
+        help="N of the structure-aware candidates are superquadrics (default: the config's, 3; "
+        "0: none, the candidates before them)",
     )
     args = parser.parse_args(argv)
     from ipr_shapes.config import Config
