@@ -69,7 +69,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
-#: Structure-aware generators, in the order their candidates are made (round robin).
+#: Structure-aware generators, in the order their candidates are made (round robin; the
+#: superquadric, ``ipr_shapes.hypotheses.superquadric``, takes its own count of the slots first).
 STRUCTURE_GENERATORS = ("symmetry", "revolution", "box", "cylinder", "sphere", "superquadric")
 
 #: Directions of the upright frame whose reach bounds the hidden extent: +a, -a, +b, -b, +up,
