@@ -61,7 +61,8 @@ PARAMETERS = 8
 
 @dataclass(frozen=True)
 class SuperquadricSettings:
-    """Settings of the superquadric fit (metres, shares).
+    """Settings of the superquadric fit (metres, shares); module defaults like
+    ``structure.StructureSettings`` (``HypothesisConfig.superquadric_count`` turns it on).
 
     Attributes:
         min_exponent: smallest exponent (a box with edges rounded at about this share of its
@@ -70,7 +71,8 @@ class SuperquadricSettings:
             the mean semi-axis, above which the family does not apply (like the sphere's and
             the circles' gates).
         fit_points: observed points in the fit at most (taken evenly).
-        free_points: seen-free voxel centres in the fit at most (the nearest to the points).
+        free_points: seen-free voxel centres in the fit at most (a sixth beyond each side of
+            the points' box, the nearest first).
         free_weight: weight of a free voxel's depth inside against a point's distance.
         max_evaluations: function evaluations of the least-squares fit at most (a count, not
             a time: results do not depend on the machine).
