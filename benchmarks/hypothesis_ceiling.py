@@ -4,7 +4,7 @@ The ``hypotheses`` section of docs/BENCHMARKS.md (``python -m benchmarks.run --o
 hypotheses``), or on its own for a subset::
 
     python -m benchmarks.hypothesis_ceiling --suite ycb-dynamic --limit 4 [--scene DIR ...]
-        [--perception-cache DIR] [--algorithm1-only] [--neighbour-surfaces]
+        [--perception-cache DIR] [--algorithm1-only] [--neighbour-surfaces] [--superquadric N]
 
 Per scene: frame 0 is perceived, the hypotheses are prepared (``prepare_hypotheses``, the
 default configuration, seed 0, as the Collision Checker's run draws them) and the Collision
@@ -243,6 +243,14 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="other objects' observed points stop the hidden extent's rays (opt-in)",
     )
+    parser.add_argument(
+        "--superquadric",
+        type=int,
+        default=None,
+        metavar="N",
+        help="N of the structure-aware candidates are superquadrics (default: the config's, 3; "
+        "0: none, the candidates before them)",
+    )
     args = parser.parse_args(argv)
     from ipr_shapes.config import Config
     from ipr_shapes.suites import suite_scenes
@@ -255,6 +263,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.neighbour_surfaces:
         config = dataclasses.replace(
             config, hypotheses=dataclasses.replace(config.hypotheses, neighbour_surfaces=True)
+        )
+    if args.superquadric is not None:
+        config = dataclasses.replace(
+            config,
+            hypotheses=dataclasses.replace(config.hypotheses, superquadric_count=args.superquadric),
         )
     groups = {name: suite_scenes(name)[: args.limit] for name in args.suite}
     if args.scene:

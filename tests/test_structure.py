@@ -17,7 +17,8 @@ from ipr_shapes.perception.types import PartialObject
 from .box_scene import SUPPORT, K, box_mesh, partial_box, render_view
 from .test_hypotheses import assert_valid
 
-CONFIG = HypothesisConfig(count=8)
+# The exact families alone (superquadrics: tests/test_superquadric.py).
+CONFIG = HypothesisConfig(count=8, superquadric_count=0)
 SETTINGS = structure.StructureSettings()
 
 

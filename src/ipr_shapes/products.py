@@ -49,7 +49,8 @@ class ShapeHypothesis:
         generator: what made it (``ipr_shapes.hypotheses.generate.GENERATORS``): "algorithm1"
             (mirrored facets), "symmetry" (reflective symmetry planes), "revolution"
             (rotational symmetry about the support normal), "box", "cylinder", "sphere"
-            (primitives fitted to the observed points) or "minimum" (the minimum shape).
+            (primitives fitted to the observed points), "superquadric" (a superquadric with
+            fitted exponents) or "minimum" (the minimum shape).
     """
 
     object_id: int

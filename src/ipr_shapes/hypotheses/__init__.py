@@ -5,6 +5,8 @@
   (``HypothesisConfig.structure_share``) goes to structure-aware candidates.
 - ``structure``: the structure-aware families: symmetry planes, surfaces of revolution, boxes,
   cylinders and spheres fitted to the observed points (issue 28).
+- ``superquadric``: superquadrics with fitted exponents, the seen-free space kept out
+  (``HypothesisConfig.superquadric_count`` of the structure-aware candidates).
 - ``constraints``: Constraints(X) (Sec. IV-C): unary feasibility and pairwise penetration.
 - ``prepare``: both together for all objects of frame 0, the ``PreparedHypotheses`` every
   inference method starts from.

@@ -69,8 +69,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
-#: Structure-aware generators, in the order their candidates are made (round robin).
-STRUCTURE_GENERATORS = ("symmetry", "revolution", "box", "cylinder", "sphere")
+#: Structure-aware generators, in the order their candidates are made (round robin; the
+#: superquadric, ``ipr_shapes.hypotheses.superquadric``, takes its own count of the slots first).
+STRUCTURE_GENERATORS = ("symmetry", "revolution", "box", "cylinder", "sphere", "superquadric")
 
 #: Directions of the upright frame whose reach bounds the hidden extent: +a, -a, +b, -b, +up,
 #: -up (indices into a variate vector).
@@ -81,20 +82,22 @@ Reach = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 
 #: Generators whose variate 0.5 is their fit (the others' smallest member is at 0).
-CENTRED = ("revolution", "cylinder", "sphere")
+CENTRED = ("revolution", "cylinder", "sphere", "superquadric")
 
 
-def variates(generator: str, count: int, rng: np.random.Generator, fits: int = 1) -> np.ndarray:
-    """(count, 6) variates in [0, 1] of a generator's candidates (module doc): the first
+def variates(
+    generator: str, count: int, rng: np.random.Generator, fits: int = 1, width: int = DIRECTIONS
+) -> np.ndarray:
+    """(count, width) variates in [0, 1] of a generator's candidates (module doc): the first
     ``fits`` (one per frame the generator cycles through) are the family's own fit (0 for
     every direction: the observed extent; 0.5 for the centred generators: the fitted axis or
     centre), the others stratified per direction (shuffled independently); for the extents
     (symmetry, box) squared, so that small hidden extents are drawn more often."""
-    out = np.full((count, DIRECTIONS), 0.5 if generator in CENTRED else 0.0)
+    out = np.full((count, width), 0.5 if generator in CENTRED else 0.0)
     rest = count - min(fits, count)
     if rest > 0:
-        strata = np.stack([rng.permutation(rest) for _ in range(DIRECTIONS)], axis=1)
-        u = (strata + rng.random((rest, DIRECTIONS))) / rest
+        strata = np.stack([rng.permutation(rest) for _ in range(width)], axis=1)
+        u = (strata + rng.random((rest, width))) / rest
         out[count - rest :] = u if generator in CENTRED else u**2
     return out
 
