@@ -3,18 +3,19 @@ search's, emulated offline on exhaustive tables (docs/experiments/2026-11-27-sam
 
 Usage: ``python -m benchmarks.dev_agreement [--sets 9100:10 9400:10] [--scenes DIR]
 [--perception-sets 8100:24 8200:24] [--tables DIR] [--seeds 10] [--share 0.18 0.3]
-[--proposal tree cover uniform]``
+[--proposal tree cover uniform] [--scene DIR ...]``
 
 1. Tables: per development scene that exhaustive search accepts (at most 4 objects after
    perception, 6 hypotheses per object, as the benchmark's comparison), the method
    ``exhaustive`` is run through ``run_pipeline`` (one worker, seed 0) and its
    ``InferenceProblem``, every jointly feasible joint model's depth error norms and the CPU
    seconds of its simulation are kept (pickled in ``--tables``, reused).
-2. Emulation: a sampler draws joint models as it would (the tree sampler with its real stability
-   tests, whose CPU seconds are measured once per context; or a proposal without them) and
-   looks their norms up in the table, charging the CPU of each stability-test context and each
-   joint model the first time the run needs it, until ``--share`` of exhaustive's CPU (the
-   sum over its models) is spent; a run with no sample returns the Collision Checker's
+2. Emulation: a sampler draws joint models as it would (``--proposal``: "tree", the tree sampler
+   with its real stability tests, whose CPU seconds are measured once per context; "uniform",
+   ``InferenceConfig.proposal`` "uniform"; "cover", each object's least drawn compatible
+   candidate, emulated here only) and looks their norms up in the table, charging the CPU
+   of each stability-test context and each joint model the first time the run needs it,
+   until ``--share`` of exhaustive's CPU (the sum over its models) is spent; a run with no sample returns the Collision Checker's
    answer, as the pipeline does (the marginals of the feasibility counts). Each of
    ``--seeds`` runs draws its own samples, so agreement is a distribution, not one draw.
 3. Estimators on the same samples (``InferenceConfig.weighting`` "hypothesis", "object",
@@ -219,10 +220,10 @@ class Emulation:
             0.0, 0, norms, tuple(object_log_proposal), tuple(explored),
         )  # fmt: skip
 
-    def _spread(self, rng, drawn, least: bool):
-        """A joint model without stability tests: objects in random order, each taking one of
-        the candidates compatible with those placed, uniformly among the least drawn so far
-        (``least``) or among all; None at a dead end."""
+    def _spread(self, rng, drawn):
+        """A joint model of the "cover" proposal (no stability tests; not in the library):
+        objects in random order, each taking one of the candidates compatible with those
+        placed, uniformly among the least drawn so far in this run; None at a dead end."""
         problem = self.problem
         placed: dict[int, int] = {}
         logq = [0.0] * problem.count
@@ -232,7 +233,7 @@ class Emulation:
                 allowed &= problem.compatibility(int(i), k)[:, j]
             if not allowed.any():
                 return None
-            counts = np.where(allowed, drawn[i] if least else 0.0, np.inf)
+            counts = np.where(allowed, drawn[i], np.inf)
             placed[int(i)] = int(rng.choice(np.flatnonzero(counts == counts.min())))
             logq[i] = -math.log(int(allowed.sum()))
         return tuple(placed[i] for i in range(problem.count)), tuple(logq), ()
@@ -250,10 +251,12 @@ class Emulation:
                 rng = np.random.default_rng([seed, index])
                 if proposal == "tree":
                     choice, logq, explored = self.sampler.tree_sample_explored(rng)
+                elif proposal == "uniform":
+                    choice, logq, explored = self.sampler.uniform_sample_explored(rng)
                 else:
                     drawn_model = None
                     while drawn_model is None:
-                        drawn_model = self._spread(rng, drawn, least=proposal == "cover")
+                        drawn_model = self._spread(rng, drawn)
                     choice, logq, explored = drawn_model
                 new = self._touched - charged
                 cost = DRAW_S + sum(self.test_cpu[key] for key in new)
@@ -297,6 +300,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--scenes", type=Path, default=Path("/tmp/ipr-dev-inference"))
     parser.add_argument("--perception-sets", nargs="*", default=[], help="SEED:COUNT")
     parser.add_argument("--perception-scenes", type=Path, default=Path("/tmp/ipr-dev-perception"))
+    parser.add_argument(
+        "--scene", type=Path, action="append", default=[], help="a further scene (repeatable)"
+    )
     parser.add_argument("--tables", type=Path, default=Path("/tmp/ipr-dev-agreement"))
     parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--share", type=float, nargs="*", default=[0.18])
@@ -305,6 +311,7 @@ def main(argv: list[str] | None = None) -> int:
     from benchmarks.inference_score import CLEAR_MARGIN
 
     paths = _sets(args.sets, args.scenes) + _sets(args.perception_sets, args.perception_scenes)
+    paths += args.scene
     emulations = []
     for path in paths:
         table = cached_table(path, args.tables)
