@@ -72,11 +72,12 @@ class InferenceConfig:
             candidates explored by their stability tests given the objects placed before it)
             or "uniform" (objects in random order, each taking a candidate uniformly among
             those compatible with the objects placed: no stability tests, so more joint models
-            in the same time). Why "tree" stays: the uniform proposal agreed more often with
-            exhaustive search on small development scenes at 18 % of its compute (0.837
-            against 0.806 of the objects with a clear exact favourite, emulated) but not
-            reliably enough to meet the 90 % target (docs/DESIGN_NOTES.md, "Tree sampler,
-            with repeated joint models reused").
+            in the same time on small problems). Why "tree" stays the default: at 18 % of
+            exhaustive search's compute "uniform" agreed with it more often on the development
+            tables (0.837 against 0.806 of the objects with a clear exact favourite) but less
+            on the ycb-dynamic check (0.650 against 0.771), and its object IoU at 30 samples
+            fell on one development set (0.639 against 0.651; 0.587 against 0.588)
+            (docs/experiments/2026-11-27-sampler-agreement.md).
     """
 
     CHECKS: ClassVar[Checks] = {
