@@ -73,9 +73,9 @@ class InferenceConfig:
             or "uniform" (objects in random order, each taking a candidate uniformly among
             those compatible with the objects placed: no stability tests, so more joint models
             in the same time on small problems). Why "tree" stays the default: at 18 % of
-            exhaustive search's compute "uniform" agreed with it more often on the development
-            tables (0.837 against 0.806 of the objects with a clear exact favourite) but less
-            on the ycb-dynamic check (0.650 against 0.771), and its object IoU at 30 samples
+            exhaustive search's compute "uniform" agreed with it as often on the development
+            tables (0.837 against 0.806-0.828 of the objects with a clear exact favourite) but
+            less on the ycb-dynamic check (0.650 against 0.771), and its object IoU at 30 samples
             fell on one development set (0.639 against 0.651; 0.587 against 0.588)
             (docs/experiments/2026-11-27-sampler-agreement.md).
     """
