@@ -439,3 +439,34 @@ def test_without_pushes_or_when_off_no_friction_is_searched():
         assert outcome.summary.frictions == (PhysicsConfig().friction,)
         assert outcome.summary.friction_posterior == (1.0,)
         assert outcome.samples[0].norms.shape[0] == 1
+
+
+def test_the_uniform_proposal_draws_compatible_candidates_evenly_without_stability_tests():
+    from collections import Counter
+
+    from ipr_shapes.inference.sampler import Sampler
+
+    # Object 0's deep box and object 1's deep box cannot coexist. Objects in random order,
+    # each uniform over what fits: (0, 0) 1/4, (0, 1) and (1, 0) 3/8 each.
+    compatible = {(0, 1): np.array([[True, True], [True, False]])}
+    problem = _fabricated_problem(2, compatible)
+    problem = dataclasses.replace(problem, config=InferenceConfig(proposal="uniform"))
+    sampler = Sampler(problem)
+    draws = [sampler.uniform_sample_explored(np.random.default_rng([0, s])) for s in range(800)]
+    counts = Counter(choice for choice, _, _ in draws)
+    assert set(counts) == {(0, 0), (0, 1), (1, 0)}
+    assert counts[(0, 0)] / 800 == pytest.approx(0.25, abs=0.05)
+    assert counts[(0, 1)] / 800 == pytest.approx(0.375, abs=0.05)
+    for _, log_q, explored in draws:
+        # The object placed second has one or two candidates left; the first always two.
+        assert sorted(np.exp(log_q).round(3)) in ([0.5, 0.5], [0.5, 1.0])
+        assert all(e.size == 0 for e in explored)
+    result = sampler.sample(0)
+    assert not sampler.cache and sampler.stability_tests == sampler.screened == 0
+    assert result.stability_tests == 0
+    assert result.choice == draws[0][0]  # the sample's draw depends on its index alone
+    # The tree sampler (the default) explores by stability tests (here screened: the boxes
+    # stand on the support).
+    tree = Sampler(_fabricated_problem(2, compatible))
+    tree.sample(0)
+    assert tree.cache and tree.stability_tests + tree.screened > 0

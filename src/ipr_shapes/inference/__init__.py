@@ -24,6 +24,10 @@ of some jointly feasible model) are candidates. Then, repeated until the time bu
      context; a candidate is held where it is once at rest; a candidate that clearly stands on
      the support alone, clear of every other shape, is settled without simulation
      (``InferenceConfig.screen_resting``); samples run in threads sharing the caches.
+   - Opt-in (``InferenceConfig.proposal`` "uniform"): objects in random order, each taking a
+     candidate uniformly among those compatible with the placed ones, with no stability test
+     (more joint models per second on small problems;
+     docs/experiments/2026-11-27-sampler-agreement.md).
 2. **Simulation of the full model** under gravity (settling) and, for the ``+action`` variants,
    the recorded pushes; the depth images rendered from each frame's camera give the likelihood
    (``ipr_shapes.likelihood``, Eq. 2). A simulation that explodes or flings an object scores 0.
@@ -80,7 +84,7 @@ and likelihood), ``pool`` (sampling threads and deadlines), ``estimators`` (samp
 marginals), ``exhaustive`` (the exact posterior), ``infer`` (``infer_shapes``).
 """
 
-from ipr_shapes.inference.config import FRICTION_GRID, WEIGHTINGS, InferenceConfig
+from ipr_shapes.inference.config import FRICTION_GRID, PROPOSALS, WEIGHTINGS, InferenceConfig
 from ipr_shapes.inference.estimators import (
     at_friction,
     effective_sample_size,
@@ -105,6 +109,7 @@ from ipr_shapes.inference.sampler import Sampler
 
 __all__ = [
     "FRICTION_GRID",
+    "PROPOSALS",
     "WEIGHTINGS",
     "at_friction",
     "InferenceConfig",

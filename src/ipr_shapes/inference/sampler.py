@@ -260,6 +260,38 @@ class Sampler:
             explored[best] = distribution
         return tuple(placed[i] for i in range(n)), tuple(log_proposal), tuple(explored)
 
+    def uniform_sample_explored(
+        self, rng: np.random.Generator, attempts: int = 20
+    ) -> tuple[tuple[int, ...], tuple[float, ...], tuple[np.ndarray, ...]]:
+        """Like ``tree_sample_explored`` for ``InferenceConfig.proposal`` "uniform": objects in
+        random order, each taking a candidate uniformly among those compatible with the
+        objects placed before it; no stability test, so the exploration probabilities are
+        empty. Each object's log proposal is log(1 / its compatible candidates) in the order
+        drawn (the probability of that order's draw, not summed over the orders). A draw
+        that reaches an object with no compatible candidate starts again, up to ``attempts``
+        times; then that object's candidates are drawn uniformly, as the tree sampler does
+        when nothing of an object fits."""
+        problem = self.problem
+        n = problem.count
+        for attempt in range(attempts):
+            placed: dict[int, int] = {}
+            log_proposal = [0.0] * n
+            for i in (int(i) for i in rng.permutation(n)):
+                allowed = np.ones(len(problem.candidates[i]), dtype=bool)
+                for k, j in placed.items():
+                    allowed &= problem.compatibility(i, k)[:, j]
+                if not allowed.any():
+                    if attempt < attempts - 1:
+                        break
+                    allowed[:] = True
+                options = np.flatnonzero(allowed)
+                placed[i] = int(rng.choice(options))
+                log_proposal[i] = -math.log(options.size)
+            if len(placed) == n:
+                break
+        explored = tuple(np.zeros(0) for _ in range(n))
+        return tuple(placed[i] for i in range(n)), tuple(log_proposal), explored
+
     # ----------------------------------------------------------------------------------------
     # Likelihood
 
@@ -379,7 +411,10 @@ class Sampler:
         started = time.perf_counter()
         tests = self._thread_state().tests
         rng = np.random.default_rng([self.problem.seed, index])
-        choice, object_log_proposal, explored = self.tree_sample_explored(rng, deadline)
+        if self.problem.config.proposal == "uniform":
+            choice, object_log_proposal, explored = self.uniform_sample_explored(rng)
+        else:
+            choice, object_log_proposal, explored = self.tree_sample_explored(rng, deadline)
         norms = self._norms_of(choice, deadline)
         return SampleResult(
             index,
