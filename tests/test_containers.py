@@ -17,12 +17,13 @@ from ipr_shapes.perception.containers import (
     _is_inside,
     _one_container,
     _rim_circle,
+    _seen_past,
     _Segment,
     _summary,
     join_container_insides,
 )
 from ipr_shapes.perception.segmentation import segment_frame
-from ipr_shapes.perception.types import KnownPlane
+from ipr_shapes.perception.types import DepthView, KnownPlane
 from ipr_shapes.scene import load_scene
 
 CONFIG = PerceptionConfig()
@@ -307,3 +308,80 @@ def test_a_real_mug_joined_from_pieces_is_one_segment_whatever_order_the_joins_t
     navy_cup, shaker = labels[207, 202], labels[258, 170]
     assert front_wall == inside != 0
     assert len({inside, navy_cup, shaker}) == 3 and 0 not in (navy_cup, shaker)
+
+
+def _rendered_view(mug: bool) -> DepthView:
+    """Depth image (160 x 120, 150 px focal length) of a table (z = 0) seen from 40 cm in front
+    of (0.3, 0.1) and 45 cm up, with, if ``mug``, an open cylinder there (radius 4.5 cm, 9 cm
+    high, floor at 1 cm): ray cast per pixel, world frame (m)."""
+    eye = np.array([0.3, -0.3, 0.45])
+    forward = np.array([0.3, 0.1, 0.03]) - eye
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    down = np.cross(forward, right)
+    world_from_camera = np.eye(4)
+    world_from_camera[:3, :3] = np.column_stack([right, down, forward])
+    world_from_camera[:3, 3] = eye
+    K = np.array([[150.0, 0.0, 80.0], [0.0, 150.0, 60.0], [0.0, 0.0, 1.0]])
+    rows, cols = np.mgrid[0:120, 0:160]
+    rays = np.stack([(cols - 80.0) / 150.0, (rows - 60.0) / 150.0, np.ones_like(cols, float)], -1)
+    rays = rays.reshape(-1, 3) @ world_from_camera[:3, :3].T  # t along it is the depth
+    depth = np.where(rays[:, 2] < 0, -eye[2] / np.minimum(rays[:, 2], -1e-9), np.inf)
+    if mug:
+        # The cylinder's wall (both sides: the near outside, the far inside) and its floor.
+        origin = eye[:2] - np.array([0.3, 0.1])
+        a = (rays[:, :2] ** 2).sum(1)
+        b = 2.0 * (rays[:, :2] @ origin)
+        c = origin @ origin - 0.045**2
+        root = np.sqrt(np.maximum(b * b - 4.0 * a * c, 0.0))
+        for t in ((-b - root) / (2.0 * a), (-b + root) / (2.0 * a)):
+            z = eye[2] + t * rays[:, 2]
+            hit = (b * b >= 4.0 * a * c) & (t > 0) & (z >= 0.0) & (z <= 0.09)
+            depth = np.where(hit & (t < depth), t, depth)
+        t = (0.01 - eye[2]) / np.minimum(rays[:, 2], -1e-9)
+        floor = eye[:2] + t[:, None] * rays[:, :2]
+        inside = np.linalg.norm(floor - [0.3, 0.1], axis=1) < 0.045
+        depth = np.where(inside & (t < depth), t, depth)
+    depth = np.where(np.isfinite(depth), depth, 0.0).reshape(120, 160).astype(np.float32)
+    return DepthView(depth, K, world_from_camera)
+
+
+def test_a_rim_the_camera_sees_past_holds_only_pieces_wholly_within_it():
+    """The rim join's leniency for a piece partly outside its rim (a mug's handle, a real
+    sensor's mixed pixels) presumes a rim that is there. The mug of the handle test, with the
+    frame's depth image: where the mug stands (ray cast), its rim blocks the camera's view all
+    round and the pieces join; where the camera sees the table through the rim's place (no
+    mug: a circle through air, as through a tilted bowl's high arc and a mug beside it, dev set
+    7200), the wall with its handle (a fifth outside) does not join, while a piece wholly
+    within the circle still does."""
+    rng = np.random.default_rng(7)
+    inner = lambda h: 0.041 + 0.0 * h  # noqa: E731
+    outer = lambda h: 0.045 + 0.0 * h  # noqa: E731
+    inside, inside_h = _bowl_surface(rng, 500, (0.0, 2 * np.pi), (0.01, 0.09), inner)
+    wall, wall_h = _bowl_surface(rng, 320, (1.1 * np.pi, 1.9 * np.pi), (0.0, 0.09), outer)
+    t = rng.uniform(0.0, np.pi, 80)
+    handle = np.column_stack([0.3 + 0.055 + 0.04 * np.sin(t), 0.1 + rng.normal(0.0, 0.004, 80)])
+    mug_inside = _segment(inside, inside_h)
+    mug_wall = _segment(
+        np.concatenate([wall, handle]), np.concatenate([wall_h, 0.05 + 0.03 * np.cos(t)])
+    )
+    support = KnownPlane("support", np.array([0.0, 0.0, 1.0]), 0.0, np.zeros((0, 3)))
+    frame = (support, np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]))
+    there, air = (_rendered_view(True), frame), (_rendered_view(False), frame)
+    rim = _rim_circle(
+        np.concatenate([wall, handle, inside]),
+        np.concatenate([mug_wall.heights, inside_h]),
+        CONFIG,
+    )
+    assert rim is not None
+    margin, clear = CONFIG.containers.margin_m, CONFIG.containers.rim_clear_m
+    # The mug: only where a ray grazes the rim's side does it see the table past all three.
+    assert _seen_past(*rim, there, margin, clear) < 0.25 < CONFIG.containers.rim_seen_past_share
+    assert _seen_past(*rim, air, margin, clear) > 0.9
+    assert _one_container(mug_wall, mug_inside, CONFIG, rim_view=there)
+    assert not _one_container(mug_wall, mug_inside, CONFIG, rim_view=air)
+    bare_wall = _segment(wall, wall_h)
+    assert _one_container(bare_wall, mug_inside, CONFIG, rim_view=air)
+    off = PerceptionConfig(containers=CONFIG.containers.__class__(rim_seen_past_share=1.0))
+    assert _one_container(mug_wall, mug_inside, off, rim_view=air)

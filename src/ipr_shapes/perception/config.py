@@ -500,6 +500,13 @@ class ContainersConfig:
             both; the robust circle fit must keep at least ``rim_inlier_share`` of them (the
             rest: flying pixels, a handle). 1 cm holds a rim a few mm thick and the wall just
             below it under a real sensor's noise.
+        rim_seen_past_share, rim_clear_m: with ``join_rims``, a rim the camera sees past
+            (at more than this share of the directions around the circle it sees a surface
+            more than ``rim_clear_m`` (m) beyond where the rim would be,
+            ``containers._seen_past``) holds only pieces wholly within it
+            (``footprint_fraction`` each, not ``piece_within_share``): the leniency for a
+            handle or mixed pixels presumes a rim that is there, whereas a circle through a
+            tilted bowl's high arc and the top of a mug beside it runs through air. 1.0 = off.
         max_front_ratio: the piece stands in front of the container along at most this share
             of the pixel pairs where they meet (an object resting on a box stands in front).
         min_contact_px: the two meet (touch, or the container hides the piece) along at least
@@ -522,6 +529,8 @@ class ContainersConfig:
         "rim_radius_m": _NON_NEGATIVE,
         "rim_band_m": _NON_NEGATIVE,
         "rim_inlier_share": _SHARE,
+        "rim_seen_past_share": _SHARE,
+        "rim_clear_m": _NON_NEGATIVE,
         "piece_within_share": _SHARE,
         "max_front_ratio": _SHARE,
         "min_contact_px": _COUNT,
@@ -542,6 +551,8 @@ class ContainersConfig:
     rim_radius_m: float = 0.02
     rim_band_m: float = 0.01
     rim_inlier_share: float = 0.8
+    rim_seen_past_share: float = 0.45
+    rim_clear_m: float = 0.02
     piece_within_share: float = 0.5
     max_front_ratio: float = 0.5
     min_contact_px: int = 3

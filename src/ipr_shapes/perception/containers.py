@@ -49,7 +49,13 @@ the two is the inside, when together they are one open container:
 - each of the two lies within that circle: ``containers.footprint_fraction`` of its points
   within the radius plus ``containers.margin_m`` on the support, a point below the rim also
   when its ray from the camera grazes the rim (mixed pixels at a far silhouette lie on their
-  ray, behind the rim).
+  ray, behind the rim);
+- a piece may stick out of the rim (``containers.piece_within_share`` of it within, the two
+  together ``footprint_fraction``: a mug's handle) only when the rim is there: when the camera
+  sees past the rim's place all round (``containers.rim_seen_past_share`` of its directions,
+  ``_seen_past``), each piece must lie ``footprint_fraction`` within it. A circle through a
+  tilted bowl's high arc and the top edge of a mug beside it runs through air
+  (``docs/experiments/2026-11-27-touching-objects.md``, addendum).
 
 The filled top of a box, a can or an object resting in a bowl above its rim fits no circle
 (a filled disc's RMS is a quarter of its radius), and an object beside a container lies outside
@@ -73,7 +79,7 @@ from scipy.spatial import ConvexHull, QhullError, cKDTree
 from ipr_shapes.geometry import order
 from ipr_shapes.perception import kernels
 from ipr_shapes.perception.config import PerceptionConfig
-from ipr_shapes.perception.types import KnownPlane
+from ipr_shapes.perception.types import DepthView, KnownPlane
 
 #: Points of a segment used for its footprint figures (an even subset).
 _MAX_POINTS = 500
@@ -153,6 +159,7 @@ def join_container_insides(
     support: KnownPlane,
     config: PerceptionConfig,
     viewpoint: np.ndarray | None = None,
+    view: DepthView | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Relabel the pieces of open containers' insides with their container's label.
 
@@ -164,6 +171,8 @@ def join_container_insides(
         support: the support plane (heights and footprints are measured on it).
         viewpoint: (3,) the camera's centre, world (m), if known: a point on the ray from it
             through a container's rim counts as within the container (``_one_container``).
+        view: the frame's depth image and camera, if known: a rim circle the camera sees past
+            (``_seen_past``) holds only pieces wholly within it (``_one_container``).
 
     Returns:
         The relabelled (labels, segment_of_supervoxel); the inputs when nothing is joined.
@@ -184,6 +193,7 @@ def join_container_insides(
     axis_u /= np.linalg.norm(axis_u)
     axis_v = np.cross(normal, axis_u)
     frame = (support, axis_u, axis_v)
+    rim_view = None if view is None else (view, frame)
     camera = None
     if viewpoint is not None:
         camera = (
@@ -220,7 +230,7 @@ def join_container_insides(
                     summary(piece), summary(container), config
                 ) or (
                     config.containers.join_rims
-                    and _one_container(summary(piece), summary(container), config, camera)
+                    and _one_container(summary(piece), summary(container), config, camera, rim_view)
                 )
             if verdicts[piece, container]:
                 best = (count, piece, container)
@@ -426,6 +436,7 @@ def _one_container(
     second: _Segment,
     config: PerceptionConfig,
     camera: tuple[np.ndarray, float] | None = None,
+    rim_view: tuple[DepthView, tuple[KnownPlane, np.ndarray, np.ndarray]] | None = None,
 ) -> bool:
     """Whether two segments are together one open container whose rim is a circle around
     both (module doc), whichever of them is the inside.
@@ -437,6 +448,13 @@ def _one_container(
     behind it (measured: 10-20 % of a white bowl's far piece lay up to 3 cm beyond its rim,
     1-3 cm above the table). A surface behind the container, seen over it, has its rays cross
     the rim's height beyond the far rim, mostly more than the margin beyond it.
+
+    ``rim_view``: the frame's depth image and camera, and the support's frame (plane, in-plane
+    axes u and v (3,) each), if known. A piece partly outside the rim (a handle, mixed pixels)
+    then joins only when the rim is not seen past (``_seen_past``): a circle through the top
+    of a tilted bowl and of an object beside it runs through air, where the camera sees what
+    lies behind it; pieces wholly within the circle join either way (a tilted bowl's own
+    pieces, whose top is no horizontal circle either).
     """
     settings = config.containers
     if np.abs(first.chroma - second.chroma).sum() > settings.max_chroma:
@@ -468,4 +486,55 @@ def _one_container(
     shares = [within(part) for part in (first, second)]
     sizes = [part.size for part in (first, second)]
     held = (shares[0] * sizes[0] + shares[1] * sizes[1]) / max(sizes[0] + sizes[1], 1)
-    return held >= settings.footprint_fraction and min(shares) >= settings.piece_within_share
+    if held < settings.footprint_fraction or min(shares) < settings.piece_within_share:
+        return False
+    # The leniencies for mixed pixels and a handle (a piece only partly within) presume a rim
+    # that is there; a rim the camera sees past asks each piece to lie within it.
+    return bool(
+        rim_view is None
+        or min(shares) >= settings.footprint_fraction
+        or _seen_past(centre, radius, rim_height, rim_view, settings.margin_m, settings.rim_clear_m)
+        <= settings.rim_seen_past_share
+    )
+
+
+#: Directions around a rim circle sampled by ``_seen_past``.
+_RIM_SAMPLES = 72
+
+
+def _seen_past(
+    centre: np.ndarray,
+    radius: float,
+    height: float,
+    rim_view: tuple[DepthView, tuple[KnownPlane, np.ndarray, np.ndarray]],
+    margin_m: float,
+    clear_m: float,
+) -> float:
+    """Share of the rim circle's directions at which the camera sees past the rim.
+
+    The circle (centre (2,) and radius on the support's in-plane axes, at ``height`` above the
+    support, metres) is sampled in ``_RIM_SAMPLES`` directions, each at the radius and
+    ``margin_m`` inside and outside it (a rim fitted to a few mm). A direction is seen past
+    when the camera observes, at all three points' pixels, a surface more than ``clear_m``
+    farther than the point: there is air where the rim would be. A real rim blocks the view
+    (its own points, the wall below it or the inside just behind it are within a few cm); a
+    pixel without a reading, outside the image or nearer (an occluder) says nothing. The
+    share is over the directions whose three points all project into the image.
+    """
+    view, (support, axis_u, axis_v) = rim_view
+    normal = support.normal / np.linalg.norm(support.normal)
+    angles = np.linspace(0.0, 2.0 * np.pi, _RIM_SAMPLES, endpoint=False)
+    ring = np.stack([np.cos(angles), np.sin(angles)], axis=1)
+    # World points of footprint (u, v) at a height h: u axis_u + v axis_v + (h - offset) normal
+    # (the axes are orthonormal and perpendicular to the unit normal).
+    lift = (height - support.offset / np.linalg.norm(support.normal)) * normal
+    past = np.ones(_RIM_SAMPLES, dtype=bool)
+    seen = np.ones(_RIM_SAMPLES, dtype=bool)
+    for r in (radius - margin_m, radius, radius + margin_m):
+        footprint = centre + max(r, 0.0) * ring
+        world = footprint[:, :1] * axis_u + footprint[:, 1:] * axis_v + lift
+        z, observed = view.depths(world)
+        seen &= view.in_image(world)
+        with np.errstate(invalid="ignore"):
+            past &= observed > z + clear_m  # NaN (nothing known) is False
+    return float(np.sum(past & seen) / max(int(seen.sum()), 1))

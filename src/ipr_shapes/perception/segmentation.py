@@ -210,6 +210,7 @@ def segment_frame(
         support,
         config,
         viewpoint=frame.world_from_camera[:3, 3],
+        view=DepthView(frame.depth_m, frame.K, frame.world_from_camera),
     )
     # The fragments' border pass serves the thin-cylinder join too when no fragment joins
     # (the same labels): one pass over the image instead of two.
