@@ -458,7 +458,7 @@ class SegmentationConfig:
     thin_radius_m: float = 0.0125
     thin_rms_m: float = 0.003
     thin_min_contact_px: int = 5
-    contour_split_px: int = 0
+    contour_split_px: int = 150
     contour_min_pairs: int = 10
     contour_facing_cos: float = 0.25
     contour_gap_m: float = 0.01
