@@ -10,7 +10,13 @@ import numpy as np
 import pytest
 import trimesh
 
-from ipr_shapes.hypotheses import HypothesisConfig, generate_hypotheses, structure, superquadric
+from ipr_shapes.hypotheses import (
+    HypothesisConfig,
+    generate_hypotheses,
+    kernels,
+    structure,
+    superquadric,
+)
 from ipr_shapes.perception.free_space import FREE, UNKNOWN, VoxelGrid
 
 from .box_scene import SUPPORT
@@ -187,3 +193,41 @@ def test_the_tessellation_lies_on_the_fitted_surface():
         world = superquadric.surface_points(found, np.full(8, t), np.zeros((0, 3)), SETTINGS)
         distance = superquadric._radial(frame.local(world), lo, hi, *exponents)
         assert np.abs(distance).max() < 2e-4
+
+
+def test_compiled_residuals_and_jacobian_match_numpy_and_finite_differences():
+    """``kernels.superquadric_residuals`` gives the fit's numpy residuals (``_radial`` on the
+    points, the weighted depth of the free voxels inside) and, as its Jacobian, their central
+    finite differences: shapes from boxes to ellipsoids, points inside and outside, on the
+    axes' planes (q_i = 0) and free voxels both inside and outside."""
+    rng = np.random.default_rng(3)
+    weight = SETTINGS.free_weight
+    inside_free = 0
+    for trial in range(60):
+        lo, hi = -rng.uniform(0.02, 0.08, 3), rng.uniform(0.02, 0.08, 3)
+        e1, e2 = rng.uniform(SETTINGS.min_exponent, 1.0, 2)
+        x = np.concatenate([lo, hi, [e1, e2]])
+        points = superquadric_points(lo, hi, e1, e2, 40, rng) + rng.normal(0, 0.004, (40, 3))
+        points[:4, trial % 3] = (lo + hi)[trial % 3] / 2  # on a plane of the centre
+        free = rng.uniform(-0.09, 0.09, (30, 3))
+
+        def numpy_residuals(x, points=points, free=free):
+            lo, hi, e1, e2 = x[:3], x[3:6], x[6], x[7]
+            depth = np.maximum(-superquadric._radial(free, lo, hi, e1, e2), 0.0)
+            return np.concatenate([superquadric._radial(points, lo, hi, e1, e2), weight * depth])
+
+        res, jac = kernels.superquadric_residuals(points, free, x, weight)
+        np.testing.assert_allclose(res, numpy_residuals(x), rtol=0, atol=1e-15)
+        step = 1e-7
+        differences = np.stack(
+            [
+                (numpy_residuals(x + step * unit) - numpy_residuals(x - step * unit)) / (2 * step)
+                for unit in np.eye(8)
+            ],
+            axis=1,
+        )
+        # Away from the free term's kink at the surface (|depth| within the step).
+        smooth = np.abs(res) > 1e-5
+        np.testing.assert_allclose(jac[smooth], differences[smooth], rtol=1e-5, atol=1e-6)
+        inside_free += int((res[40:] > 0).sum())
+    assert inside_free > 100

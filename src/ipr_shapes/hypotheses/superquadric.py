@@ -52,6 +52,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
+from ipr_shapes.hypotheses.kernels import superquadric_residuals
 from ipr_shapes.hypotheses.structure import UprightFrame
 from ipr_shapes.perception.free_space import FREE, SeenSpace
 
@@ -210,25 +211,20 @@ def fit(
     upper = np.maximum(upper, lower + 1e-6)
     x0 = np.clip(x0, lower, upper)
     weight = s.free_weight
-
-    def batch(x: np.ndarray) -> np.ndarray:
-        """Residuals (P, N + F) of parameter rows x (P, 8)."""
-        lo, hi, e1, e2 = x[:, :3], x[:, 3:6], x[:, 6], x[:, 7]
-        out = _radial(local, lo, hi, e1, e2)
-        if len(free):
-            inside = np.maximum(-_radial(free, lo, hi, e1, e2), 0.0)
-            out = np.concatenate([out, weight * inside], axis=1)
-        return out
+    local_c, free_c = np.ascontiguousarray(local), np.ascontiguousarray(free, dtype=float)
+    # The residuals and their exact Jacobian in one compiled pass (``kernels``):
+    # least_squares asks for the Jacobian at the point whose residuals it just took.
+    last: dict[str, np.ndarray] = {}
 
     def residuals(x: np.ndarray) -> np.ndarray:
-        return batch(x[None])[0]
+        res, jac = superquadric_residuals(local_c, free_c, np.asarray(x, float), weight)
+        last["x"], last["jac"] = x.copy(), jac
+        return res
 
-    def jacobian(x: np.ndarray) -> np.ndarray:
-        # Forward differences, all eight in one evaluation (stepping away from the bounds).
-        step = 1e-6 * np.maximum(np.abs(x), 0.01)
-        step = np.where(x + step > upper, -step, step)
-        rows = batch(np.concatenate([x[None], x + np.diag(step)]))
-        return ((rows[1:] - rows[0]) / step[:, None]).T
+    def jacobian(x: np.ndarray, *_) -> np.ndarray:
+        if "x" not in last or not np.array_equal(last["x"], x):
+            residuals(x)
+        return last["jac"]
 
     try:
         result = least_squares(
