@@ -15,6 +15,7 @@ import time
 from collections.abc import Mapping
 
 import numpy as np
+from threadpoolctl import ThreadpoolController
 
 from ipr_shapes.hypotheses.constraints import (
     ConstraintConfig,
@@ -32,6 +33,12 @@ from ipr_shapes.products import PreparedHypotheses, ShapeHypothesis, volume_spre
 from ipr_shapes.progress import ProgressCallback, report
 
 logger = logging.getLogger(__name__)
+
+#: The BLAS libraries loaded with numpy and scipy, found once. The stage's linear algebra is
+#: small (SVDs of 100 x 8 Jacobians in the superquadric fits, 3 x 3 frames, hulls' products):
+#: OpenBLAS threads spread it over every core and spin for nothing, and the last bits of a fit
+#: would depend on the machine's core count; so the stage runs on one BLAS thread.
+_BLAS = ThreadpoolController()
 
 
 def prepare_hypotheses(
@@ -61,6 +68,25 @@ def prepare_hypotheses(
     Returns the objects' hypotheses with their unary and pairwise constraints, in the order of
     ``objects``.
     """
+    with _BLAS.limit(limits=1, user_api="blas"):
+        return _prepare(
+            objects, space, planes, config, constraints, rng, time_budget_s, object_spaces,
+            progress,
+        )  # fmt: skip
+
+
+def _prepare(
+    objects: tuple[PartialObject, ...],
+    space: SpaceMap | None,
+    planes: tuple[KnownPlane, ...],
+    config: HypothesisConfig | None,
+    constraints: ConstraintConfig | None,
+    rng: np.random.Generator | None,
+    time_budget_s: float | None,
+    object_spaces: Mapping[int, SeenSpace] | None,
+    progress: ProgressCallback | None,
+) -> PreparedHypotheses:
+    """``prepare_hypotheses`` on one BLAS thread (its doc)."""
     config = config or HypothesisConfig()
     constraints = constraints or ConstraintConfig()
     rng = rng if rng is not None else np.random.default_rng(config.seed)
