@@ -46,7 +46,8 @@ class ShapeHypothesis:
         voxel_keys: sorted ``ipr_shapes.voxels`` keys of its voxels at ``voxel_pitch_m`` (None when
             not voxelised, e.g. without a free-space map).
         voxel_pitch_m: pitch of ``voxel_keys`` (m).
-        generator: what made it (``ipr_shapes.hypotheses.generate.GENERATORS``): "algorithm1"
+        generator: what made it (Algorithm 1 or one of
+            ``ipr_shapes.hypotheses.structure.STRUCTURE_GENERATORS``): "algorithm1"
             (mirrored facets), "symmetry" (reflective symmetry planes), "revolution"
             (rotational symmetry about the support normal), "box", "cylinder", "sphere"
             (primitives fitted to the observed points), "superquadric" (a superquadric with
