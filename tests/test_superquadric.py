@@ -231,3 +231,33 @@ def test_compiled_residuals_and_jacobian_match_numpy_and_finite_differences():
         np.testing.assert_allclose(jac[smooth], differences[smooth], rtol=1e-5, atol=1e-6)
         inside_free += int((res[40:] > 0).sum())
     assert inside_free > 100
+
+
+def test_the_hypotheses_stage_fits_on_one_blas_thread_and_restores_the_callers(monkeypatch):
+    """The stage's linear algebra is small (the fits' SVDs of about 100 x 8 Jacobians): OpenBLAS
+    threads over every core spin for nothing and make a fit's last bits depend on the core
+    count. ``prepare_hypotheses`` fits on one BLAS thread whatever its caller set, and leaves
+    the caller's setting as it was."""
+    from threadpoolctl import ThreadpoolController, threadpool_info
+
+    from ipr_shapes.hypotheses import prepare_hypotheses
+
+    def blas_threads() -> int:
+        return max(i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas")
+
+    seen: list[int] = []
+    real = superquadric.least_squares
+
+    def counted(*args, **kwargs):
+        seen.append(blas_threads())
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(superquadric, "least_squares", counted)
+    mesh = rounded_box([0.1, 0.06, 0.08], 0.012)
+    obj, space, _ = rendered(mesh, (0.3, -0.3, 0.2), (0.0, 0.0, 0.04))
+    with ThreadpoolController().limit(limits=2, user_api="blas"):
+        if blas_threads() < 2:
+            pytest.skip("this machine's BLAS runs one thread at most")
+        prepare_hypotheses((obj,), space, (SUPPORT,), CONFIG)
+        assert blas_threads() == 2
+    assert seen and set(seen) == {1}
