@@ -264,6 +264,20 @@ def test_a_dark_cups_inside_and_outside_have_alike_colours_but_dark_red_and_blue
     assert distance(inside, outside, floorless) > limit
 
 
+def _mug(rng: np.random.Generator) -> tuple:
+    """A mug (rim 4.5 cm, 9 cm high, centred at (0.3, 0.1)) seen from the front, as footprints
+    (N, 2) and heights (N,) on the support: its inside with the far rim, its outer wall, and
+    its handle, a loop at the side (angle 0) from 2 to 8 cm high, 1-5 cm beyond the wall."""
+    inner = lambda h: 0.041 + 0.0 * h  # noqa: E731
+    outer = lambda h: 0.045 + 0.0 * h  # noqa: E731
+    inside = _bowl_surface(rng, 500, (0.0, 2 * np.pi), (0.01, 0.09), inner)
+    wall = _bowl_surface(rng, 320, (1.1 * np.pi, 1.9 * np.pi), (0.0, 0.09), outer)
+    t = rng.uniform(0.0, np.pi, 80)
+    reach = 0.045 + 0.01 + 0.04 * np.sin(t)
+    handle = np.column_stack([0.3 + reach, 0.1 + rng.normal(0.0, 0.004, 80)])
+    return inside, wall, (handle, 0.05 + 0.03 * np.cos(t))
+
+
 def test_a_mugs_handle_sticks_out_of_its_rim_but_a_cup_beside_it_is_not_the_mug():
     """A mug (rim 4.5 cm, 9 cm high) seen from the front: its inside with the far rim, and its
     outer wall with the handle (a fifth of that piece 1-5 cm outside the rim, below it). The
@@ -271,15 +285,7 @@ def test_a_mugs_handle_sticks_out_of_its_rim_but_a_cup_beside_it_is_not_the_mug(
     within it. A cup of the mug's colour touching it, 3.5 cm across, is not part of it though
     it is small beside the mug; nor, with each piece held whole by the rim, is the handle."""
     rng = np.random.default_rng(7)
-    inner = lambda h: 0.041 + 0.0 * h  # noqa: E731
-    outer = lambda h: 0.045 + 0.0 * h  # noqa: E731
-    inside, inside_h = _bowl_surface(rng, 500, (0.0, 2 * np.pi), (0.01, 0.09), inner)
-    wall, wall_h = _bowl_surface(rng, 320, (1.1 * np.pi, 1.9 * np.pi), (0.0, 0.09), outer)
-    # The handle: a loop at the side (angle 0) from 2 to 8 cm high, 1-5 cm beyond the wall.
-    t = rng.uniform(0.0, np.pi, 80)
-    reach = 0.045 + 0.01 + 0.04 * np.sin(t)
-    handle = np.column_stack([0.3 + reach, 0.1 + rng.normal(0.0, 0.004, 80)])
-    handle_h = 0.05 + 0.03 * np.cos(t)
+    (inside, inside_h), (wall, wall_h), (handle, handle_h) = _mug(rng)
     mug_inside = _segment(inside, inside_h)
     mug_wall = _segment(np.concatenate([wall, handle]), np.concatenate([wall_h, handle_h]))
     assert _one_container(mug_wall, mug_inside, CONFIG)
@@ -355,17 +361,9 @@ def test_a_rim_the_camera_sees_past_holds_only_pieces_wholly_within_it():
     mug: a circle through air, as through a tilted bowl's high arc and a mug beside it, dev set
     7200), the wall with its handle (a fifth outside) does not join, while a piece wholly
     within the circle still does."""
-    rng = np.random.default_rng(7)
-    inner = lambda h: 0.041 + 0.0 * h  # noqa: E731
-    outer = lambda h: 0.045 + 0.0 * h  # noqa: E731
-    inside, inside_h = _bowl_surface(rng, 500, (0.0, 2 * np.pi), (0.01, 0.09), inner)
-    wall, wall_h = _bowl_surface(rng, 320, (1.1 * np.pi, 1.9 * np.pi), (0.0, 0.09), outer)
-    t = rng.uniform(0.0, np.pi, 80)
-    handle = np.column_stack([0.3 + 0.055 + 0.04 * np.sin(t), 0.1 + rng.normal(0.0, 0.004, 80)])
+    (inside, inside_h), (wall, wall_h), (handle, handle_h) = _mug(np.random.default_rng(7))
     mug_inside = _segment(inside, inside_h)
-    mug_wall = _segment(
-        np.concatenate([wall, handle]), np.concatenate([wall_h, 0.05 + 0.03 * np.cos(t)])
-    )
+    mug_wall = _segment(np.concatenate([wall, handle]), np.concatenate([wall_h, handle_h]))
     support = KnownPlane("support", np.array([0.0, 0.0, 1.0]), 0.0, np.zeros((0, 3)))
     frame = (support, np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]))
     there, air = (_rendered_view(True), frame), (_rendered_view(False), frame)
