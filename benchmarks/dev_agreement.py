@@ -308,6 +308,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--share", type=float, nargs="*", default=[0.18])
     parser.add_argument("--proposal", nargs="*", default=["tree"], choices=PROPOSALS)
     args = parser.parse_args(argv)
+    # Checked before any table is built: a scene that cannot be read would otherwise be cached
+    # as one that exhaustive search refuses.
+    for scene in args.scene:
+        if not (scene / "scene_camera.json").is_file():
+            parser.error(f"--scene {scene}: not a scene folder (no scene_camera.json there)")
+    for value in (*args.sets, *args.perception_sets):
+        parts = value.split(":")
+        if len(parts) != 2 or not all(p.isdigit() for p in parts) or int(parts[1]) < 1:
+            parser.error(f"a set is SEED:COUNT with a count of at least 1, got {value!r}")
+    if not all(0.0 < share <= 1.0 for share in args.share):
+        parser.error(f"--share takes shares of exhaustive's CPU in (0, 1], got {args.share}")
+    if args.seeds < 1:
+        parser.error(f"--seeds must be at least 1, got {args.seeds}")
     from benchmarks.inference_score import CLEAR_MARGIN
 
     paths = _sets(args.sets, args.scenes) + _sets(args.perception_sets, args.perception_scenes)

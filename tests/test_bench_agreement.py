@@ -83,3 +83,24 @@ def test_a_run_spends_at_most_its_share_and_given_enough_finds_the_exact_favouri
     # Object 0's exact favourite (candidate 1) is the hypothesis estimator's runner-up: its
     # own term averaged over object 1's candidates favours candidate 0.
     assert emulation.agreements(results, "hypothesis", 0.1)[0] is False
+
+
+def test_the_emulator_refuses_what_it_cannot_read_before_building_any_table(tmp_path, capsys):
+    """A folder that is no scene, a share beyond exhaustive's compute or a malformed set is
+    refused with what is wrong, exit 2, and no table is written (an unreadable scene was
+    cached as one exhaustive refuses)."""
+    from benchmarks.dev_agreement import main
+
+    tables = tmp_path / "tables"
+    cases = (
+        (["--scene", str(tmp_path), "--sets"], "not a scene folder"),
+        (["--share", "2", "--sets"], "--share takes shares"),
+        (["--sets", "9100"], "a set is SEED:COUNT"),
+        (["--seeds", "0", "--sets"], "--seeds must be at least 1"),
+    )
+    for argv, message in cases:
+        with pytest.raises(SystemExit) as refused:
+            main([*argv, "--tables", str(tables)])
+        assert refused.value.code == 2
+        assert message in capsys.readouterr().err
+    assert not tables.exists()
