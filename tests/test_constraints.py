@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -9,7 +11,9 @@ from ipr_shapes.hypotheses import UnaryTolerances
 from ipr_shapes.hypotheses.constraints import (
     ConstraintConfig,
     OverlapCache,
+    box_depth_bounds,
     compatibility_matrix,
+    interacting_pairs,
     intersection_volume,
     joint_feasible,
     pairwise_overlap,
@@ -58,6 +62,70 @@ def test_compatibility_matrix_with_tolerance_and_box_pretest():
     compatibility_matrix(first, second, config, cache)
     assert cache.queries == 1  # cached
     assert compatibility_matrix(second, first, config).T.tolist() == matrix.tolist()
+
+
+def cuboid(object_id: int, index: int, lower, upper) -> ShapeHypothesis:
+    """An axis-aligned box hypothesis from its lower to its upper corner (m)."""
+    lower, upper = np.asarray(lower, float), np.asarray(upper, float)
+    vertices, faces = box_mesh((upper - lower) / 2, (upper + lower) / 2)
+    volume = float(np.prod(upper - lower))
+    return ShapeHypothesis(object_id, index, vertices, faces, volume, np.zeros(0), np.zeros((0, 3)))
+
+
+def test_thickness_is_the_least_extent_across_the_faces():
+    slab = cuboid(1, 0, [0, 0, 0], [0.1, 0.002, 0.04])
+    assert slab.width_m == pytest.approx(0.002, abs=1e-12)
+    assert cube(1, 1, [0, 0, 0], size=0.03).width_m == pytest.approx(0.03, abs=1e-12)
+    # Turned 30 degrees about z: still 2 mm across its broad faces (not its box's 5.2 cm).
+    turn = np.deg2rad(30.0)
+    rotation = np.array(
+        [[np.cos(turn), -np.sin(turn), 0], [np.sin(turn), np.cos(turn), 0], [0, 0, 1]]
+    )
+    turned = dataclasses.replace(slab, vertices=slab.vertices @ rotation.T)
+    assert turned.width_m == pytest.approx(0.002, abs=1e-12)
+    assert np.ptp(turned.vertices[:, 1]) > 0.05
+
+
+def test_a_thin_candidate_across_a_neighbour_is_not_passed_by_the_box_pretest():
+    """A 2 mm slab across a long box: its bounding box's intervals overlap by 2 mm along y, but
+    separating them takes a 3.9 cm move (up z); the pre-test must not answer 2 mm."""
+    config = ConstraintConfig(overlap_tolerance_m=0.005)
+    box = cuboid(1, 0, [-0.049, -0.03, 0.0], [0.049, 0.2, 0.039])
+    slab = cuboid(2, 0, [-0.05, 0.098, 0.0], [0.05, 0.1, 0.04])
+    assert box_depth_bounds([box], [slab])[0, 0] == pytest.approx(0.039, abs=1e-9)
+    assert penetration_depth(box, slab) == pytest.approx(0.039, abs=1e-6)
+    cache = OverlapCache([box, slab])
+    assert cache.depth_matrix([box], [slab], exact_above_m=0.005)[0, 0] == pytest.approx(
+        0.039, abs=1e-6
+    )
+    strict = ConstraintConfig(overlap_tolerance_m=0.005, relax_forced_overlap=False)
+    assert compatibility_matrix([box], [slab], strict, cache).tolist() == [[False]]
+    # The objects' envelopes (one candidate each here) interact: the pair is measured.
+    assert interacting_pairs({1: [box], 2: [slab]}, 0.005) == [(1, 2)]
+    apart = cuboid(2, 1, [-0.05, 0.3, 0.0], [0.05, 0.302, 0.04])
+    assert interacting_pairs({1: [box], 2: [apart]}, 0.005) == []
+    # A box that stops 1 cm short of the slab is compatible; with both, only it is.
+    short = cuboid(1, 1, [-0.049, -0.03, 0.0], [0.049, 0.088, 0.039])
+    assert compatibility_matrix([box, short], [slab], config).tolist() == [[False], [True]]
+
+
+def test_a_candidate_thinner_than_the_tolerance_may_not_sink_into_a_neighbour():
+    """The tolerance is for touching surfaces: a 2 mm slab 3 mm deep into a box's face (within
+    the 5 mm tolerance) lies wholly inside it and is refused; 1 mm deep (half of it, a noisy
+    contact) passes, and so does a 1 cm plate 3 mm deep (its depth within the tolerance)."""
+    config = ConstraintConfig(overlap_tolerance_m=0.005, relax_forced_overlap=False)
+    box = cuboid(1, 0, [0.0, 0.0, 0.0], [0.1, 0.1, 0.1])
+    sunk = cuboid(2, 0, [0.02, 0.02, 0.097], [0.08, 0.08, 0.099])  # 3 mm deep, 2 mm thick
+    touching = cuboid(2, 1, [0.02, 0.02, 0.099], [0.08, 0.08, 0.101])  # 1 mm deep
+    plate = cuboid(2, 2, [0.02, 0.02, 0.097], [0.08, 0.08, 0.107])  # 3 mm deep, 1 cm thick
+    assert intersection_volume(box, sunk) == pytest.approx(sunk.volume_m3, rel=1e-9)
+    assert penetration_depth(box, sunk) == pytest.approx(0.003, abs=1e-6)
+    matrix = compatibility_matrix([box], [sunk, touching, plate], config)
+    assert matrix.tolist() == [[False, True, True]]
+    # The measure: the depth in units of the thinner candidate's thickness (t / w = 2.5).
+    assert pairwise_overlap(box, sunk, config) == pytest.approx(0.0075, abs=1e-6)
+    assert pairwise_overlap(box, touching, config) == pytest.approx(0.0025, abs=1e-6)
+    assert pairwise_overlap(box, plate, config) == pytest.approx(0.003, abs=1e-6)
 
 
 def test_forced_overlap_is_relaxed_but_still_ranks():

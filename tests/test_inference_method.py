@@ -17,7 +17,7 @@ import pytest
 from ipr_shapes.camera import look_at
 from ipr_shapes.collision_checker import uniform_posteriors
 from ipr_shapes.factor_graph import posterior_medoid
-from ipr_shapes.hypotheses import ConstraintConfig, OverlapCache, overlap_threshold
+from ipr_shapes.hypotheses import ConstraintConfig, OverlapCache, overlap_matrix, overlap_threshold
 from ipr_shapes.inference import (
     FRICTION_GRID,
     InferenceConfig,
@@ -73,15 +73,15 @@ def _prepared(
     candidates: dict[int, list[ShapeHypothesis]], minima: dict[int, ShapeHypothesis]
 ) -> PreparedHypotheses:
     """Hypotheses and constraints of objects given their candidates (all unary-feasible) and
-    minimum shapes, measured as ``prepare_hypotheses`` does: exact penetration depths, the
-    default tolerance."""
+    minimum shapes, measured as ``prepare_hypotheses`` does: the overlap measure (exact
+    penetration depths), the default tolerance."""
     ids = list(candidates)
     cache = OverlapCache([h for i in ids for h in candidates[i]])
     config = ConstraintConfig()
     depths, thresholds = {}, {}
     for position, a in enumerate(ids):
         for b in ids[position + 1 :]:
-            matrix = cache.depth_matrix(candidates[a], candidates[b])
+            matrix = overlap_matrix(cache, candidates[a], candidates[b], config.overlap_tolerance_m)
             threshold = overlap_threshold(matrix, config, a, b)
             if (matrix > threshold).any():
                 depths[(a, b)], thresholds[(a, b)] = matrix, threshold

@@ -82,6 +82,21 @@ class ShapeHypothesis:
         box.setflags(write=False)
         return box
 
+    @functools.cached_property
+    def width_m(self) -> float:
+        """Thickness (m): the least extent of the hull along one of its face normals (the
+        distance from a face's plane to the farthest vertex behind it). Exact for boxes and
+        slabs, otherwise at least the minimal width (it may be attained between two edges);
+        the pairwise constraint measures a thin candidate's penetration against it
+        (``ipr_shapes.hypotheses.constraints``). Computed once."""
+        planes = self.face_planes()
+        if len(planes) == 0:
+            return 0.0
+        # Each face's plane is a supporting plane of the hull: n . x + offset = 0 on the face,
+        # <= 0 inside, so the farthest vertex behind face f lies -min(n_f . v + offset_f) away.
+        depths = self.vertices @ planes[:, :3].T + planes[:, 3]
+        return float(max(-depths.min(axis=0).max(), 0.0))
+
     @property
     def mesh(self) -> tuple[np.ndarray, np.ndarray]:
         """(vertices, faces), the pair ``ipr_shapes.voxels`` and ``ipr_shapes.result`` accept."""
@@ -191,9 +206,11 @@ class PreparedHypotheses:
         minima: id -> minimum shape.
         candidates: id -> indices into ``generated[id]`` of the unary-feasible hypotheses.
         seconds: id -> seconds spent generating.
-        depths: (a, b) -> (len(candidates[a]), len(candidates[b])) penetration depths (m) for
-            interacting pairs (a before b in ``ids``); pairs absent never conflict.
-        thresholds: (a, b) -> the largest allowed depth (m) for that pair.
+        depths: (a, b) -> (len(candidates[a]), len(candidates[b])) overlap measures (m) for
+            interacting pairs (a before b in ``ids``); pairs absent never conflict. The
+            penetration depth, scaled by tolerance / thickness where the thinner candidate is
+            thinner than the tolerance (``ipr_shapes.hypotheses.constraints.overlap_matrix``).
+        thresholds: (a, b) -> the largest allowed measure (m) for that pair.
     """
 
     ids: list[int]

@@ -13,10 +13,25 @@ than manifold3d's exact intersection volume, fits the per-object budget (docs/DE
 whereas the volume of a noisy contact grows with the contact's area. ``intersection_volume``
 (manifold3d) stays available for reporting and tests.
 
-A bounding-box pre-test skips most pairs: the depth along the axis where the boxes overlap
-least bounds the penetration depth from above (moving one shape that far apart along that axis
-separates the boxes, hence the shapes), so pairs whose bound is within the tolerance are
-compatible without a query.
+Thin candidates: a candidate thinner than the tolerance (a thin symmetry candidate, a flat
+superquadric) could lie wholly inside a neighbour, or pass through its surface layer, within a
+tolerated depth. The tolerance is for two *surfaces* in contact, each a few millimetres off;
+once the depth reaches the thinner candidate's thickness w (``ShapeHypothesis.width_m``), that
+candidate is no longer in contact with its neighbour's surface but inside it. So a pair whose
+thinner candidate has w below the tolerance t is measured as depth * t / w: the depth in units
+of that candidate's thickness, against the same tolerance (a depth of w is the tolerance), and
+the relaxations below (forced overlaps; the Collision Checker's doubling) apply to that
+measure alike. Pairs of candidates at least t thick keep their depth in metres.
+
+A bounding-box pre-test skips most pairs: the boxes' own penetration depth bounds the shapes'
+from above (a shape lies in its box, so a move that separates the boxes separates the shapes),
+so pairs whose bound is within the tolerance are compatible without a query. Along one axis the
+boxes [lo_a, hi_a] and [lo_b, hi_b] separate after a move of min(hi_a - lo_b, hi_b - lo_a)
+(one way or the other), and the boxes' depth is the least of that over the three axes. The
+intervals' overlap, min(hi_a, hi_b) - max(lo_a, lo_b), is *not* a bound: when one interval holds
+the other (a thin candidate across a neighbour) it is the thin one's thickness, however deep
+the thin one lies inside (until 2026-11-27 that was the pre-test, and a 2 mm candidate passed
+through any neighbour; docs/experiments/2026-11-27-thin-candidates-overlap.md).
 
 Forced overlaps: when even the least-overlapping pair of two objects' hypotheses penetrates by
 more than the tolerance, the overlap is forced by the observations (segmentation bleeding,
@@ -125,17 +140,65 @@ def intersection_volume(a: ShapeHypothesis, b: ShapeHypothesis) -> float:
     return float((first ^ second).volume())
 
 
-def pairwise_overlap(a: ShapeHypothesis, b: ShapeHypothesis) -> float:
-    """The overlap measure of the constraints: penetration depth in metres (module doc)."""
-    return penetration_depth(a, b)
+def pairwise_overlap(
+    a: ShapeHypothesis, b: ShapeHypothesis, config: ConstraintConfig | None = None
+) -> float:
+    """The overlap measure of the constraints (m): penetration depth, scaled by t / w when
+    the thinner candidate's thickness w is below the tolerance t (module doc)."""
+    config = config or ConstraintConfig()
+    tolerance = config.overlap_tolerance_m
+    limit = thin_limits([a], [b], tolerance)
+    return float(penetration_depth(a, b) * thin_scale(limit, tolerance)[0, 0])
+
+
+#: Thickness (m) below which a candidate counts as flat: its measure's scale stays finite.
+_FLAT_M = 1e-6
+
+
+def thin_limits(
+    hyps_i: Sequence[ShapeHypothesis], hyps_j: Sequence[ShapeHypothesis], tolerance_m: float
+) -> np.ndarray:
+    """(m_i, m_j) the depth (m) at which each pair's measure reaches the tolerance: the
+    tolerance, or the thinner candidate's thickness when that is less (module doc)."""
+    widths_i = np.array([h.width_m for h in hyps_i], float)
+    widths_j = np.array([h.width_m for h in hyps_j], float)
+    return np.minimum(tolerance_m, np.minimum.outer(widths_i, widths_j))
+
+
+def thin_scale(limits: np.ndarray, tolerance_m: float) -> np.ndarray:
+    """Factors (same shape as ``thin_limits``' answer) from penetration depths to the overlap
+    measure: t / w where the thinner candidate's thickness w is below the tolerance t, else 1."""
+    return np.where(limits < tolerance_m, tolerance_m / np.maximum(limits, _FLAT_M), 1.0)
+
+
+def overlap_matrix(
+    cache: OverlapCache,
+    hyps_i: Sequence[ShapeHypothesis],
+    hyps_j: Sequence[ShapeHypothesis],
+    tolerance_m: float,
+) -> np.ndarray:
+    """(m_i, m_j) overlap measures (m, module doc) of two lists of hypotheses registered in
+    ``cache``: penetration depths, those of pairs with a candidate thinner than the tolerance
+    scaled by t / w. Pairs whose bounding boxes' depth is within their limit (the tolerance, or
+    the thinner's thickness) are not queried: their measure is at most the tolerance."""
+    limits = thin_limits(hyps_i, hyps_j, tolerance_m)
+    depths = cache.depth_matrix(hyps_i, hyps_j, exact_above_m=limits)
+    return depths * thin_scale(limits, tolerance_m)
 
 
 def _box_bounds(lo_a: np.ndarray, hi_a: np.ndarray, lo_b: np.ndarray, hi_b: np.ndarray):
-    """Upper bounds (m_a, m_b) on penetration depths from bounding boxes (m_a/m_b, 3) each."""
-    overlap = np.minimum(hi_a[:, None, :], hi_b[None, :, :]) - np.maximum(
-        lo_a[:, None, :], lo_b[None, :, :]
-    )
-    return np.maximum(overlap.min(axis=2), 0.0)
+    """(m_a, m_b) penetration depths (m) of bounding boxes given by corners (m_a/m_b, 3) each:
+    upper bounds on their shapes' depths (module doc; 0 for boxes apart on some axis)."""
+    move = np.minimum(hi_a[:, None, :] - lo_b[None, :, :], hi_b[None, :, :] - lo_a[:, None, :])
+    return np.maximum(move.min(axis=2), 0.0)
+
+
+def box_depth(lo_a: np.ndarray, hi_a: np.ndarray, lo_b: np.ndarray, hi_b: np.ndarray) -> float:
+    """Penetration depth (m) of two axis-aligned boxes given by their (3,) corners: the least
+    move along one axis that separates them (0 when apart), an upper bound on the depth of any
+    two shapes inside them (module doc)."""
+    move = np.minimum(np.asarray(hi_a) - np.asarray(lo_b), np.asarray(hi_b) - np.asarray(lo_a))
+    return max(float(move.min()), 0.0)
 
 
 def box_depth_bounds(
@@ -195,11 +258,18 @@ class OverlapCache:
         self,
         hyps_i: Sequence[ShapeHypothesis],
         hyps_j: Sequence[ShapeHypothesis],
-        exact_above_m: float = 0.0,
+        exact_above_m: float | np.ndarray = 0.0,
     ) -> np.ndarray:
         """(m_i, m_j) penetration depths (m). Pairs whose bounding-box bound is at most
-        ``exact_above_m`` are not queried: they hold that bound (>= the true depth) instead."""
-        signature = (tuple(map(key_of, hyps_i)), tuple(map(key_of, hyps_j)), exact_above_m)
+        ``exact_above_m`` (a number, or one per pair: (m_i, m_j)) are not queried: they hold
+        that bound (>= the true depth) instead."""
+        above = np.asarray(exact_above_m, float)
+        signature = (
+            tuple(map(key_of, hyps_i)),
+            tuple(map(key_of, hyps_j)),
+            above.shape,
+            above.tobytes(),
+        )
         cached = self._matrices.get(signature)
         if cached is not None:
             return cached
@@ -211,7 +281,7 @@ class OverlapCache:
         keys_i, keys_j = signature[0], signature[1]
         cache, geom, model, data = self._depth, self._geom, self._model, self._data
         distance_of = mujoco.mj_geomDistance
-        rows, cols = np.nonzero(depths > exact_above_m)
+        rows, cols = np.nonzero(depths > above)
         found = []
         queries = 0
         # Python ints and lists: numpy scalars' indexing and item assignment cost more than
@@ -235,6 +305,29 @@ class OverlapCache:
         return depths
 
 
+def interacting_pairs(
+    hypotheses: Mapping[int, Sequence[ShapeHypothesis]], tolerance_m: float
+) -> list[tuple[int, int]]:
+    """The pairs (a, b) of object ids (a before b in the mapping's order) some pair of whose
+    hypotheses may exceed the tolerance: the penetration depth of the objects' envelopes (the
+    box around all their hypotheses' boxes) bounds every pair's (module doc), and a pair
+    matters once its depth may exceed the tolerance or the thinnest candidate's thickness."""
+    ids = [i for i in hypotheses if len(hypotheses[i])]
+    envelopes = {
+        i: (np.min([h.bounds[0] for h in hypotheses[i]], axis=0),
+            np.max([h.bounds[1] for h in hypotheses[i]], axis=0))
+        for i in ids
+    }  # fmt: skip
+    thinnest = {i: min(h.width_m for h in hypotheses[i]) for i in ids}
+    pairs = []
+    for position, a in enumerate(ids):
+        for b in ids[position + 1 :]:
+            bound = box_depth(*envelopes[a], *envelopes[b])
+            if bound > min(tolerance_m, thinnest[a], thinnest[b]):
+                pairs.append((a, b))
+    return pairs
+
+
 def compatibility_matrix(
     hyps_i: Sequence[ShapeHypothesis],
     hyps_j: Sequence[ShapeHypothesis],
@@ -242,7 +335,7 @@ def compatibility_matrix(
     cache: OverlapCache | None = None,
 ) -> np.ndarray:
     """(m_i, m_j) bool: True where hypothesis a of object i and b of object j may coexist
-    (penetration depth within the tolerance, relaxed for forced overlaps: module doc).
+    (overlap measure within the tolerance, relaxed for forced overlaps: module doc).
 
     ``cache`` must hold every hypothesis of both lists (one is built for them otherwise).
     """
@@ -251,15 +344,15 @@ def compatibility_matrix(
         return np.ones((len(hyps_i), len(hyps_j)), dtype=bool)
     if cache is None or not all(h in cache for h in (*hyps_i, *hyps_j)):
         cache = OverlapCache([*hyps_i, *hyps_j])
-    tolerance = config.overlap_tolerance_m
-    depths = cache.depth_matrix(hyps_i, hyps_j, exact_above_m=tolerance)
-    return depths <= overlap_threshold(depths, config, hyps_i[0].object_id, hyps_j[0].object_id)
+    measures = overlap_matrix(cache, hyps_i, hyps_j, config.overlap_tolerance_m)
+    return measures <= overlap_threshold(measures, config, hyps_i[0].object_id, hyps_j[0].object_id)
 
 
 def overlap_threshold(
     depths: np.ndarray, config: ConstraintConfig, object_i: int = -1, object_j: int = -1
 ) -> float:
-    """Penetration depth (m) tolerated between two objects given their depth matrix."""
+    """Overlap measure (m) tolerated between two objects given their matrix of measures
+    (``overlap_matrix``; penetration depths for candidates at least the tolerance thick)."""
     tolerance = config.overlap_tolerance_m
     least = float(depths.min()) if depths.size else 0.0
     if config.relax_forced_overlap and least > tolerance:

@@ -2,7 +2,8 @@
 
 Algorithm 1 (``ipr_shapes.hypotheses.generate``) runs per object; the unary constraints
 (``ipr_shapes.hypotheses.constraints``) keep the feasible hypotheses (an object with none is
-represented by its minimum shape); the pairwise penetration depths are measured between the
+represented by its minimum shape); the pairwise overlap measures (penetration depths, a
+candidate thinner than the tolerance's relative to its thickness) are measured between the
 feasible hypotheses of objects whose envelopes overlap. Every inference method (the Collision
 Checker and the physics-based ones) starts from this ``PreparedHypotheses``.
 """
@@ -22,7 +23,10 @@ from ipr_shapes.hypotheses.constraints import (
     OverlapCache,
     box_depth_bounds,
     generated_unary_feasible,
+    interacting_pairs,
+    overlap_matrix,
     overlap_threshold,
+    thin_limits,
 )
 from ipr_shapes.hypotheses.generate import HypothesisConfig, generate_hypotheses, minimum_shape
 from ipr_shapes.hypotheses.neighbours import neighbour_spaces
@@ -138,37 +142,27 @@ def _prepare(
             volume_spread(hyps),
         )
 
-    # Pairwise penetration depths between the feasible hypotheses of objects whose hypotheses'
-    # bounding boxes overlap by more than the tolerance.
+    # Pairwise overlap measures (penetration depths; a thin candidate's relative to its
+    # thickness: ``constraints`` module doc) between the feasible hypotheses of objects whose
+    # hypotheses' bounding boxes may overlap by more than that allows.
     chosen = {i: [generated[i][k] for k in candidates[i]] for i in ids}
     tolerance = constraints.overlap_tolerance_m
-    envelopes = {
-        i: np.stack([np.min([h.bounds[0] for h in chosen[i]], axis=0),
-                     np.max([h.bounds[1] for h in chosen[i]], axis=0)])
-        for i in ids
-    }  # fmt: skip
-    pairs = []
-    for position, a in enumerate(ids):
-        for b in ids[position + 1 :]:
-            bound = np.min(
-                np.minimum(envelopes[a][1], envelopes[b][1])
-                - np.maximum(envelopes[a][0], envelopes[b][0])
-            )
-            if bound > tolerance:
-                pairs.append((a, b))
+    pairs = interacting_pairs(chosen, tolerance)
     # Only the hypotheses some pair's depth query needs go into the MuJoCo model (the rest keep
     # their box bounds): compiling costs per mesh, and a geom's depths do not depend on the
     # other meshes in the model.
     queried: dict[int, np.ndarray] = {i: np.zeros(len(chosen[i]), dtype=bool) for i in ids}
     for a, b in pairs:
-        needed = box_depth_bounds(chosen[a], chosen[b]) > tolerance
+        needed = box_depth_bounds(chosen[a], chosen[b]) > thin_limits(
+            chosen[a], chosen[b], tolerance
+        )
         queried[a] |= needed.any(axis=1)
         queried[b] |= needed.any(axis=0)
     cache = OverlapCache([h for i in ids for h, q in zip(chosen[i], queried[i], strict=True) if q])
     depths: dict[tuple[int, int], np.ndarray] = {}
     thresholds: dict[tuple[int, int], float] = {}
     for a, b in pairs:
-        matrix = cache.depth_matrix(chosen[a], chosen[b], exact_above_m=tolerance)
+        matrix = overlap_matrix(cache, chosen[a], chosen[b], tolerance)
         threshold = overlap_threshold(matrix, constraints, a, b)
         if (matrix > threshold).any():
             depths[(a, b)], thresholds[(a, b)] = matrix, threshold
