@@ -88,14 +88,11 @@ class ShapeHypothesis:
         distance from a face's plane to the farthest vertex behind it). Exact for boxes and
         slabs, otherwise at least the minimal width (it may be attained between two edges);
         the pairwise constraint measures a thin candidate's penetration against it
-        (``ipr_shapes.hypotheses.constraints``). Computed once."""
-        planes = self.face_planes()
-        if len(planes) == 0:
-            return 0.0
-        # Each face's plane is a supporting plane of the hull: n . x + offset = 0 on the face,
-        # <= 0 inside, so the farthest vertex behind face f lies -min(n_f . v + offset_f) away.
-        depths = self.vertices @ planes[:, :3].T + planes[:, 3]
-        return float(max(-depths.min(axis=0).max(), 0.0))
+        (``ipr_shapes.hypotheses.constraints``). Computed once, compiled
+        (``ipr_shapes.hypotheses.kernels.hull_width``)."""
+        from ipr_shapes.hypotheses.kernels import hull_width
+
+        return float(hull_width(np.asarray(self.vertices, float), np.asarray(self.faces, np.int64)))
 
     @property
     def mesh(self) -> tuple[np.ndarray, np.ndarray]:
