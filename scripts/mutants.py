@@ -402,6 +402,23 @@ MUTANTS: tuple[Mutant, ...] = (
         _t("constraints"),
     ),
     Mutant(
+        "box-pretest-interval-overlap",
+        "constraints",
+        "the box pre-test takes the boxes' interval overlap for a depth bound (a thin candidate "
+        "across a neighbour passes unqueried)",
+        "move = np.minimum(hi_a[:, None, :] - lo_b[None, :, :], hi_b[None, :, :] - lo_a[:, None, :])",
+        "move = np.minimum(hi_a[:, None, :], hi_b[None, :, :]) - np.maximum(lo_a[:, None, :], lo_b[None, :, :])",
+        _t("constraints", "collision_checker"),
+    ),
+    Mutant(
+        "thin-candidates-not-scaled",
+        "constraints",
+        "a candidate thinner than the tolerance may sink wholly into a neighbour",
+        "return np.where(limits < tolerance_m, tolerance_m / np.maximum(limits, _FLAT_M), 1.0)",
+        "return np.ones_like(limits)",
+        _t("constraints"),
+    ),
+    Mutant(
         "support-constraint-dropped",
         "constraints",
         "hypotheses below the support are unary-feasible",
