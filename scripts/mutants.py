@@ -364,9 +364,17 @@ MUTANTS: tuple[Mutant, ...] = (
         "collision-checker-mode-not-medoid",
         "collision_checker",
         "the Collision Checker outputs its most probable hypothesis, not the medoid",
-        "posterior_medoid(hyps, probabilities),",
+        "posterior_medoid(hyps, feasible / feasible.sum()),",
         "int(np.argmax(probabilities)),",
         _t("inference_method", "collision_checker"),
+    ),
+    Mutant(
+        "medoid-weighted-by-marginals",
+        "collision_checker",
+        "the Collision Checker's medoid weights the feasible candidates by their marginals",
+        "posterior_medoid(hyps, feasible / feasible.sum()),",
+        "posterior_medoid(hyps, probabilities),",
+        _t("collision_checker"),
     ),
     Mutant(
         "medoid-ignores-iou",

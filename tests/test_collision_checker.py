@@ -7,8 +7,12 @@ import itertools
 import numpy as np
 import pytest
 
-from ipr_shapes.collision_checker import CollisionCheckerConfig, collision_checker
-from ipr_shapes.factor_graph import exact_marginals, gibbs_marginals
+from ipr_shapes.collision_checker import (
+    CollisionCheckerConfig,
+    collision_checker,
+    uniform_posteriors,
+)
+from ipr_shapes.factor_graph import exact_marginals, gibbs_marginals, posterior_medoid
 from ipr_shapes.hypotheses import ConstraintConfig, HypothesisConfig
 from ipr_shapes.perception.free_space import FREE, SpaceMap
 from ipr_shapes.perception.types import Facet, PartialObject
@@ -156,3 +160,43 @@ def test_the_sampler_reaches_feasible_assignments_that_random_draws_would_not():
     assert sampled is not None
     for i in sizes:  # every counted state is feasible: all objects agree
         assert sampled[i] == pytest.approx(sampled[0])
+
+
+def test_output_is_the_medoid_of_the_feasible_candidates_each_counted_once():
+    """Nested cubes of 4, 5 and 6 cm for one object; beside them ten candidates of a neighbour
+    that only the 4 cm cube leaves room for, and one far away. The 4 cm cube is in 11 of the 13
+    feasible joint models (marginal 11/13), yet of the three the 5 cm cube is the one closest
+    in IoU to the other two: the output. The marginals' medoid would be the 4 cm cube: its
+    weight counts the neighbour's candidates, not evidence about this object."""
+    from ipr_shapes.hypotheses import OverlapCache, overlap_matrix, overlap_threshold
+    from ipr_shapes.products import PreparedHypotheses, ShapeHypothesis
+
+    from .box_scene import box_mesh
+
+    def cube(object_id, index, lower, size):
+        half = np.full(3, size / 2)
+        vertices, faces = box_mesh(half, np.asarray(lower, float) + half)
+        return ShapeHypothesis(
+            object_id, index, vertices, faces, size**3, np.zeros(0), np.zeros((0, 3))
+        )
+
+    first = [cube(1, k, [0.0, 0.0, 0.0], size) for k, size in enumerate((0.04, 0.05, 0.06))]
+    second = [cube(2, k, [0.040 + 1e-4 * k, 0.0, 0.0], 0.02) for k in range(10)]
+    second.append(cube(2, 10, [0.2, 0.0, 0.0], 0.02))
+    config = ConstraintConfig()
+    matrix = overlap_matrix(
+        OverlapCache([*first, *second]), first, second, config.overlap_tolerance_m
+    )
+    prepared = PreparedHypotheses(
+        ids=[1, 2],
+        generated={1: tuple(first), 2: tuple(second)},
+        minima={1: first[0], 2: second[0]},
+        candidates={1: [0, 1, 2], 2: list(range(11))},
+        seconds={1: 0.0, 2: 0.0},
+        depths={(1, 2): matrix},
+        thresholds={(1, 2): overlap_threshold(matrix, config, 1, 2)},
+    )
+    box, _ = uniform_posteriors(prepared, CONFIG)
+    assert box.probabilities == pytest.approx([11 / 13, 1 / 13, 1 / 13])
+    assert box.best == 1
+    assert posterior_medoid(box.hypotheses, box.probabilities) == 0  # the test means something

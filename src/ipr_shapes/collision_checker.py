@@ -14,8 +14,15 @@ Constraints(X), and each object's output is read from its marginal over its own 
 - No feasible joint assignment in a component (noisy or concave objects): the pairwise
   tolerance of that component is doubled, up to ``relax_steps`` times, then its pairwise
   constraints are dropped (each object uniform over its feasible hypotheses); logged.
-- Output shape: the posterior medoid under voxel IoU (the Bayes choice under IoU loss), among
-  hypotheses with non-zero probability; the minimum shape when no hypothesis is feasible.
+- Output shape: the medoid under voxel IoU of the jointly feasible hypotheses (non-zero
+  probability), each weighted equally: the Bayes choice under IoU loss if each were equally
+  likely to be the object; the minimum shape when no hypothesis is feasible. The marginals
+  themselves are not the weights: a candidate's marginal also counts the joint models it is
+  in, i.e. how many of its neighbours' *generated* candidates it fits with, which says how the
+  neighbours were sampled, not what this object is; small candidates fit with more and the
+  marginals fall with volume (median correlation of marginal and log volume -0.57 on 75
+  development objects), so their medoid leaned small (docs/experiments/
+  2026-11-27-thin-candidates-overlap.md). The marginals are still the written probabilities.
 """
 
 from __future__ import annotations
@@ -168,12 +175,15 @@ def uniform_posteriors(
         probabilities[candidates[i]] = marginals[i]
         probabilities /= probabilities.sum()
         inference = "minimum" if hyps[0].index == -1 else how[i]
+        # The medoid of the jointly feasible candidates, each counted once (module doc): a
+        # marginal also counts how many of the neighbours' candidates a candidate fits with.
+        feasible = (probabilities > 0).astype(float)
         posteriors.append(
             ObjectPosterior(
                 i,
                 hyps,
                 probabilities,
-                posterior_medoid(hyps, probabilities),
+                posterior_medoid(hyps, feasible / feasible.sum()),
                 prepared.minima[i],
                 inference,
                 prepared.seconds[i],

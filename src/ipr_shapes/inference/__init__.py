@@ -69,8 +69,9 @@ of some jointly feasible model) are candidates. Then, repeated until the time bu
 Priors: ``uniform``, or ``size``: P(X_i^j) proportional to volume(X_i^j)^-size_prior_exponent
 (smaller models are more probable, the paper's informed prior), normalised per object.
 
-Output per object: the posterior medoid under voxel IoU (the Bayes choice under IoU loss), as the
-Collision Checker does. Anytime: before the first sample finishes the answer is the Collision
+Output per object: the posterior medoid under voxel IoU (the Bayes choice under IoU loss), weighted
+by this posterior (the Collision Checker's medoid weights its feasible candidates equally: its
+marginals count joint models, not evidence; ``ipr_shapes.collision_checker``). Anytime: before the first sample finishes the answer is the Collision
 Checker's; a budget too small for one sample returns it and says so. Samples are independent
 given their index (each draws from ``default_rng([seed, index])``), so a run with ``max_samples``
 and no deadline gives the same result with any number of workers.
