@@ -329,30 +329,3 @@ def test_slice_ranks_are_numpy_s_unique_inverse():
             values[0] = 10**9  # an outlier: numpy's sort
         got, expected = _ranks(values), np.unique(values, return_inverse=True)[1]
         assert got.dtype == expected.dtype and np.array_equal(got, expected)
-
-
-def test_hull_width_is_numpy_s_least_extent_across_the_faces():
-    """The compiled thickness (early stop per face) against the numpy expression over every
-    face and vertex, on random hulls from flat to round, turned at random."""
-    from ipr_shapes.hypotheses.kernels import hull_width
-    from ipr_shapes.products import ShapeHypothesis
-
-    rng = np.random.default_rng(5)
-    widths = []
-    for _ in range(60):
-        points = rng.normal(size=(rng.integers(8, 200), 3)) * rng.uniform(0.001, 0.05, 3)
-        rotation, _ = np.linalg.qr(rng.normal(size=(3, 3)))
-        points = points @ rotation.T + rng.uniform(-0.2, 0.2, 3)
-        hull = ConvexHull(points)
-        faces = hull.simplices.copy()
-        tri = points[faces]
-        normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-        flip = np.einsum("ij,ij->i", normals, hull.equations[:, :3]) < 0
-        faces[flip] = faces[flip][:, [0, 2, 1]]
-        h = ShapeHypothesis(1, 0, points, faces, hull.volume, np.zeros(0), np.zeros((0, 3)))
-        planes = h.face_planes()
-        expected = -(points @ planes[:, :3].T + planes[:, 3]).min(axis=0).max()
-        assert hull_width(points, faces.astype(np.int64)) == pytest.approx(expected, abs=1e-12)
-        assert h.width_m == pytest.approx(expected, abs=1e-12)
-        widths.append(expected)
-    assert min(widths) < 0.004 < max(widths)  # thin and thick hulls both met

@@ -89,8 +89,8 @@ class ShapeHypothesis:
         slabs, otherwise at least the minimal width (it may be attained between two edges);
         the pairwise constraint measures a thin candidate's penetration against it
         (``ipr_shapes.hypotheses.constraints``). Computed once, compiled
-        (``ipr_shapes.hypotheses.kernels.hull_width``)."""
-        from ipr_shapes.hypotheses.kernels import hull_width
+        (``ipr_shapes.geometry.kernels.hull_width``)."""
+        from ipr_shapes.geometry.kernels import hull_width
 
         return float(hull_width(np.asarray(self.vertices, float), np.asarray(self.faces, np.int64)))
 
