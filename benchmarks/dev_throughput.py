@@ -12,10 +12,11 @@ or ``--config``'s TOML, ``ipr+action+uniform``), then ``--samples`` tree samples
 the machine is shared, so wall time says little), the CPU seconds inside ``mujoco.mj_step``
 and the steps taken (MuJoCo's raw stepping rate is steps / stepping CPU; if sampling did
 nothing but step, it would reach steps per sample / that rate), world compilations, stability
-tests, candidates screened and distinct joint models. One JSON line per scene on stdout.
+tests, candidates screened, candidates' test results reused in another context and distinct
+joint models. One JSON line per scene on stdout.
 
 To compare code versions, run it under each (``PYTHONPATH=<their src>``): the script only uses
-``Sampler`` attributes both have, and reads ``screened`` when present.
+``Sampler`` attributes both have, and reads ``screened`` and ``reused`` when present.
 """
 
 from __future__ import annotations
@@ -117,6 +118,7 @@ def measure(path: Path, samples: int, workers: int, config=None) -> dict:
         "stepping_bound_samples_per_cpu_s": raw_rate / steps_per_sample,
         "stability_tests": getattr(sampler, "stability_tests", None),
         "screened": getattr(sampler, "screened", None),
+        "reused": getattr(sampler, "reused", None),
         "distinct_models": len(sampler.evaluated) if sampler else None,
         "choices": [list(r.choice) for r in results],
     }

@@ -668,6 +668,82 @@ def test_stability_tests_in_the_reused_world_match_a_world_compiled_per_context(
         sampler.close()
 
 
+def test_a_candidate_test_is_reused_in_contexts_that_agree_inside_its_swept_box(pair):
+    # Object 1's short shape ends 2 cm before object 2's nearest shape: no context changes what
+    # it touches, so after its first test it is never simulated again. Its long shapes reach
+    # into object 2's near shape only: tested again beside it, reused beside the far shape
+    # (their result without object 2's minimum, which none reaches either). Every distance
+    # is what a world of that context alone gives.
+    prepared, observed = pair
+    problem = _problem(
+        prepared, observed, "ipr+uniform", config=InferenceConfig(screen_resting=False)
+    )
+    physics = problem.config.physics
+
+    def fresh(placed):
+        context = problem.candidates[1][placed[1]] if 1 in placed else problem.minima[1]
+        bodies = [Body(context.vertices, context.faces, dynamic=False)]
+        bodies += [Body(h.vertices, h.faces, candidate=True) for h in problem.candidates[0]]
+        world = build_world(bodies, problem.planes, physics)
+        world.settle(physics.stability_s)
+        return world.drops()[1:]
+
+    sampler = Sampler(problem)
+    try:
+        distances = {}
+        for name, placed, tests, reused in (
+            ("minimum", {}, 1, 0),
+            ("near", {1: 0}, 2, 1),
+            ("far", {1: 1}, 2, 4),
+        ):
+            distances[name] = sampler._distances(0, placed, math.inf)
+            assert (sampler.stability_tests, sampler.reused) == (tests, reused), name
+            assert distances[name] == pytest.approx(fresh(placed), abs=5e-4), name
+        # Reused results are the earlier tests' own.
+        assert distances["far"].tolist() == distances["minimum"].tolist()
+        assert distances["near"][0] == distances["minimum"][0]
+        assert distances["near"][1] != distances["minimum"][1]  # shoved: a result of its own
+    finally:
+        sampler.close()
+
+
+def test_objects_whose_bound_is_below_the_best_mass_are_not_tested(pair, stack_observed):
+    # Each stage tests the objects in the order of their mass bounds and skips those whose
+    # bound is below the largest mass found: the same draws as testing every object, with
+    # fewer tests.
+    stack = _prepared({1: [TOP_THIN, TOP_THICK], 2: [BOTTOM_MID, BOTTOM_DEEP]}, STACK_MINIMA)
+    config = InferenceConfig(screen_resting=False)
+    problems = [
+        _problem(pair[0], pair[1], "ipr+uniform", config=config),
+        _problem(stack, stack_observed, "ipr+uniform", config=config),
+    ]
+    tests = []
+    for problem in problems:
+        pruned, every = Sampler(problem), Sampler(problem)
+        every._mass_bound = lambda i, placed: math.inf
+        for sampler in (pruned, every):
+            # Without reuse across contexts (its results agree with a fresh test's to about
+            # 1e-7 m, not bit for bit, and the two samplers test different contexts).
+            sampler._reuse = lambda i, candidates, *_: np.full(len(candidates), np.nan)
+        try:
+            for seed in range(12):
+                draws = [
+                    s.tree_sample_explored(np.random.default_rng([0, seed]))
+                    for s in (pruned, every)
+                ]
+                assert draws[0][0] == draws[1][0] and draws[0][1] == draws[1][1]
+                for a, b in zip(draws[0][2], draws[1][2], strict=True):
+                    assert a.tolist() == b.tolist()
+            tests.append((pruned.stability_tests, every.stability_tests))
+        finally:
+            pruned.close()
+            every.close()
+    # The pair: object 1's short shape stands beside anything, so its three candidates'
+    # mass is above object 2's bound (two candidates) in the first stage; the stack's
+    # objects have two candidates each, and the first one's mass is below 2: both tested.
+    assert tests[0][0] < tests[0][1] and tests[1][0] == tests[1][1]
+
+
 def test_only_candidates_clear_of_other_shapes_are_screened(pair):
     # On its own, every shape of object 1 stands on the support 1 cm or more from object 2's
     # seen front: all screened. Beside object 1's longest shape, object 2's near shape

@@ -177,6 +177,36 @@ def test_settle_each_holds_each_shape_once_at_rest_and_measures_as_settle_does()
     assert world.settle_each([0, 1], 0.05).tolist() == [True, False]
 
 
+def test_settle_each_sweeps_each_shape_from_its_start_to_where_it_rested():
+    # The swept box covers every step's pose: the standing box's is its own box, the falling
+    # box's spans its 6 cm fall down to the support; the same steps as without sweeping.
+    standing = box_mesh(np.array([0.02, 0.02, 0.02]), np.array([0.0, 0.1, 0.02]))
+    falling = box_mesh(np.array([0.02, 0.02, 0.02]), np.array([0.0, -0.1, 0.08]))
+    bodies = [Body(*standing, switchable=True), Body(*falling, switchable=True)]
+    plain, swept_world = build_world(bodies, [SUPPORT]), build_world(bodies, [SUPPORT])
+    plain.settle_each([0, 1], 0.3)
+    swept = np.zeros((2, 2, 3))
+    swept_world.settle_each([0, 1], 0.3, swept)
+    assert swept_world.drops().tolist() == plain.drops().tolist()
+    for k, (vertices, _) in enumerate((standing, falling)):
+        start = np.stack([vertices.min(axis=0), vertices.max(axis=0)])
+        end = swept_world.shape_boxes([k])[0]
+        assert np.all(swept[k, 0] <= np.minimum(start[0], end[0]) + 1e-9)
+        assert np.all(swept[k, 1] >= np.maximum(start[1], end[1]) - 1e-9)
+    # (the standing box sinks 0.6 mm into the soft support)
+    assert swept[0] == pytest.approx(np.stack([standing[0].min(0), standing[0].max(0)]), abs=1e-3)
+    # Down to the support (the box enters it 6 mm on landing), up to where it started.
+    assert -0.01 < swept[1, 0, 2] <= swept_world.shape_boxes([1])[0, 0, 2]
+    assert swept[1, 1, 2] == pytest.approx(0.10, abs=1e-9)  # from its start
+    # A box turned by 45 degrees about z: its box grows by sqrt(2) (the box of the turned box).
+    c = np.cos(np.pi / 4)
+    turn = np.array([c, -c, 0.0, c, c, 0.0, 0.0, 0.0, 1.0])
+    swept_world.data.xmat[swept_world.body_ids[0]] = turn
+    box = swept_world.shape_boxes([0])[0]
+    assert box[1, 0] - box[0, 0] == pytest.approx(0.04 * np.sqrt(2))
+    assert box[1, 2] - box[0, 2] == pytest.approx(0.04)
+
+
 def test_resting_drop_settles_only_the_clear_cases_and_agrees_with_the_simulation():
     from ipr_shapes.physics import convex_centroid, resting_drop
 

@@ -207,6 +207,7 @@ class World:
     initial_com: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     shape_geoms: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     contacts: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), dtype=np.int32))
+    local_boxes: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 3)))
 
     # ----------------------------------------------------------------------------------------
     # Reuse: one compiled world for many stability tests
@@ -247,13 +248,22 @@ class World:
             start = self.model.body_dofadr[body]
             self.data.qvel[start : start + 6] = 0.0
 
-    def settle_each(self, shapes: Sequence[int], max_s: float) -> np.ndarray:
+    def settle_each(
+        self, shapes: Sequence[int], max_s: float, swept: np.ndarray | None = None
+    ) -> np.ndarray:
         """Step until each of ``shapes`` (switchable dynamic bodies) is slower than the settle
         thresholds, holding each (``hold``) as soon as it is, checked every 50 ms as in
         ``settle``, or until ``max_s`` passed; a body's distances are then measured where it
         came to rest. Returns (len(shapes),) bool: which came to rest (False for all when the
         world exploded). Why: one shape still moving no longer keeps every other one
-        simulated (and its contacts solved) to the end of the test."""
+        simulated (and its contacts solved) to the end of the test.
+
+        ``swept`` (len(shapes), 2, 3), when given, receives each shape's swept box (m, world):
+        the union of its axis-aligned boxes (``shape_boxes``) at every step, from the start
+        to where it came to rest. MuJoCo detects contacts at the steps' poses only, so a
+        shape whose swept box no other shape's box enters touched none of them (the
+        stability cache of ``ipr_shapes.inference.sampler`` reuses its result in any context
+        that agrees inside that box). Stepping then goes one step per call (the same steps)."""
         config = self.config
         check_every = max(1, int(round(0.05 / config.timestep_s)))
         steps = int(np.ceil(max_s / config.timestep_s))
@@ -261,21 +271,55 @@ class World:
         moving = list(range(len(shapes)))
         rested = np.zeros(len(shapes), dtype=bool)
         dofs = self.model.body_dofadr[self.body_ids[shapes]] if shapes else np.zeros(0, int)
+        if swept is not None and shapes:
+            swept[:] = self.shape_boxes(shapes)
+            positions = np.empty((check_every, len(shapes), 3))
+            rotations = np.empty((check_every, len(shapes), 9))
         for _ in range(0, steps, check_every):
             if not moving:
                 break
-            mujoco.mj_step(self.model, self.data, nstep=check_every)
+            if swept is None:
+                mujoco.mj_step(self.model, self.data, nstep=check_every)
+            else:
+                moved = [shapes[m] for m in moving]
+                ids = self.body_ids[moved]
+                count = len(moved)
+                for step in range(check_every):
+                    mujoco.mj_step(self.model, self.data)
+                    # After mj_step, xpos and xmat are the pose its collisions were found at.
+                    np.take(self.data.xpos, ids, axis=0, out=positions[step, :count])
+                    np.take(self.data.xmat, ids, axis=0, out=rotations[step, :count])
+                low, high = self._boxes_at(moved, positions[:, :count], rotations[:, :count])
+                swept[moving, 0] = np.minimum(swept[moving, 0], low.min(axis=0))
+                swept[moving, 1] = np.maximum(swept[moving, 1], high.max(axis=0))
             if not self._check():
                 return np.zeros(len(shapes), dtype=bool)
             velocity = self.data.qvel[dofs[moving, None] + np.arange(6)]
-            still = (np.linalg.norm(velocity[:, :3], axis=1) < config.settle_linear_m_s) & (
-                np.linalg.norm(velocity[:, 3:], axis=1) < config.settle_angular_rad_s
-            )
+            linear = np.linalg.norm(velocity[:, :3], axis=1)
+            angular = np.linalg.norm(velocity[:, 3:], axis=1)
+            still = (linear < config.settle_linear_m_s) & (angular < config.settle_angular_rad_s)
             for position in np.flatnonzero(still):
                 rested[moving[position]] = True
                 self.hold(shapes[moving[position]])
             moving = [m for m, s in zip(moving, still, strict=True) if not s]
         return rested
+
+    def shape_boxes(self, shapes: Sequence[int]) -> np.ndarray:
+        """(len(shapes), 2, 3) axis-aligned boxes (m, world) of dynamic ``shapes`` where they
+        are now: each shape's frame-0 box about its body origin, turned and moved with the
+        body (the box of the turned box: it contains the shape; exact at frame 0)."""
+        ids = self.body_ids[np.asarray(shapes, dtype=np.int64)]
+        low, high = self._boxes_at(shapes, self.data.xpos[ids][None], self.data.xmat[ids][None])
+        return np.stack([low[0], high[0]], axis=1)
+
+    def _boxes_at(self, shapes: Sequence[int], positions: np.ndarray, rotations: np.ndarray):
+        """The boxes of ``shapes`` at T poses, body positions (T, S, 3) and rotations (T, S, 9)
+        as ``data.xpos`` and ``data.xmat`` hold them: their low and high corners (T, S, 3)."""
+        local = self.local_boxes[np.asarray(shapes, dtype=np.int64)]
+        rotation = rotations.reshape(*rotations.shape[:2], 3, 3)
+        centre = positions + np.matmul(rotation, local.mean(axis=1)[:, :, None])[..., 0]
+        half = np.matmul(np.abs(rotation), ((local[:, 1] - local[:, 0]) / 2)[:, :, None])[..., 0]
+        return centre - half, centre + half
 
     # ----------------------------------------------------------------------------------------
     # State
@@ -438,19 +482,22 @@ class World:
             self.at_rest = False
         check_every = max(1, int(round(0.1 / timestep)))
         self.model.opt.timestep = timestep
+        # Per step only what the early stop needs (cheap numpy: a step costs 0.1-0.4 ms).
+        model, mocap, pusher = self.model, data.mocap_pos, self.pusher_geom
+        intrusion = config.push_stop_intrusion_m
         try:
             for step in range(skipped + 1, steps + 1):
                 travelled = min(step * timestep * speed, push.distance_m)
-                data.mocap_pos[self.pusher_mocap] = start + direction * travelled
-                mujoco.mj_step(self.model, data)
+                mocap[self.pusher_mocap] = start + direction * travelled
+                mujoco.mj_step(model, data)
                 if step % check_every == 0 and not self._check():
                     return travelled
                 count = data.ncon
                 if count:
-                    touching = (data.contact.geom[:count] == self.pusher_geom).any(axis=1)
-                    if touching.any() and -data.contact.dist[:count][touching].min() > (
-                        config.push_stop_intrusion_m
-                    ):
+                    contact = data.contact
+                    geom = contact.geom[:count]
+                    touching = (geom[:, 0] == pusher) | (geom[:, 1] == pusher)
+                    if touching.any() and -contact.dist[:count][touching].min() > intrusion:
                         break
         finally:
             self.model.opt.timestep = config.timestep_s
@@ -498,9 +545,28 @@ def support_of(planes: Sequence[KnownPlane]) -> KnownPlane | None:
     return next((plane for plane in planes if plane.kind == "support"), None)
 
 
+#: ``_wall_slab``'s recent results by (plane, thickness): every joint model of a scene is built
+#: on the same planes. Holds the plane, so that its ``id`` is not reused while cached.
+_SLABS: dict[tuple[int, float], tuple[KnownPlane, np.ndarray | None]] = {}
+_SLABS_KEPT = 64
+
+
 def _wall_slab(plane: KnownPlane, min_thickness_m: float) -> np.ndarray | None:
     """(2P, 3) vertices of a wall's slab: its points' outline on the visible face and the same
-    outline ``thickness`` behind it; None when the outline is degenerate."""
+    outline ``thickness`` behind it; None when the outline is degenerate (cached per plane
+    object: a plane is not changed once made)."""
+    key = (id(plane), float(min_thickness_m))
+    kept = _SLABS.get(key)
+    if kept is not None and kept[0] is plane:
+        return kept[1]
+    slab = _make_wall_slab(plane, min_thickness_m)
+    if len(_SLABS) >= _SLABS_KEPT:
+        _SLABS.pop(next(iter(_SLABS)), None)
+    _SLABS[key] = (plane, slab)
+    return slab
+
+
+def _make_wall_slab(plane: KnownPlane, min_thickness_m: float) -> np.ndarray | None:
     points = np.asarray(plane.points, float).reshape(-1, 3)
     if len(points) < 3:
         return None
@@ -670,6 +736,10 @@ def build_world(
     contacts = np.stack(
         [model.geom_contype[shape_geoms], model.geom_conaffinity[shape_geoms]], axis=1
     ).astype(np.int32)
+    local_boxes = np.zeros((len(bodies), 2, 3))
+    for k, body in enumerate(bodies):
+        relative = np.asarray(body.vertices, float).reshape(-1, 3) - origins[k]
+        local_boxes[k] = relative.min(axis=0), relative.max(axis=0)
     return World(
         model,
         data,
@@ -684,6 +754,7 @@ def build_world(
         initial_com=initial_com,
         shape_geoms=shape_geoms,
         contacts=contacts.reshape(-1, 2),
+        local_boxes=local_boxes,
     )
 
 
