@@ -387,6 +387,20 @@ class SegmentationConfig:
             neighbouring pixels of one surface are centimetres apart).
         contour_gap_m: two neighbouring pixels whose world points are closer than this (m)
             connect their supervoxels into one part (as ``fragment_gap_m``).
+        crease_split_depth_m: after the contour split, a segment one of whose supervoxel
+            centres lies at least this deep (m) inside the 3D convex hull of the segment's
+            points is cut along that crease (two convex objects meeting flush, a bottle lying
+            on a block: the crease lies inside the union's hull, a convex object's surface on
+            its own; ``ipr_shapes.perception.creases``). 0: off. 2 cm: no single object of
+            the development sets is that concave without being a container, whose inside
+            leaves its rim in one piece.
+        crease_cut_depth_m: ... the supervoxels deeper than a cut depth are the crease, and the
+            segment is cut when the rest falls into exactly two parts of at least
+            ``crease_split_px`` pixels (the crease going to the part whose flood reaches it
+            first); cut depths are tried from 0.8 ``crease_split_depth_m`` down by factors of
+            0.8 to this one (m; 5 mm: shallower is the noise and the curvature of single
+            objects' supervoxel centres).
+        crease_split_px: ... (pixels; as ``contour_split_px``).
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -424,6 +438,9 @@ class SegmentationConfig:
         "contour_min_pairs": _AT_LEAST_ONE,
         "contour_facing_cos": Interval(-1, 1),
         "contour_gap_m": _POSITIVE,
+        "crease_split_depth_m": _NON_NEGATIVE,
+        "crease_cut_depth_m": _POSITIVE,
+        "crease_split_px": _AT_LEAST_ONE,
     }
 
     concavity_tolerance_deg: float = 10.0
@@ -462,6 +479,9 @@ class SegmentationConfig:
     contour_min_pairs: int = 10
     contour_facing_cos: float = 0.25
     contour_gap_m: float = 0.01
+    crease_split_depth_m: float = 0.02
+    crease_cut_depth_m: float = 0.005
+    crease_split_px: int = 150
 
     def __post_init__(self) -> None:
         check_fields(self)
