@@ -13,7 +13,12 @@ import numpy as np
 
 from ipr_shapes.camera import look_at
 from ipr_shapes.perception.config import PerceptionConfig
-from ipr_shapes.perception.creases import _cut_levels, hull_depths, split_at_creases
+from ipr_shapes.perception.creases import (
+    _cut_levels,
+    _slab_depth_bound,
+    hull_depths,
+    split_at_creases,
+)
 from ipr_shapes.perception.supervoxels import compute_supervoxels
 from ipr_shapes.perception.types import KnownPlane
 from ipr_shapes.scene import Frame
@@ -239,3 +244,20 @@ def test_cut_levels_run_from_the_split_depth_down_to_the_floor():
     levels = _cut_levels(0.02, 0.005)
     assert levels[0] == 0.016 and levels[-1] == 0.005
     assert all(a > b for a, b in zip(levels, levels[1:], strict=False))
+
+
+def test_the_slab_bound_is_never_below_the_depth_inside_the_hull_and_skips_flat_segments():
+    """The hull is skipped when the slab bound is below the split depth: the bound must hold
+    (at least the true depth) for the leaning boards, the cup and the cube on the box, and be
+    below 2 cm for a box's single face."""
+    for frame, objects in (_leaning_boxes(), _render(_camera(), cups=[CUP]), _cube_on_box(0.0)):
+        cloud = frame.points_world()[objects >= 0][::5].astype(np.float64)
+        queries = cloud[::3]
+        deepest = hull_depths(cloud, queries).max()
+        assert deepest > 0.015
+        assert deepest <= _slab_depth_bound(cloud, queries) <= deepest + 0.08
+    box = (np.array([0.0, 0.0, 0.03]), np.array([0.08, 0.08, 0.03]), np.eye(3))
+    frame, objects = _render(_camera(), boxes=[box])
+    points = frame.points_world()
+    top = points[(objects == 0) & (points[..., 2] > 0.055)].astype(np.float64)
+    assert _slab_depth_bound(top[::5], top[::15]) < 0.005
