@@ -829,7 +829,10 @@ class TrackingConfig:
             in frame t-1 and, carried back, in frame 0 (two touching objects one segment until
             a push separates them; ``tracking.split_merged_objects``).
         split_min_share, split_min_px: each part holds at least this share of the object's
-            frame t-1 pixels with depth, and this many pixels (the new object too).
+            frame t-1 pixels with depth, and this many pixels (the new object too). 0.05: a
+            can pushed out of a frame-0 union held 9.6 % of it (development 8400/011), and
+            0.2 left it the union's sliver id; the pixel floor keeps slivers out
+            (docs/experiments/2026-11-27-flush-contacts.md).
         split_margin: the split's cost is below the unsplit one's by more than this.
         split_merged_segments: a segment matched to one object that also holds a known object
             left unmatched in this frame (two objects pushed into contact and segmented as
@@ -912,7 +915,7 @@ class TrackingConfig:
     merge_split_objects: bool = True
     object_merge_margin: float = 0.0
     split_merged_objects: bool = True
-    split_min_share: float = 0.2
+    split_min_share: float = 0.05
     split_min_px: int = 200
     split_margin: float = 0.0
     split_merged_segments: bool = True

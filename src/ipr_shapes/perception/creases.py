@@ -190,7 +190,7 @@ def _crease_sides(
     """(n,) side 0 or 1 of each of a segment's supervoxels ``nodes`` (n,), or None when the
     supervoxels less deep than ``cut_depth`` (m; ``depth`` (n,)) do not form exactly two
     parts of at least ``min_px`` pixels under the segment's adjacency ``edges`` (E, 2)
-    (supervoxel ids). The deeper supervoxels go, in order of increasing depth, to the side of
+    (supervoxel ids), or when those two are not joined through the deeper ones. The deeper supervoxels go, in order of increasing depth, to the side of
     the neighbour that reaches them first (a flood from both parts; the crease, deepest, is
     reached last); any the flood never reaches stay with side 0."""
     n = len(nodes)
@@ -204,6 +204,15 @@ def _crease_sides(
     part_px = np.bincount(part[shallow], weights=sizes[nodes[shallow]])
     large = np.flatnonzero(part_px >= min_px)
     if len(large) != 2:
+        return None
+    # The two parts must meet through the crease: pieces of a segment that do not touch at all
+    # (an object seen on both sides of an occluder, objects the previous frame's grouping
+    # keeps together) are not cut here.
+    _, whole = connected_components(
+        coo_matrix((np.ones(len(a)), (a, b)), shape=(n, n)), directed=False
+    )
+    first, second = (np.flatnonzero(part == p)[0] for p in large)
+    if whole[first] != whole[second]:
         return None
     side = np.full(n, -1, dtype=np.int64)
     side[part == large[0]] = 0
