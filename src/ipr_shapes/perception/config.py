@@ -391,9 +391,9 @@ class SegmentationConfig:
             centres lies at least this deep (m) inside the 3D convex hull of the segment's
             points is cut along that crease (two convex objects meeting flush, a bottle lying
             on a block: the crease lies inside the union's hull, a convex object's surface on
-            its own; ``ipr_shapes.perception.creases``). 0: off. 2 cm: no single object of
-            the development sets is that concave without being a container, whose inside
-            leaves its rim in one piece.
+            its own; ``ipr_shapes.perception.creases``). 0: off. 2 cm: at 1.5 cm a large
+            single box of the development sets was cut; a container's floor, as deep, leaves
+            its rim and walls in one piece, which is not cut.
         crease_cut_depth_m: ... the supervoxels deeper than a cut depth are the crease, and the
             segment is cut when the rest falls into exactly two parts of at least
             ``crease_split_px`` pixels (the crease going to the part whose flood reaches it
