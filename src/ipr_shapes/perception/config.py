@@ -387,6 +387,20 @@ class SegmentationConfig:
             neighbouring pixels of one surface are centimetres apart).
         contour_gap_m: two neighbouring pixels whose world points are closer than this (m)
             connect their supervoxels into one part (as ``fragment_gap_m``).
+        crease_split_depth_m: after the contour split, a segment one of whose supervoxel
+            centres lies at least this deep (m) inside the 3D convex hull of the segment's
+            points is cut along that crease (two convex objects meeting flush, a bottle lying
+            on a block: the crease lies inside the union's hull, a convex object's surface on
+            its own; ``ipr_shapes.perception.creases``). 0: off. 2 cm: at 1.5 cm a large
+            single box of the development sets was cut; a container's floor, as deep, leaves
+            its rim and walls in one piece, which is not cut.
+        crease_cut_depth_m: ... the supervoxels deeper than a cut depth are the crease, and the
+            segment is cut when the rest falls into exactly two parts of at least
+            ``crease_split_px`` pixels (the crease going to the part whose flood reaches it
+            first); cut depths are tried from 0.8 ``crease_split_depth_m`` down by factors of
+            0.8 to this one (m; 5 mm: shallower is the noise and the curvature of single
+            objects' supervoxel centres).
+        crease_split_px: ... (pixels; as ``contour_split_px``).
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -424,6 +438,9 @@ class SegmentationConfig:
         "contour_min_pairs": _AT_LEAST_ONE,
         "contour_facing_cos": Interval(-1, 1),
         "contour_gap_m": _POSITIVE,
+        "crease_split_depth_m": _NON_NEGATIVE,
+        "crease_cut_depth_m": _POSITIVE,
+        "crease_split_px": _AT_LEAST_ONE,
     }
 
     concavity_tolerance_deg: float = 10.0
@@ -462,6 +479,9 @@ class SegmentationConfig:
     contour_min_pairs: int = 10
     contour_facing_cos: float = 0.25
     contour_gap_m: float = 0.01
+    crease_split_depth_m: float = 0.02
+    crease_cut_depth_m: float = 0.005
+    crease_split_px: int = 150
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -809,7 +829,10 @@ class TrackingConfig:
             in frame t-1 and, carried back, in frame 0 (two touching objects one segment until
             a push separates them; ``tracking.split_merged_objects``).
         split_min_share, split_min_px: each part holds at least this share of the object's
-            frame t-1 pixels with depth, and this many pixels (the new object too).
+            frame t-1 pixels with depth, and this many pixels (the new object too). 0.05: a
+            can pushed out of a frame-0 union held 9.6 % of it (development 8400/011), and
+            0.2 left it the union's sliver id; the pixel floor keeps slivers out
+            (docs/experiments/2026-11-27-flush-contacts.md).
         split_margin: the split's cost is below the unsplit one's by more than this.
         split_merged_segments: a segment matched to one object that also holds a known object
             left unmatched in this frame (two objects pushed into contact and segmented as
@@ -892,7 +915,7 @@ class TrackingConfig:
     merge_split_objects: bool = True
     object_merge_margin: float = 0.0
     split_merged_objects: bool = True
-    split_min_share: float = 0.2
+    split_min_share: float = 0.05
     split_min_px: int = 200
     split_margin: float = 0.0
     split_merged_segments: bool = True

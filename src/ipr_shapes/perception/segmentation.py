@@ -10,8 +10,9 @@ Steps, as in the paper:
    eigengap, k-means on the row-normalised eigenvectors (``cluster_supervoxels``).
 
 Then, beyond the paper, for real sensors: segments meeting along a smoothly curved concave
-surface are joined (``curvature.py``), opt-in a segment of two parts seen only across depth
-steps is split in two (``contours.py``), support residue and clutter beyond the table dropped
+surface are joined (``curvature.py``), a segment of two parts seen only across depth
+steps is split in two (``contours.py``), and so is one of two convex surfaces meeting at a
+concave crease inside its 3D convex hull (``creases.py``), support residue and clutter beyond the table dropped
 (``workspace.py``), open containers' insides joined to them (``containers.py``), small fragments
 joined to the surface they continue (``fragments.py``) and, opt-in, packed boxes cut at colour
 seams (``seams.py``).
@@ -36,6 +37,7 @@ from ipr_shapes.perception import kernels
 from ipr_shapes.perception.config import PerceptionConfig
 from ipr_shapes.perception.containers import join_container_insides
 from ipr_shapes.perception.contours import split_at_occluding_contours
+from ipr_shapes.perception.creases import split_at_creases
 from ipr_shapes.perception.curvature import join_curved_segments, smooth_concave_edges
 from ipr_shapes.perception.fragments import fragment_borders, join_fragments
 from ipr_shapes.perception.planes import find_support_plane, find_walls, static_geometry_mask
@@ -76,7 +78,7 @@ def segment_frame(
     Returns labels (H, W) int32 with 0 for background, support, walls, robot and large depth
     holes, and positive labels for the segments (numbered by decreasing size before the
     container and fragment joins, which give a joined piece its partner's label and so leave
-    gaps; a segment split at an occluding contour gives its second part the next free label); pixels without depth near a segment take its label (``fill_label_holes``). A frame
+    gaps; a segment split at an occluding contour or a crease gives its second part the next free label); pixels without depth near a segment take its label (``fill_label_holes``). A frame
     without any depth reading gives an empty segmentation (all 0, no planes, no supervoxels).
 
     The support is the plane the objects rest on (``planes.find_support_plane``), chosen in the
@@ -180,6 +182,10 @@ def segment_frame(
             frame.world_from_camera[:3, 3],
             support,
             config,
+        )
+    if config.segmentation.crease_split_depth_m > 0:
+        segment_of_supervoxel = split_at_creases(
+            segment_of_supervoxel, supervoxels, points, support, config
         )
     lookup = np.append(segment_of_supervoxel, 0).astype(np.int32)  # label -1 -> last -> 0
     labels = fill_label_holes(
