@@ -157,38 +157,3 @@ def test_the_sampler_reaches_feasible_assignments_that_random_draws_would_not():
     assert sampled is not None
     for i in sizes:  # every counted state is feasible: all objects agree
         assert sampled[i] == pytest.approx(sampled[0])
-
-
-def test_objects_generated_on_threads_get_the_hypotheses_of_one_thread(scene, monkeypatch):
-    # Each object draws from its own stream: generated two at a time (the larger, here the
-    # second, first), the hypotheses, their order, the constraints and so the marginals are
-    # those of one thread.
-    import threading
-
-    import ipr_shapes.hypotheses.prepare as prepare
-
-    view, objects = scene
-    objects = objects[::-1]
-    names = []
-    generate = prepare.generate_hypotheses
-    monkeypatch.setattr(
-        prepare,
-        "generate_hypotheses",
-        lambda *a, **k: names.append(threading.current_thread().name) or generate(*a, **k),
-    )
-
-    def run(workers):
-        return collision_checker(
-            objects, view.space(), (SUPPORT,), CONFIG, np.random.default_rng(5),
-            hypotheses=HYPOTHESES, workers=workers,
-        )  # fmt: skip
-
-    alone, threaded = run(1), run(2)
-    assert names[:2] == ["MainThread"] * 2
-    assert len(names) == 4 and all(n.startswith("ipr-hypotheses") for n in names[2:])
-    assert [p.object_id for p in threaded] == [2, 1]
-    for a, b in zip(alone, threaded, strict=True):
-        assert len(a.hypotheses) == len(b.hypotheses)
-        for x, y in zip(a.hypotheses, b.hypotheses, strict=True):
-            assert np.array_equal(x.vertices, y.vertices) and np.array_equal(x.faces, y.faces)
-        assert np.array_equal(a.probabilities, b.probabilities) and a.best == b.best

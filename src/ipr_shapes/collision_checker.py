@@ -194,7 +194,6 @@ def collision_checker(
     hypotheses: HypothesisConfig | None = None,
     constraints: ConstraintConfig | None = None,
     progress: ProgressCallback | None = None,
-    workers: int = 1,
 ) -> list[ObjectPosterior]:
     """Marginal shape posteriors of the objects of one frame (frame 0) under a uniform prior
     restricted to jointly feasible models (module doc).
@@ -211,8 +210,6 @@ def collision_checker(
             (``prepare_hypotheses``).
         hypotheses, constraints: settings of generation and of the constraints (defaults).
         progress: observer of the hypotheses' progress (``ipr_shapes.progress``).
-        workers: threads generating the objects' hypotheses (``prepare_hypotheses``; the
-            same hypotheses for any number).
 
     Returns:
         One ObjectPosterior per object, in the order of ``objects``.
@@ -225,7 +222,7 @@ def collision_checker(
     generation_rng, sampler_rng = rng.spawn(2)
     prepared = prepare_hypotheses(
         objects, space, planes, hypotheses, constraints, generation_rng, time_budget_s,
-        object_spaces, progress, workers,
+        object_spaces, progress,
     )  # fmt: skip
     posteriors = uniform_posteriors(prepared, config, sampler_rng, deadline)
     logger.debug(

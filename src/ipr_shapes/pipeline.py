@@ -240,9 +240,8 @@ class FusedObjects:
 
 
 def _threads(config: Config, workers: int | None) -> int:
-    """Threads of the stages before sampling (fusion, hypotheses): the sampling's
-    (``--workers``, else ``inference.workers``, else all cores); their results are the same
-    for any number."""
+    """Threads of fusion: the sampling's (``--workers``, else ``inference.workers``, else all
+    cores); its result is the same for any number."""
     return workers or config.inference.workers or default_workers()
 
 
@@ -310,7 +309,6 @@ def infer_with_physics(
         remaining_s,
         fused.object_spaces,
         progress,
-        _threads(config, workers),
     )
     hypotheses_s = time.perf_counter() - started
     observed = observed_frames(
@@ -412,7 +410,6 @@ def run_pipeline(
             hypotheses=config.hypotheses,
             constraints=config.constraints,
             progress=progress,
-            workers=_threads(config, workers),
         )
         generation = float(sum(p.generation_s for p in posteriors))
         timing = StageTimings(

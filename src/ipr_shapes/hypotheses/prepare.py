@@ -13,7 +13,6 @@ import dataclasses
 import logging
 import time
 from collections.abc import Mapping
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 from threadpoolctl import ThreadpoolController
@@ -52,7 +51,6 @@ def prepare_hypotheses(
     time_budget_s: float | None = None,
     object_spaces: Mapping[int, SeenSpace] | None = None,
     progress: ProgressCallback | None = None,
-    workers: int = 1,
 ) -> PreparedHypotheses:
     """Generate each object's hypotheses and minimum shape, keep the unary-feasible ones and
     measure the pairwise penetration depths between interacting objects' hypotheses.
@@ -67,18 +65,13 @@ def prepare_hypotheses(
     draws from its own child stream (``rng.spawn``). ``progress`` hears of each object done
     (``ipr_shapes.progress``, stage ``hypotheses``).
 
-    ``workers``: threads generating objects at once (each object draws from its own stream and
-    reads nothing of the others', and the compiled kernels and Qhull release the GIL), so the
-    hypotheses are the same for any number; only with ``time_budget_s`` can the objects'
-    timeouts, which are wall clock, cut them differently.
-
     Returns the objects' hypotheses with their unary and pairwise constraints, in the order of
     ``objects``.
     """
     with _BLAS.limit(limits=1, user_api="blas"):
         return _prepare(
             objects, space, planes, config, constraints, rng, time_budget_s, object_spaces,
-            progress, workers,
+            progress,
         )  # fmt: skip
 
 
@@ -92,7 +85,6 @@ def _prepare(
     time_budget_s: float | None,
     object_spaces: Mapping[int, SeenSpace] | None,
     progress: ProgressCallback | None,
-    workers: int = 1,
 ) -> PreparedHypotheses:
     """``prepare_hypotheses`` on one BLAS thread (its doc)."""
     config = config or HypothesisConfig()
@@ -118,54 +110,33 @@ def _prepare(
     minima: dict[int, ShapeHypothesis] = {}
     candidates: dict[int, list[int]] = {}  # object -> indices of unary-feasible hypotheses
     seconds: dict[int, float] = {}
-
-    def one(obj: PartialObject, object_rng: np.random.Generator):
-        """Object ``obj``'s hypotheses, minimum shape, feasible indices and seconds."""
+    report(progress, "hypotheses", 0, len(objects))
+    for done, (obj, object_rng) in enumerate(zip(objects, object_rngs, strict=True), start=1):
         begin = time.perf_counter()
         seen = (object_spaces or {}).get(obj.id, space)
         hyps = generate_hypotheses(
             obj, seen, planes, hypothesis_config, object_rng, bounds=bounds.get(obj.id)
         )
-        minimum = minimum_shape(obj, planes, hypothesis_config)
+        minima[obj.id] = minimum_shape(obj, planes, hypothesis_config)
         # generate_hypotheses checked each against ``seen`` and ``planes`` already (h.feasible):
         # ``unary_feasible``'s answer without measuring every hypothesis again.
         feasible = [
             k for k, h in enumerate(hyps) if generated_unary_feasible(h, regions, config.unary)
         ]
-        return hyps, minimum, feasible, time.perf_counter() - begin
-
-    report(progress, "hypotheses", 0, len(objects))
-    threads = min(max(1, int(workers)), len(objects))
-    pool = ThreadPoolExecutor(threads, thread_name_prefix="ipr-hypotheses") if threads > 1 else None
-    try:
-        if pool is not None:
-            # The most points first, so that the threads finish together; taken in order.
-            order = sorted(range(len(objects)), key=lambda k: -len(objects[k].points))
-            futures = {k: pool.submit(one, objects[k], object_rngs[k]) for k in order}
-            results = (futures[k].result() for k in range(len(objects)))
-        else:
-            results = (one(obj, r) for obj, r in zip(objects, object_rngs, strict=True))
-        for done, (obj, (hyps, minimum, feasible, took)) in enumerate(
-            zip(objects, results, strict=True), start=1
-        ):
-            minima[obj.id] = minimum
-            if not feasible:
-                logger.warning("object %d: no feasible hypothesis; using its minimum shape", obj.id)
-                hyps = (minimum,)
-                feasible = [0]
-            generated[obj.id], candidates[obj.id] = hyps, feasible
-            seconds[obj.id] = took
-            report(progress, "hypotheses", done, len(objects))
-            logger.debug(
-                "object %d: %d/%d feasible, volumes %s",
-                obj.id,
-                len(feasible),
-                len(hyps),
-                volume_spread(hyps),
-            )
-    finally:
-        if pool is not None:
-            pool.shutdown(cancel_futures=True)
+        if not feasible:
+            logger.warning("object %d: no feasible hypothesis; using its minimum shape", obj.id)
+            hyps = (minima[obj.id],)
+            feasible = [0]
+        generated[obj.id], candidates[obj.id] = hyps, feasible
+        seconds[obj.id] = time.perf_counter() - begin
+        report(progress, "hypotheses", done, len(objects))
+        logger.debug(
+            "object %d: %d/%d feasible, volumes %s",
+            obj.id,
+            len(feasible),
+            len(hyps),
+            volume_spread(hyps),
+        )
 
     # Pairwise penetration depths between the feasible hypotheses of objects whose hypotheses'
     # bounding boxes overlap by more than the tolerance.
