@@ -393,3 +393,44 @@ def test_batched_scoring_chooses_the_registration_of_starts_scored_one_by_one(vi
                 expected.reverse_free_share,
                 expected.rmse_m,
             )
+
+
+def test_objects_fused_on_threads_are_those_fused_one_by_one(views, monkeypatch):
+    # Three frame-0 objects: two that register (one turned the other way, in frame 2) and
+    # one whose later view is a flattened copy that does not; fused on threads, each object is what it is fused alone,
+    # in the objects' order, and the threads did the registrations.
+    import dataclasses
+    import threading
+
+    import ipr_shapes.fusion as fusion
+
+    reference, space, later, later_space, _ = views
+    other = dataclasses.replace(reference, id=2)
+    half_turn = _motion(180.0, [0.0, 0.0, 0.0])
+    turned, turned_space = _moved_view(half_turn @ _motion(70.0, [0.04, 0.03, 0.0]))
+    bar = dataclasses.replace(reference, id=3)
+    bar_view = dataclasses.replace(later, id=3, points=later.points[::3] * [1.0, 0.2, 1.0])
+    frames = [(reference, other, bar), (later, bar_view), (dataclasses.replace(turned, id=2),)]
+    spaces = [space, later_space, turned_space]
+    threads = []
+    register = fusion.register_view
+    monkeypatch.setattr(
+        fusion,
+        "register_view",
+        lambda *a: threads.append(threading.current_thread().name) or register(*a),
+    )
+    together = fuse_views(frames, spaces, SUPPORT, workers=2)
+    assert all(name.startswith("ipr-fusion") for name in threads) and len(threads) == 3
+    alone = [fuse_views([(obj,), *frames[1:]], spaces, SUPPORT) for obj in frames[0]]
+    assert [o.id for o in together.objects] == [1, 2, 3]
+    assert list(together.motions) == [k for k in (1, 2, 3) if alone[k - 1].motions]
+    assert set(together.fused_frames) == {1, 2} and 3 not in together.motions
+    for obj, single in zip(together.objects, alone, strict=True):
+        (expected,) = single.objects
+        assert np.array_equal(obj.points, expected.points)
+        assert np.array_equal(obj.pixels, expected.pixels)
+        assert len(obj.facets) == len(expected.facets)
+        assert together.fused_frames.get(obj.id) == single.fused_frames.get(obj.id)
+        mine, theirs = together.motions.get(obj.id, {}), single.motions.get(obj.id, {})
+        assert list(mine) == list(theirs)
+        assert all(np.array_equal(mine[t], theirs[t]) for t in mine)

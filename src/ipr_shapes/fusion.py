@@ -44,6 +44,7 @@ import dataclasses
 import functools
 import logging
 import threading
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -397,6 +398,85 @@ class FusedViews:
     motions: dict[int, dict[int, np.ndarray]]
 
 
+def _fuse_object(
+    obj: PartialObject,
+    objects: list[tuple[PartialObject, ...]],
+    spaces: list[SpaceMap | None],
+    support: KnownPlane | None,
+    up: np.ndarray,
+    config: FusionConfig,
+    workers: int,
+) -> tuple[PartialObject, list[int], dict[int, np.ndarray]]:
+    """One frame-0 object completed with its later views (``fuse_views``): the (fused) object,
+    the later frames that added points, and per later frame whose view registered its
+    ``frame0_from_frame`` motion. Reads nothing of the other objects' results."""
+    reference = np.asarray(obj.points, float)
+    added_points, added_facets, frames = [], [], []
+    motions: dict[int, np.ndarray] = {}
+    for t in range(1, len(objects)):
+        later = next((o for o in objects[t] if o.id == obj.id), None)
+        if later is None or len(later.points) < config.min_novel_points:
+            continue
+        registration = register_view(
+            later.points, reference, up, spaces[0], spaces[t], config, workers
+        )
+        if registration is None:
+            logger.info("object %d: frame %d's view does not register; not fused", obj.id, t)
+            continue
+        transform = registration.frame0_from_frame
+        motions[t] = transform
+        moved = _transformed(transform, later.points)
+        known = cKDTree(np.concatenate([reference, *added_points]))
+        distance, _ = known.query(moved)
+        novel = distance > config.novel_distance_m
+        if support is not None:
+            # A few millimetres of registration tilt would put points under the support,
+            # where no object can be (the constraints would then reject every shape).
+            novel &= support.signed_distance(moved) > config.novel_distance_m
+        if novel.sum() < config.min_novel_points:
+            continue
+        added_points.append(moved[novel])
+        frames.append(t)
+        for facet in later.facets:
+            facet_points = _transformed(transform, facet.points)
+            new_share = float(np.mean(known.query(facet_points)[0] > config.novel_distance_m))
+            if new_share < 0.5:
+                continue  # a side frame 0 already saw
+            added_facets.append(
+                Facet(
+                    _transformed(transform, facet.centre[None])[0],
+                    transform[:3, :3] @ np.asarray(facet.normal, float),
+                    facet_points,
+                    float(facet.area_m2),
+                )
+            )
+        logger.debug(
+            "object %d: frame %d fused (%d new points, overlap %.2f, rmse %.1f mm)",
+            obj.id,
+            t,
+            int(novel.sum()),
+            registration.overlap,
+            registration.rmse_m * 1e3,
+        )
+    if not added_points:
+        return obj, [], motions
+    extra = np.concatenate(added_points)
+    facet_of_point = obj.facet_of_point
+    if facet_of_point is not None:
+        facet_of_point = np.concatenate([facet_of_point, np.full(len(extra), -1)])
+    fused = PartialObject(
+        obj.id,
+        obj.frame,
+        np.concatenate([obj.pixels, np.full(len(extra), -1, dtype=obj.pixels.dtype)]),
+        np.concatenate([reference, extra]),
+        np.concatenate([obj.colours, np.zeros((len(extra), 3), dtype=obj.colours.dtype)]),
+        tuple(obj.facets) + tuple(added_facets),
+        facet_of_point,
+        obj.touches_border,
+    )
+    return fused, frames, motions
+
+
 def fuse_views(
     objects: list[tuple[PartialObject, ...]],
     spaces: list[SpaceMap | None],
@@ -411,8 +491,10 @@ def fuse_views(
         spaces: per frame, the free-space map (``Perception.free_space``).
         support: frame 0's support plane (its normal is the turning axis), or None (world z).
         config: parameters (module docstring).
-        workers: threads of each k-d tree query of the registrations (``register_view``);
-            the result is the same for any number.
+        workers: threads: with several objects, as many objects are fused at once (each
+            object's registrations are its own; the compiled queries release the GIL and
+            overlap the other object's numpy work); with one, its k-d tree queries are split
+            (``register_view``). The result is the same for any number.
 
     Returns:
         The fused objects, the frames fused per object and every accepted registration
@@ -422,75 +504,29 @@ def fuse_views(
     if not objects:
         return FusedViews((), {}, {})
     up = np.array([0.0, 0.0, 1.0]) if support is None else np.asarray(support.normal, float)
+    first = list(objects[0])
+    threads = min(max(1, int(workers)), len(first))
+
+    def one(obj: PartialObject, query_workers: int):
+        return _fuse_object(obj, objects, spaces, support, up, config, query_workers)
+
+    if threads > 1:
+        # The most points first, so that the threads finish together; results in object order.
+        order = sorted(range(len(first)), key=lambda k: -len(first[k].points))
+        results: list = [None] * len(first)
+        with ThreadPoolExecutor(threads, thread_name_prefix="ipr-fusion") as pool:
+            futures = {k: pool.submit(one, first[k], 1) for k in order}
+            for k, future in futures.items():
+                results[k] = future.result()
+    else:
+        results = [one(obj, workers) for obj in first]
     fused, used, motions = [], {}, {}
-    for obj in objects[0]:
-        reference = np.asarray(obj.points, float)
-        added_points, added_facets, frames = [], [], []
-        for t in range(1, len(objects)):
-            later = next((o for o in objects[t] if o.id == obj.id), None)
-            if later is None or len(later.points) < config.min_novel_points:
-                continue
-            registration = register_view(
-                later.points, reference, up, spaces[0], spaces[t], config, workers
-            )
-            if registration is None:
-                logger.info("object %d: frame %d's view does not register; not fused", obj.id, t)
-                continue
-            transform = registration.frame0_from_frame
-            motions.setdefault(int(obj.id), {})[t] = transform
-            moved = _transformed(transform, later.points)
-            known = cKDTree(np.concatenate([reference, *added_points]))
-            distance, _ = known.query(moved)
-            novel = distance > config.novel_distance_m
-            if support is not None:
-                # A few millimetres of registration tilt would put points under the support,
-                # where no object can be (the constraints would then reject every shape).
-                novel &= support.signed_distance(moved) > config.novel_distance_m
-            if novel.sum() < config.min_novel_points:
-                continue
-            added_points.append(moved[novel])
-            frames.append(t)
-            for facet in later.facets:
-                facet_points = _transformed(transform, facet.points)
-                new_share = float(np.mean(known.query(facet_points)[0] > config.novel_distance_m))
-                if new_share < 0.5:
-                    continue  # a side frame 0 already saw
-                added_facets.append(
-                    Facet(
-                        _transformed(transform, facet.centre[None])[0],
-                        transform[:3, :3] @ np.asarray(facet.normal, float),
-                        facet_points,
-                        float(facet.area_m2),
-                    )
-                )
-            logger.debug(
-                "object %d: frame %d fused (%d new points, overlap %.2f, rmse %.1f mm)",
-                obj.id,
-                t,
-                int(novel.sum()),
-                registration.overlap,
-                registration.rmse_m * 1e3,
-            )
-        if not added_points:
-            fused.append(obj)
-            continue
-        extra = np.concatenate(added_points)
-        facet_of_point = obj.facet_of_point
-        if facet_of_point is not None:
-            facet_of_point = np.concatenate([facet_of_point, np.full(len(extra), -1)])
-        fused.append(
-            PartialObject(
-                obj.id,
-                obj.frame,
-                np.concatenate([obj.pixels, np.full(len(extra), -1, dtype=obj.pixels.dtype)]),
-                np.concatenate([reference, extra]),
-                np.concatenate([obj.colours, np.zeros((len(extra), 3), dtype=obj.colours.dtype)]),
-                tuple(obj.facets) + tuple(added_facets),
-                facet_of_point,
-                obj.touches_border,
-            )
-        )
-        used[obj.id] = frames
+    for obj, (result, frames, moved) in zip(first, results, strict=True):
+        fused.append(result)
+        if moved:
+            motions[int(obj.id)] = moved
+        if frames:
+            used[obj.id] = frames
     return FusedViews(tuple(fused), used, motions)
 
 

@@ -239,6 +239,12 @@ class FusedObjects:
     fused_views: Mapping[str, list[int]] | None = None
 
 
+def _threads(config: Config, workers: int | None) -> int:
+    """Threads of fusion: the sampling's (``--workers``, else ``inference.workers``, else all
+    cores); its result is the same for any number."""
+    return workers or config.inference.workers or default_workers()
+
+
 def fuse(
     scene: Scene,
     perception: Perception,
@@ -253,8 +259,13 @@ def fuse(
     if not (method.actions and config.fusion.enabled):
         return FusedObjects(objects)
     support = next((p for p in perception.planes[0] if p.kind == "support"), None)
-    workers = workers or config.inference.workers or default_workers()
-    fused = fuse_views(perception.objects, perception.free_space, support, config.fusion, workers)
+    fused = fuse_views(
+        perception.objects,
+        perception.free_space,
+        support,
+        config.fusion,
+        _threads(config, workers),
+    )
     object_spaces: dict = {}
     if config.fusion.later_free_space or config.fusion.pusher_free_space:
         object_spaces = tracked_free_spaces(
