@@ -69,10 +69,14 @@ of some jointly feasible model) are candidates. Then, repeated until the time bu
 Priors: ``uniform``, or ``size``: P(X_i^j) proportional to volume(X_i^j)^-size_prior_exponent
 (smaller models are more probable, the paper's informed prior), normalised per object.
 
-Output per object: the posterior medoid under voxel IoU (the Bayes choice under IoU loss), weighted
-by this posterior (the Collision Checker's medoid weights its feasible candidates equally: its
-marginals count joint models, not evidence; ``ipr_shapes.collision_checker``). Anytime: before the first sample finishes the answer is the Collision
-Checker's; a budget too small for one sample returns it and says so. Samples are independent
+Output per object: the medoid under voxel IoU of its candidates (every one jointly feasible),
+each weighted by its own unary factor, evidence times prior (``medoid_weights``; "object" and
+"joint" weighting: by their marginals), not by its marginal: a marginal also counts the joint
+models the candidate is in, how many of the neighbours' generated candidates it fits with (small
+ones fit with more), as the Collision Checker's marginals do and its medoid leaves out
+(``ipr_shapes.collision_checker``; docs/experiments/2026-11-27-physics-posterior-weights.md).
+The written probabilities stay the marginals. Anytime: before the first sample finishes the
+answer is the Collision Checker's; a budget too small for one sample returns it and says so. Samples are independent
 given their index (each draws from ``default_rng([seed, index])``), so a run with ``max_samples``
 and no deadline gives the same result with any number of workers.
 
@@ -92,7 +96,9 @@ from ipr_shapes.inference.estimators import (
     factor_marginals,
     friction_posterior,
     hypothesis_log_likelihoods,
+    hypothesis_unary,
     marginals,
+    medoid_weights,
     object_log_weights,
     own_log_likelihoods,
     sample_log_weights,
@@ -125,8 +131,10 @@ __all__ = [
     "factor_marginals",
     "friction_posterior",
     "hypothesis_log_likelihoods",
+    "hypothesis_unary",
     "infer_shapes",
     "marginals",
+    "medoid_weights",
     "object_log_weights",
     "own_log_likelihoods",
     "run_samples",

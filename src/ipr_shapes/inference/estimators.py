@@ -170,6 +170,25 @@ def _exploration_ratio(results: Sequence[SampleResult], k: int, chosen: np.ndarr
         return np.log(explored / reference)
 
 
+def hypothesis_unary(
+    results: Sequence[SampleResult], problem: InferenceProblem
+) -> list[np.ndarray]:
+    """Per object, (m_k,) the log unary factor of "hypothesis" weighting from samples scored
+    under one friction: each candidate's log evidence (``hypothesis_log_likelihoods``) plus its
+    log prior. An object whose samples all failed keeps its prior; a candidate no sample
+    chose takes the mean likelihood of its object's sampled candidates, scaled by its mean
+    exploration probability against theirs (module doc, step 3)."""
+    unary = []
+    for k, means in enumerate(hypothesis_log_likelihoods(results, problem)):
+        evidence = np.zeros(len(means))
+        chosen = np.isfinite(means)
+        if chosen.any():
+            mean = np.logaddexp.reduce(means[chosen]) - math.log(int(chosen.sum()))
+            evidence = np.where(chosen, means, mean + _exploration_ratio(results, k, chosen))
+        unary.append(evidence + problem.log_prior[k])
+    return unary
+
+
 def _single_friction_marginals(
     results: Sequence[SampleResult], problem: InferenceProblem, joint: bool
 ) -> list[np.ndarray] | None:
@@ -177,18 +196,7 @@ def _single_friction_marginals(
     if not any(r.norms is not None for r in results):
         return None
     if not joint and problem.config.weighting == "hypothesis":
-        unary = []
-        for k, means in enumerate(hypothesis_log_likelihoods(results, problem)):
-            # An object whose samples all failed keeps its prior; a candidate no sample
-            # chose takes the mean likelihood of its object's sampled candidates, scaled by
-            # its mean exploration probability against theirs (module doc, step 3).
-            evidence = np.zeros(len(means))
-            chosen = np.isfinite(means)
-            if chosen.any():
-                mean = np.logaddexp.reduce(means[chosen]) - math.log(int(chosen.sum()))
-                evidence = np.where(chosen, means, mean + _exploration_ratio(results, k, chosen))
-            unary.append(evidence + problem.log_prior[k])
-        return factor_marginals(unary, problem)
+        return factor_marginals(hypothesis_unary(results, problem), problem)
     log_weights = sample_log_weights(results, problem, joint=joint)
     estimates = []
     for k, candidates in enumerate(problem.candidates):
@@ -224,6 +232,41 @@ def marginals(
             continue
         for k, values in enumerate(estimate):
             mixed[k] += posterior[f] * values
+    return [m / m.sum() for m in mixed]
+
+
+def medoid_weights(
+    results: Sequence[SampleResult], problem: InferenceProblem, *, joint: bool = False
+) -> list[np.ndarray] | None:
+    """Per object, (m_k,) the weights its output medoid is taken under: with "hypothesis"
+    weighting (not ``joint``) each candidate's own unary factor (evidence times prior,
+    ``hypothesis_unary``), normalised, every candidate being jointly feasible; mixed over the
+    frictions by ``friction_posterior``. Not the marginals: a marginal also counts the joint
+    models a candidate is in, i.e. how many of the neighbours' generated candidates it fits
+    with (small candidates fit with more), as the Collision Checker's does
+    (``ipr_shapes.collision_checker``, docs/experiments/2026-11-27-physics-posterior-weights.md).
+    Other weightings: their marginals (sample frequencies, no constraint count). None when
+    no sample has a positive weight."""
+    if joint or problem.config.weighting != "hypothesis":
+        return marginals(results, problem, joint=joint)
+    if not any(math.isfinite(r.log_likelihood) for r in results):
+        return None
+    count = len(problem.friction_values)
+    posterior = np.ones(1) if count == 1 else friction_posterior(results, problem)
+    if posterior is None:
+        return None
+    mixed = [np.zeros(len(c)) for c in problem.candidates]
+    for f in range(count):
+        if posterior[f] == 0:
+            continue
+        scored = at_friction(results, problem, f)
+        if not any(r.norms is not None for r in scored):
+            continue
+        for k, unary in enumerate(hypothesis_unary(scored, problem)):
+            weights = np.exp(unary - np.max(unary))
+            mixed[k] += posterior[f] * weights / weights.sum()
+    if not all(m.sum() > 0 for m in mixed):
+        return None
     return [m / m.sum() for m in mixed]
 
 

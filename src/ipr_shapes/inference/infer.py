@@ -19,6 +19,7 @@ from ipr_shapes.inference.estimators import (
     effective_sample_size,
     friction_posterior,
     marginals,
+    medoid_weights,
     sample_log_weights,
 )
 from ipr_shapes.inference.exhaustive import exhaustive_models
@@ -150,16 +151,21 @@ def infer_shapes(
         logger.warning("%s: %s", method, fallback)
         posteriors = uniform
     else:
+        # The medoid is weighted by each candidate's own evidence, not its marginal, which
+        # also counts the neighbours' candidates it fits with (``medoid_weights``).
+        weights = medoid_weights(samples, problem, joint=variant.exhaustive) or estimate
         posteriors = []
         for k, base in enumerate(uniform):
             probabilities = np.zeros(len(base.hypotheses))
             probabilities[indices[k]] = estimate[k]
+            medoid_weight = np.zeros(len(base.hypotheses))
+            medoid_weight[indices[k]] = weights[k]
             posteriors.append(
                 ObjectPosterior(
                     base.object_id,
                     base.hypotheses,
                     probabilities,
-                    posterior_medoid(base.hypotheses, probabilities),
+                    posterior_medoid(base.hypotheses, medoid_weight),
                     base.minimum,
                     method,
                     base.generation_s,
