@@ -142,9 +142,18 @@ MUTANTS: tuple[Mutant, ...] = (
         "medoid-replaced-by-mode",
         "inference",
         "the output shape is the most probable hypothesis, not the posterior medoid under IoU",
-        "posterior_medoid(base.hypotheses, probabilities),",
+        "posterior_medoid(base.hypotheses, medoid_weight),",
         "int(np.argmax(probabilities)),",
         _t("inference_method", "inference"),
+    ),
+    Mutant(
+        "physics-medoid-weighted-by-marginals",
+        "inference",
+        "the physics-based medoid weights candidates by their marginals (which count the "
+        "neighbours' candidates they fit with), not by their own evidence",
+        'if joint or problem.config.weighting != "hypothesis":',
+        "if True:",
+        _t("inference"),
     ),
     Mutant(
         "gravity-only-compares-every-frame",
