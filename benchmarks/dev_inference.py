@@ -213,7 +213,7 @@ def estimate_iou(
     import dataclasses
 
     from ipr_shapes.factor_graph import posterior_medoid
-    from ipr_shapes.inference import at_friction, marginals, size_log_prior
+    from ipr_shapes.inference import at_friction, medoid_weights, size_log_prior
 
     problem = scene["problem"]
     if prior == "size":
@@ -249,7 +249,8 @@ def estimate_iou(
         dataclasses.replace(r, norms=None if r.norms is None else r.norms[:, :frames])
         for r in results
     ]
-    estimate = marginals(results, problem)
+    # The weights the library's medoid is taken under (its marginals for "object").
+    estimate = medoid_weights(results, problem)
     output = {}
     for k, ious in scene["candidate_iou"].items():
         best = posterior_medoid(problem.candidates[k], estimate[k]) if estimate else 0
