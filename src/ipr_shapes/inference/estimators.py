@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -217,9 +217,23 @@ def marginals(
     None when no sample has a positive weight."""
     if not any(math.isfinite(r.log_likelihood) for r in results):
         return None
+    return _over_frictions(
+        results, problem, lambda scored: _single_friction_marginals(scored, problem, joint), joint
+    )
+
+
+def _over_frictions(
+    results: Sequence[SampleResult],
+    problem: InferenceProblem,
+    estimate: Callable[[Sequence[SampleResult]], list[np.ndarray] | None],
+    joint: bool = False,
+) -> list[np.ndarray] | None:
+    """Per object, ``estimate`` (per-object (m_k,) weights from the samples scored under one
+    friction, or None) summed over the frictions weighted by ``friction_posterior`` and
+    normalised; with one friction, its own estimate. None when no friction gives one."""
     count = len(problem.friction_values)
     if count == 1:
-        return _single_friction_marginals(at_friction(results, problem, 0), problem, joint)
+        return estimate(at_friction(results, problem, 0))
     posterior = friction_posterior(results, problem, joint=joint)
     if posterior is None:
         return None
@@ -227,11 +241,13 @@ def marginals(
     for f in range(count):
         if posterior[f] == 0:
             continue
-        estimate = _single_friction_marginals(at_friction(results, problem, f), problem, joint)
-        if estimate is None:
+        values = estimate(at_friction(results, problem, f))
+        if values is None:
             continue
-        for k, values in enumerate(estimate):
-            mixed[k] += posterior[f] * values
+        for k, v in enumerate(values):
+            mixed[k] += posterior[f] * v
+    if not all(m.sum() > 0 for m in mixed):
+        return None
     return [m / m.sum() for m in mixed]
 
 
@@ -251,23 +267,14 @@ def medoid_weights(
         return marginals(results, problem, joint=joint)
     if not any(math.isfinite(r.log_likelihood) for r in results):
         return None
-    count = len(problem.friction_values)
-    posterior = np.ones(1) if count == 1 else friction_posterior(results, problem)
-    if posterior is None:
-        return None
-    mixed = [np.zeros(len(c)) for c in problem.candidates]
-    for f in range(count):
-        if posterior[f] == 0:
-            continue
-        scored = at_friction(results, problem, f)
+
+    def own_evidence(scored: Sequence[SampleResult]) -> list[np.ndarray] | None:
         if not any(r.norms is not None for r in scored):
-            continue
-        for k, unary in enumerate(hypothesis_unary(scored, problem)):
-            weights = np.exp(unary - np.max(unary))
-            mixed[k] += posterior[f] * weights / weights.sum()
-    if not all(m.sum() > 0 for m in mixed):
-        return None
-    return [m / m.sum() for m in mixed]
+            return None
+        weights = [np.exp(unary - np.max(unary)) for unary in hypothesis_unary(scored, problem)]
+        return [w / w.sum() for w in weights]
+
+    return _over_frictions(results, problem, own_evidence)
 
 
 def sample_log_weights(
