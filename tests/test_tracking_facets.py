@@ -376,6 +376,55 @@ def test_a_piece_left_to_another_object_joins_the_object_it_resembles_more():
     assert merge(np.array([[1.0, 3.0], [1.2, 1.1]])) == ({2: 7, 3: 8}, {})
 
 
+def test_a_segment_held_by_an_object_seen_the_frame_before_is_no_piece_with_the_switch():
+    # The case above, but object 8 (yellow) was seen the frame before: the second stage's
+    # pairing gives the lower half to an object that is around, so it is object 8, not a
+    # piece of the box (two alike objects touching, one of them pushed). With
+    # merge_keeps_seen_objects the half stays with 8; an object 8 not seen the frame before
+    # (a hidden object's guess) still gives it up, and without the switch nothing changes.
+    labels, points, rgb = _boxes({2: (60, 120, 15, 30, YELLOW), 3: (75, 120, 15, 30, YELLOW)})
+    box = segment_features(*_boxes({7: (60, 100, 30, 30, YELLOW)}))[7]
+    other = segment_features(*_boxes({8: (10, 200, 12, 12, YELLOW)}))[8]
+    sightings = {7: [box], 8: [other]}
+    cost = np.array([[1.0, 3.0], [1.2, 2.4]])  # rows: segments 2, 3; columns: objects 7, 8
+
+    def merge(config, seen):
+        segments = segment_features(labels, points, rgb)
+        return merge_split_pieces(
+            {2: 7, 3: 8},
+            cost,
+            [2, 3],
+            [7, 8],
+            segments,
+            sightings,
+            points,
+            config,
+            seen_last_frame=seen,
+        )
+
+    keeps = TrackingConfig(merge_keeps_seen_objects=True)
+    assert merge(keeps, {7, 8}) == ({2: 7, 3: 8}, {})
+    assert merge(keeps, {7}) == ({2: 7}, {3: 2})
+    assert merge(keeps, None) == ({2: 7}, {3: 2})
+    assert merge(TrackingConfig(), {7, 8}) == ({2: 7}, {3: 2})
+
+
+def test_two_alike_objects_pushed_together_keep_their_ids_with_the_switch():
+    # A yellow box and a yellow bar touching its side, two segments, are pushed 2 cm together.
+    # The bar now lies where the box's side was: it resembles the box better than its own
+    # sighting, so the piece join takes it for a piece of the box and the bar's id is lost.
+    # With merge_keeps_seen_objects the bar, seen the frame before, keeps its segment.
+    red = {9: (5, 5, 10, 10, RED)}
+    first = _boxes({**red, 1: (60, 100, 30, 30, YELLOW), 2: (60, 130, 30, 10, YELLOW)})
+    second = _boxes({**red, 1: (60, 80, 30, 30, YELLOW), 2: (60, 110, 30, 10, YELLOW)})
+    box, bar = (_track([first, second])[0][70, k] for k in (110, 135))
+    assert box != bar
+    tracked = _track([first, second], TrackingConfig(merge_keeps_seen_objects=True))
+    assert tracked[1][70, 90] == box and tracked[1][70, 115] == bar
+    joined = _track([first, second])
+    assert joined[1][70, 90] == joined[1][70, 115] == box
+
+
 def test_touching_pieces_of_another_colour_or_depth_are_not_joined():
     red = {1: (10, 10, 15, 15, RED)}
     # Frame 0 took a yellow and a green object for one; frame 1 shows them apart. Their union

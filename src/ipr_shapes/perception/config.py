@@ -807,6 +807,10 @@ class TrackingConfig:
             to the same known object or to one it resembles less, whose union resembles that
             object better than either alone become one segment with its id (an object split in
             this frame; ``tracking.merge_split_pieces``).
+        merge_keeps_seen_objects: a segment the assignment gave to another object seen in the
+            previous frame is that object's, not a piece to take (``merge_split_pieces``):
+            only an object not seen the frame before (the elimination stage's guess at a
+            hidden object) gives its segment up.
         merge_max_colour: the two pieces' colour histograms are at most this Bhattacharyya
             distance apart (in [0, 1]).
         merge_margin: the union's cost is below both pieces' by more than this (negative: it
@@ -907,6 +911,7 @@ class TrackingConfig:
     larger_object_takes_segment: bool = True
     piece_cost_margin: float = 0.6
     merge_split_pieces: bool = True
+    merge_keeps_seen_objects: bool = False
     merge_max_colour: float = 0.6
     merge_margin: float = -0.2
     merge_candidates: int = 4

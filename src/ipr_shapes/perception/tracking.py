@@ -764,13 +764,21 @@ def _touching_alike(
 
 
 def _free_for(
-    matched: int | None, object_id: int, row_cost: np.ndarray, column_of: dict[int, int]
+    matched: int | None,
+    object_id: int,
+    row_cost: np.ndarray,
+    column_of: dict[int, int],
+    holders: frozenset[int] = frozenset(),
 ) -> bool:
     """Whether a segment matched to ``matched`` (None: unmatched) may become a piece of
     ``object_id``: it is unmatched, matched to that object, or matched to another object that
-    it resembles less (a leftover pairing of the assignment's second stage)."""
+    it resembles less (a leftover pairing of the assignment's second stage) and that is not
+    one of ``holders`` (objects whose segments are not given up: seen the frame before, with
+    ``merge_keeps_seen_objects``)."""
     if matched is None or matched == object_id:
         return True
+    if matched in holders:
+        return False
     return bool(row_cost[column_of[object_id]] < row_cost[column_of[matched]])
 
 
@@ -784,6 +792,7 @@ def merge_split_pieces(
     points: np.ndarray,
     config: TrackingConfig,
     depth_m: np.ndarray | None = None,
+    seen_last_frame: set[int] | None = None,
 ) -> tuple[dict[int, int], dict[int, int]]:
     """Join pieces of this frame that together are one known object.
 
@@ -806,12 +815,17 @@ def merge_split_pieces(
             columns ``known_ids``); segments: the frame's segment features, updated in place
             (the kept segment's become the union's, absorbed segments are removed);
             sightings: each known object's sightings; points: the frame's (H, W, 3) world
-            points (m); depth_m: its (H, W) depth (m, 0 = no reading; None = all valid).
+            points (m); depth_m: its (H, W) depth (m, 0 = no reading; None = all valid);
+            seen_last_frame: ids seen in the previous frame (with
+            ``merge_keeps_seen_objects``, a segment matched to one of them, other than the
+            object joined, is no candidate piece: the object is there, and the segment is
+            it; None: no such object).
 
     Returns:
         The new segment -> object assignment and the joins {absorbed segment: kept segment}.
     """
     result = dict(assignment)
+    holders = frozenset(seen_last_frame or ()) if config.merge_keeps_seen_objects else frozenset()
     joins: dict[int, int] = {}
     column_of = {o: c for c, o in enumerate(known_ids)}
     width = points.shape[1]
@@ -824,7 +838,7 @@ def merge_split_pieces(
             for row in np.argsort(cost[:, column])[: config.merge_candidates]
             if cost[row, column] <= config.piece_max_cost
             and segment_ids[row] in segments
-            and _free_for(result.get(segment_ids[row]), object_id, cost[row], column_of)
+            and _free_for(result.get(segment_ids[row]), object_id, cost[row], column_of, holders)
         }
         while len(row_cost) >= 2:
             best = None
@@ -1140,6 +1154,7 @@ def track_segments(
                     points,
                     config,
                     depth,
+                    seen_last_frame,
                 )
             if config.merge_split_objects:
                 for kept, absorbed in merge_split_objects(
