@@ -636,6 +636,13 @@ class SeamsConfig:
             threshold, thinned) connected to a strong one (Canny's hysteresis at his 2:1
             ratio), in the segments and a 3 px ring: the seam between two boxes of one colour
             fades along its length, and a stretch that stops short of the outline cannot cut.
+        extend_planes: when a cut is undone and a piece on one side of it faces several
+            pieces across it (cut apart by seams kept after it: the boxes of a row beyond a
+            printed line across the row), that piece is first cut along the kept seams' 3D
+            planes (each seam's line and the surface normal), each part joining the piece it
+            faces: the seams between packed boxes go on across the boxes' barcode ends and end
+            faces, where no colour edge of their own was found (False: the whole piece joins
+            the one piece it faces most).
         max_cuts: most cuts per segment (bounds the time on a textured segment).
     """
 
@@ -669,6 +676,7 @@ class SeamsConfig:
     max_cuts: int = 32
     rows_of_three: bool = True
     hysteresis: bool = True
+    extend_planes: bool = True
 
     def __post_init__(self) -> None:
         check_fields(self)
