@@ -19,6 +19,7 @@ import pytest
 
 from ipr_shapes.perception.config import PerceptionConfig, SeamsConfig
 from ipr_shapes.perception.seams import (
+    _cut_by_planes,
     _equally_spaced,
     _linked_edges,
     _Seam,
@@ -312,6 +313,39 @@ def test_a_wider_piece_beyond_an_undone_line_is_not_cut_along_the_rows_seams():
     joined = _undo(pieces, line, kept, _grid_points(pieces.shape), measured, ON)
     assert len(np.unique(joined[:10])) == 1
     assert joined[20, 5] != joined[20, 15]
+
+
+def _seam_at_column(col: int, rows: np.ndarray) -> _Seam:
+    """A seam along column ``col`` (between col - 1 and col) of ``_grid_points``' top."""
+    return _Seam(
+        rows=rows, cols=np.full(len(rows), col), cos_a=1.0, sin_a=0.0,
+        middle=np.array([0.01 * col - 0.005, 0.01 * float(rows.mean()), 0.0]),
+        direction=np.array([0.0, 1.0, 0.0]), across=np.array([1.0, 0.0, 0.0]),
+        normal=np.array([0.0, 0.0, 1.0]), half_length_m=0.005 * len(rows),
+    )  # fmt: skip
+
+
+def test_a_row_beyond_a_kept_seam_is_cut_along_the_seams_of_the_row_it_faces():
+    # A grid of two rows: the seam between the rows is kept, the seams between the far row's
+    # boxes were found but the near row's (bending over its front faces) were not. The near
+    # row is cut along the far row's seams' planes, each part a box of its own.
+    pieces = np.zeros((30, 30), dtype=np.int32)
+    pieces[:10] = 1
+    pieces[10:, :10], pieces[10:, 10:20], pieces[10:, 20:] = 2, 3, 4
+    between_rows, _ = _row_below_a_line(pieces, [])
+    far = [_seam_at_column(col, np.arange(11, 30)) for col in (10, 20)]
+    points = _grid_points(pieces.shape)
+    measured = np.ones(pieces.shape, dtype=bool)
+    cut = _cut_by_planes(pieces, between_rows, far, points, measured, ON)
+    near = {cut[5, 5], cut[5, 15], cut[5, 25]}
+    assert len(near) == 3 and not near & {2, 3, 4}
+    assert np.array_equal(cut[10:], pieces[10:])
+    # Rows laid like bricks: the near row's own seam lies between the far row's seams (5 cm
+    # off the one at column 20), so their planes are not its boxes' boundaries.
+    pieces[:10, 25:] = 5
+    own = _seam_at_column(25, np.arange(0, 10))
+    offset = _cut_by_planes(pieces, between_rows, [*far, own], points, measured, ON)
+    assert np.array_equal(offset, pieces)
 
 
 def test_a_printed_border_across_one_box_is_not_a_seam():

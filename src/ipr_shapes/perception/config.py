@@ -636,13 +636,15 @@ class SeamsConfig:
             threshold, thinned) connected to a strong one (Canny's hysteresis at his 2:1
             ratio), in the segments and a 3 px ring: the seam between two boxes of one colour
             fades along its length, and a stretch that stops short of the outline cannot cut.
-        extend_planes: when a cut is undone and a piece on one side of it faces several
-            pieces across it (cut apart by seams kept after it: the boxes of a row beyond a
-            printed line across the row), that piece is first cut along the kept seams' 3D
-            planes (each seam's line and the surface normal), each part joining the piece it
-            faces: the seams between packed boxes go on across the boxes' barcode ends and end
-            faces, where no colour edge of their own was found (False: the whole piece joins
-            the one piece it faces most).
+        extend_planes: the seams between packed boxes go on as 3D planes (each seam's line
+            and the surface normal) across the boxes' other faces: when a piece faces several
+            pieces across a seam (undone: the boxes of a row beyond a printed line across it;
+            or kept: the second row of a grid, whose seams bend over the boxes' front faces)
+            and kept seams lie between those pieces, the piece is cut along their planes, each
+            part as wide as the piece it faces (``strip_tolerance``), unless the piece's own
+            seams along them lie off them (rows offset like bricks); an undone seam's parts
+            then join the pieces they face. False: an undone seam's piece joins the one piece
+            it faces most, and nothing is cut across kept seams.
         max_cuts: most cuts per segment (bounds the time on a textured segment).
     """
 

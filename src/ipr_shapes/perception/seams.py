@@ -178,8 +178,8 @@ def _decide(
     """(h, w) int pieces of one segment's crop with the cuts that fail the strip tests undone
     (``_unrepeated``: ``cloud``, ``flat`` and ``sizes`` see there); with
     ``seams.extend_planes``, ``points`` ((h, w, 3) world, m) and ``measured`` ((h, w) bool,
-    pixels with depth) of the crop, an undone cut's piece that faces several pieces is cut
-    along the kept seams' planes (``_undo``)."""
+    pixels with depth) of the crop, a piece that faces several pieces across an undone or a
+    kept seam is cut along the kept seams' planes between them (``_cut_by_planes``)."""
     if config.seams.strip_tolerance >= 1.0:
         return cut
     pieces = cut
@@ -189,6 +189,13 @@ def _decide(
         points = measured = None
     for seam in dropped:
         pieces = _undo(pieces, seam, kept, points, measured, config)
+    # And across the kept seams: a row of boxes cut apart on one side of a seam goes on
+    # across it (the second row of a grid, whose seams bend over the boxes' front faces).
+    if points is not None and measured is not None:
+        for seam in kept:
+            others = [other for other in kept if other is not seam]
+            if others:
+                pieces = _cut_by_planes(pieces, seam, others, points, measured, config)
     return pieces
 
 
@@ -689,14 +696,20 @@ def _cut_by_planes(
     measured: np.ndarray,
     config: PerceptionConfig,
 ) -> np.ndarray:
-    """``pieces`` with each piece that faces two or more pieces across ``seam`` (a seam to be
-    undone) cut along the planes of the ``kept`` seams that lie between two of those pieces
-    (each kept seam's plane holds its 3D line and the surface's normal: the plane between two
-    packed boxes). Each of the piece's pixels with depth (``measured``; ``points`` (h, w, 3),
-    m) takes the side of every plane; a facing piece's sides are those of its median point; the
-    pixels on the sides of one facing piece form a part (new id), the rest of the piece (and
-    its pixels without depth) go to the nearest part. Nothing changes when no kept seam lies
-    between two facing pieces, or two facing pieces lie on the same sides."""
+    """``pieces`` with each piece that faces two or more pieces across ``seam`` (a seam undone,
+    or a kept seam that ends a row of boxes cut apart on its other side) cut along the planes
+    of the ``kept`` seams that lie between two of those pieces (each kept seam's plane holds
+    its 3D line and the surface's normal: the plane between two packed boxes, which goes on
+    across the boxes' other faces and across the seam where the colour edge bends or fades).
+    Each of the piece's pixels with depth (``measured``; ``points`` (h, w, 3), m) takes the
+    side of every plane; a facing piece's sides are those of its median point; the pixels on
+    the sides of one facing piece form a part (new id), the rest of the piece (and its pixels
+    without depth) go to the nearest part. A part must span the width of the piece it faces
+    along ``seam`` (within ``seams.strip_tolerance``; one that does not goes to its
+    neighbours), and at least two parts must. Nothing changes when no kept seam lies between
+    two facing pieces, two facing pieces lie on the same sides, or the piece's own seams
+    along the planes lie off them (``_on_any_plane``: its rows are offset from the faced
+    ones)."""
     tolerance = config.seams.strip_tolerance
     counts = _facing(pieces, seam)
     across: dict[int, set[int]] = {}
@@ -716,6 +729,16 @@ def _cut_by_planes(
         planes = [other for other in kept if id(other) in between
                   and set(between[id(other)]) <= faced]  # fmt: skip
         if not planes:
+            continue
+        # The piece's own seams across the same direction must continue the planes (an
+        # aligned grid): where they lie between them, its boxes are offset from the faced
+        # ones (rows laid like bricks) and the planes are not their boundaries.
+        if any(
+            _parallel_to_any(other, planes) and not _on_any_plane(other, planes, config)
+            for other in kept
+            if all(other is not plane for plane in planes)
+            and any(piece in pair for pair in _facing(pieces, other))
+        ):
             continue
         normals = np.array([other.across for other in planes])
         offsets = np.array([float(other.across @ other.middle) for other in planes])
@@ -758,6 +781,23 @@ def _cut_by_planes(
             out[parts == part] = next_id
             next_id += 1
     return out
+
+
+def _parallel_to_any(seam: _Seam, planes: list[_Seam]) -> bool:
+    """Whether ``seam`` runs along one of ``planes``' seams (within ``_PARALLEL_DEG``)."""
+    parallel = np.cos(np.radians(_PARALLEL_DEG))
+    return any(abs(float(seam.direction @ plane.direction)) >= parallel for plane in planes)
+
+
+def _on_any_plane(seam: _Seam, planes: list[_Seam], config: PerceptionConfig) -> bool:
+    """Whether ``seam`` continues one of ``planes``' seams: parallel to it and its middle
+    within ``seams.min_width_m`` of its plane (the line and the surface normal)."""
+    parallel = np.cos(np.radians(_PARALLEL_DEG))
+    return any(
+        abs(float(seam.direction @ plane.direction)) >= parallel
+        and abs(float(plane.across @ (seam.middle - plane.middle))) <= config.seams.min_width_m
+        for plane in planes
+    )
 
 
 def _alike_widths(
