@@ -30,7 +30,12 @@ object's own lines whole:
   one box with a printed line through its middle) is kept only where it meets a seam that
   lies between seams (a grid of boxes) or its strips have the size of a flat rectangular
   face seen elsewhere in the frame (packed boxes repeat; ``seams.pair_needs_grid``,
-  ``seams.pair_sizes``).
+  ``seams.pair_sizes``);
+- **planes across the other faces**: a seam between two boxes goes on as a plane (its 3D line
+  and the surface normal) across the boxes' other faces, where the colour edge bends over a
+  crease or fades; a piece facing several pieces across a seam, with kept seams between them,
+  is cut along their planes when its parts are as wide as the pieces they face and its own
+  seams do not lie between the planes (``seams.extend_planes``).
 
 The best seam (most edge pixels) is cut and both pieces are searched again, up to
 ``seams.max_cuts`` cuts per segment; every segment is searched before any cut is judged, so
