@@ -19,6 +19,7 @@ import pytest
 
 from ipr_shapes.perception.config import PerceptionConfig, SeamsConfig
 from ipr_shapes.perception.seams import (
+    _cut_by_planes,
     _equally_spaced,
     _linked_edges,
     _Seam,
@@ -245,6 +246,106 @@ def test_an_undone_line_across_a_row_keeps_the_rows_seams():
     assert len(np.unique(joined)) == 3
     assert joined[0, 0] == joined[20, 25]  # the strip joins the box it faces along most
     assert len({joined[20, 5], joined[20, 15], joined[20, 25]}) == 3
+
+
+def _grid_points(shape: tuple[int, int]) -> np.ndarray:
+    """(h, w, 3) world points of a flat top, pixel (r, c) at (c, r, 0) cm."""
+    rows, cols = np.mgrid[0 : shape[0], 0 : shape[1]]
+    return np.stack([cols * 0.01, rows * 0.01, np.zeros(shape)], axis=2)
+
+
+def _row_below_a_line(pieces: np.ndarray, cuts: list[int]) -> tuple[_Seam, list[_Seam]]:
+    """The printed line along row 10 (to be undone) and the kept seams between the boxes below
+    it, at the columns ``cuts`` (each between column c - 1 and c), on ``_grid_points``."""
+    cols = np.arange(pieces.shape[1])
+    line = _Seam(
+        rows=np.full(len(cols), 10), cols=cols, cos_a=0.0, sin_a=1.0,
+        middle=np.array([0.15, 0.1, 0.0]), direction=np.array([1.0, 0.0, 0.0]),
+        across=np.array([0.0, 1.0, 0.0]), normal=np.array([0.0, 0.0, 1.0]), half_length_m=0.15,
+    )  # fmt: skip
+    rows = np.arange(11, pieces.shape[0])
+    kept = [
+        _Seam(
+            rows=rows,
+            cols=np.full(len(rows), cut),
+            cos_a=1.0,
+            sin_a=0.0,
+            middle=np.array([0.01 * cut - 0.005, 0.2, 0.0]),
+            direction=np.array([0.0, 1.0, 0.0]),
+            across=np.array([1.0, 0.0, 0.0]),
+            normal=np.array([0.0, 0.0, 1.0]),
+            half_length_m=0.1,
+        )  # fmt: skip
+        for cut in cuts
+    ]
+    return line, kept
+
+
+def test_an_undone_line_across_a_row_is_cut_along_the_rows_seams():
+    # The row's boxes go on beyond a printed line across them (their barcode ends, their end
+    # faces): undoing the line cuts the strip beyond it along the planes of the seams kept
+    # between the boxes, and each part joins its own box.
+    pieces = np.zeros((30, 30), dtype=np.int32)
+    pieces[:10] = 1
+    pieces[10:, :10], pieces[10:, 10:19], pieces[10:, 19:] = 2, 3, 4
+    line, kept = _row_below_a_line(pieces, [10, 19])
+    points = _grid_points(pieces.shape)
+    measured = np.ones(pieces.shape, dtype=bool)
+    measured[0, :] = False  # pixels without depth go with their neighbours
+    joined = _undo(pieces, line, kept, points, measured, ON)
+    assert len(np.unique(joined[joined > 0])) == 3
+    for col in (0, 5, 15, 25, 29):
+        assert joined[0, col] == joined[5, col] == joined[25, col]
+    assert len({joined[20, 5], joined[20, 15], joined[20, 25]}) == 3
+    # Without the kept seams' planes: the strip joins one box only (as before).
+    alone = _undo(pieces, line)
+    assert alone[5, 5] != alone[20, 5] or alone[5, 25] != alone[20, 25]
+
+
+def test_a_wider_piece_beyond_an_undone_line_is_not_cut_along_the_rows_seams():
+    # Another box lying across the row's end (wider than the row's boxes it faces): it does
+    # not end at their seams, so it is not cut; it joins the one box it faces most, as before.
+    pieces = np.zeros((30, 30), dtype=np.int32)
+    pieces[:10] = 1
+    pieces[10:, :10], pieces[10:, 10:19] = 2, 3
+    line, kept = _row_below_a_line(pieces, [10])
+    measured = np.ones(pieces.shape, dtype=bool)
+    joined = _undo(pieces, line, kept, _grid_points(pieces.shape), measured, ON)
+    assert len(np.unique(joined[:10])) == 1
+    assert joined[20, 5] != joined[20, 15]
+
+
+def _seam_at_column(col: int, rows: np.ndarray) -> _Seam:
+    """A seam along column ``col`` (between col - 1 and col) of ``_grid_points``' top."""
+    return _Seam(
+        rows=rows, cols=np.full(len(rows), col), cos_a=1.0, sin_a=0.0,
+        middle=np.array([0.01 * col - 0.005, 0.01 * float(rows.mean()), 0.0]),
+        direction=np.array([0.0, 1.0, 0.0]), across=np.array([1.0, 0.0, 0.0]),
+        normal=np.array([0.0, 0.0, 1.0]), half_length_m=0.005 * len(rows),
+    )  # fmt: skip
+
+
+def test_a_row_beyond_a_kept_seam_is_cut_along_the_seams_of_the_row_it_faces():
+    # A grid of two rows: the seam between the rows is kept, the seams between the far row's
+    # boxes were found but the near row's (bending over its front faces) were not. The near
+    # row is cut along the far row's seams' planes, each part a box of its own.
+    pieces = np.zeros((30, 30), dtype=np.int32)
+    pieces[:10] = 1
+    pieces[10:, :10], pieces[10:, 10:20], pieces[10:, 20:] = 2, 3, 4
+    between_rows, _ = _row_below_a_line(pieces, [])
+    far = [_seam_at_column(col, np.arange(11, 30)) for col in (10, 20)]
+    points = _grid_points(pieces.shape)
+    measured = np.ones(pieces.shape, dtype=bool)
+    cut = _cut_by_planes(pieces, between_rows, far, points, measured, ON)
+    near = {cut[5, 5], cut[5, 15], cut[5, 25]}
+    assert len(near) == 3 and not near & {2, 3, 4}
+    assert np.array_equal(cut[10:], pieces[10:])
+    # Rows laid like bricks: the near row's own seam lies between the far row's seams (5 cm
+    # off the one at column 20), so their planes are not its boxes' boundaries.
+    pieces[:10, 25:] = 5
+    own = _seam_at_column(25, np.arange(0, 10))
+    offset = _cut_by_planes(pieces, between_rows, [*far, own], points, measured, ON)
+    assert np.array_equal(offset, pieces)
 
 
 def test_a_printed_border_across_one_box_is_not_a_seam():

@@ -636,6 +636,15 @@ class SeamsConfig:
             threshold, thinned) connected to a strong one (Canny's hysteresis at his 2:1
             ratio), in the segments and a 3 px ring: the seam between two boxes of one colour
             fades along its length, and a stretch that stops short of the outline cannot cut.
+        extend_planes: the seams between packed boxes go on as 3D planes (each seam's line
+            and the surface normal) across the boxes' other faces: when a piece faces several
+            pieces across a seam (undone: the boxes of a row beyond a printed line across it;
+            or kept: the second row of a grid, whose seams bend over the boxes' front faces)
+            and kept seams lie between those pieces, the piece is cut along their planes, each
+            part as wide as the piece it faces (``strip_tolerance``), unless the piece's own
+            seams along them lie off them (rows offset like bricks); an undone seam's parts
+            then join the pieces they face. False: an undone seam's piece joins the one piece
+            it faces most, and nothing is cut across kept seams.
         max_cuts: most cuts per segment (bounds the time on a textured segment).
     """
 
@@ -669,6 +678,7 @@ class SeamsConfig:
     max_cuts: int = 32
     rows_of_three: bool = True
     hysteresis: bool = True
+    extend_planes: bool = True
 
     def __post_init__(self) -> None:
         check_fields(self)

@@ -30,7 +30,12 @@ object's own lines whole:
   one box with a printed line through its middle) is kept only where it meets a seam that
   lies between seams (a grid of boxes) or its strips have the size of a flat rectangular
   face seen elsewhere in the frame (packed boxes repeat; ``seams.pair_needs_grid``,
-  ``seams.pair_sizes``).
+  ``seams.pair_sizes``);
+- **planes across the other faces**: a seam between two boxes goes on as a plane (its 3D line
+  and the surface normal) across the boxes' other faces, where the colour edge bends over a
+  crease or fades; a piece facing several pieces across a seam, with kept seams between them,
+  is cut along their planes when its parts are as wide as the pieces they face and its own
+  seams do not lie between the planes (``seams.extend_planes``).
 
 The best seam (most edge pixels) is cut and both pieces are searched again, up to
 ``seams.max_cuts`` cuts per segment; every segment is searched before any cut is judged, so
@@ -150,8 +155,10 @@ def cut_colour_seams(
         flat = [_flat_strips(seam, cloud, config) for seam in found]
         searched.append((crop, mask, cut, found, cloud, flat))
     asked = [_Sizes() for _ in searched]
-    decided = [_decide(cut, found, cloud, flat, config, sizes) for (_, _, cut, found, cloud, flat),
-               sizes in zip(searched, asked, strict=True)]  # fmt: skip
+    with_depth = depth_m > 0
+    decided = [_decide(cut, found, cloud, flat, config, sizes, points[crop], with_depth[crop])
+               for (crop, _, cut, found, cloud, flat), sizes
+               in zip(searched, asked, strict=True)]  # fmt: skip
     if seams.pair_needs_grid and seams.pair_sizes:
         decided = _pairs_by_size(searched, decided, asked, points, normals, depth_m, config)
     next_id = int(labels.max()) + 1
@@ -170,14 +177,30 @@ def _decide(
     flat: list[bool],
     config: PerceptionConfig,
     sizes: _Sizes | None = None,
+    points: np.ndarray | None = None,
+    measured: np.ndarray | None = None,
 ) -> np.ndarray:
     """(h, w) int pieces of one segment's crop with the cuts that fail the strip tests undone
-    (``_unrepeated``: ``cloud``, ``flat`` and ``sizes`` see there)."""
+    (``_unrepeated``: ``cloud``, ``flat`` and ``sizes`` see there); with
+    ``seams.extend_planes``, ``points`` ((h, w, 3) world, m) and ``measured`` ((h, w) bool,
+    pixels with depth) of the crop, a piece that faces several pieces across an undone or a
+    kept seam is cut along the kept seams' planes between them (``_cut_by_planes``)."""
     if config.seams.strip_tolerance >= 1.0:
         return cut
     pieces = cut
-    for seam in _unrepeated(found, cloud, flat, config, sizes):
-        pieces = _undo(pieces, seam)
+    dropped = _unrepeated(found, cloud, flat, config, sizes)
+    kept = [seam for seam in found if not any(seam is other for other in dropped)]
+    if not config.seams.extend_planes:
+        points = measured = None
+    for seam in dropped:
+        pieces = _undo(pieces, seam, kept, points, measured, config)
+    # And across the kept seams: a row of boxes cut apart on one side of a seam goes on
+    # across it (the second row of a grid, whose seams bend over the boxes' front faces).
+    if points is not None and measured is not None:
+        for seam in kept:
+            others = [other for other in kept if other is not seam]
+            if others:
+                pieces = _cut_by_planes(pieces, seam, others, points, measured, config)
     return pieces
 
 
@@ -234,7 +257,7 @@ def _pairs_by_size(
         return faces
 
     result = []
-    for index, ((_, _, cut, found, cloud, flat), pieces) in enumerate(
+    for index, ((crop, _, cut, found, cloud, flat), pieces) in enumerate(
         zip(searched, decided, strict=True)
     ):
         if len(found) == 0 or not asked[index].asked:
@@ -249,7 +272,8 @@ def _pairs_by_size(
                 np.array(pairs_elsewhere).reshape(-1, 2, 2),
             )
 
-        result.append(_decide(cut, found, cloud, flat, config, _Sizes(others)))
+        result.append(_decide(cut, found, cloud, flat, config, _Sizes(others), points[crop],
+                              depth_m[crop] > 0))  # fmt: skip
     return result
 
 
@@ -615,28 +639,30 @@ def _neighbours(seam: _Seam, found: list[_Seam]) -> list[_Seam]:
     ]
 
 
-def _undo(pieces: np.ndarray, seam: _Seam) -> np.ndarray:
+def _undo(
+    pieces: np.ndarray,
+    seam: _Seam,
+    kept: list[_Seam] | None = None,
+    points: np.ndarray | None = None,
+    measured: np.ndarray | None = None,
+    config: PerceptionConfig | None = None,
+) -> np.ndarray:
     """``pieces`` with the pieces that face each other across ``seam`` (3-5 px either side of
     it, along its length) merged back, one to one: each piece joins at most one piece across
     it, the one it faces along most of the seam. A piece that faces several pieces across it
     was cut by kept seams after this one (a printed line across a row of boxes cut first,
-    then the seams between the boxes): joining it to all of them would undo those cuts too."""
-    height, width = pieces.shape
-    pairs = []
-    for k in (3, 4, 5):
-        rows_a = np.clip(np.round(seam.rows + k * seam.sin_a).astype(np.int64), 0, height - 1)
-        cols_a = np.clip(np.round(seam.cols + k * seam.cos_a).astype(np.int64), 0, width - 1)
-        rows_b = np.clip(np.round(seam.rows - k * seam.sin_a).astype(np.int64), 0, height - 1)
-        cols_b = np.clip(np.round(seam.cols - k * seam.cos_a).astype(np.int64), 0, width - 1)
-        a, b = pieces[rows_a, cols_a], pieces[rows_b, cols_b]
-        keep = (a > 0) & (b > 0) & (a != b)
-        pairs.extend(zip(a[keep].tolist(), b[keep].tolist(), strict=True))
-    if not pairs:
+    then the seams between the boxes): joining it to all of them would undo those cuts too.
+
+    With the ``kept`` seams and the crop's ``points`` ((h, w, 3) world, m; ``measured`` (h, w)
+    bool: pixels with depth), such a piece is first cut along the 3D planes of the kept seams
+    between the pieces it faces (``_cut_by_planes``), each part then joining the piece it faces:
+    a seam between two boxes goes on across the rest of the boxes (their barcode ends and end
+    faces beyond a printed line across the row), where no colour edge of its own was found."""
+    if kept and points is not None and measured is not None and config is not None:
+        pieces = _cut_by_planes(pieces, seam, kept, points, measured, config)
+    counts = _facing(pieces, seam)
+    if not counts:
         return pieces
-    counts: dict[tuple[int, int], int] = {}
-    for a, b in pairs:
-        key = (min(a, b), max(a, b))
-        counts[key] = counts.get(key, 0) + 1
     relabel = np.arange(int(pieces.max()) + 1)
     joined: set[int] = set()
     for (a, b), _ in sorted(counts.items(), key=lambda item: (-item[1], item[0])):
@@ -647,6 +673,155 @@ def _undo(pieces: np.ndarray, seam: _Seam) -> np.ndarray:
         low, high = min(root_a, root_b), max(root_a, root_b)
         relabel[relabel == high] = low
     return relabel[pieces].astype(np.int32)
+
+
+def _facing(pieces: np.ndarray, seam: _Seam) -> dict[tuple[int, int], int]:
+    """How often (samples 3-5 px either side of ``seam``, along its length) each pair
+    (smaller id, larger id) of different pieces faces each other across it."""
+    height, width = pieces.shape
+    counts: dict[tuple[int, int], int] = {}
+    for k in (3, 4, 5):
+        rows_a = np.clip(np.round(seam.rows + k * seam.sin_a).astype(np.int64), 0, height - 1)
+        cols_a = np.clip(np.round(seam.cols + k * seam.cos_a).astype(np.int64), 0, width - 1)
+        rows_b = np.clip(np.round(seam.rows - k * seam.sin_a).astype(np.int64), 0, height - 1)
+        cols_b = np.clip(np.round(seam.cols - k * seam.cos_a).astype(np.int64), 0, width - 1)
+        a, b = pieces[rows_a, cols_a], pieces[rows_b, cols_b]
+        keep = (a > 0) & (b > 0) & (a != b)
+        for pa, pb in zip(a[keep].tolist(), b[keep].tolist(), strict=True):
+            key = (min(pa, pb), max(pa, pb))
+            counts[key] = counts.get(key, 0) + 1
+    return counts
+
+
+def _cut_by_planes(
+    pieces: np.ndarray,
+    seam: _Seam,
+    kept: list[_Seam],
+    points: np.ndarray,
+    measured: np.ndarray,
+    config: PerceptionConfig,
+) -> np.ndarray:
+    """``pieces`` with each piece that faces two or more pieces across ``seam`` (a seam undone,
+    or a kept seam that ends a row of boxes cut apart on its other side) cut along the planes
+    of the ``kept`` seams that lie between two of those pieces (each kept seam's plane holds
+    its 3D line and the surface's normal: the plane between two packed boxes, which goes on
+    across the boxes' other faces and across the seam where the colour edge bends or fades).
+    Each of the piece's pixels with depth (``measured``; ``points`` (h, w, 3), m) takes the
+    side of every plane; a facing piece's sides are those of its median point; the pixels on
+    the sides of one facing piece form a part (new id), the rest of the piece (and its pixels
+    without depth) go to the nearest part. A part must span the width of the piece it faces
+    along ``seam`` (within ``seams.strip_tolerance``; one that does not goes to its
+    neighbours), and at least two parts must. Nothing changes when no kept seam lies between
+    two facing pieces, two facing pieces lie on the same sides, or the piece's own seams
+    along the planes lie off them (``_on_any_plane``: its rows are offset from the faced
+    ones)."""
+    tolerance = config.seams.strip_tolerance
+    counts = _facing(pieces, seam)
+    across: dict[int, set[int]] = {}
+    for a, b in counts:
+        across.setdefault(a, set()).add(b)
+        across.setdefault(b, set()).add(a)
+    between = {}
+    for other in kept:
+        pairs = _facing(pieces, other)
+        if pairs:
+            between[id(other)] = max(pairs, key=lambda pair: (pairs[pair], pair))
+    out = pieces
+    next_id = int(pieces.max()) + 1
+    for piece, faced in sorted(across.items()):
+        if len(faced) < 2:
+            continue
+        planes = [other for other in kept if id(other) in between
+                  and set(between[id(other)]) <= faced]  # fmt: skip
+        if not planes:
+            continue
+        # The piece's own seams across the same direction must continue the planes (an
+        # aligned grid): where they lie between them, its boxes are offset from the faced
+        # ones (rows laid like bricks) and the planes are not their boundaries.
+        if any(
+            _parallel_to_any(other, planes) and not _on_any_plane(other, planes, config)
+            for other in kept
+            if all(other is not plane for plane in planes)
+            and any(piece in pair for pair in _facing(pieces, other))
+        ):
+            continue
+        normals = np.array([other.across for other in planes])
+        offsets = np.array([float(other.across @ other.middle) for other in planes])
+        signs = {}
+        for other_piece in sorted(faced):
+            cloud = points[(pieces == other_piece) & measured].astype(np.float64)
+            if len(cloud) == 0:
+                break
+            signs[other_piece] = tuple(np.median(cloud, axis=0) @ normals.T > offsets)
+        if len(signs) < len(faced) or len(set(signs.values())) < len(signs):
+            continue
+        inside = pieces == piece
+        own = inside & measured
+        side = points[own].astype(np.float64) @ normals.T > offsets
+        assigned = np.zeros(pieces.shape, dtype=np.int32)
+        values = np.zeros(int(own.sum()), dtype=np.int32)
+        for part, other_piece in enumerate(sorted(faced), start=1):
+            values[np.all(side == np.array(signs[other_piece]), axis=1)] = part
+        # A part is as wide along the undone seam as the piece it faces (within
+        # ``seams.strip_tolerance``): the same boxes go on beyond a printed line across them;
+        # another box beyond the line (lying across the row's end) does not end at their
+        # seams. A part that is not goes to its neighbours (below), as the pixels without depth.
+        along = points[own].astype(np.float64) @ seam.direction
+        for part, other_piece in enumerate(sorted(faced), start=1):
+            if not _alike_widths(along[values == part], pieces == other_piece, points, measured,
+                                 seam.direction, tolerance):  # fmt: skip
+                values[values == part] = 0
+        if len(np.unique(values[values > 0])) < 2:
+            continue
+        assigned[own] = values
+        # The rest of the piece (its pixels without depth, off every facing piece's sides):
+        # the nearest part's.
+        nearest = ndimage.distance_transform_edt(
+            assigned == 0, return_distances=False, return_indices=True
+        )
+        parts = np.where(inside, assigned[nearest[0], nearest[1]], 0)
+        if out is pieces:
+            out = pieces.copy()
+        for part in range(2, len(faced) + 1):
+            out[parts == part] = next_id
+            next_id += 1
+    return out
+
+
+def _parallel_to_any(seam: _Seam, planes: list[_Seam]) -> bool:
+    """Whether ``seam`` runs along one of ``planes``' seams (within ``_PARALLEL_DEG``)."""
+    parallel = np.cos(np.radians(_PARALLEL_DEG))
+    return any(abs(float(seam.direction @ plane.direction)) >= parallel for plane in planes)
+
+
+def _on_any_plane(seam: _Seam, planes: list[_Seam], config: PerceptionConfig) -> bool:
+    """Whether ``seam`` continues one of ``planes``' seams: parallel to it and its middle
+    within ``seams.min_width_m`` of its plane (the line and the surface normal)."""
+    parallel = np.cos(np.radians(_PARALLEL_DEG))
+    return any(
+        abs(float(seam.direction @ plane.direction)) >= parallel
+        and abs(float(plane.across @ (seam.middle - plane.middle))) <= config.seams.min_width_m
+        for plane in planes
+    )
+
+
+def _alike_widths(
+    along: np.ndarray,
+    other: np.ndarray,
+    points: np.ndarray,
+    measured: np.ndarray,
+    direction: np.ndarray,
+    tolerance: float,
+) -> bool:
+    """Whether a part's points' coordinates ``along`` (m) a direction and the points of the
+    piece ``other`` ((h, w) bool; ``points`` (h, w, 3) m, ``measured`` (h, w) bool) along
+    ``direction`` (3,) span one width (2nd-98th percentile) within ``tolerance`` of the wider."""
+    theirs = points[other & measured].astype(np.float64) @ direction
+    if len(along) < 2 or len(theirs) < 2:
+        return False
+    mine = float(np.subtract(*np.percentile(along, [98, 2])))
+    width = float(np.subtract(*np.percentile(theirs, [98, 2])))
+    return min(mine, width) >= (1.0 - tolerance) * max(mine, width, 1e-9)
 
 
 def _best_cut(
