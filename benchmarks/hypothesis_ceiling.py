@@ -5,7 +5,7 @@ hypotheses``), or on its own for a subset::
 
     python -m benchmarks.hypothesis_ceiling --suite ycb-dynamic --limit 4 [--scene DIR ...]
         [--perception-cache DIR] [--algorithm1-only] [--neighbour-surfaces] [--superquadric N]
-        [--no-fitted-axis]
+        [--fitted-axis]
 
 Per scene: frame 0 is perceived, the hypotheses are prepared (``prepare_hypotheses``, the
 default configuration, seed 0, as the Collision Checker's run draws them) and the Collision
@@ -253,9 +253,9 @@ def main(argv: list[str] | None = None) -> int:
         "0: none, the candidates before them)",
     )
     parser.add_argument(
-        "--no-fitted-axis",
+        "--fitted-axis",
         action="store_true",
-        help="no surface of revolution about the axis the surface normals meet (before)",
+        help="surfaces of revolution also about the axis the surface normals meet (opt-in)",
     )
     args = parser.parse_args(argv)
     from ipr_shapes.config import Config
@@ -275,10 +275,10 @@ def main(argv: list[str] | None = None) -> int:
             config,
             hypotheses=dataclasses.replace(config.hypotheses, superquadric_count=args.superquadric),
         )
-    if args.no_fitted_axis:
+    if args.fitted_axis:
         config = dataclasses.replace(
             config,
-            hypotheses=dataclasses.replace(config.hypotheses, fitted_revolution_axis=False),
+            hypotheses=dataclasses.replace(config.hypotheses, fitted_revolution_axis=True),
         )
     groups = {name: suite_scenes(name)[: args.limit] for name in args.suite}
     if args.scene:
