@@ -5,6 +5,7 @@ hypotheses``), or on its own for a subset::
 
     python -m benchmarks.hypothesis_ceiling --suite ycb-dynamic --limit 4 [--scene DIR ...]
         [--perception-cache DIR] [--algorithm1-only] [--neighbour-surfaces] [--superquadric N]
+        [--fitted-axis]
 
 Per scene: frame 0 is perceived, the hypotheses are prepared (``prepare_hypotheses``, the
 default configuration, seed 0, as the Collision Checker's run draws them) and the Collision
@@ -251,6 +252,11 @@ def main(argv: list[str] | None = None) -> int:
         help="N of the structure-aware candidates are superquadrics (default: the config's, 3; "
         "0: none, the candidates before them)",
     )
+    parser.add_argument(
+        "--fitted-axis",
+        action="store_true",
+        help="surfaces of revolution also about the axis the surface normals meet (opt-in)",
+    )
     args = parser.parse_args(argv)
     from ipr_shapes.config import Config
     from ipr_shapes.suites import suite_scenes
@@ -268,6 +274,11 @@ def main(argv: list[str] | None = None) -> int:
         config = dataclasses.replace(
             config,
             hypotheses=dataclasses.replace(config.hypotheses, superquadric_count=args.superquadric),
+        )
+    if args.fitted_axis:
+        config = dataclasses.replace(
+            config,
+            hypotheses=dataclasses.replace(config.hypotheses, fitted_revolution_axis=True),
         )
     groups = {name: suite_scenes(name)[: args.limit] for name in args.suite}
     if args.scene:

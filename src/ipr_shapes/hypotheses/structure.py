@@ -420,6 +420,69 @@ def axis_frame(axis: np.ndarray, towards_camera: np.ndarray) -> UprightFrame:
     return UprightFrame(a, b, axis, 0.0, hidden)
 
 
+def surface_normals(points: np.ndarray, neighbours: int = 16) -> np.ndarray:
+    """Unit surface normals (N, 3) of (N, 3) points (sign arbitrary): the least-spread axis
+    of each point's ``neighbours`` nearest points (zeros with fewer than 4 points)."""
+    from scipy.spatial import cKDTree
+
+    n = len(points)
+    if n < 4:
+        return np.zeros((n, 3))
+    _, index = cKDTree(points).query(points, k=min(neighbours, n))
+    near = points[index]
+    near = near - near.mean(axis=1, keepdims=True)
+    _, vectors = np.linalg.eigh(np.einsum("nki,nkj->nij", near, near))
+    return vectors[:, :, 0]
+
+
+def revolution_axis(
+    points: np.ndarray, normals: np.ndarray, trim: float = 0.2
+) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """The axis (unit direction (3,), a point on it (3,)) of the surface of revolution that
+    best explains points (N, 3) with unit surface normals (N, 3), and how far the normals
+    miss it (RMS angle, radians); None when degenerate.
+
+    Every normal line of a surface of revolution meets its axis (a lid's and an end cap's are
+    parallel to it, which counts as meeting), so with the axis direction a and moment
+    m = c x a (c on the axis) each point satisfies (p x n) . a + n . m = 0 (Pottmann and
+    Randrup 1998, the linear line complex of rotational surfaces); the left side is
+    (a x n) . (p - c), the point's distance from the axis times the sine of the angle by
+    which its normal leaves the plane through the axis and the point. The axis is the
+    least-squares solution with |a| = 1: m eliminated, a is the smallest eigenvector of the
+    3 x 3 Schur complement. Refitted once without the ``trim`` share of the points that fit
+    worst (other surfaces in the segment, noisy normals at edges); the angle is that of the
+    points kept. A sphere or a plane fits many axes (the caller's circle fit decides whether
+    the axis is any good); a shape that is no surface of revolution (a bottle with a flat
+    cross-section) leaves its normals off every axis by a large angle."""
+    if len(points) < 10:
+        return None
+    origin = points.mean(axis=0)
+    p = points - origin
+    lines = np.concatenate([np.cross(p, normals), normals], axis=1)
+    weights = np.ones(len(p))
+    axis = moment = None
+    for _ in range(2):
+        matrix = (lines * weights[:, None]).T @ lines
+        a_block, b_block, c_block = matrix[:3, :3], matrix[:3, 3:], matrix[3:, 3:]
+        c_inverse = np.linalg.pinv(c_block, rcond=1e-9)
+        schur = a_block - b_block @ c_inverse @ b_block.T
+        values, vectors = np.linalg.eigh(0.5 * (schur + schur.T))
+        if not np.all(np.isfinite(values)):
+            return None
+        axis = vectors[:, 0]
+        moment = -c_inverse @ b_block.T @ axis
+        residual = np.abs(lines @ np.concatenate([axis, moment]))
+        weights = (residual <= np.quantile(residual, 1.0 - trim)).astype(float)
+    assert axis is not None and moment is not None
+    # m = c x a, so a x m is the axis' point nearest the origin (|a| = 1).
+    centre = _cross(axis, moment)
+    across = p - centre
+    across -= np.outer(across @ axis, axis)
+    sines = residual / np.maximum(np.linalg.norm(across, axis=1), 1e-3)
+    angle = float(np.sqrt(np.mean(sines[weights > 0] ** 2)))
+    return axis, origin + centre, angle
+
+
 def best_axis(
     upright: UprightFrame,
     points: np.ndarray,
@@ -427,21 +490,41 @@ def best_axis(
     towards_camera: np.ndarray,
     s: StructureSettings,
     horizontal: int = 12,
+    fitted_axis: bool = False,
 ) -> tuple[UprightFrame, np.ndarray, AxisFit] | None:
     """The axis of revolution that fits the points best: the support normal, or one of
     ``horizontal`` directions in the support plane (every 180/horizontal degrees, objects
     lying on their side), each fitted by ``fit_axis`` without the points whose facet normal
     (``point_normals`` (N, 3), zero for none) is within 37 degrees of the axis (a lid or an
     end cap lies inside the circles of the sides); (frame, local points, fit) of the smallest
-    residual among the fits that apply (module doc), None when none does."""
-    frames = [upright]
+    residual among the fits that apply (module doc), None when none does.
+
+    With ``fitted_axis``, also the axis the points' own surface normals meet
+    (``surface_normals``, ``revolution_axis``: a can leaning on another, at any tilt), its
+    lids left out by those normals rather than by the facets' (a perceived facet may span a
+    can's lid and side); only when the normals miss it by at most the circles' own share
+    (``circle_residual``) as an angle in radians."""
+    frames = [(upright, point_normals)]
     for angle in np.arange(horizontal) * np.pi / horizontal:
         axis = np.cos(angle) * upright.a + np.sin(angle) * upright.b
-        frames.append(axis_frame(axis, towards_camera))
+        frames.append((axis_frame(axis, towards_camera), point_normals))
+    if fitted_axis:
+        surface = surface_normals(points)
+        found = revolution_axis(points, surface)
+        if found is not None and found[2] <= s.circle_residual:
+            frames.append((axis_frame(found[0], towards_camera), surface))
+    return _best_fit(frames, points, s)
+
+
+def _best_fit(
+    frames: list[tuple[UprightFrame, np.ndarray]], points: np.ndarray, s: StructureSettings
+) -> tuple[UprightFrame, np.ndarray, AxisFit] | None:
+    """(frame, local points, fit) of the smallest circle residual among ``frames`` (each with
+    the points' normals (N, 3) that leave out lids along its axis) whose fit applies."""
     best = None
-    for frame in frames:
+    for frame, normals in frames:
         local = frame.local(points)
-        keep = np.abs(point_normals @ frame.up) <= 0.8
+        keep = np.abs(normals @ frame.up) <= 0.8
         fit = fit_axis(local, keep, s)
         if fit is None or fit.residual > s.circle_residual:
             continue
