@@ -246,6 +246,34 @@ def test_completion_image_shows_the_input_beside_the_completed_objects():
     assert np.ptp(completion_image(frame, [])[:, WIDTH:].astype(int), axis=2).max() <= 1
 
 
+def test_completion_shading_around_the_drawn_pixels_is_the_whole_images():
+    """The picture shades only the drawn pixels' box grown by one pixel; each drawn pixel's
+    shade must be the whole image's, bit for bit (also at the image's edge)."""
+    from ipr_shapes.collision_checker import uniform_posteriors
+    from ipr_shapes.perception.output import palette
+    from ipr_shapes.report import _shading, completion_image
+
+    for eye in ((0.0, -0.35, 0.3), (0.03, -0.1, 0.06)):  # the second cut by the image's edge
+        frame, _ = _frame(0, eye)
+        posteriors = uniform_posteriors(_prepared(TRUE_BOX, TOP_SLAB))
+        depth, index = render_depth_and_ids(
+            [p.output_mesh for p in posteriors], [None] * len(posteriors), K, WIDTH, HEIGHT,
+            frame.world_from_camera,
+        )  # fmt: skip
+        drawn = index >= 0
+        rgb = np.asarray(frame.rgb, np.uint8)
+        grey = rgb.astype(np.float64).mean(axis=2, keepdims=True)
+        expected = np.repeat(0.35 * grey + 40.0, 3, axis=2)
+        colours = palette(np.array([p.object_id for p in posteriors])).astype(np.float64)
+        whole = _shading(depth, np.asarray(K, float))
+        expected[drawn] = colours[np.maximum(index, 0)][drawn] * whole[drawn, None]
+        image = completion_image(frame, posteriors)[:, WIDTH:]
+        assert np.array_equal(image, np.clip(expected, 0, 255).astype(np.uint8))
+        # The shade is not flat (so that a window without its margin would show).
+        assert np.ptp(whole[drawn]) > 0.1
+    assert drawn[:, 0].any() or drawn[:, -1].any() or drawn[0].any() or drawn[-1].any()
+
+
 def _fabricated_problem(count: int, compatible: dict | None = None, weighting="hypothesis"):
     """A problem of ``count`` objects with two candidates each, for estimators alone."""
     from ipr_shapes.inference import InferenceProblem

@@ -130,6 +130,41 @@ def test_posterior_results_count_the_carved_shapes_that_were_written(tmp_path):
     assert _probability_at(occupancy.objects[0], (0.0325, 0.0075, 0.0075)) == 0.0
 
 
+def test_posterior_occupancy_from_cached_voxels_is_that_of_the_written_meshes(tmp_path):
+    """A hypothesis written as itself gives its cached voxels (not voxelised again); a carved
+    one its carved mesh's: the file is the occupancy of the written meshes."""
+
+    def hypothesis(box: trimesh.Trimesh, index: int) -> ShapeHypothesis:
+        vertices, faces = np.asarray(box.vertices), np.asarray(box.faces)
+        return ShapeHypothesis(
+            0, index, vertices, faces, float(box.volume), np.zeros(0), np.zeros((0, 3)),
+            voxel_keys=voxels.scanline_voxels(vertices, faces, PITCH),
+        )  # fmt: skip
+
+    tilted = LARGE.copy()
+    tilted.apply_transform(trimesh.transformations.rotation_matrix(0.3, [0.2, 0.3, 1.0]))
+    hypotheses = (hypothesis(LARGE, 0), hypothesis(SMALL, 1), hypothesis(tilted, 2))
+    carved = SMALL.vertices.copy(), SMALL.faces.copy()  # LARGE carved down to SMALL
+    posterior = ObjectPosterior(
+        0, hypotheses, np.array([0.5, 0.2, 0.3]), 0, hypothesis(SMALL, -1), "test",
+        output_meshes=(carved, None, None),
+    )  # fmt: skip
+    assert posterior.written_shape(0) is carved
+    assert posterior.written_shape(1) is hypotheses[1].voxel_keys
+    assert isinstance(posterior.written_shape(1, 2 * PITCH), tuple)  # another pitch: the mesh
+    out = write_posterior_result(tmp_path / "r", [posterior], {0: WORLD_FROM_CAMERA}, method="t")
+    expected = posterior_occupancy(
+        {0: [(posterior.written_mesh(k), p) for k, p in enumerate(posterior.probabilities)]}
+    )
+    occupancy = load_occupancy(out)
+    for got, wanted in (
+        (occupancy.objects[0], expected.objects[0]),
+        (occupancy.scene, expected.scene),
+    ):
+        assert np.array_equal(got[0], wanted[0]) and np.array_equal(got[1], wanted[1])
+    assert _probability_at(occupancy.objects[0], (0.0325, 0.0075, 0.0075)) == 0.0
+
+
 @pytest.mark.parametrize(
     "change, problem",
     [

@@ -331,3 +331,26 @@ def test_a_result_mesh_in_millimetres_is_refused_with_its_file(tmp_path):
     with pytest.raises(ValueError, match="millimetres"):
         write_result(tmp_path / "mm", "m", np.eye(4), [(small.apply_scale(1000.0), [])])
     assert not (tmp_path / "mm").exists()
+
+
+def test_written_ply_reads_as_trimesh_loads_it(tmp_path):
+    """``read_mesh`` parses ipr's PLY files without trimesh's scene round trip: the same
+    float64 vertices and int64 faces as ``trimesh.load``; a PLY with more than positions and
+    faces (vertex colours) is read by ``trimesh.load`` as before."""
+    from ipr_shapes.result import _read_plain_ply
+
+    rng = np.random.default_rng(3)
+    mesh = trimesh.convex.convex_hull(rng.normal(0.0, 0.05, (40, 3)))
+    plain = tmp_path / "plain.ply"
+    mesh.export(plain, file_type="ply")
+    read = read_mesh(plain)
+    loaded = trimesh.load(plain, force="mesh", process=False)
+    assert _read_plain_ply(plain) is not None
+    for ours, theirs in ((read.vertices, loaded.vertices), (read.faces, loaded.faces)):
+        assert ours.dtype == theirs.dtype and np.array_equal(ours, theirs)
+    coloured = tmp_path / "coloured.ply"
+    painted = mesh.copy()
+    painted.visual.vertex_colors = np.tile([200, 10, 10, 255], (len(mesh.vertices), 1))
+    painted.export(coloured, file_type="ply")
+    assert _read_plain_ply(coloured) is None
+    assert np.array_equal(read_mesh(coloured).faces, mesh.faces)

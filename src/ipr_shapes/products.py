@@ -185,6 +185,19 @@ class ObjectPosterior:
             return self.output_meshes[k]
         return self.hypotheses[k].mesh
 
+    def written_shape(self, k: int, pitch_m: float = voxels.DEFAULT_PITCH_M) -> Any:
+        """Hypothesis k's written shape as ``ipr_shapes.result.posterior_occupancy`` takes it: the
+        hypothesis's cached voxel keys (sorted, at ``pitch_m``) when it is written as itself
+        and was voxelised at that pitch (the same scanline voxelisation of the same closed
+        hull, so the same voxels, without voxelising it again), else ``written_mesh(k)``."""
+        hypothesis = self.hypotheses[k]
+        carved = self.output_meshes is not None and self.output_meshes[k] is not None
+        if carved or hypothesis.voxel_keys is None:
+            return self.written_mesh(k)
+        if not np.isclose(pitch_m, hypothesis.voxel_pitch_m):
+            return self.written_mesh(k)
+        return hypothesis.voxel_keys
+
     @property
     def output_mesh(self) -> tuple[np.ndarray, np.ndarray]:
         """(vertices, faces) of the output shape (``best.ply``)."""

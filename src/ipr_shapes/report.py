@@ -19,10 +19,15 @@ from ipr_shapes.products import ObjectPosterior
 from ipr_shapes.scene import Frame
 
 
-def _shading(depth_m: np.ndarray, K: np.ndarray) -> np.ndarray:
-    """(H, W) in [0.35, 1]: how directly each rendered surface faces the camera."""
+def _shading(depth_m: np.ndarray, K: np.ndarray, corner: tuple[int, int] = (0, 0)) -> np.ndarray:
+    """(H, W) in [0.35, 1]: how directly each rendered surface faces the camera.
+
+    ``depth_m`` (H, W) m may be a window of the image whose pixel (0, 0) is the image's pixel
+    ``corner`` (row, column); each pixel's shade then depends only on its own depth and its
+    four neighbours' in the window (their one-sided differences at the window's edges)."""
     height, width = depth_m.shape
-    v, u = np.mgrid[0:height, 0:width].astype(np.float64)
+    top, left = corner
+    v, u = np.mgrid[top : top + height, left : left + width].astype(np.float64)
     z = depth_m.astype(np.float64)
     x = (u - K[0, 2]) * z / K[0, 0]
     y = (v - K[1, 2]) * z / K[1, 1]
@@ -50,8 +55,18 @@ def completion_image(frame: Frame, posteriors: Sequence[ObjectPosterior]) -> np.
         depth, index = render_depth_and_ids(
             meshes, [None] * len(meshes), frame.K, width, height, frame.world_from_camera
         )
-        shade = _shading(depth, np.asarray(frame.K, float))
         drawn = index >= 0
+        # Shaded only around the drawn pixels: their box grown by one pixel (inside the image)
+        # holds every neighbour a drawn pixel's differences read, so each drawn pixel's shade
+        # is the whole image's, bit for bit, at a fraction of the pixels.
+        shade = np.zeros((height, width))
+        rows, cols = np.flatnonzero(drawn.any(axis=1)), np.flatnonzero(drawn.any(axis=0))
+        if rows.size:
+            top, bottom = max(rows[0] - 1, 0), min(rows[-1] + 2, height)
+            left, right_end = max(cols[0] - 1, 0), min(cols[-1] + 2, width)
+            shade[top:bottom, left:right_end] = _shading(
+                depth[top:bottom, left:right_end], np.asarray(frame.K, float), (top, left)
+            )
         colours = palette(np.array([p.object_id for p in posteriors])).astype(np.float64)
         colour = colours[np.maximum(index, 0)]
         right[drawn] = colour[drawn] * shade[drawn, None]
@@ -63,5 +78,9 @@ def completion_png(frame: Frame, posteriors: Sequence[ObjectPosterior]) -> bytes
     from PIL import Image
 
     buffer = io.BytesIO()
-    Image.fromarray(completion_image(frame, posteriors)).save(buffer, format="PNG")
+    # zlib level 1: a third of level 6's (Pillow's default) time for a 20 % larger file; the
+    # same pixels.
+    Image.fromarray(completion_image(frame, posteriors)).save(
+        buffer, format="PNG", compress_level=1
+    )
     return buffer.getvalue()
