@@ -328,3 +328,35 @@ def test_fill_label_holes_matches_the_pixel_by_pixel_fill(seed):
         expected = _reference_fill(labels, valid, distance)
         assert (fill_label_holes(labels, valid, distance) == expected).all()
     assert (fill_label_holes(labels, valid, 3.0) > 0).sum() > (labels > 0).sum()
+
+
+def test_frames_perceived_on_threads_are_those_perceived_one_by_one(scene_dir, monkeypatch):
+    """The frames' partial objects and free-space maps made on two threads are the very
+    ones made in order in one thread, in frame order, and the threads made them."""
+    import pickle
+    import threading
+
+    import ipr_shapes.perception as perception
+    from ipr_shapes.scene import load_scene
+
+    scene = load_scene(scene_dir)
+    alone = perception.perceive_scene(scene)
+    names = []
+    observe = perception.observe_space
+    decompose = perception.partial_objects
+    monkeypatch.setattr(perception, "observe_space",
+                        lambda *a, **k: names.append(threading.current_thread().name)
+                        or observe(*a, **k))  # fmt: skip
+    monkeypatch.setattr(perception, "partial_objects",
+                        lambda *a, **k: names.append(threading.current_thread().name)
+                        or decompose(*a, **k))  # fmt: skip
+    together = perception.perceive_scene(scene, workers=2)
+    assert len(names) == 2 * len(scene.frames) >= 4
+    assert all(name.startswith("ipr-perception") for name in names)
+    for field in ("labels", "facet_labels", "objects", "planes"):
+        assert pickle.dumps(getattr(together, field)) == pickle.dumps(getattr(alone, field))
+    assert all(
+        np.array_equal(a.state, b.state)
+        for a, b in zip(together.free_space, alone.free_space, strict=True)
+    )
+    assert [m.state.any() for m in together.free_space] == [True] * len(scene.frames)

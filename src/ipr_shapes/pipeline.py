@@ -163,10 +163,17 @@ def _checked_seed(seed: int) -> int:
     return seed
 
 
-def perceive(scene: Scene, config: Config, progress: ProgressCallback | None = None) -> Perception:
+def perceive(
+    scene: Scene,
+    config: Config,
+    progress: ProgressCallback | None = None,
+    workers: int = 1,
+) -> Perception:
     """Every frame's perception, with frame 0's occluded pieces joined; ``progress`` hears it
-    frame by frame (``perceive_scene``)."""
-    perception = perceive_scene(scene, config.perception, progress=progress)
+    frame by frame (``perceive_scene``); ``workers`` threads make the frames' partial objects
+    and free-space maps (``run_pipeline``: the sampling's, ``_threads``; the result is the same
+    for any number)."""
+    perception = perceive_scene(scene, config.perception, progress=progress, workers=workers)
     perception, _ = join_first_frame_pieces(scene, perception, config.perception.occluded_pieces)
     mark_kernel_cache_warm()
     return perception
@@ -364,7 +371,7 @@ def run_pipeline(
     budget = RunBudget.start(time_budget_s)
     if progress is not None and kernel_cache_cold():
         report(progress, "compiling", 0)
-    perception = perceive(scene, config, progress)
+    perception = perceive(scene, config, progress, workers=_threads(config, workers))
     perceived = time.perf_counter()
     check_objects_found(scene, perception)
     if not perception.objects[0]:

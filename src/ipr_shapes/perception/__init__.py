@@ -74,11 +74,16 @@ def perceive_scene(
     *,
     with_free_space: bool = True,
     progress: ProgressCallback | None = None,
+    workers: int = 1,
 ) -> Perception:
     """Segment, track and decompose every frame of a scene into partial objects with facets.
 
     ``progress`` (``ipr_shapes.progress``) hears ``perception`` as each frame is segmented (most of
     the time) and ``free_space`` as each frame's voxel map is made, frame by frame.
+    ``workers`` threads make the frames' partial objects and then their free-space maps (each
+    frame's from that frame alone, so the result is the same for any number; the maps'
+    large numpy operations and the compiled kernels release the GIL). Segmentation and
+    tracking stay sequential: each frame starts from the previous one's.
     """
     config = config or PerceptionConfig()
     count = len(scene.frames)
@@ -104,24 +109,29 @@ def perceive_scene(
     labels = track_scene([s.labels for s in segmentations], scene, points, config)
     tracking_seconds = time.perf_counter() - started
 
-    facet_seconds, objects, facet_labels = [], [], []
-    for frame, segmentation, frame_labels in zip(scene.frames, segmentations, labels, strict=True):
+    def decompose(index: int):
         started = time.perf_counter()
-        frame_objects, frame_facets = partial_objects(frame, segmentation, frame_labels, config)
+        frame = scene.frames[index]
+        made = partial_objects(frame, segmentations[index], labels[index], config)
+        return made, time.perf_counter() - started
+
+    facet_seconds, objects, facet_labels = [], [], []
+    for (frame_objects, frame_facets), seconds in _frames_in_threads(decompose, count, workers):
         objects.append(frame_objects)
         facet_labels.append(frame_facets)
-        facet_seconds.append(time.perf_counter() - started)
+        facet_seconds.append(seconds)
 
     free_space: list[SpaceMap | None] = [None] * len(scene.frames)
     free_seconds = [0.0] * len(scene.frames)
     grid = workspace_grid(objects, config) if with_free_space else None
     if grid is not None:
-        report(progress, "free_space", 0, count)
-        for index, frame in enumerate(scene.frames):
+
+        def observe(index: int):
             started = time.perf_counter()
+            frame = scene.frames[index]
             # The robot is not an obstacle to hypotheses, and space behind it is unknown.
             ignore = robot_pixels(frame, scene.pushes, scene.pusher, config)
-            free_space[index] = observe_space(
+            space = observe_space(
                 frame.depth_m,
                 frame.K,
                 frame.world_from_camera,
@@ -129,7 +139,12 @@ def perceive_scene(
                 surface_margin_m=config.free_space.surface_margin_m,
                 ignore_mask=ignore,
             )
-            free_seconds[index] = time.perf_counter() - started
+            return space, time.perf_counter() - started
+
+        report(progress, "free_space", 0, count)
+        maps = _frames_in_threads(observe, count, workers)
+        for index, (space, seconds) in enumerate(maps):
+            free_space[index], free_seconds[index] = space, seconds
             report(progress, "free_space", index + 1, count)
 
     tracking_share = tracking_seconds / max(len(scene.frames), 1)
@@ -153,6 +168,18 @@ def perceive_scene(
         free_space,
         timing,
     )
+
+
+def _frames_in_threads(work, count: int, workers: int):
+    """``work(index)`` of frames 0..count-1 on up to ``workers`` threads (one: in this thread),
+    yielded in frame order."""
+    if workers <= 1 or count <= 1:
+        yield from (work(index) for index in range(count))
+        return
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(min(workers, count), thread_name_prefix="ipr-perception") as pool:
+        yield from pool.map(work, range(count))
 
 
 def track_scene(
