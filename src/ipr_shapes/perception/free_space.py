@@ -4,7 +4,7 @@ A voxel is *free* in a frame when the camera's rays passed through it before hit
 *occupied* when it holds an observed surface, and *unknown* when it lies behind observed
 surfaces, outside the image, or where the sensor gave no reading. Instead of marching every
 pixel's ray, each voxel centre is projected into the image and compared with the depth there
-(a projective test): the cost is one vectorised pass over the voxels, independent of the image
+(a projective test): the cost is one compiled pass over the voxels, independent of the image
 size. The test is conservative for *free*: the depth is min-filtered over the voxel's pixel
 footprint, so a voxel is free only if every ray through it that returned a reading went past
 it; a footprint with no reading at all stays unknown.
@@ -15,6 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Protocol
 
+import numba
 import numpy as np
 from scipy.ndimage import minimum_filter
 
@@ -113,6 +114,94 @@ class SeenSpace(Protocol):
     def state_at(self, points: np.ndarray) -> np.ndarray: ...
 
 
+# Compiled per-voxel pass of ``observe_space`` (nogil: frames are observed on threads; no
+# fastmath: numpy's IEEE arithmetic, operation for operation, so the same states bit for bit).
+_jit = numba.njit(cache=True, nogil=True)
+
+
+@_jit
+def _round_half_even(x: float) -> float:
+    """numpy's ``round`` of a finite float64 (ties to even); x - floor(x) is exact."""
+    r = np.floor(x)
+    d = x - r
+    if d > 0.5 or (d == 0.5 and r % 2.0 != 0.0):
+        r += 1.0
+    return r
+
+
+@_jit
+def _project(terms, offset, k, fx, cx, fy, cy, width, height, near):
+    """Pixel (u, v) and float32 depth z of grid voxel (i, j, k) (camera coordinates as the
+    float32 sum ``(terms[0][i] + terms[1][j]) + (terms[2][k] + offset)``, as numpy broadcasts
+    it), and whether it is in front and inside the image."""
+    i, j, kk = k
+    x = (terms[0][i, 0] + terms[1][j, 0]) + (terms[2][kk, 0] + offset[0])
+    y = (terms[0][i, 1] + terms[1][j, 1]) + (terms[2][kk, 1] + offset[1])
+    z = (terms[0][i, 2] + terms[1][j, 2]) + (terms[2][kk, 2] + offset[2])
+    in_front = z > near
+    safe = z if in_front else np.float32(1.0)
+    u = np.int64(_round_half_even(fx * np.float64(x) / np.float64(safe) + cx))
+    v = np.int64(_round_half_even(fy * np.float64(y) / np.float64(safe) + cy))
+    inside = in_front and u >= 0 and u < width and v >= 0 and v < height
+    return u, v, z, inside
+
+
+@_jit
+def _footprint_level(z, footprint_scale, nearest_z, windows):
+    """Index of the smallest window (``windows`` ascending) covering a voxel's footprint
+    ``ceil(footprint_scale / max(z, nearest_z))`` pixels, the last one at most (numpy's
+    ``searchsorted``, left side)."""
+    footprint = np.ceil(footprint_scale / np.float64(max(z, nearest_z)))
+    level = 0
+    while level < windows.size and windows[level] < footprint:
+        level += 1
+    return min(level, windows.size - 1)
+
+
+@_jit
+def _voxel_states(terms, offset, shape, fx, cx, fy, cy, width, height, near, footprint_scale,
+                  nearest_z, windows, nearest, available, depth, margin):  # fmt: skip
+    """(nx, ny, nz) uint8 states of ``observe_space`` (module doc) and (len(windows),) bool: the
+    windows some voxel inside the image needed but ``available`` did not have (its state is
+    then wrong: fill that window and call again). ``nearest`` holds the min-filtered depth
+    (H, W) float32 of each available window, ``depth`` the readings, ``margin`` the float32
+    surface margin."""
+    state = np.zeros((shape[0], shape[1], shape[2]), dtype=np.uint8)
+    missing = np.zeros(windows.size, dtype=np.bool_)
+    for i in range(shape[0]):
+        for j in range(shape[1]):
+            for kk in range(shape[2]):
+                u, v, z, inside = _project(
+                    terms, offset, (i, j, kk), fx, cx, fy, cy, width, height, near
+                )
+                if not inside:
+                    continue
+                level = _footprint_level(z, footprint_scale, nearest_z, windows)
+                if not available[level]:
+                    missing[level] = True
+                    continue
+                observed_near = nearest[level][v, u]
+                observed = depth[v, u]
+                if np.isfinite(observed_near) and z < observed_near - margin:
+                    state[i, j, kk] = 1  # FREE
+                elif observed > 0 and abs(z - observed) <= margin:
+                    state[i, j, kk] = 2  # OCCUPIED
+    return state, missing
+
+
+def _windows_between(
+    near_z: float, far_z: float, footprint_scale: float, windows: np.ndarray
+) -> np.ndarray:
+    """(len(windows),) bool: the footprint windows of the depths (m) from ``near_z`` to
+    ``far_z`` (``footprint_scale``: a voxel's footprint in pixels at 1 m)."""
+    nearest_z = np.maximum(np.array([far_z, near_z], dtype=np.float32), np.float32(0.05))
+    footprints = np.ceil(footprint_scale / nearest_z.astype(np.float64))
+    levels = np.minimum(np.searchsorted(windows, footprints), len(windows) - 1)
+    available = np.zeros(len(windows), dtype=bool)
+    available[levels[0] : levels[1] + 1] = True
+    return available
+
+
 def observe_space(
     depth_m: np.ndarray,
     K: np.ndarray,
@@ -144,50 +233,50 @@ def observe_space(
     axes = [
         grid.origin[i] + (np.arange(n) + 0.5) * grid.voxel_size_m for i, n in enumerate(grid.shape)
     ]
-    terms = [np.outer(axis, rotation[:, i]).astype(np.float32) for i, axis in enumerate(axes)]
-    camera = (
-        terms[0][:, None, None, :]
-        + terms[1][None, :, None, :]
-        + (terms[2] + camera_from_world[:3, 3].astype(np.float32))[None, None, :, :]
-    ).reshape(-1, 3)
-    z = camera[:, 2]
-    in_front = z > 1e-3
-    safe_z = np.where(in_front, z, 1.0)
-    u = np.round(K[0, 0] * camera[:, 0] / safe_z + K[0, 2]).astype(np.int64)
-    v = np.round(K[1, 1] * camera[:, 1] / safe_z + K[1, 2]).astype(np.int64)
-    in_image = in_front & (u >= 0) & (u < width) & (v >= 0) & (v < height)
+    terms = tuple(np.outer(axis, rotation[:, i]).astype(np.float32) for i, axis in enumerate(axes))
+    offset = camera_from_world[:3, 3].astype(np.float32)
+    K = np.asarray(K, dtype=np.float64)
+    # The comparisons of float32 depths with Python floats are float32 ones (numpy's), here
+    # and in the compiled pass.
+    footprint_scale = float(K[0, 0] * grid.voxel_size_m)  # pixels at 1 m
+    windows = np.array(FOOTPRINT_WINDOWS)
+    projection = (
+        terms, offset, np.asarray(grid.shape, np.int64), float(K[0, 0]), float(K[0, 2]),
+        float(K[1, 1]), float(K[1, 2]), width, height, np.float32(1e-3),
+        footprint_scale, np.float32(0.05), windows,
+    )  # fmt: skip
 
     # Conservative "free": the nearest depth over the voxel's pixel footprint must lie beyond it.
     # The footprint shrinks with distance, so the min filter is precomputed at a few window sizes
-    # and each voxel reads the one that covers it. A missing reading says nothing about where its
-    # ray ended, so it is left out of the minimum (the voxel is covered by its neighbours' rays);
-    # a footprint without any reading stays unknown.
+    # (those some voxel reads) and each voxel reads the one that covers it. A missing reading
+    # says nothing about where its ray ended, so it is left out of the minimum (the voxel is
+    # covered by its neighbours' rays); a footprint without any reading stays unknown.
     valid_depth = np.where(depth > 0, depth, np.inf).astype(np.float32)
     # Sensors drop readings at depth discontinuities: a missing pixel is assumed to belong to the
     # nearest surface around it, so free space never leaks past an object's silhouette.
     nearby = minimum_filter(valid_depth, size=HOLE_FILL_WINDOW, mode="nearest")
     valid_depth = np.where(depth > 0, valid_depth, nearby)
-    index = np.flatnonzero(in_image)
-    zi = z[index]
-    footprint_px = np.ceil(K[0, 0] * grid.voxel_size_m / np.maximum(zi, 0.05))
-    windows = np.array(FOOTPRINT_WINDOWS)
-    level = np.minimum(np.searchsorted(windows, footprint_px), len(windows) - 1)
-    ui, vi = u[index], v[index]
-    observed_near = np.empty(len(index), dtype=np.float32)
-    for number, window in enumerate(windows):
-        chosen = level == number
-        if chosen.any():
-            nearest = (
-                valid_depth
-                if window == 1
-                else minimum_filter(valid_depth, size=int(window), mode="nearest")
-            )
-            observed_near[chosen] = nearest[vi[chosen], ui[chosen]]
-    observed = depth[vi, ui]
-
-    state = np.full(len(z), UNKNOWN, dtype=np.uint8)
-    free = np.isfinite(observed_near) & (zi < observed_near - surface_margin_m)
-    occupied = ~free & (observed > 0) & (np.abs(zi - observed) <= surface_margin_m)
-    state[index[free]] = FREE
-    state[index[occupied]] = OCCUPIED
-    return SpaceMap(grid, state.reshape(grid.shape))
+    # The windows the grid's depths can need (its corners bound z; float32 rounding may step
+    # past them, which the compiled pass reports, and then the window is added).
+    corners = [terms[axis][[0, -1], 2] for axis in range(3)]
+    corner_z = (corners[0][:, None, None] + corners[1][None, :, None]) + (corners[2] + offset[2])[
+        None, None, :
+    ]
+    available = _windows_between(corner_z.min(), corner_z.max(), footprint_scale, windows)
+    unused = np.zeros((1, 1), dtype=np.float32)
+    nearest = [unused] * len(FOOTPRINT_WINDOWS)
+    while True:
+        for number, window in enumerate(FOOTPRINT_WINDOWS):
+            if available[number] and nearest[number] is unused:
+                nearest[number] = (
+                    valid_depth
+                    if window == 1
+                    else minimum_filter(valid_depth, size=int(window), mode="nearest")
+                )
+        state, missing = _voxel_states(
+            *projection, tuple(nearest), available, depth, np.float32(surface_margin_m)
+        )
+        if not missing.any():
+            break
+        available |= missing
+    return SpaceMap(grid, state)
