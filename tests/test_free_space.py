@@ -91,3 +91,29 @@ def test_grid_is_aligned_to_the_metrics_lattice():
     assert np.allclose(grid.origin / 0.005, np.round(grid.origin / 0.005))
     centres = grid.centres()
     assert np.allclose((centres[0, 0, 0] / 0.005) % 1, 0.5)
+
+
+def test_state_at_is_the_lookup_of_the_grid_indices():
+    """The compiled ``state_at`` reads the voxel ``grid.indices_of`` gives (numpy's floor of
+    the same quotient), UNKNOWN outside the grid; points on voxel faces, just inside and
+    outside each face of the grid, far away and not finite."""
+    from ipr_shapes.perception.free_space import SpaceMap, VoxelGrid
+
+    rng = np.random.default_rng(11)
+    grid = VoxelGrid(np.array([-0.1, 0.2, -0.03]), 0.005, (30, 20, 12))
+    space = SpaceMap(grid, rng.integers(0, 3, grid.shape).astype(np.uint8))
+    low, high = grid.origin, grid.origin + np.array(grid.shape) * grid.voxel_size_m
+    inside = rng.uniform(low, high, (2000, 3))
+    faces = grid.origin + rng.integers(-2, 35, (500, 3)) * grid.voxel_size_m
+    edges = np.concatenate([low + 1e-12, high - 1e-12, low - 1e-12, high + 1e-12]).reshape(-1, 3)
+    odd = np.array([[np.nan, 0.25, 0.0], [np.inf, 0.25, 0.0], [1e300, 0.0, 0.0]])
+    points = np.concatenate([inside, faces, edges, odd, rng.normal(0.0, 3.0, (200, 3))])
+    with np.errstate(invalid="ignore", over="ignore"):  # numpy's cast of the far points
+        indices, kept = grid.indices_of(np.nan_to_num(points, nan=1e9))
+    expected = np.zeros(len(points), np.uint8)
+    expected[kept] = space.state[tuple(indices[kept].T)]
+    got = space.state_at(points)
+    assert got.dtype == np.uint8 and np.array_equal(got, expected)
+    single = points[np.abs(points).max(axis=1) < 1e30].astype(np.float32)
+    assert np.array_equal(space.state_at(single), space.state_at(single.astype(np.float64)))
+    assert (got > 0).sum() > 1000 and space.state_at(np.zeros((0, 3))).shape == (0,)

@@ -93,15 +93,12 @@ class SpaceMap:
         return self.state == UNKNOWN
 
     def state_at(self, points: np.ndarray) -> np.ndarray:
-        """State (N,) of the voxels holding world points (N, 3); UNKNOWN outside the grid."""
-        indices, inside = self.grid.indices_of(points)
-        states = np.full(len(points), UNKNOWN, dtype=np.uint8)
-        kept = indices[inside]
-        nx, ny, nz = self.state.shape
-        # One flat gather (the grid is C-ordered): cheaper than a tuple of three index arrays.
-        flat = (kept[:, 0] * ny + kept[:, 1]) * nz + kept[:, 2]
-        states[inside] = self.state.reshape(-1)[flat]
-        return states
+        """State (N,) of the voxels holding world points (N, 3); UNKNOWN outside the grid (the
+        voxels of ``grid.indices_of``, in one compiled pass: hypotheses ask thousands of times)."""
+        points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+        grid = self.grid
+        origin = np.asarray(grid.origin, dtype=np.float64)
+        return _states_at(points, origin, float(grid.voxel_size_m), self.state)
 
 
 class SeenSpace(Protocol):
@@ -114,9 +111,25 @@ class SeenSpace(Protocol):
     def state_at(self, points: np.ndarray) -> np.ndarray: ...
 
 
-# Compiled per-voxel pass of ``observe_space`` (nogil: frames are observed on threads; no
+# Compiled per-voxel pass of ``observe_space`` and lookups of ``SpaceMap.state_at`` (nogil: frames are observed on threads; no
 # fastmath: numpy's IEEE arithmetic, operation for operation, so the same states bit for bit).
 _jit = numba.njit(cache=True, nogil=True)
+
+
+@_jit
+def _states_at(points, origin, voxel_size_m, state):
+    """(N,) uint8 ``state`` of the voxels holding (N, 3) float64 ``points``: voxel index
+    ``floor((p - origin) / voxel_size_m)`` per axis (numpy's arithmetic), UNKNOWN (0) outside
+    the grid or for a non-finite point."""
+    nx, ny, nz = state.shape
+    out = np.zeros(points.shape[0], dtype=np.uint8)
+    for n in range(points.shape[0]):
+        i = np.floor((points[n, 0] - origin[0]) / voxel_size_m)
+        j = np.floor((points[n, 1] - origin[1]) / voxel_size_m)
+        k = np.floor((points[n, 2] - origin[2]) / voxel_size_m)
+        if 0 <= i < nx and 0 <= j < ny and 0 <= k < nz:  # False for NaN
+            out[n] = state[np.int64(i), np.int64(j), np.int64(k)]
+    return out
 
 
 @_jit
