@@ -75,6 +75,22 @@ def test_voxel_surface_is_a_closed_manifold_that_reads_back_its_voxels():
     assert len(faces) == 2 * 2 * (3 * 4 + 4 * 2 + 3 * 2)
 
 
+def test_voxel_surface_keys_are_the_voxels_its_mesh_reads_back():
+    """The joined voxels ``voxel_surface(..., with_keys=True)`` gives are exactly what the
+    result's voxelisation (``voxels.occupied_voxels``) reads back from the written mesh, so
+    ``occupancy.npz`` may use them instead of voxelising the carved shapes again."""
+    rng = np.random.default_rng(8)
+    for share in (0.3, 0.45, 0.6, 0.8):
+        index = np.argwhere(rng.random((10, 9, 8)) < share) + np.array([-30, 12, 5])
+        keys = np.unique(voxels.pack(index))
+        vertices, faces, joined = voxel_surface(keys, PITCH, with_keys=True)
+        assert np.array_equal(voxels.occupied_voxels((vertices, faces), PITCH), joined)
+        assert joined.size > keys.size and np.isin(keys, joined).all()  # edge contacts joined
+        assert np.array_equal(np.sort(joined), joined)
+        plain = voxel_surface(keys, PITCH)
+        assert np.array_equal(plain[0], vertices) and np.array_equal(plain[1], faces)
+
+
 def test_carving_hollows_an_open_box_seen_from_above():
     cup = _open_box()
     hull = voxels.convex_hull(cup[0])

@@ -212,8 +212,8 @@ def _fill_edge_contacts(occupied: np.ndarray) -> np.ndarray:
 
 
 def voxel_surface(
-    keys: np.ndarray, pitch_m: float = voxels.DEFAULT_PITCH_M
-) -> tuple[np.ndarray, np.ndarray]:
+    keys: np.ndarray, pitch_m: float = voxels.DEFAULT_PITCH_M, *, with_keys: bool = False
+) -> tuple[np.ndarray, ...]:
     """Closed mesh (vertices (V, 3) m, faces (F, 3) counter-clockwise from outside) of the
     union of the voxel cubes of ``keys`` (``ipr_shapes.voxels`` keys at ``pitch_m``).
 
@@ -221,10 +221,12 @@ def voxel_surface(
     shared at the lattice corners, so the surface is closed. Voxels that touch only along an
     edge are first joined (``_fill_edge_contacts``: a voxel added, never one removed), so every
     edge has exactly two faces. A voxel centre lies inside the mesh exactly when its voxel is
-    in the (joined) set, which is what the metric's voxelisation reads back.
+    in the (joined) set, which is what the metric's voxelisation reads back. ``with_keys``:
+    also that set, sorted keys (the written shape's voxels, not voxelised again).
     """
     if keys.size == 0:
-        return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
+        empty = (np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64))
+        return (*empty, keys[:0]) if with_keys else empty
     index = voxels.unpack(keys)
     low = index.min(axis=0) - 1
     shape = tuple(int(n) for n in index.max(axis=0) - low + 2)
@@ -255,6 +257,9 @@ def voxel_surface(
     vertices = (np.stack(np.unravel_index(unique, tuple(corner_shape)), axis=1) + low) * pitch_m
     corner_ids = inverse.reshape(-1, 4)
     faces = np.concatenate([corner_ids[:, [0, 1, 2]], corner_ids[:, [0, 2, 3]]])
+    if with_keys:
+        joined = np.sort(voxels.pack(np.argwhere(occupied) + low))
+        return vertices.astype(np.float64), faces.astype(np.int64), joined
     return vertices.astype(np.float64), faces.astype(np.int64)
 
 
@@ -278,12 +283,15 @@ def carve_shape_voxels(
     object_id: int,
     views: Sequence[SurfaceView],
     pitch_m: float = voxels.DEFAULT_PITCH_M,
-) -> tuple[np.ndarray, np.ndarray] | None:
-    """``carve_mesh`` of a shape given by its voxel keys at ``pitch_m``."""
+    *,
+    with_keys: bool = False,
+) -> tuple[np.ndarray, ...] | None:
+    """``carve_mesh`` of a shape given by its voxel keys at ``pitch_m`` (``with_keys``: and
+    its voxels, as ``voxel_surface`` gives them)."""
     kept = carve_voxels(keys, object_id, views, pitch_m)
     if kept.size in (0, keys.size):
         return None
-    return voxel_surface(kept, pitch_m)
+    return voxel_surface(kept, pitch_m, with_keys=with_keys)
 
 
 def surface_views(
@@ -338,11 +346,17 @@ def carve_posteriors(
     non-zero probability, and the best) are carved by ``views``."""
     carved = []
     for posterior in posteriors:
-        meshes = []
+        meshes, kept = [], []
         for k, hypothesis in enumerate(posterior.hypotheses):
             written = posterior.probabilities[k] > 0 or k == posterior.best
             # The hypotheses' own voxels (cached at generation, the same voxelisation).
             keys = hypothesis.keys(voxels.DEFAULT_PITCH_M) if written else None
-            meshes.append(carve_shape_voxels(keys, posterior.object_id, views) if written else None)
-        carved.append(replace(posterior, output_meshes=tuple(meshes)))
+            made = (
+                carve_shape_voxels(keys, posterior.object_id, views, with_keys=True)
+                if written
+                else None
+            )
+            meshes.append(None if made is None else made[:2])
+            kept.append(None if made is None else made[2])
+        carved.append(replace(posterior, output_meshes=tuple(meshes), output_keys=tuple(kept)))
     return carved

@@ -163,6 +163,9 @@ class ObjectPosterior:
         output_meshes: per hypothesis, the (vertices, faces) written in its place, or None to
             write the hypothesis itself (``ipr_shapes.carving`` sets it); None: write every
             hypothesis as it is.
+        output_keys: per hypothesis, the sorted ``ipr_shapes.voxels`` keys (default pitch) of
+            its ``output_meshes`` entry, the voxels its centres-inside voxelisation reads back
+            (``ipr_shapes.carving.voxel_surface``), or None; None: not known.
     """
 
     object_id: int
@@ -173,6 +176,7 @@ class ObjectPosterior:
     inference: str
     generation_s: float = 0.0
     output_meshes: tuple[tuple[np.ndarray, np.ndarray] | None, ...] | None = None
+    output_keys: tuple[np.ndarray | None, ...] | None = None
 
     @property
     def best_hypothesis(self) -> ShapeHypothesis:
@@ -186,13 +190,19 @@ class ObjectPosterior:
         return self.hypotheses[k].mesh
 
     def written_shape(self, k: int, pitch_m: float = voxels.DEFAULT_PITCH_M) -> Any:
-        """Hypothesis k's written shape as ``ipr_shapes.result.posterior_occupancy`` takes it: the
-        hypothesis's cached voxel keys (sorted, at ``pitch_m``) when it is written as itself
-        and was voxelised at that pitch (the same scanline voxelisation of the same closed
-        hull, so the same voxels, without voxelising it again), else ``written_mesh(k)``."""
+        """Hypothesis k's written shape as ``ipr_shapes.result.posterior_occupancy`` takes it,
+        without voxelising it again where its voxels at ``pitch_m`` are known: a carved
+        shape's ``output_keys`` (at the default pitch), else the hypothesis's cached voxel
+        keys when it is written as itself (the same scanline voxelisation of the same closed
+        hull); otherwise ``written_mesh(k)``."""
         hypothesis = self.hypotheses[k]
         carved = self.output_meshes is not None and self.output_meshes[k] is not None
-        if carved or hypothesis.voxel_keys is None:
+        if carved:
+            known = self.output_keys[k] if self.output_keys is not None else None
+            if known is not None and np.isclose(pitch_m, voxels.DEFAULT_PITCH_M):
+                return known
+            return self.written_mesh(k)
+        if hypothesis.voxel_keys is None:
             return self.written_mesh(k)
         if not np.isclose(pitch_m, hypothesis.voxel_pitch_m):
             return self.written_mesh(k)
