@@ -354,3 +354,32 @@ def test_written_ply_reads_as_trimesh_loads_it(tmp_path):
     painted.export(coloured, file_type="ply")
     assert _read_plain_ply(coloured) is None
     assert np.array_equal(read_mesh(coloured).faces, mesh.faces)
+
+
+def test_object_posterior_refuses_carved_keys_without_their_meshes():
+    """Carved voxel keys stand for carved meshes one to one; keys alone would write an
+    occupancy that is not the written shapes'."""
+    from ipr_shapes.products import ObjectPosterior
+
+    with pytest.raises(ValueError, match="output_keys"):
+        ObjectPosterior(
+            object_id=0,
+            hypotheses=(),
+            probabilities=np.zeros(0),
+            best=0,
+            minimum=None,
+            inference="exact",
+            output_meshes=None,
+            output_keys=(None,),
+        )
+    with pytest.raises(ValueError, match="same length"):
+        ObjectPosterior(
+            object_id=0,
+            hypotheses=(),
+            probabilities=np.zeros(0),
+            best=0,
+            minimum=None,
+            inference="exact",
+            output_meshes=(None, None),
+            output_keys=(None,),
+        )

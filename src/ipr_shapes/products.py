@@ -178,6 +178,17 @@ class ObjectPosterior:
     output_meshes: tuple[tuple[np.ndarray, np.ndarray] | None, ...] | None = None
     output_keys: tuple[np.ndarray | None, ...] | None = None
 
+    def __post_init__(self) -> None:
+        # Carved voxels stand for carved meshes: keys without meshes, or of another length,
+        # would write an occupancy that is not the written shapes'.
+        if self.output_keys is not None and (
+            self.output_meshes is None or len(self.output_keys) != len(self.output_meshes)
+        ):
+            raise ValueError(
+                "ObjectPosterior.output_keys needs output_meshes of the same length "
+                "(set both, as ipr_shapes.carving does, or neither)"
+            )
+
     @property
     def best_hypothesis(self) -> ShapeHypothesis:
         """The most probable hypothesis (convex, as inferred)."""
