@@ -356,12 +356,15 @@ def test_written_ply_reads_as_trimesh_loads_it(tmp_path):
     assert np.array_equal(read_mesh(coloured).faces, mesh.faces)
 
 
-def test_object_posterior_refuses_carved_keys_without_their_meshes():
+@pytest.mark.parametrize(
+    ("meshes", "message"), [(None, "output_keys"), ((None, None), "same length")]
+)
+def test_object_posterior_refuses_carved_keys_without_their_meshes(meshes, message):
     """Carved voxel keys stand for carved meshes one to one; keys alone would write an
     occupancy that is not the written shapes'."""
     from ipr_shapes.products import ObjectPosterior
 
-    with pytest.raises(ValueError, match="output_keys"):
+    with pytest.raises(ValueError, match=message):
         ObjectPosterior(
             object_id=0,
             hypotheses=(),
@@ -369,17 +372,6 @@ def test_object_posterior_refuses_carved_keys_without_their_meshes():
             best=0,
             minimum=None,
             inference="exact",
-            output_meshes=None,
-            output_keys=(None,),
-        )
-    with pytest.raises(ValueError, match="same length"):
-        ObjectPosterior(
-            object_id=0,
-            hypotheses=(),
-            probabilities=np.zeros(0),
-            best=0,
-            minimum=None,
-            inference="exact",
-            output_meshes=(None, None),
+            output_meshes=meshes,
             output_keys=(None,),
         )

@@ -36,6 +36,15 @@ def best_by_generator(hypotheses, truth) -> dict[str, float]:
     return best
 
 
+def generated_best(obj, space, truth, config=CONFIG):
+    """The hypotheses generated on ``SUPPORT`` (seed 0), each checked valid, and
+    ``best_by_generator`` over them."""
+    hypotheses = generate_hypotheses(obj, space, (SUPPORT,), config, np.random.default_rng(0))
+    for h in hypotheses:
+        assert_valid(h, obj.points, convex_tolerance=1e-8)
+    return hypotheses, best_by_generator(hypotheses, truth)
+
+
 def arc_points(centre, radius, axis_index, length, arc_deg, facing, rng, noise=0.0005):
     """Points on the side of a cylinder (world), the arc of ``arc_deg`` facing ``facing`` (2,)
     in the plane across the axis (``axis_index``: 0 = x, 2 = z), with Gaussian noise (m)."""
@@ -229,10 +238,7 @@ def test_a_standing_cylinder_is_completed_by_its_revolution(eye):
     mesh = trimesh.creation.cylinder(radius=0.035, height=0.1, sections=64)
     mesh.apply_translation([0.0, 0.0, 0.05])
     obj, space, truth = rendered(mesh, eye, (0.0, 0.0, 0.05))
-    hypotheses = generate_hypotheses(obj, space, (SUPPORT,), CONFIG, np.random.default_rng(0))
-    for h in hypotheses:
-        assert_valid(h, obj.points, convex_tolerance=1e-8)
-    best = best_by_generator(hypotheses, truth)
+    _, best = generated_best(obj, space, truth)
     assert best["revolution"] >= 0.9 and best["cylinder"] >= 0.9
     assert best["revolution"] > best["algorithm1"] + 0.05
 
@@ -246,10 +252,7 @@ def test_a_leaning_cylinder_is_completed_by_its_revolution(tilt, eye):
     mesh.apply_translation([0.0, 0.0, -mesh.bounds[0][2]])
     obj, space, truth = rendered(mesh, eye, (0.0, 0.0, 0.05))
     fitted = dataclasses.replace(CONFIG, fitted_revolution_axis=True)
-    hypotheses = generate_hypotheses(obj, space, (SUPPORT,), fitted, np.random.default_rng(0))
-    for h in hypotheses:
-        assert_valid(h, obj.points, convex_tolerance=1e-8)
-    best = best_by_generator(hypotheses, truth)
+    _, best = generated_best(obj, space, truth, fitted)
     assert best["revolution"] >= 0.95 and best["cylinder"] >= 0.95
     assert best["revolution"] > best["algorithm1"] + 0.05
     # By default (opt-in off) only the fixed axes are tried: none fits a leaning can.
