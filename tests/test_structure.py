@@ -11,7 +11,7 @@ import trimesh
 
 from ipr_shapes import voxels
 from ipr_shapes.camera import backproject
-from ipr_shapes.hypotheses import HypothesisConfig, generate_hypotheses, structure
+from ipr_shapes.hypotheses import HypothesisConfig, generate, generate_hypotheses, structure
 from ipr_shapes.perception.types import PartialObject
 
 from .box_scene import SUPPORT, K, box_mesh, partial_box, render_view
@@ -288,3 +288,57 @@ def test_the_count_is_a_budget_shared_by_the_generators(monkeypatch):
     monkeypatch.setattr(structure, "fit_sphere", lambda points: None)
     nothing = generate_hypotheses(bare, None, (), CONFIG, np.random.default_rng(0))
     assert {h.generator for h in nothing} == {"algorithm1"}
+
+
+def test_disabling_a_family_leaves_the_others_candidates_bit_identical():
+    """Each family draws its variates from its own stream (``structure.family_rng``): with its
+    count unchanged, a family's candidates do not depend on which other families applied
+    before it in the round robin (one shared stream made every later family's candidates
+    change with any change to an earlier one)."""
+    mesh = trimesh.creation.cylinder(radius=0.035, height=0.1, sections=64)
+    mesh.apply_translation([0.0, 0.0, 0.05])
+    obj, space, _ = rendered(mesh, (0.3, -0.3, 0.2), (0.0, 0.0, 0.05))
+    config = dataclasses.replace(CONFIG, superquadric_count=2)
+    ctx = generate._prepare(obj, space, (SUPPORT,), config)
+    makers, fits = generate._structure_makers(obj, ctx)
+    families = [name for name in structure.STRUCTURE_GENERATORS if name in makers]
+    assert {"symmetry", "revolution", "box", "cylinder", "superquadric"} <= set(families)
+    root = np.random.SeedSequence([7, 1])
+    each = 3  # candidates per family taking turns: the same with or without the dropped one
+
+    def clouds(available: dict) -> dict[str, list[np.ndarray]]:
+        turns = [name for name in available if name != "superquadric"]
+        count = each * len(turns) + (
+            config.superquadric_count if "superquadric" in available else 0
+        )
+        out: dict[str, list[np.ndarray]] = {}
+        for name, make in generate._structure_plan(available, fits, count, root, ctx):
+            out.setdefault(name, []).append(make(1.0).points)
+        return out
+
+    everything = clouds(makers)
+    assert all(len(everything[name]) >= each - 1 for name in families)
+    for dropped in families:
+        others = clouds({name: make for name, make in makers.items() if name != dropped})
+        assert set(others) == set(families) - {dropped}
+        for name, points in others.items():
+            assert len(points) == len(everything[name])
+            for mine, before in zip(points, everything[name], strict=True):
+                np.testing.assert_array_equal(mine, before)
+
+
+def test_the_families_candidates_do_not_depend_on_algorithm1s_count():
+    """The families' streams hang off a constant key of the object's seed sequence, not off the
+    child after Algorithm 1's m1 slots: the same structure-aware count with another Algorithm 1
+    count gives the same structure-aware hypotheses."""
+    view = render_view((0.3, -0.3, 0.3))
+    obj, space = partial_box(view), view.space()
+    fewer = generate_hypotheses(obj, space, (SUPPORT,), CONFIG, np.random.default_rng(3))
+    more_config = dataclasses.replace(CONFIG, count=10, structure_share=0.4)
+    more = generate_hypotheses(obj, space, (SUPPORT,), more_config, np.random.default_rng(3))
+    structured = [h for h in fewer if h.generator != "algorithm1"]
+    assert len(structured) == 4 and {"symmetry", "box"} <= {h.generator for h in structured}
+    assert [h.generator for h in more[-4:]] == [h.generator for h in structured]
+    for mine, before in zip(more[-4:], structured, strict=True):
+        np.testing.assert_array_equal(mine.vertices, before.vertices)
+        np.testing.assert_array_equal(mine.faces, before.faces)

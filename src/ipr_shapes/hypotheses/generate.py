@@ -1236,16 +1236,35 @@ def _structure_makers(
     return makers, fits
 
 
+#: Spawn key (under the object's seed sequence) of the root of the structure-aware families'
+#: streams: a constant, so the families' draws do not depend on how many Algorithm 1 slots
+#: were spawned before them (keys 0 .. m1 - 1); below 2**32 (one word of the key).
+_STRUCTURE_STREAM = 2**31
+
+
+def _structure_root(rng: np.random.Generator) -> np.random.SeedSequence:
+    """The root of the structure-aware families' streams: the child of ``rng``'s seed sequence
+    with spawn key ``(..., _STRUCTURE_STREAM)``, made without advancing its spawn counter."""
+    seq = rng.bit_generator.seed_seq
+    if not isinstance(seq, np.random.SeedSequence):
+        raise TypeError("generate_hypotheses needs an rng seeded from a SeedSequence")
+    return np.random.SeedSequence(
+        seq.entropy, spawn_key=(*seq.spawn_key, _STRUCTURE_STREAM), pool_size=seq.pool_size
+    )
+
+
 def _structure_plan(
     makers: dict[str, _Maker],
     fits: dict[str, int],
     count: int,
-    rng: np.random.Generator,
+    root: np.random.SeedSequence,
     ctx: _Context,
 ) -> list[tuple[str, Callable[[float], _Sample]]]:
     """``count`` structure-aware candidates, the applicable generators taking turns: (generator,
     make) pairs, ``make(scale)`` the candidate's points with its variates scaled by ``scale``
-    (1, then 0 for the second attempt). Variates: ``structure.variates``."""
+    (1, then 0 for the second attempt). Variates: ``structure.variates``, each generator's from
+    its own stream under ``root`` (``structure.family_rng``), so a generator's candidates
+    depend on its own count and fits alone, not on the other families'."""
     towards, min_thickness = ctx.fallback_normal, ctx.config.min_thickness_m
     order = [name for name in structure.STRUCTURE_GENERATORS if name in makers]
     if not order or count <= 0:
@@ -1263,7 +1282,8 @@ def _structure_plan(
     for name in counts:
         n = counts[name]
         width = superquadric.PARAMETERS if name == "superquadric" else structure.DIRECTIONS
-        variates = structure.variates(name, n, rng, fits.get(name, 1), width)
+        stream = structure.family_rng(root, name)
+        variates = structure.variates(name, n, stream, fits.get(name, 1), width)
         for k in range(n):
 
             def make(scale: float, name=name, t=variates[k], k=k) -> _Sample:
@@ -1311,7 +1331,9 @@ def generate_hypotheses(
         space: the frame's free/occupied/unknown voxel map (None: no free-space limit).
         planes: the frame's support and walls.
         config: settings (defaults: ``HypothesisConfig()``).
-        rng: random source (default: seeded from ``config.seed`` and the object id).
+        rng: random source (default: seeded from ``config.seed`` and the object id); Algorithm
+            1's slots draw from its children 0 .. m1 - 1, each structure-aware family from its
+            own keyed stream (``_structure_root``, ``structure.family_rng``).
         bounds: the space the hidden extent's rays stop in (default ``space``):
             ``prepare_hypotheses`` passes ``space`` with the other objects' observed surfaces
             (``ipr_shapes.hypotheses.neighbours``); the unary checks use ``space``.
@@ -1334,7 +1356,9 @@ def generate_hypotheses(
     strata = np.stack([rng.permutation(m1) for _ in ctx.observed], axis=1)
     observed_u = (strata + rng.random(strata.shape)) / max(m1, 1)
     slot_rngs = rng.spawn(m1)
-    plan = _structure_plan(makers, fits, structured, rng.spawn(1)[0], ctx) if structured else []
+    plan = (
+        _structure_plan(makers, fits, structured, _structure_root(rng), ctx) if structured else []
+    )
     hypotheses = []
     finished: dict[tuple, tuple] = {}  # structure-aware clouds already finished (_finished)
     timed_out = False

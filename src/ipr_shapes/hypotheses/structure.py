@@ -73,6 +73,20 @@ from scipy.spatial import ConvexHull, QhullError
 #: superquadric, ``ipr_shapes.hypotheses.superquadric``, takes its own count of the slots first).
 STRUCTURE_GENERATORS = ("symmetry", "revolution", "box", "cylinder", "sphere", "superquadric")
 
+#: Stable keys of the generators' random streams (``family_rng``): each family draws its
+#: variates from its own stream, so a change in one family's draws (its count of fits, its
+#: presence) leaves another's candidates of the same count bit-identical. Constants, not
+#: positions in ``STRUCTURE_GENERATORS`` nor Python's salted ``hash``: a new family takes a new
+#: number and the others keep theirs.
+STREAM_KEYS = {
+    "symmetry": 1,
+    "revolution": 2,
+    "box": 3,
+    "cylinder": 4,
+    "sphere": 5,
+    "superquadric": 6,
+}
+
 #: Directions of the upright frame whose reach bounds the hidden extent: +a, -a, +b, -b, +up,
 #: -up (indices into a variate vector).
 DIRECTIONS = 6
@@ -83,6 +97,20 @@ Reach = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 #: Generators whose variate 0.5 is their fit (the others' smallest member is at 0).
 CENTRED = ("revolution", "cylinder", "sphere", "superquadric")
+
+
+def family_rng(root: np.random.SeedSequence, generator: str) -> np.random.Generator:
+    """The generator's own random stream: the child of ``root`` with spawn key
+    ``root.spawn_key + (STREAM_KEYS[generator],)``, made without advancing ``root``'s spawn
+    counter, so it depends on ``root`` and the generator's name alone (not on which other
+    families applied or how many variates they drew)."""
+    return np.random.default_rng(
+        np.random.SeedSequence(
+            root.entropy,
+            spawn_key=(*root.spawn_key, STREAM_KEYS[generator]),
+            pool_size=root.pool_size,
+        )
+    )
 
 
 def variates(
