@@ -2,7 +2,7 @@
 
 ``PerceptionConfig`` holds a frozen group per step of perception, in the order they run:
 ``planes`` (RANSAC shared by the support and the walls), ``support``, ``walls``, ``robot``,
-``supervoxels``, ``segmentation``, ``containers``, ``seams``, ``temporal``, ``tracking``, ``denoise``,
+``supervoxels``, ``segmentation``, ``containers``, ``seams``, ``occluder_splits``, ``temporal``, ``tracking``, ``denoise``,
 ``facets``, ``free_space`` and ``occluded_pieces``, plus the ``seed`` of every random choice.
 Change one value with ``dataclasses.replace``::
 
@@ -685,6 +685,74 @@ class SeamsConfig:
 
 
 @dataclass(frozen=True)
+class OccluderSplitsConfig:
+    """Joining, in every frame's label image, the two pieces of an object that a nearer object
+    cuts in two (``ipr_shapes.perception.occluder_splits``; the last step of the segmentation).
+
+    Off by default: see docs/experiments/2026-11-27-occluder-splits.md for its figures.
+
+    Attributes:
+        enabled: join such pieces at all.
+        step_m: depth difference (m) that makes one surface nearer than another (across a
+            segment border, and against the depth interpolated along the lines between the
+            pieces).
+        max_gap_px: pieces farther apart than this in the image (px) are not compared.
+        band_px: the lines start at the pieces' nearest pixel pairs, those at most this much
+            (px) farther apart than the nearest.
+        pairs: lines drawn per pair of pieces at most (spread over that band).
+        min_piece_px: pieces with fewer pixels with depth are left alone.
+        min_occluded: share of the pixels between the pieces that must be nearer than them.
+        max_seen_beyond: share of those pixels allowed farther than the pieces or unlabelled
+            (seen past the gap: free space between them).
+        max_gap_m: largest median 3D distance (m) between the lines' ends (the hidden part).
+        normal_radius_m: the local tangent plane at a line's end is fitted to the piece's
+            points within this radius (m).
+        max_step_m: largest median distance (m) of a line's end off the other end's tangent
+            plane (one surface runs on under the occluder; two surfaces meet in a step).
+        max_joint_rms_m: largest RMS residual (m) of one quadric surface fitted to both pieces.
+        max_rms_increase_m: that residual may exceed the rougher piece's own by this much (m).
+        max_colour: largest Bhattacharyya distance between the pieces' colour histograms.
+        max_extent_m: the union's extent along each world axis at most this (m; one object).
+    """
+
+    CHECKS: ClassVar[Checks] = {
+        "step_m": _NON_NEGATIVE,
+        "max_gap_px": _NON_NEGATIVE,
+        "band_px": _NON_NEGATIVE,
+        "pairs": _AT_LEAST_ONE,
+        "min_piece_px": _COUNT,
+        "min_occluded": _SHARE,
+        "max_seen_beyond": _SHARE,
+        "max_gap_m": _NON_NEGATIVE,
+        "normal_radius_m": _POSITIVE,
+        "max_step_m": _NON_NEGATIVE,
+        "max_joint_rms_m": _NON_NEGATIVE,
+        "max_rms_increase_m": _NON_NEGATIVE,
+        "max_colour": _SHARE,
+        "max_extent_m": _POSITIVE,
+    }
+
+    enabled: bool = False
+    step_m: float = 0.01
+    max_gap_px: float = 80.0
+    band_px: float = 10.0
+    pairs: int = 24
+    min_piece_px: int = 30
+    min_occluded: float = 0.5
+    max_seen_beyond: float = 0.03
+    max_gap_m: float = 0.06
+    normal_radius_m: float = 0.015
+    max_step_m: float = 0.02
+    max_joint_rms_m: float = 0.01
+    max_rms_increase_m: float = 0.002
+    max_colour: float = 0.75
+    max_extent_m: float = 0.3
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+
+@dataclass(frozen=True)
 class TemporalConfig:
     """Segmenting frames after the first with the previous frame's help
     (``ipr_shapes.perception.temporal``): objects that did not move keep their grouping.
@@ -1082,6 +1150,8 @@ class PerceptionConfig:
         segmentation: the supervoxel graph, its clustering and the segments kept.
         containers: joining an open container's inside to the container.
         seams: cutting segments along straight colour seams (packed boxes; off by default).
+        occluder_splits: joining the two pieces of an object cut in two by a nearer object in
+            every frame's label image (off by default).
         temporal: segmenting later frames with the previous frame's help.
         tracking: matching of segments across frames.
         denoise: the plane-fitted depth of partial objects' points.
@@ -1102,6 +1172,7 @@ class PerceptionConfig:
     segmentation: SegmentationConfig = field(default_factory=SegmentationConfig)
     containers: ContainersConfig = field(default_factory=ContainersConfig)
     seams: SeamsConfig = field(default_factory=SeamsConfig)
+    occluder_splits: OccluderSplitsConfig = field(default_factory=OccluderSplitsConfig)
     temporal: TemporalConfig = field(default_factory=TemporalConfig)
     tracking: TrackingConfig = field(default_factory=TrackingConfig)
     denoise: DenoiseConfig = field(default_factory=DenoiseConfig)

@@ -40,6 +40,7 @@ from ipr_shapes.perception.contours import split_at_occluding_contours
 from ipr_shapes.perception.creases import split_at_creases
 from ipr_shapes.perception.curvature import join_curved_segments, smooth_concave_edges
 from ipr_shapes.perception.fragments import fragment_borders, join_fragments
+from ipr_shapes.perception.occluder_splits import join_occluder_splits
 from ipr_shapes.perception.planes import find_support_plane, find_walls, static_geometry_mask
 from ipr_shapes.perception.robot import robot_pixels
 from ipr_shapes.perception.seams import cut_colour_seams
@@ -253,6 +254,10 @@ def segment_frame(
     )
     if config.seams.enabled:
         labels, segment_of_supervoxel = _cut_seams(labels, supervoxels, frame, points, config)
+    if config.occluder_splits.enabled:
+        labels, segment_of_supervoxel, _ = join_occluder_splits(
+            labels, segment_of_supervoxel, points, frame.depth_m, frame.rgb, config.occluder_splits
+        )
     return FrameSegmentation(frame.index, labels, supervoxels, segment_of_supervoxel, planes)
 
 
