@@ -5,7 +5,7 @@ hypotheses``), or on its own for a subset::
 
     python -m benchmarks.hypothesis_ceiling --suite ycb-dynamic --limit 4 [--scene DIR ...]
         [--perception-cache DIR] [--algorithm1-only] [--neighbour-surfaces] [--superquadric N]
-        [--fitted-axis]
+        [--fitted-axis] [--unbounded-view]
 
 Per scene: frame 0 is perceived, the hypotheses are prepared (``prepare_hypotheses``, the
 default configuration, seed 0, as the Collision Checker's run draws them) and the Collision
@@ -257,6 +257,11 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="surfaces of revolution also about the axis the surface normals meet (opt-in)",
     )
+    parser.add_argument(
+        "--unbounded-view",
+        action="store_true",
+        help="no bound on the hidden extent beyond the camera's view (before 2026-11-27)",
+    )
     args = parser.parse_args(argv)
     from ipr_shapes.config import Config
     from ipr_shapes.suites import suite_scenes
@@ -279,6 +284,11 @@ def main(argv: list[str] | None = None) -> int:
         config = dataclasses.replace(
             config,
             hypotheses=dataclasses.replace(config.hypotheses, fitted_revolution_axis=True),
+        )
+    if args.unbounded_view:
+        config = dataclasses.replace(
+            config,
+            hypotheses=dataclasses.replace(config.hypotheses, outside_view_ratio=None),
         )
     groups = {name: suite_scenes(name)[: args.limit] for name in args.suite}
     if args.scene:

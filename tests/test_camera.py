@@ -11,6 +11,7 @@ from ipr_shapes.camera import (
     mujoco_camera_attributes,
     mujoco_camera_pose,
     project,
+    view_halfspaces,
 )
 from ipr_shapes.gl import offscreen_context_class
 
@@ -76,3 +77,30 @@ def test_look_at_is_right_handed_and_faces_target():
     assert np.isclose(np.linalg.det(rotation), 1.0)
     assert np.allclose(rotation[:, 2], -np.array([1.0, 0, 1.0]) / np.sqrt(2))
     assert rotation[2, 1] < 0  # image "down" points down in the world
+
+
+def test_the_view_halfspaces_hold_what_projects_inside_the_image():
+    K = np.array([[500.0, 0, 300.5], [0, 510.0, 250.0], [0, 0, 1]])
+    world_from_camera = look_at(np.array([0.2, -0.6, 0.5]), np.array([0.0, 0.1, 0.0]))
+    height, width = 480, 640
+    view = view_halfspaces(K, world_from_camera, (height, width))
+    rng = np.random.default_rng(3)
+    # Camera-frame points in front of the camera, projecting inside and outside the image.
+    z = rng.uniform(0.2, 2.0, 5000)
+    u, v = rng.uniform(-200, width + 200, 5000), rng.uniform(-200, height + 200, 5000)
+    camera = np.column_stack([(u - K[0, 2]) / K[0, 0] * z, (v - K[1, 2]) / K[1, 1] * z, z])
+    world = apply_transform(world_from_camera, camera)
+    distance = world @ view[:, :3].T + view[:, 3]
+    assert np.allclose(np.linalg.norm(view[:, :3], axis=1), 1.0)
+    inside = (u >= -0.5) & (u <= width - 0.5) & (v >= -0.5) & (v <= height - 0.5)
+    assert np.array_equal(np.all(distance >= 0, axis=1), inside)
+    # Each row is the distance (m) from its border's plane: left, right, top, bottom.
+    left = world_from_camera[:3, 3] + world_from_camera[:3, :3] @ np.array(
+        [(-0.5 - K[0, 2]) / K[0, 0], 0.0, 1.0]
+    )
+    assert abs(left @ view[0, :3] + view[0, 3]) < 1e-12
+    step = world_from_camera[:3, :3] @ np.array([0.01, 0.0, 0.0])  # 1 cm to the right
+    assert (left + step) @ view[0, :3] + view[0, 3] == pytest.approx(
+        0.01 * view[0, :3] @ world_from_camera[:3, 0]
+    )
+    assert view[0, :3] @ world_from_camera[:3, 0] > 0.8  # into the view, about the x axis

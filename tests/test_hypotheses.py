@@ -220,6 +220,69 @@ def test_objects_cut_by_the_image_border_may_extend_further(low):
     assert max(h.distances_m[0] for h in cut) > CONFIG.max_depth_m
 
 
+@pytest.fixture(scope="module")
+def cut_by_border():
+    """The oblique camera turned left: the image's right border cuts the box's right part off."""
+    view = render_view((0.0, -0.45, 0.40), target=(-0.30, 0.0, 0.02))
+    return partial_box(view, touches_border=True), view.space()
+
+
+def _beyond(vertices: np.ndarray, view: np.ndarray) -> np.ndarray:
+    """How far (m, (4,)) a convex shape's vertices reach past each side of the view (negative:
+    inside)."""
+    return -(vertices @ view[:, :3].T + view[:, 3]).min(axis=0)
+
+
+def test_a_shape_cut_by_the_image_border_reaches_beyond_it_no_further_than_seen_inside(
+    cut_by_border,
+):
+    obj, space = cut_by_border
+    view = space.view
+    assert view is not None  # the map knows the camera's view
+    inside = obj.points @ view[:, :3].T + view[:, 3]
+    right = 1
+    assert inside[:, right].min() < 0.005  # the border cuts the box
+    bounded = generate_hypotheses(obj, space, (SUPPORT,), CONFIG, np.random.default_rng(0))
+    unbounded = generate_hypotheses(
+        obj,
+        space,
+        (SUPPORT,),
+        dataclasses.replace(CONFIG, outside_view_ratio=None),
+        np.random.default_rng(0),
+    )
+    seen_reach = inside.max(axis=0)
+    for h in bounded:
+        assert_valid(h, obj.points)
+        assert np.all(
+            _beyond(h.vertices, view) <= seen_reach + 1e-6
+        )  # every generator's candidates
+    assert {h.generator for h in bounded} > {"algorithm1"}
+    # Without the bound the hidden side grew into the space beyond the image (unknown, not
+    # free) up to the rays' cap, far beyond anything the 6 cm the box reaches there.
+    assert max(_beyond(h.vertices, view)[right] for h in unbounded) > 3 * seen_reach[right]
+    assert max(h.volume_m3 for h in unbounded) > 3 * max(h.volume_m3 for h in bounded)
+    # The true box lies within the bound, and the best candidate is closer to it.
+    truth = true_box_keys()
+    assert _beyond(box_mesh()[0], view)[right] <= seen_reach[right]
+    best = [max(iou(h.keys(0.005), truth) for h in hs) for hs in (bounded, unbounded)]
+    assert best[0] > best[1]
+
+
+def test_a_shape_well_inside_the_view_is_not_bounded_by_it(oblique):
+    obj, space = oblique
+    assert space.view is not None
+    bounded = generate_hypotheses(obj, space, (SUPPORT,), CONFIG, np.random.default_rng(0))
+    unbounded = generate_hypotheses(
+        obj,
+        space,
+        (SUPPORT,),
+        dataclasses.replace(CONFIG, outside_view_ratio=None),
+        np.random.default_rng(0),
+    )
+    for a, b in zip(bounded, unbounded, strict=True):
+        assert np.array_equal(a.vertices, b.vertices)
+
+
 def test_minimum_shape_is_small_thick_and_contains_the_points(oblique, low):
     for obj, _ in (oblique, low[1:]):
         smallest = minimum_shape(obj, (SUPPORT,), CONFIG)

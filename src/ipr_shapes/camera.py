@@ -105,3 +105,33 @@ def mujoco_camera_pose(world_from_camera: np.ndarray) -> tuple[np.ndarray, np.nd
     rotation = world_from_camera[:3, :3] @ MUJOCO_FROM_OPENCV
     x, y, z, w = Rotation.from_matrix(rotation).as_quat()
     return world_from_camera[:3, 3].copy(), np.array([w, x, y, z])
+
+
+def view_halfspaces(
+    K: np.ndarray, world_from_camera: np.ndarray, shape: tuple[int, int]
+) -> np.ndarray:
+    """The camera's view as four world half-spaces (4, 4): rows (n, b) with n . x + b >= 0 for
+    world points x (m) that project inside the image of ``shape`` (height, width) pixels, one
+    per border (left, right, top, bottom), unit n pointing into the view, so n . x + b is the
+    distance (m) of x from that border's plane (through the camera centre), positive inside.
+
+    The borders are the image's outer pixel edges (u = -0.5, u = width - 0.5 and likewise v;
+    pixel centres at integer coordinates). Points behind the camera are not excluded: the sides
+    alone bound what a frame cannot have seen beside it (``ipr_shapes.hypotheses.generate``).
+    """
+    height, width = shape
+    K = np.asarray(K, dtype=float)
+    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+    # u = fx x / z + cx >= -0.5  <=>  fx x + (cx + 0.5) z >= 0 (z > 0), and likewise.
+    normals = np.array(
+        [
+            [fx, 0.0, cx + 0.5],
+            [-fx, 0.0, width - 0.5 - cx],
+            [0.0, fy, cy + 0.5],
+            [0.0, -fy, height - 0.5 - cy],
+        ]
+    )
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    transform = np.asarray(world_from_camera, dtype=float)
+    world = normals @ transform[:3, :3].T
+    return np.column_stack([world, -(world @ transform[:3, 3])])

@@ -723,6 +723,11 @@ class TrackedFreeSpace:
         """Frame 0's voxel grid (world frame, metres)."""
         return self.reference.grid
 
+    @property
+    def view(self) -> np.ndarray | None:
+        """Frame 0's field of view (``SpaceMap.view``)."""
+        return self.reference.view
+
     def state_at(self, points: np.ndarray) -> np.ndarray:
         """State (N,) of world points (N, 3) at the object's frame-0 pose: FREE where frame 0 or,
         for frame 0's unknown voxels, any later frame saw the moved point's voxel empty or a

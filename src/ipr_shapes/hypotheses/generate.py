@@ -14,8 +14,9 @@ Choices made here (the paper leaves them open):
 
 - D_max by ray tracing. From each of a facet's points p a ray runs along -N through the frame's
   free-space map; it ends at the first voxel seen FREE, where it enters the support (below the
-  plane) or a known wall's slab, or at ``max_depth_m`` (``border_max_depth_m`` for an object
-  cut by the image border, whose hidden part may extend beyond the picture). The mirror image
+  plane) or a known wall's slab, where it leaves the object's bound beyond the camera's view
+  (below), or at ``max_depth_m`` (``border_max_depth_m`` for an object cut by the image border,
+  whose hidden part may extend beyond the picture). The mirror image
   of p lies on the same line, t = 2 N.(p - c) + d behind p, and the paper asks that the space
   between a facet and its mirror be hidden: 0 <= t <= limit(p), i.e. each ray allows
   d in [-2 N.(p - c), limit(p) - 2 N.(p - c)]. The lower end matters for curved facets: a
@@ -55,7 +56,8 @@ Choices made here (the paper leaves them open):
   margin (1 cm) of an observed surface occupied, so it cannot stop growth just in front of a facet;
   instead every hypothesis is cut at each observed facet's support plane (the object's outermost
   observed point along N, plus ``facet_tolerance_m``): for a convex object the point with normal N
-  lies on that facet, so nothing of the object is in front of it. A hypothesis that fails is
+  lies on that facet, so nothing of the object is in front of it; and at the bound beyond each
+  side of the camera's view (above). A hypothesis that fails is
   resampled with its observed facets' variates halved each attempt (pulling d towards D_min), at
   most ``max_attempts`` times; if every attempt fails, the one with the fewest offending voxels is
   kept with ``feasible=False`` (logged) for the constraint stage to reject. When *no* hypothesis
@@ -63,6 +65,18 @@ Choices made here (the paper leaves them open):
   surface allowance excused (``ipr_shapes.hypotheses.allowance``; ``surface_allowance_quantile``):
   a real sensor's depth bent behind the true surface, measured on the object's own points
   (docs/DESIGN_NOTES.md, "A second seen-free check within the object's own surface allowance").
+- Beyond the camera's view (``outside_view_ratio``): space outside the image is UNKNOWN to
+  the free-space map, like space hidden behind a surface, but nothing there was ever in
+  sight: no seen-free voxel, no surface, no support edge bounds it, and an object cut by the
+  image border grew candidates of tens of litres into it (docs/experiments/
+  2026-11-27-giant-candidates-real.md). The seen part is the only evidence there is, so the
+  paper's own rule for the hidden is applied to the border: across each side of the view
+  (the image border's plane through the camera centre, ``SpaceMap.view``) a hypothesis may
+  reach past the side at most ``outside_view_ratio`` (1: the mirror image of the seen part
+  about the border) times as far as the object's observed points reach inside it, and never
+  less far than its observed points do. Each such side is a half-space every hypothesis is
+  cut to (with the others below) and every ray stops at, like the support. An object far from
+  the border reaches far inside, so its bound lies far outside and never binds.
 - Structure-aware candidates (``ipr_shapes.hypotheses.structure``; docs/DESIGN_NOTES.md,
   "Structure-aware candidates beside Algorithm 1"): ``structure_share`` of the m hypotheses
   (rounded) are made by the structure-aware generators that apply to the object, taking turns
@@ -230,6 +244,15 @@ class HypothesisConfig:
             take slots from the symmetry and box families and lost 0.0007-0.0013 on the YCB
             suites (docs/DESIGN_NOTES.md, "Surfaces of revolution about the axis their
             normals meet: opt-in").
+        outside_view_ratio: beyond each side of the camera's view (the image border's plane,
+            ``SpaceMap.view``) a hypothesis reaches at most this multiple of how far the
+            object's observed points reach inside that side (and at least as far as they do
+            beyond it; module doc). Default 1: the mirror image of the seen part about the
+            border, the paper's mirror rule applied where the image ends, not a tuned value;
+            space outside the image is unknown and nothing else bounds it there (an object cut
+            by the border grew 5-60 litre candidates, docs/experiments/
+            2026-11-27-border-cut-extent.md). None: unbounded (before 2026-11-27); also
+            unbounded for a space without a ``view``.
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -263,6 +286,7 @@ class HypothesisConfig:
         "neighbour_surfaces": Options(True, False),
         "superquadric_count": Interval(0, None, integer=True),
         "fitted_revolution_axis": Options(True, False),
+        "outside_view_ratio": OrNone(Interval(0, None)),
     }
 
     count: int = 32
@@ -293,6 +317,7 @@ class HypothesisConfig:
     neighbour_surfaces: bool = False
     superquadric_count: int = 3
     fitted_revolution_axis: bool = False
+    outside_view_ratio: float | None = 1.0
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -432,7 +457,9 @@ class _Context:
     ``base_points`` are the observed points that matter for hulls (exact), ``loop_points`` the
     same thinned to one per ``hull_spacing_m`` cell for the hulls inside Algorithm 1's loop.
     ``cuts`` (C, 4) are half-spaces n . x + offset >= 0 every hypothesis is cut to: the support
-    planes (lowered to the lowest observed point) and the observed facets' support planes.
+    planes (lowered to the lowest observed point), the observed facets' support planes and the
+    bounds beyond the camera's view; ``stops`` (S, 4) are the last of these, which the hidden
+    extent's rays also stop at (``_view_bounds``).
     """
 
     object_id: int
@@ -449,6 +476,7 @@ class _Context:
     pitch_m: float
     config: HypothesisConfig
     rays: SeenSpace | None = None  # the space hidden-extent rays stop in (``bounds``)
+    stops: np.ndarray | None = None  # half-spaces (S, 4) rays stop at leaving (``_view_bounds``)
 
 
 def dominant_normal(obj: PartialObject, planes: tuple[KnownPlane, ...]) -> np.ndarray:
@@ -479,12 +507,19 @@ def _ray_limits(
     regions: tuple[PlaneRegion, ...],
     cap: float,
     step: float,
+    stops: np.ndarray | None = None,
 ) -> np.ndarray:
     """Distance (R,) from each origin (R, 3) along -``normal`` to the first blocked point, at
-    most ``cap`` (m): a voxel seen FREE (sampled every ``step``), the support plane (exact) or
-    a wall's slab."""
+    most ``cap`` (m): a voxel seen FREE (sampled every ``step``), the support plane (exact), a
+    wall's slab, or leaving one of the half-spaces ``stops`` (S, 4) n . x + b >= 0 (exact)."""
     direction = -normal
     limits = np.full(len(origins), cap)
+    if stops is not None:
+        for stop in stops:
+            rate = float(direction @ stop[:3])  # d(n . x + b) / dt
+            if rate < -1e-9:
+                reach = (origins @ stop[:3] + stop[3]) / -rate
+                limits = np.minimum(limits, np.maximum(reach, 0.0))
     for region in regions:
         if region.is_support:
             rate = float(direction @ region.plane.normal)  # d(signed distance) / dt
@@ -576,8 +611,8 @@ def _ray_bounds(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per ray, the range (low (R,), high (R,)) of d that keeps the mirror of its point p in
     hidden space: the mirror lands t = 2 N.(p - c) + d behind p, and 0 <= t <= limit(p)."""
-    space, regions, cap, step = ctx_parts
-    limits = _ray_limits(ray_points, normal, space, regions, cap, step)
+    space, regions, cap, step, stops = ctx_parts
+    limits = _ray_limits(ray_points, normal, space, regions, cap, step, stops)
     offsets = 2.0 * (ray_points - centre) @ normal
     return -offsets, limits - offsets
 
@@ -673,7 +708,8 @@ def _prepare(
     pitch = space.grid.voxel_size_m if space is not None else voxels.DEFAULT_PITCH_M
     step = config.ray_step_m or pitch
     rays = bounds if bounds is not None else space
-    ray_parts = (rays, regions, cap, step)
+    stops = _view_bounds(points, space, config.outside_view_ratio)
+    ray_parts = (rays, regions, cap, step, stops)
     fallback = dominant_normal(obj, planes)
 
     used = [
@@ -750,6 +786,7 @@ def _prepare(
             # (a handle beyond a curved side's plane) are never cut off.
             reach = float((points @ facet.normal).max()) + config.facet_tolerance_m
             cuts.append(np.append(-facet.normal, reach))
+    cuts.extend(stops)
     forced_free = forced_wall = 0
     base = _observed_extremes(points)
     observed_hull = _observed_hull(base)
@@ -779,7 +816,23 @@ def _prepare(
         pitch,
         config,
         rays,
+        stops,
     )
+
+
+def _view_bounds(points: np.ndarray, space: SeenSpace | None, ratio: float | None) -> np.ndarray:
+    """Half-spaces (S, 4) n . x + b >= 0 bounding an object beyond the camera's view (module
+    doc): per side (n, b) of ``space``'s ``view`` (unit n into the view, so n . p + b is a
+    point's distance inside that side, m), the observed points (N, 3) reach s_max inside and
+    s_min at least; a hypothesis may reach ``ratio`` * s_max beyond it, or s_min when lower.
+    Empty without a view or a ratio."""
+    view = getattr(space, "view", None) if ratio is not None else None
+    if view is None or len(points) == 0:
+        return np.zeros((0, 4))
+    view = np.asarray(view, float).reshape(-1, 4)
+    inside = points @ view[:, :3].T + view[:, 3]  # (N, S) distances inside each side
+    level = np.minimum(inside.min(axis=0), -ratio * np.maximum(inside.max(axis=0), 0.0))
+    return np.column_stack([view[:, :3], view[:, 3] - level])
 
 
 def _distance(facet: _SourceFacet, u: float, config: HypothesisConfig) -> float:
@@ -905,7 +958,7 @@ def _hull_source(
     samples = samples + r2[:, None] * (tri[pick, 2] - tri[pick, 0])
     samples = centre + 0.85 * (samples - centre)
     step = ctx.config.ray_step_m or ctx.pitch_m
-    parts = (ctx.rays, ctx.regions, ctx.cap_m, step)
+    parts = (ctx.rays, ctx.regions, ctx.cap_m, step, ctx.stops)
     cells, conflict = _admissible(
         [_ray_bounds(samples, centre, normal, parts)], ctx.config.ray_quantile, step
     )
@@ -1152,7 +1205,7 @@ def _structure_makers(
     step = config.ray_step_m or ctx.pitch_m
 
     def reach(origins: np.ndarray, direction: np.ndarray) -> np.ndarray:
-        return _ray_limits(origins, -direction, ctx.rays, ctx.regions, ctx.cap_m, step)
+        return _ray_limits(origins, -direction, ctx.rays, ctx.regions, ctx.cap_m, step, ctx.stops)
 
     makers: dict[str, _Maker] = {}
     support = next((r.plane for r in ctx.regions if r.is_support), None)

@@ -49,6 +49,11 @@ class NeighbourSpace:
         """The base's grid."""
         return self.base.grid
 
+    @property
+    def view(self) -> np.ndarray | None:
+        """The base's field of view (``SpaceMap.view``), None when it has none."""
+        return getattr(self.base, "view", None)
+
     def state_at(self, points: np.ndarray) -> np.ndarray:
         """State (N,) of the voxels holding world points (N, 3)."""
         states = np.array(self.base.state_at(points), dtype=np.uint8, copy=True)
@@ -93,7 +98,7 @@ def neighbour_spaces(
             indices = voxels.unpack(blocked) - np.round(seen.grid.origin / pitch).astype(np.int64)
             inside = np.all((indices >= 0) & (indices < np.array(seen.grid.shape)), axis=1)
             state[tuple(indices[inside].T)] = FREE
-            out[obj.id] = SpaceMap(seen.grid, state)
+            out[obj.id] = SpaceMap(seen.grid, state, getattr(seen, "view", None))
         else:
             out[obj.id] = NeighbourSpace(seen, blocked)
     return out

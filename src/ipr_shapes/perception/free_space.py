@@ -19,7 +19,7 @@ import numba
 import numpy as np
 from scipy.ndimage import minimum_filter
 
-from ipr_shapes.camera import invert_transform
+from ipr_shapes.camera import invert_transform, view_halfspaces
 
 UNKNOWN, FREE, OCCUPIED = np.uint8(0), np.uint8(1), np.uint8(2)
 #: Min-filter window sizes (pixels, odd) available for voxel footprints.
@@ -77,10 +77,16 @@ class VoxelGrid:
 
 @dataclass(frozen=True, eq=False)
 class SpaceMap:
-    """What one frame saw of a voxel grid: ``state`` (nx, ny, nz) uint8 of UNKNOWN/FREE/OCCUPIED."""
+    """What one frame saw of a voxel grid: ``state`` (nx, ny, nz) uint8 of UNKNOWN/FREE/OCCUPIED,
+    and ``view``, the frame's field of view as (4, 4) world half-spaces n . x + b >= 0 (unit n,
+    m; ``ipr_shapes.camera.view_halfspaces``), or None when not known. Beyond ``view`` every voxel
+    is UNKNOWN because the image ends there, not because something hides it: the hypotheses
+    bound their hidden extent there by the object's seen part (``HypothesisConfig.outside_view_ratio``).
+    """
 
     grid: VoxelGrid
     state: np.ndarray
+    view: np.ndarray | None = None
 
     @property
     def free(self) -> np.ndarray:
@@ -109,6 +115,9 @@ class SeenSpace(Protocol):
     def grid(self) -> VoxelGrid: ...
 
     def state_at(self, points: np.ndarray) -> np.ndarray: ...
+
+    # A space may also have ``view`` (``SpaceMap.view``: its frame's field of view, or None);
+    # the hypotheses read it with ``getattr``, so spaces without it remain spaces.
 
 
 # Compiled per-voxel pass of ``observe_space`` and lookups of ``SpaceMap.state_at`` (nogil: frames are observed on threads; no
@@ -292,4 +301,4 @@ def observe_space(
         if not missing.any():
             break
         available |= missing
-    return SpaceMap(grid, state)
+    return SpaceMap(grid, state, view_halfspaces(K, world_from_camera, (height, width)))
