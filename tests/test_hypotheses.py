@@ -261,11 +261,13 @@ def test_a_shape_cut_by_the_image_border_reaches_beyond_it_no_further_than_seen_
     # free) up to the rays' cap, far beyond anything the 6 cm the box reaches there.
     assert max(_beyond(h.vertices, view)[right] for h in unbounded) > 3 * seen_reach[right]
     assert max(h.volume_m3 for h in unbounded) > 3 * max(h.volume_m3 for h in bounded)
-    # The true box lies within the bound, and the best candidate is closer to it.
+    # The true box lies within the bound; the best candidate is no worse for it and the
+    # candidates are closer to it on average (the best one alone depends on the draw).
     truth = true_box_keys()
     assert _beyond(box_mesh()[0], view)[right] <= seen_reach[right]
-    best = [max(iou(h.keys(0.005), truth) for h in hs) for hs in (bounded, unbounded)]
-    assert best[0] > best[1]
+    ious = [[iou(h.keys(0.005), truth) for h in hs] for hs in (bounded, unbounded)]
+    assert max(ious[0]) >= max(ious[1])
+    assert np.mean(ious[0]) > np.mean(ious[1]) + 0.05
 
 
 def test_a_shape_well_inside_the_view_is_not_bounded_by_it(oblique):
