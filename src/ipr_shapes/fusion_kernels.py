@@ -159,3 +159,75 @@ def nearest_within(
             distance[q], index[q] = np.sqrt(best), chosen
         else:
             distance[q], index[q] = np.inf, n
+
+
+@_jit
+def nearest_within_hinted(
+    points: np.ndarray,
+    order: np.ndarray,
+    slotted: np.ndarray,
+    dims: np.ndarray,
+    splits: np.ndarray,
+    children: np.ndarray,
+    ranges: np.ndarray,
+    queries: np.ndarray,
+    bound: float,
+    hints: np.ndarray,
+    distance: np.ndarray,
+    index: np.ndarray,
+) -> None:
+    """``nearest_within``'s answers, each query's search started from a hint: ``hints`` (Q,)
+    a tree point per query (N: none), e.g. its match in the ICP's previous iteration. The
+    hint's squared distance, computed as the search computes it (the same differences and
+    sums in the same order, so the same bits), is the first best found: the search then prunes
+    from the start every branch farther than that, and the answer is the same (the lowest
+    (squared distance, index) below the bound: a pruned branch holds nothing nearer, and an
+    equal distance with a lower index still replaces the hint). Why: in late ICP iterations a
+    point's match barely moves, and the descent pushes fewer far branches."""
+    n = points.shape[0]
+    limit = bound * bound
+    nodes = np.zeros(_STACK, np.int64)
+    floors = np.zeros(_STACK)  # squared distance to the split plane of each waiting node
+    for q in range(queries.shape[0]):
+        x, y, z = queries[q, 0], queries[q, 1], queries[q, 2]
+        best, chosen = limit, n
+        hint = hints[q]
+        if hint < n:
+            a = points[hint, 0] - x
+            b = points[hint, 1] - y
+            c = points[hint, 2] - z
+            squared = 0.0
+            squared += a * a
+            squared += b * b
+            squared += c * c
+            if squared < limit:
+                best, chosen = squared, hint
+        nodes[0], floors[0] = 0, 0.0
+        top = 1
+        while top:
+            top -= 1
+            if floors[top] > best:
+                continue
+            node = nodes[top]
+            while dims[node] >= 0:
+                axis = dims[node]
+                offset = (x if axis == 0 else y if axis == 1 else z) - splits[node]
+                near, far = (0, 1) if offset < 0 else (1, 0)
+                if offset * offset <= best:  # equal: a tie with a lower index may be there
+                    nodes[top], floors[top] = children[node, far], offset * offset
+                    top += 1
+                node = children[node, near]
+            for slot in range(ranges[node, 0], ranges[node, 1]):
+                a = slotted[slot, 0] - x
+                b = slotted[slot, 1] - y
+                c = slotted[slot, 2] - z
+                squared = 0.0
+                squared += a * a
+                squared += b * b
+                squared += c * c
+                if squared < best or (squared == best and chosen < n and order[slot] < chosen):
+                    best, chosen = squared, order[slot]
+        if chosen < n:
+            distance[q], index[q] = np.sqrt(best), chosen
+        else:
+            distance[q], index[q] = np.inf, n
