@@ -8,7 +8,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from ipr_shapes.fusion import _Nearest
-from ipr_shapes.fusion_kernels import build_tree, nearest_within, nearest_within_hinted
+from ipr_shapes.fusion_kernels import build_tree, nearest_within
 
 
 def _surface(rng: np.random.Generator, count: int) -> np.ndarray:
@@ -63,74 +63,3 @@ def test_threads_split_the_queries_without_changing_an_answer(workers):
     assert np.array_equal(distance, expected[0]) and np.array_equal(index, expected[1])
     empty = _Nearest(target, workers).query(np.empty((0, 3)), 0.01)
     assert empty[0].shape == (0,) and empty[1].shape == (0,)
-
-
-def test_hinted_search_gives_the_unhinted_answers_whatever_the_hint():
-    # A hint only starts the search: near (the answer itself or a point beside it), random,
-    # beyond the bound, none (N), or the higher index of two equal points, the answer is
-    # cKDTree's, ties to the lowest index.
-    rng = np.random.default_rng(11)
-    target = _surface(rng, 1200)
-    target = np.concatenate([target, target[:200]])  # repeated points: exact ties
-    queries = np.concatenate([_surface(rng, 2000), target[:200]]) + rng.normal(
-        scale=0.003, size=(2200, 3)
-    )
-    queries[-50:] = target[1200:1250]  # exactly on a repeated point
-    n = len(target)
-    tree = build_tree(target, 12)
-    reference = cKDTree(target)
-    for bound in (np.inf, 0.05, 0.01, 0.002):
-        expected = reference.query(queries, distance_upper_bound=bound)
-        answer = np.minimum(expected[1], n - 1)
-        # A repeated point's higher index, the answer itself, a neighbour, random, none.
-        twin = np.where(answer < 200, answer + 1200, answer)
-        for hints in (
-            twin,
-            answer,
-            np.maximum(answer - 1, 0),
-            rng.integers(0, n, len(queries)),
-            np.full(len(queries), n),
-        ):
-            distance = np.empty(len(queries))
-            index = np.empty(len(queries), dtype=np.int64)
-            nearest_within_hinted(
-                target, *tree, queries, bound, hints.astype(np.int64), distance, index
-            )
-            assert np.array_equal(distance, expected[0]), bound
-            squared = ((queries[:, None, :] - target[None]) ** 2).sum(axis=2)
-            paired = np.isfinite(distance)
-            ties = squared[paired] == squared[paired].min(axis=1, keepdims=True)
-            assert np.array_equal(index[paired], np.argmax(ties, axis=1)), bound
-            assert np.all(index[~paired] == n)
-    assert (twin != answer).sum() > 40  # the tied hints were there
-
-
-def test_a_hint_at_exactly_the_bound_is_not_an_answer():
-    target = np.array([[0.0, 0.0, 0.0], [0.5, 0.0, 0.0], [0.0, 0.25, 0.0]])
-    queries = np.zeros((1, 3))
-    queries[0, 0] = 0.125  # 0.125 from point 0 exactly (binary fractions)
-    for hints, expected_index in (([0], 0), ([1], 0), ([3], 0)):
-        distance, index = np.empty(1), np.empty(1, dtype=np.int64)
-        nearest_within_hinted(
-            target, *build_tree(target, 1), queries, 0.125, np.array(hints), distance, index
-        )
-        # The bound excludes a point at exactly the bound, hinted or not.
-        assert np.isinf(distance[0]) and index[0] == 3, hints
-        nearest_within_hinted(
-            target, *build_tree(target, 1), queries, 0.2, np.array(hints), distance, index
-        )
-        assert (distance[0], index[0]) == (0.125, expected_index), hints
-
-
-@pytest.mark.parametrize("workers", [1, 2])
-def test_query_with_hints_splits_them_with_the_queries(workers):
-    # Hints split over the threads with their queries: the answers, exact hints or not.
-    rng = np.random.default_rng(7)
-    target = _surface(rng, 700)
-    queries = _surface(rng, 1001) + rng.normal(scale=0.002, size=(1001, 3))
-    expected = cKDTree(target).query(queries, distance_upper_bound=0.01)
-    hints = np.minimum(expected[1], len(target))
-    distance, index = _Nearest(target, workers).query(queries, 0.01, hints)
-    assert np.array_equal(distance, expected[0]) and np.array_equal(index, expected[1])
-    distance, index = _Nearest(target, workers).query(queries, 0.01, hints[::-1].copy())
-    assert np.array_equal(distance, expected[0]) and np.array_equal(index, expected[1])

@@ -199,35 +199,21 @@ class _Nearest:
         from ipr_shapes import fusion_kernels
 
         self._kernel = fusion_kernels.nearest_within
-        self._hinted = fusion_kernels.nearest_within_hinted
         self.points = np.ascontiguousarray(points, dtype=np.float64)
         self.tree = fusion_kernels.build_tree(self.points, self.LEAF_SIZE)
         self.workers = max(1, int(workers))
 
-    def query(
-        self, queries: np.ndarray, gate: float, hints: np.ndarray | None = None
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """The answers for (Q, 3) ``queries`` within ``gate`` (m); ``hints`` (Q,) int64, a
-        point index per query to start its search from (M: none; the same answers, found
-        sooner when the hint is near: ``fusion_kernels.nearest_within_hinted``)."""
+    def query(self, queries: np.ndarray, gate: float) -> tuple[np.ndarray, np.ndarray]:
         queries = np.ascontiguousarray(queries, dtype=np.float64)
         distance = np.empty(len(queries))
         index = np.empty(len(queries), dtype=np.int64)
         edges = np.linspace(0, len(queries), min(self.workers, len(queries)) + 1).astype(int)
-        if hints is not None:
-            hints = np.ascontiguousarray(hints, dtype=np.int64)
 
         def part(first: int, last: int) -> None:
-            if hints is None:
-                self._kernel(
-                    self.points, *self.tree, queries[first:last], float(gate),
-                    distance[first:last], index[first:last],
-                )  # fmt: skip
-            else:
-                self._hinted(
-                    self.points, *self.tree, queries[first:last], float(gate),
-                    hints[first:last], distance[first:last], index[first:last],
-                )  # fmt: skip
+            self._kernel(
+                self.points, *self.tree, queries[first:last], float(gate),
+                distance[first:last], index[first:last],
+            )  # fmt: skip
 
         if len(edges) <= 2:
             part(0, len(queries))
@@ -262,7 +248,6 @@ def _icp_starts(
     rotations: list[np.ndarray],
     translations: list[np.ndarray],
     config: FusionConfig,
-    matches: np.ndarray | None = None,
 ) -> tuple[list[np.ndarray], list[np.ndarray]]:
     """Point-to-plane ICP of (N, 3) ``source`` onto (M, 3) ``target`` from each of S initial
     (rotation (3, 3), translation (3,)) pairs; returns the S refined pairs (x -> R x + t).
@@ -272,25 +257,17 @@ def _icp_starts(
     arithmetic is the one it would do alone (a point's nearest neighbour does not depend on
     the other points of the query, and each start solves its own rows), so the results are
     the same, bit for bit, for any S and any number of threads; a start stops when fewer
-    than 6 points pair or its step is below 1e-6.
-
-    Each point's query starts from its match of the start's previous iteration
-    (``_Nearest.query``'s hints: the same answers, sooner). ``matches`` (S, N) int64, when
-    given, receives each start's last matches (M, the target's size: none)."""
+    than 6 points pair or its step is below 1e-6."""
     rotations, translations = list(rotations), list(translations)
     count = len(source)
     active = list(range(len(rotations)))
-    if matches is None:
-        matches = np.empty((len(rotations), count), dtype=np.int64)
-    matches[:] = len(target)
     for gate in np.geomspace(config.coarse_gate_m, config.fine_gate_m, config.iterations):
         if not active:
             break
         moved = np.empty((len(active), count, 3))
         for slot, start in enumerate(active):
             moved[slot] = source @ rotations[start].T + translations[start]
-        distance, index = nearest.query(moved.reshape(-1, 3), gate, matches[active].reshape(-1))
-        matches[active] = index.reshape(len(active), count)
+        distance, index = nearest.query(moved.reshape(-1, 3), gate)
         paired = np.isfinite(distance).reshape(len(active), count)
         enough = paired.sum(axis=1) >= 6
         paired &= enough[:, None]
@@ -358,9 +335,8 @@ def register_view(
     rotations = [_rotation_about(up, float(angle)) for angle in angles]
     translations = [target_centre - rotation @ source_centre for rotation in rotations]
     nearest = _Nearest(target, workers)
-    matches = np.empty((len(rotations), len(source)), dtype=np.int64)
     rotations, translations = _icp_starts(
-        source, target, normals, nearest, rotations, translations, config, matches
+        source, target, normals, nearest, rotations, translations, config
     )
     # Every start scored at once (one tree query, one map lookup per frame): each point's
     # answer is its own, so the shares are those of scoring the starts one by one.
@@ -369,7 +345,7 @@ def register_view(
     for slot, (rotation, translation) in enumerate(zip(rotations, translations, strict=True)):
         moved[slot] = source @ rotation.T + translation
         back[slot] = (target - translation) @ rotation  # frame-0 points at the later pose
-    distance, _ = nearest.query(moved.reshape(-1, 3), config.fine_gate_m, matches.reshape(-1))
+    distance, _ = nearest.query(moved.reshape(-1, 3), config.fine_gate_m)
     distance = distance.reshape(len(rotations), len(source))
     free = _free_shares(moved, reference_space)
     reverse = _free_shares(back, view_space)
