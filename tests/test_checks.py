@@ -91,7 +91,7 @@ def _groups(config) -> list:
 
 def test_every_perception_field_is_declared_and_the_defaults_pass():
     groups = _groups(PerceptionConfig())
-    assert len(groups) == 15
+    assert len(groups) == 16
     for group in groups:
         check_fields(group)
         names = {item.name for item in dataclasses.fields(group)}

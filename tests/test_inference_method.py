@@ -583,6 +583,47 @@ def test_posterior_medoid_maximises_expected_iou_among_probable_hypotheses():
     assert posterior_medoid([NESTED[1], *NESTED], np.array([0.0, 0.37, 0.22, 0.21, 0.2])) == 2
 
 
+def test_a_shared_iou_table_gives_each_medoid_and_counts_each_pair_once(monkeypatch):
+    # Two medoids of one object over different supports share their pairs' IoU: the same
+    # medoids as computed alone, and a pair asked again is not intersected again (a table
+    # keyed by the support's positions instead of the hypotheses' indices fails here: the
+    # second support's positions are other hypotheses).
+    from ipr_shapes import voxels
+    from ipr_shapes.factor_graph import PairwiseIoU
+
+    middle = _box(1, 4, [-0.05, -0.03, 0.0], [0.05, 0.055, 0.04])
+    hypotheses = [*NESTED, middle]
+    calls = []
+    counted = voxels.intersection_count
+    monkeypatch.setattr(voxels, "intersection_count", lambda a, b: calls.append(1) or counted(a, b))
+    supports = (
+        np.array([0.2, 0.2, 0.2, 0.2, 0.2]),
+        np.array([0.0, 0.3, 0.0, 0.2, 0.5]),
+        np.array([0.5, 0.0, 0.0, 0.0, 0.5]),
+        np.array([0.0, 0.0, 0.1, 0.6, 0.3]),
+    )
+    alone = []
+    for probabilities in supports:
+        alone.append(posterior_medoid(hypotheses, probabilities))
+    assert len(calls) == 10 + 3 + 1 + 3
+    calls.clear()
+    table = PairwiseIoU(hypotheses)
+    shared = [posterior_medoid(hypotheses, p, table) for p in supports]
+    assert shared == alone
+    assert len(set(alone)) > 1  # the supports' medoids differ: the IoU mattered
+    assert len(calls) == 10  # every later pair was in the table
+    with pytest.raises(ValueError, match="another list"):
+        posterior_medoid(list(hypotheses), supports[0], table)
+
+
+def test_the_collision_checker_hands_its_medoid_tables_on():
+    minimum = _slab(1, [-0.05, -0.03, 0.0], [0.05, 0.03, 0.04])
+    tables = {}
+    (posterior,) = uniform_posteriors(_prepared({1: NESTED}, {1: minimum}), tables=tables)
+    assert tables[1].hypotheses is posterior.hypotheses
+    assert len(tables[1]._iou) == 6  # every pair of the four feasible shapes
+
+
 def test_the_collision_checker_outputs_the_medoid_of_its_uniform_posterior():
     minimum = _slab(1, [-0.05, -0.03, 0.0], [0.05, 0.03, 0.04])
     (posterior,) = uniform_posteriors(_prepared({1: NESTED}, {1: minimum}))
@@ -705,6 +746,108 @@ def test_a_candidate_test_is_reused_in_contexts_that_agree_inside_its_swept_box(
         assert distances["near"][1] != distances["minimum"][1]  # shoved: a result of its own
     finally:
         sampler.close()
+
+
+@pytest.mark.parametrize("owner_fails", [False, True])
+def test_a_test_under_way_in_one_thread_is_waited_for_not_run_again(pair, owner_fails):
+    # Two threads need the same stability test: the second waits for the first's result (the
+    # same array, one test); when the first gives up (its deadline), the second runs it.
+    import threading
+    import time
+
+    from ipr_shapes.inference.sampler import _Deadline
+
+    prepared, observed = pair
+    sampler = Sampler(
+        _problem(prepared, observed, "ipr+uniform", config=InferenceConfig(screen_resting=False))
+    )
+    started, release = threading.Event(), threading.Event()
+    calls = []
+    test = sampler._test
+
+    def held(i, context, deadline):
+        calls.append(threading.current_thread().name)
+        if len(calls) == 1:
+            started.set()
+            release.wait(10)
+            if owner_fails:
+                raise _Deadline
+        return test(i, context, deadline)
+
+    sampler._test = held
+    results = {}
+
+    def run(name):
+        try:
+            results[name] = sampler._distances(0, {}, math.inf)
+        except _Deadline:
+            results[name] = None
+
+    first = threading.Thread(target=run, args=("first",), name="first")
+    second = threading.Thread(target=run, args=("second",), name="second")
+    try:
+        first.start()
+        assert started.wait(10)
+        second.start()
+        time.sleep(0.3)  # the second thread finds the test under way
+        assert calls == ["first"]
+        release.set()
+        first.join(10)
+        second.join(10)
+        assert not first.is_alive() and not second.is_alive()
+        if owner_fails:
+            assert calls == ["first", "second"] and results["first"] is None
+            assert (
+                sampler.stability_tests == 1 and results["second"] is sampler.cache[(0, ((1, -1),))]
+            )
+        else:
+            assert calls == ["first"] and sampler.stability_tests == 1
+            assert results["first"] is results["second"]
+        assert not sampler._pending
+    finally:
+        release.set()
+        sampler.close()
+
+
+def test_sampling_threads_compile_the_object_worlds_side_by_side(pair, monkeypatch):
+    # Two sampling threads compile the two objects' stability-test worlds at the same time,
+    # each world once; the samples are those of one thread. ("uniform" draws compile none.)
+    import threading
+    import time
+
+    import ipr_shapes.inference.sampler as sampler_module
+    from ipr_shapes.inference.pool import run_samples
+
+    prepared, observed = pair
+    problem = _problem(
+        prepared, observed, "ipr+uniform", config=InferenceConfig(screen_resting=False)
+    )
+    alone = run_samples(problem, [(0, None), (1, None)], workers=1, deadline=math.inf)
+    built = []
+    build = sampler_module.build_world
+
+    def slow_build(bodies, *args, **kwargs):
+        if not any(body.switchable for body in bodies):
+            return build(bodies, *args, **kwargs)  # a joint model
+        started = time.perf_counter()
+        time.sleep(0.3)
+        world = build(bodies, *args, **kwargs)
+        mine = next(body for body in bodies if body.switchable).vertices
+        which = next(k for k, c in enumerate(problem.candidates) if c[0].vertices is mine)
+        built.append((which, threading.current_thread().name, started, time.perf_counter()))
+        return world
+
+    monkeypatch.setattr(sampler_module, "build_world", slow_build)
+    both = run_samples(problem, [(0, None), (1, None)], workers=2, deadline=math.inf)
+    assert [r.choice for r in both] == [r.choice for r in alone]
+    assert [r.log_likelihood for r in both] == [r.log_likelihood for r in alone]
+    assert sorted(b[0] for b in built) == [0, 1]  # each object's world, once
+    (_, first, start_a, end_a), (_, second, start_b, end_b) = sorted(built, key=lambda b: b[2])
+    assert first != second and start_b < end_a  # at the same time, in two threads
+    built.clear()
+    uniform = dataclasses.replace(problem, config=InferenceConfig(proposal="uniform"))
+    run_samples(uniform, [(0, None), (1, None)], workers=2, deadline=math.inf)
+    assert built == []
 
 
 def test_objects_whose_bound_is_below_the_best_mass_are_not_tested(pair, stack_observed):

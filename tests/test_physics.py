@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.spatial import ConvexHull
 
 from ipr_shapes.camera import look_at
 from ipr_shapes.perception.types import KnownPlane
@@ -11,6 +12,7 @@ from ipr_shapes.physics import (
     STIFF_PUSHER,
     Body,
     PhysicsConfig,
+    _mesh_asset,
     build_world,
     decimated_camera,
     decimated_pixels,
@@ -374,3 +376,40 @@ def test_the_default_8_ms_step_settles_and_tests_stability_as_4_ms_steps_do():
     assert drops["default"][0] < 0.001 and drops["default"][1] > 0.02
     assert drops["default"][2] > 0.055
     assert poses["default"] == pytest.approx(poses["4 ms"], abs=0.001)
+
+
+def _model_arrays(model) -> dict[str, np.ndarray]:
+    """Every numeric array of a compiled model but its names and file paths."""
+    skipped = {"names", "paths", "names_map", "mesh_pathadr"}
+    arrays = {}
+    for name in dir(model):
+        if name.startswith("_") or name in skipped:
+            continue
+        value = getattr(model, name)
+        if isinstance(value, np.ndarray):
+            arrays[name] = value
+    return arrays
+
+
+def test_meshes_given_as_cached_assets_compile_to_the_same_model():
+    # Shapes as named mesh files (MuJoCo's asset cache) and as vertex lists: the same
+    # compiled model, array for array, also when a shape was processed before (a cache hit)
+    # and for two shapes with equal vertices but other faces (no name clash).
+    rng = np.random.default_rng(4)
+    shapes = []
+    for k in range(5):
+        points = rng.normal(size=(60, 3)) * [0.03, 0.02, 0.015] + [0.1 * k, 0.0, 0.04]
+        shapes.append((points, ConvexHull(points).simplices))
+    box_vertices, box_faces = STANDING
+    shapes.append((box_vertices, box_faces))
+    shapes.append((box_vertices + [0.0, 0.2, 0.0], box_faces[::-1].copy()))
+    bodies = [Body(v, f, dynamic=k % 2 == 0) for k, (v, f) in enumerate(shapes)]
+    vertices_only = build_world(bodies, [SUPPORT], cached_meshes=False).model
+    for _ in range(2):  # the second time every shape is a cache hit
+        cached = build_world(bodies, [SUPPORT]).model
+        expected, got = _model_arrays(vertices_only), _model_arrays(cached)
+        assert expected.keys() == got.keys() and len(got) > 100
+        for name, value in expected.items():
+            assert np.array_equal(value, got[name], equal_nan=True), name
+    names = {_mesh_asset(v - v.mean(axis=0), f)[0] for v, f in shapes}
+    assert len(names) == len(shapes)

@@ -37,6 +37,7 @@ import numpy as np
 
 from ipr_shapes.checks import Checks, Interval, check_fields
 from ipr_shapes.factor_graph import (
+    PairwiseIoU,
     TableTooLarge,
     elimination_table_size,
     exact_marginals,
@@ -146,10 +147,13 @@ def uniform_posteriors(
     config: CollisionCheckerConfig | None = None,
     rng: np.random.Generator | None = None,
     deadline: float = np.inf,
+    tables: dict[int, PairwiseIoU] | None = None,
 ) -> list[ObjectPosterior]:
     """The Collision Checker's marginals from prepared hypotheses (module doc): uniform over
     jointly feasible joint models; the Gibbs sampler stops at ``deadline``
-    (``time.perf_counter()`` seconds)."""
+    (``time.perf_counter()`` seconds). ``tables``, when given, receives per object id the
+    pairwise IoU of its hypotheses its medoid computed (``PairwiseIoU``), for a later medoid
+    of the same object."""
     config = config or CollisionCheckerConfig()
     rng = rng if rng is not None else np.random.default_rng(0)
     ids, generated, candidates = prepared.ids, prepared.generated, prepared.candidates
@@ -178,12 +182,15 @@ def uniform_posteriors(
         # The medoid of the jointly feasible candidates, each counted once (module doc): a
         # marginal also counts how many of the neighbours' candidates a candidate fits with.
         feasible = (probabilities > 0).astype(float)
+        table = PairwiseIoU(hyps)
+        if tables is not None:
+            tables[i] = table
         posteriors.append(
             ObjectPosterior(
                 i,
                 hyps,
                 probabilities,
-                posterior_medoid(hyps, feasible / feasible.sum()),
+                posterior_medoid(hyps, feasible / feasible.sum(), table),
                 prepared.minima[i],
                 inference,
                 prepared.seconds[i],

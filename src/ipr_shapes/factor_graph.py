@@ -188,19 +188,54 @@ def interaction_components(
     return [sorted(g) for g in groups.values()]
 
 
-def posterior_medoid(hypotheses: Sequence[ShapeHypothesis], probabilities: np.ndarray) -> int:
+class PairwiseIoU:
+    """Voxel IoU of pairs of one object's hypotheses (``hypotheses``, by index), each pair
+    counted once and kept: the Collision Checker's medoid and a physics method's medoid of the
+    same object ask for many of the same pairs (the candidates are among the Collision
+    Checker's feasible hypotheses). Why: the voxel intersections are most of a medoid's cost
+    (0.16 CPU-s for the 12 medoids of a 6-object ycb-dynamic scene,
+    docs/experiments/2026-11-27-whole-run-speed-3.md)."""
+
+    def __init__(self, hypotheses: Sequence[ShapeHypothesis]) -> None:
+        self.hypotheses = hypotheses
+        self._iou: dict[tuple[int, int], float] = {}
+
+    def matrix(self, support: np.ndarray) -> np.ndarray:
+        """(S, S) IoU of the hypotheses ``support`` (S,) (indices, increasing), ones on the
+        diagonal."""
+        iou = np.eye(support.size)
+        keys: dict[int, np.ndarray] = {}
+        for a in range(support.size):
+            for b in range(a + 1, support.size):
+                pair = (int(support[a]), int(support[b]))
+                value = self._iou.get(pair)
+                if value is None:
+                    for k in pair:
+                        if k not in keys:
+                            keys[k] = self.hypotheses[k].keys()
+                    first, second = keys[pair[0]], keys[pair[1]]
+                    common = voxels.intersection_count(first, second)
+                    union = float(first.size) + float(second.size) - common
+                    value = self._iou[pair] = common / union if union > 0 else 0.0
+                iou[a, b] = iou[b, a] = value
+        return iou
+
+
+def posterior_medoid(
+    hypotheses: Sequence[ShapeHypothesis],
+    probabilities: np.ndarray,
+    table: PairwiseIoU | None = None,
+) -> int:
     """Index of the hypothesis with the highest expected voxel IoU under ``probabilities``
-    (the Bayes choice under IoU loss), among those with non-zero probability."""
+    (the Bayes choice under IoU loss), among those with non-zero probability. ``table``: the
+    pairs' IoU already computed for ``hypotheses`` (a ``PairwiseIoU`` of the same list; None:
+    computed here), filled with the pairs computed."""
     support = np.flatnonzero(probabilities > 0)
     if support.size <= 1:
         return int(support[0]) if support.size else 0
-    keys = [hypotheses[k].keys() for k in support]
-    sizes = np.array([k.size for k in keys], dtype=float)
-    iou = np.eye(support.size)
-    for a in range(support.size):
-        for b in range(a + 1, support.size):
-            common = voxels.intersection_count(keys[a], keys[b])
-            union = sizes[a] + sizes[b] - common
-            iou[a, b] = iou[b, a] = common / union if union > 0 else 0.0
-    expected = iou @ probabilities[support]
+    if table is None:
+        table = PairwiseIoU(hypotheses)
+    elif table.hypotheses is not hypotheses:
+        raise ValueError("the IoU table belongs to another list of hypotheses")
+    expected = table.matrix(support) @ probabilities[support]
     return int(support[int(np.argmax(expected))])

@@ -33,6 +33,7 @@ MuJoCo is deterministic: the same joint model and actions give bit-identical res
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
@@ -525,6 +526,26 @@ class World:
 # Building
 
 
+def _mesh_asset(vertices: np.ndarray, faces: np.ndarray) -> tuple[str, bytes]:
+    """A shape's mesh as a MuJoCo binary mesh file (``.msh``: vertex, normal, texture
+    coordinate and face counts as int32, then the (V, 3) vertices as float32 and the (F, 3)
+    faces as int32) and its name, a digest of those bytes. Why: MuJoCo caches a mesh file's
+    processing (convex hull, inertia) by its name for the process, and the stability-test
+    worlds hold each neighbour's shapes again and again (each distinct shape 5-7 times in a
+    pile; docs/experiments/2026-11-27-whole-run-speed-3.md); named by its content and
+    compiled with the same settings everywhere (convex inertia, no scale), a shape is
+    processed once. The float32 vertices are what ``uservert`` stores, so the compiled model
+    is the same."""
+    vertices = np.ascontiguousarray(vertices, dtype=np.float32).reshape(-1, 3)
+    faces = np.ascontiguousarray(faces, dtype=np.int32).reshape(-1, 3)
+    payload = (
+        np.array([len(vertices), 0, 0, len(faces)], dtype=np.int32).tobytes()
+        + vertices.tobytes()
+        + faces.tobytes()
+    )
+    return f"ipr_convex_{hashlib.sha1(payload).hexdigest()}.msh", payload
+
+
 def _frame_axes(normal: np.ndarray) -> np.ndarray:
     """(3, 3) rotation whose third column is ``normal`` (unit)."""
     normal = np.asarray(normal, float) / np.linalg.norm(normal)
@@ -590,6 +611,7 @@ def build_world(
     pusher: Pusher | None = None,
     cameras: Sequence[PinholeCamera] = (),
     render_static: bool = False,
+    cached_meshes: bool = True,
 ) -> World:
     """Compile the MuJoCo world of ``bodies`` on ``planes`` (module doc).
 
@@ -601,6 +623,10 @@ def build_world(
         pusher: the robot's pusher, parked until ``World.push``.
         cameras: cameras to render from, named ``camera_<k>`` in order.
         render_static: draw the support and walls too (index -2 in ``World.render``).
+        cached_meshes: give each shape's mesh as a named asset (``_mesh_asset``), whose
+            processing MuJoCo keeps in its asset cache, so that a shape already compiled in
+            this process (in another world) is not processed again; False: as vertex lists
+            (the same compiled model, processed every time).
     """
     config = config or PhysicsConfig()
     spec = mujoco.MjSpec()
@@ -654,16 +680,22 @@ def build_world(
     # A rigid group's shapes are geoms of the body made for its first shape (``Body``).
     group_body: dict[int, tuple[Any, np.ndarray, int]] = {}
     body_of_shape = list(range(len(bodies)))
+    assets: dict[str, bytes] = {}
     for k, body in enumerate(bodies):
         vertices = np.asarray(body.vertices, float).reshape(-1, 3)
         faces = np.asarray(body.faces, np.int64).reshape(-1, 3)
         origin = vertices.mean(axis=0)
         origins[k] = origin
-        mesh = spec.add_mesh(
-            name=f"shape_{k}",
-            uservert=(vertices - origin).ravel().tolist(),
-            userface=faces.astype(np.int32).ravel().tolist(),
-        )
+        if cached_meshes:
+            asset, payload = _mesh_asset(vertices - origin, faces)
+            assets[asset] = payload
+            mesh = spec.add_mesh(name=f"shape_{k}", file=asset)
+        else:
+            mesh = spec.add_mesh(
+                name=f"shape_{k}",
+                uservert=(vertices - origin).ravel().tolist(),
+                userface=faces.astype(np.int32).ravel().tolist(),
+            )
         mesh.inertia = mujoco.mjtMeshInertia.mjMESH_INERTIA_CONVEX
         if body.dynamic and body.rigid_group >= 0 and body.rigid_group in group_body:
             parent, group_origin, body_of_shape[k] = group_body[body.rigid_group]
@@ -714,6 +746,8 @@ def build_world(
         names.append(f"camera_{number}")
         add_pinhole_camera(spec, camera, names[-1])
 
+    if assets:
+        spec.assets = assets
     model = spec.compile()
     model.body_gravcomp[:] = 0.0
     data = mujoco.MjData(model)

@@ -13,7 +13,7 @@ import numpy as np
 
 from ipr_shapes.collision_checker import CollisionCheckerConfig, uniform_posteriors
 from ipr_shapes.errors import IprError
-from ipr_shapes.factor_graph import posterior_medoid
+from ipr_shapes.factor_graph import PairwiseIoU, posterior_medoid
 from ipr_shapes.inference.config import InferenceConfig
 from ipr_shapes.inference.estimators import (
     effective_sample_size,
@@ -92,11 +92,15 @@ def infer_shapes(
         )
     config = config or InferenceConfig()
     started = time.perf_counter()
+    # The medoids' pairwise IoU, per object: the final medoid's candidates are among the
+    # Collision Checker's, whose medoid computed their pairs.
+    tables: dict[int, PairwiseIoU] = {}
     uniform = uniform_posteriors(
         prepared,
         collision_checker_config,
         np.random.default_rng([seed, 2**31]),
         math.inf if deadline is None else deadline,
+        tables,
     )
     checked = time.perf_counter()
     n = len(prepared.ids)
@@ -165,7 +169,7 @@ def infer_shapes(
                     base.object_id,
                     base.hypotheses,
                     probabilities,
-                    posterior_medoid(base.hypotheses, medoid_weight),
+                    posterior_medoid(base.hypotheses, medoid_weight, tables.get(base.object_id)),
                     base.minimum,
                     method,
                     base.generation_s,

@@ -42,6 +42,7 @@ def run_samples(
     failure: list[BaseException] = []
 
     def work() -> None:
+        prepared = False
         try:
             while not failure:
                 with lock:
@@ -51,6 +52,10 @@ def run_samples(
                 index, choice = task
                 try:
                     if choice is None:
+                        if not prepared and workers > 1:
+                            # The threads compile the stability-test worlds side by side.
+                            sampler.prepare_worlds(deadline)
+                            prepared = True
                         result = sampler.sample(index, deadline)
                     else:
                         result = sampler.score(index, choice, deadline)

@@ -78,7 +78,12 @@ class Sampler:
         self.reused = 0
         self._swept: dict[int, tuple[np.ndarray, ...]] = {}
         self._lock = threading.Lock()
+        # Stability tests under way in some thread, by cache key: another thread that needs
+        # the same test waits for it instead of running it again (``_distances``).
+        self._pending: dict[tuple, threading.Event] = {}
         self._compiled: dict[int, _ObjectWorld] = {}
+        # Object worlds being compiled, by object: another thread waits for them.
+        self._compiling: dict[int, threading.Event] = {}
         self._centroids: dict[tuple[int, int], np.ndarray | None] = {}
         self._alone: dict[tuple[int, int], float | None] = {}
         self._walls = wall_boxes(problem.planes, problem.config.physics)
@@ -99,37 +104,80 @@ class Sampler:
 
     def _object_world(self, i: int) -> _ObjectWorld:
         """Object i's stability-test world for this thread (module doc, step 1): compiled once
-        per sampler with every shape its neighbours can take (each candidate and the minimum)
-        as static geometry switched on and off per context, and its candidates as switchable
-        transparent bodies; each thread simulates its own copy of the compiled model."""
+        per sampler (``_compile_world``), each thread simulating its own copy of the compiled
+        model."""
         local = self._thread_state()
         if i in local.worlds:
             return local.worlds[i]
-        with self._lock:
-            compiled = self._compiled.get(i)
-            if compiled is None:
-                problem = self.problem
-                options, bodies = {}, []
-                for k in problem.neighbours[i]:
-                    for j, shape in (*enumerate(problem.candidates[k]), (-1, problem.minima[k])):
-                        options[(k, j)] = len(bodies)
-                        bodies.append(Body(shape.vertices, shape.faces, dynamic=False))
-                first = len(bodies)
-                bodies += [
-                    Body(h.vertices, h.faces, candidate=True, switchable=True)
-                    for h in problem.candidates[i]
-                ]
-                world = build_world(bodies, problem.planes, problem.config.physics)
-                # The switched-off shapes stay in the static bodies' collision tree; without
-                # it (the same contacts) a step costs what it does in a world of the context
-                # alone (docs/experiments/2026-11-26-sampling-throughput.md).
-                world.model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_MIDPHASE
-                compiled = self._compiled[i] = _ObjectWorld(world, options, first)
+        compiled = self._compiled_world(i)
         world = compiled.world
         own = dataclasses.replace(world, model=copy.copy(world.model))
         own.data = mujoco.MjData(own.model)
         local.worlds[i] = _ObjectWorld(own, compiled.options, compiled.first)
         return local.worlds[i]
+
+    def _compiled_world(self, i: int, wait: bool = True) -> _ObjectWorld | None:
+        """Object i's compiled world: compiled here unless another thread compiles it, whose
+        world is then waited for (``wait``) or None returned at once (not ``wait``)."""
+        while True:
+            with self._lock:
+                compiled = self._compiled.get(i)
+                if compiled is not None:
+                    return compiled
+                running = self._compiling.get(i)
+                if running is None:
+                    running = self._compiling[i] = threading.Event()
+                    break
+            if not wait:
+                return None
+            running.wait()
+        try:
+            compiled = self._compile_world(i)
+            with self._lock:
+                self._compiled[i] = compiled
+            return compiled
+        finally:
+            with self._lock:
+                self._compiling.pop(i).set()
+
+    def _compile_world(self, i: int) -> _ObjectWorld:
+        """Compile object i's world: every shape its neighbours can take (each candidate and
+        the minimum) as static geometry switched on and off per context, and its candidates
+        as switchable transparent bodies. MuJoCo releases the GIL while it compiles, so two
+        threads compile two objects' worlds at once (``prepare_worlds``)."""
+        problem = self.problem
+        options, bodies = {}, []
+        for k in problem.neighbours[i]:
+            for j, shape in (*enumerate(problem.candidates[k]), (-1, problem.minima[k])):
+                options[(k, j)] = len(bodies)
+                bodies.append(Body(shape.vertices, shape.faces, dynamic=False))
+        first = len(bodies)
+        bodies += [
+            Body(h.vertices, h.faces, candidate=True, switchable=True)
+            for h in problem.candidates[i]
+        ]
+        world = build_world(bodies, problem.planes, problem.config.physics)
+        # The switched-off shapes stay in the static bodies' collision tree; without it (the
+        # same contacts) a step costs what it does in a world of the context alone
+        # (docs/experiments/2026-11-26-sampling-throughput.md).
+        world.model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_MIDPHASE
+        return _ObjectWorld(world, options, first)
+
+    def prepare_worlds(self, deadline: float = math.inf) -> None:
+        """Compile the objects' stability-test worlds not yet compiled or being compiled by
+        another thread, the most candidates first (the order of the first stage's tests),
+        until none is left or ``deadline`` (``time.perf_counter()``) passes. Each sampling
+        thread calls it before its first tree sample: the threads then compile different
+        worlds at once, where the first sample's tests would have asked for them one after
+        the other, the other thread waiting (the same worlds: each is compiled once, from the
+        problem alone). Not for the "uniform" proposal, which runs no stability test."""
+        if self.problem.config.proposal != "tree":
+            return
+        candidates = self.problem.candidates
+        for i in sorted(range(self.problem.count), key=lambda i: (-len(candidates[i]), i)):
+            if time.perf_counter() >= deadline:
+                return
+            self._compiled_world(i, wait=False)
 
     def _centroid(self, i: int, j: int) -> np.ndarray | None:
         key = (i, j)
@@ -186,11 +234,35 @@ class Sampler:
         problem = self.problem
         context = tuple((k, placed.get(k, -1)) for k in problem.neighbours[i])
         key = (i, context)
-        cached = self.cache.get(key)
-        if cached is not None:
-            return cached
-        if time.perf_counter() > deadline:
-            raise _Deadline
+        while True:
+            cached = self.cache.get(key)
+            if cached is not None:
+                return cached
+            if time.perf_counter() > deadline:
+                raise _Deadline
+            with self._lock:
+                cached = self.cache.get(key)  # cached before its test left ``_pending``
+                if cached is not None:
+                    return cached
+                running = self._pending.get(key)
+                if running is None:
+                    running = self._pending[key] = threading.Event()
+                    break
+            # Another thread runs this very test (two threads start from the same first
+            # stage): its result, once cached; the deadline (checked above), else.
+            left = deadline - time.perf_counter()
+            running.wait(None if math.isinf(left) else max(left, 0.0))
+        try:
+            return self._test(i, context, deadline)
+        finally:
+            with self._lock:
+                self._pending.pop(key).set()
+
+    def _test(self, i: int, context: tuple[tuple[int, int], ...], deadline: float) -> np.ndarray:
+        """``_distances`` of object i in ``context`` (the neighbours' choices), computed and
+        cached (one thread per key at a time)."""
+        problem = self.problem
+        key = (i, context)
         candidates = problem.candidates[i]
         distances = self._screen(i, context)
         simulate = np.flatnonzero(np.isnan(distances))
