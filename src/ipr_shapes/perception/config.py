@@ -646,6 +646,12 @@ class SeamsConfig:
             then join the pieces they face. False: an undone seam's piece joins the one piece
             it faces most, and nothing is cut across kept seams.
         max_cuts: most cuts per segment (bounds the time on a textured segment).
+        settled: in frames after the first (with ``temporal.anchoring``), a segment that is
+            mostly (``temporal.static_fraction`` of its pixels) supervoxels anchored to one
+            previous segment that stayed is not searched: the previous frame decided its seams
+            on the same unmoved surface. Without it a printed line that one frame's pass missed
+            and the next found (the potted meat can's label, dev 8100) cuts an unmoved object,
+            and the tracker carries the cut back to the earlier frames.
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -679,6 +685,7 @@ class SeamsConfig:
     rows_of_three: bool = True
     hysteresis: bool = True
     extend_planes: bool = True
+    settled: bool = True
 
     def __post_init__(self) -> None:
         check_fields(self)

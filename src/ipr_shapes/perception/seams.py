@@ -103,6 +103,7 @@ def cut_colour_seams(
     depth_m: np.ndarray,
     K: np.ndarray,
     config: PerceptionConfig,
+    settled: np.ndarray | None = None,
 ) -> np.ndarray:
     """Labels (H, W) int32 with segments cut along colour seams (module doc); new pieces take
     new ids above the largest one (renumbering is the caller's).
@@ -111,6 +112,9 @@ def cut_colour_seams(
         labels: (H, W) int segment labels, 0 = none; rgb: (H, W, 3) uint8;
         points: (H, W, 3) world points (m); normals: (H, W, 3) unit normals in the world frame,
             0 where unknown; depth_m: (H, W) depth (m, 0 = none); K: (3, 3) intrinsics.
+        settled: (labels.max() + 1,) bool, segments not searched (kept whole: unmoved since
+            the previous frame, which decided their seams; ``segmentation.settled_segments``),
+            or None (all searched). They still count as faces for ``seams.pair_sizes``.
     """
     seams = config.seams
     out = labels.astype(np.int32, copy=True)
@@ -145,6 +149,9 @@ def cut_colour_seams(
         right = min(box[1].stop + _MARGIN_PX, labels.shape[1])
         crop = (slice(top, bottom), slice(left, right))
         mask = labels[crop] == segment
+        if settled is not None and segment < len(settled) and settled[segment]:
+            searched.append((crop, mask, mask.astype(np.int32), [], np.empty((0, 3)), []))
+            continue
         cut, found = _search_segment(mask, edges[crop], direction[crop], points[crop],
                                      normals[crop], depth_m[crop], focal_px, config)  # fmt: skip
         # The segment's points with depth, and which seams have flat strips: measured once,
