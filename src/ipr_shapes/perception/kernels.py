@@ -1385,6 +1385,84 @@ def count_key_states(
 
 
 @_jit
+def erode_diamond(mask: np.ndarray, radius: int) -> np.ndarray:
+    """(h, w) bool: the pixels of ``mask`` whose every pixel within city-block distance
+    ``radius`` lies inside the grid and in ``mask``: ``scipy.ndimage.binary_erosion(mask,
+    iterations=radius)`` (its default cross, border 0), whose iterated crosses are that
+    diamond. One pass with a row's run of ``mask`` pixels (the seams' ``_best_cut``, once per
+    search)."""
+    height, width = mask.shape
+    # Each pixel's run of mask pixels to its left and right (inclusive), so that a row span
+    # [c - k, c + k] is inside when both runs reach k.
+    left = np.zeros((height, width), dtype=np.int64)
+    right = np.zeros((height, width), dtype=np.int64)
+    for r in range(height):
+        run = 0
+        for c in range(width):
+            run = run + 1 if mask[r, c] else 0
+            left[r, c] = run
+        run = 0
+        for c in range(width - 1, -1, -1):
+            run = run + 1 if mask[r, c] else 0
+            right[r, c] = run
+    out = np.zeros((height, width), dtype=np.bool_)
+    for r in range(radius, height - radius):
+        for c in range(radius, width - radius):
+            if not mask[r, c]:
+                continue
+            inside = True
+            for dr in range(-radius, radius + 1):
+                k = radius - abs(dr)
+                if left[r + dr, c] <= k or right[r + dr, c] <= k:
+                    inside = False
+                    break
+            out[r, c] = inside
+    return out
+
+
+@_jit
+def label_four_connected(mask: np.ndarray):
+    """(h, w) int32 labels of the 4-connected components of the (h, w) bool ``mask`` (0
+    outside) and their count: ``scipy.ndimage.label(mask)`` (its default cross structure), the
+    components numbered 1.. in the order of their first pixel in row-major order, as scipy
+    numbers them. One flood fill per component instead of scipy's two passes and its
+    set-up per call: the seams' ``_split`` labels the pieces of every candidate cut."""
+    height, width = mask.shape
+    labels = np.zeros((height, width), dtype=np.int32)
+    stack = np.empty(height * width, dtype=np.int64)
+    count = 0
+    for r0 in range(height):
+        for c0 in range(width):
+            if not mask[r0, c0] or labels[r0, c0] != 0:
+                continue
+            count += 1
+            labels[r0, c0] = count
+            top = 0
+            stack[0] = r0 * width + c0
+            top = 1
+            while top > 0:
+                top -= 1
+                r, c = divmod(stack[top], width)
+                if r > 0 and mask[r - 1, c] and labels[r - 1, c] == 0:
+                    labels[r - 1, c] = count
+                    stack[top] = (r - 1) * width + c
+                    top += 1
+                if r + 1 < height and mask[r + 1, c] and labels[r + 1, c] == 0:
+                    labels[r + 1, c] = count
+                    stack[top] = (r + 1) * width + c
+                    top += 1
+                if c > 0 and mask[r, c - 1] and labels[r, c - 1] == 0:
+                    labels[r, c - 1] = count
+                    stack[top] = r * width + c - 1
+                    top += 1
+                if c + 1 < width and mask[r, c + 1] and labels[r, c + 1] == 0:
+                    labels[r, c + 1] = count
+                    stack[top] = r * width + c + 1
+                    top += 1
+    return labels, count
+
+
+@_jit
 def largest_inscribed_squared(inside: np.ndarray, occupied: np.ndarray) -> int:
     """The largest squared Euclidean distance (px^2, exact integer) from a pixel of ``inside``
     to the nearest pixel of the (h, w) bool grid that is not ``occupied``: the square of

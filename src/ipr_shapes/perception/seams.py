@@ -121,6 +121,25 @@ def cut_colour_seams(
     segment_pixels = labels > 0
     if not seams.enabled or not segment_pixels.any():
         return out
+    focal_px = float(K[0, 0])
+    # The segments to search: not settled, and with room for two pieces of the smallest area
+    # (``_search_segment``'s own first test). A frame with none needs no edges at all.
+    segments = []
+    for segment, box in enumerate(ndimage.find_objects(labels), start=1):
+        if box is None:
+            continue
+        top = max(box[0].start - _MARGIN_PX, 0)
+        bottom = min(box[0].stop + _MARGIN_PX, labels.shape[0])
+        left = max(box[1].start - _MARGIN_PX, 0)
+        right = min(box[1].stop + _MARGIN_PX, labels.shape[1])
+        crop = (slice(top, bottom), slice(left, right))
+        mask = labels[crop] == segment
+        search = not (settled is not None and segment < len(settled) and settled[segment])
+        if search and _area_m2(mask, depth_m[crop], focal_px) < 2 * seams.min_area_m2:
+            search = False
+        segments.append((crop, mask, search))
+    if not any(search for *_, search in segments):
+        return out
     magnitude, gx, gy = _colour_gradient(rgb)
     # The frame's own scale, over every pixel with depth: not over the segments, whose
     # share of smooth surfaces depends on what the earlier steps removed (a bin's walls).
@@ -138,18 +157,10 @@ def cut_colour_seams(
         near = ndimage.binary_dilation(segment_pixels, iterations=3)
         low = 0.5 * seams.edge_factor * max(noise, 1e-6)
         edges = _linked_edges(magnitude, gx, gy, direction, edges, low, near)
-    focal_px = float(K[0, 0])
     searched = []
-    for segment, box in enumerate(ndimage.find_objects(labels), start=1):
-        if box is None:
-            continue
-        top = max(box[0].start - _MARGIN_PX, 0)
-        bottom = min(box[0].stop + _MARGIN_PX, labels.shape[0])
-        left = max(box[1].start - _MARGIN_PX, 0)
-        right = min(box[1].stop + _MARGIN_PX, labels.shape[1])
-        crop = (slice(top, bottom), slice(left, right))
-        mask = labels[crop] == segment
-        if settled is not None and segment < len(settled) and settled[segment]:
+    for crop, mask, search in segments:
+        if not search:
+            # Kept whole; still a face for the pairs' sizes (``_pairs_by_size``).
             searched.append((crop, mask, mask.astype(np.int32), [], np.empty((0, 3)), []))
             continue
         cut, found = _search_segment(mask, edges[crop], direction[crop], points[crop],
@@ -850,7 +861,8 @@ def _best_cut(
     # stay the crop's, so that the votes are the crop's).
     window = _window(part, part.shape)
     top_px, left_px = window[0].start, window[1].start
-    inner = ndimage.binary_erosion(part[window], iterations=2)
+    # Compiled: ``ndimage.binary_erosion(part[window], iterations=2)``.
+    inner = kernels.erode_diamond(part[window], 2)
     rows, cols = np.nonzero(edges[window] & inner)
     if len(rows) < 20:
         return None
@@ -1036,7 +1048,8 @@ def _split(
     inside = (r >= 0) & (r < sub.shape[0]) & (c >= 0) & (c < sub.shape[1])
     seam[r[inside], c[inside]] = True
     seam &= sub
-    pieces, count = ndimage.label(sub & ~seam)
+    # Compiled: ``ndimage.label(sub & ~seam)``'s labels and count (4-connected).
+    pieces, count = kernels.label_four_connected(sub & ~seam)
     if count < 2:
         return None
     sizes = np.bincount(pieces.ravel())[1:]
@@ -1081,8 +1094,11 @@ def _area_m2(part: np.ndarray, depth_m: np.ndarray, focal_px: float) -> float:
     """Area (m^2) of the pixels of ``part``, each a (depth / focal)^2 square (pixels without
     depth take the median depth of the others)."""
     depths = depth_m[part]
-    known = depths[depths > 0]
+    has_depth = depths > 0
+    if has_depth.all():  # nothing to fill: the median would not be used
+        return float(np.sum(depths**2)) / focal_px**2
+    known = depths[has_depth]
     if known.size == 0:
         return 0.0
-    filled = np.where(depths > 0, depths, np.median(known))
+    filled = np.where(has_depth, depths, np.median(known))
     return float(np.sum(filled**2)) / focal_px**2
