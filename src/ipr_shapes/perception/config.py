@@ -589,13 +589,11 @@ class SeamsConfig:
     (``ipr_shapes.perception.seams``): packed boxes of one height whose coplanar tops the convexity
     graph cannot tell apart.
 
-    Off by default for its time, not its accuracy: on the development sets it changes no scene
-    (docs/experiments/2026-11-26-packed-boxes.md), but with it on the perception costs 1.4-1.9
-    times as much CPU per tabletop frame and about 4 times per bin frame (about 680 ms on a
-    loaded machine; docs/experiments/2026-11-26-seams-speed.md), against a 150 ms budget,
-    and the hysteresis edges add 1.3-1.8 times to the pass
-    (docs/experiments/2026-11-27-bins-faint-seams.md). Turn it on for packed boxes (bin
-    picking).
+    Off by default for its time, not its accuracy: with it on, every development, container
+    and tabletop set scores as with it off (bins-real 28.6 -> 55.5 %), but the perception costs
+    1.3-1.9 times as much CPU per tabletop frame (142-271 ms) and about 5 times per bin frame
+    (about 800 ms), against a 150 ms budget (docs/experiments/2026-11-27-seams-default.md).
+    Turn it on for packed boxes (bin picking).
 
     Attributes:
         enabled: cut segments along seams (False: labels as the graph gives them).

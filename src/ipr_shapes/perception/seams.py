@@ -31,6 +31,9 @@ object's own lines whole:
   lies between seams (a grid of boxes) or its strips have the size of a flat rectangular
   face seen elsewhere in the frame (packed boxes repeat; ``seams.pair_needs_grid``,
   ``seams.pair_sizes``);
+- **decided once per unmoved surface**: in frames after the first, a segment that is an
+  unmoved segment of the previous frame (``seams.settled``,
+  ``segmentation.settled_segments``) is not searched: the previous frame decided its seams;
 - **planes across the other faces**: a seam between two boxes goes on as a plane (its 3D line
   and the surface normal) across the boxes' other faces, where the colour edge bends over a
   crease or fades; a piece facing several pieces across a seam, with kept seams between them,
