@@ -571,3 +571,24 @@ def test_the_seams_pixel_kernels_are_scipys():
         for radius in (1, 2, 3):
             eroded = kernels.erode_diamond(mask, radius)
             assert np.array_equal(eroded, ndimage.binary_erosion(mask, iterations=radius))
+
+
+def test_the_compiled_thinning_is_the_numpy_one():
+    """Exact, rounding ties included (directions at odd multiples of 22.5 degrees)."""
+    from ipr_shapes.perception.seams import _thin, _thin_numpy
+
+    rng = np.random.default_rng(6)
+    quarter = np.float32(np.pi / 4)
+    for trial in range(200):
+        height, width = rng.integers(1, 30, 2)
+        magnitude = rng.random((height, width)).astype(np.float32)
+        if trial % 3 == 0:
+            magnitude = np.round(magnitude * 4).astype(np.float32) / 4  # equal neighbours
+        direction = rng.uniform(-np.pi, np.pi, (height, width)).astype(np.float32)
+        if trial % 2 == 0:
+            halves = (rng.integers(-8, 9, (height, width)) / 2).astype(np.float32)
+            direction = quarter * halves  # float32: direction / quarter is exactly the halves
+        at = np.flatnonzero(rng.random(height * width) < 0.6)
+        assert np.array_equal(
+            _thin(magnitude, direction, at), _thin_numpy(magnitude, direction, at)
+        )

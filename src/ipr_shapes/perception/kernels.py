@@ -1385,6 +1385,46 @@ def count_key_states(
 
 
 @_jit
+def thin_edges(magnitude: np.ndarray, direction: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """(H, W) bool: of the pixels ``at`` (int64 flat indices into the (H, W) float32
+    ``magnitude``), those whose magnitude is at least that of both neighbours across the edge
+    (Canny's non-maximum suppression), the gradient ``direction`` ((H, W) float32, rad)
+    quantised to 45 degrees as ``np.round(direction / (np.pi / 4)) % 4`` in float32
+    (half to even), neighbours outside the image 0. The seams' ``_thin`` without its
+    temporaries (every frame, strong and faint pixels)."""
+    height, width = magnitude.shape
+    edges = np.zeros((height, width), dtype=np.bool_)
+    quarter = np.float32(np.pi / 4)
+    for k in range(at.shape[0]):
+        index = at[k]
+        r = index // width
+        c = index - r * width
+        q = np.float64(np.float32(direction[r, c]) / quarter)
+        rounded = np.floor(q + 0.5)
+        if q + 0.5 == rounded and rounded % 2.0 != 0.0:
+            rounded -= 1.0  # half to even, as np.round
+        sector = int(rounded % 4.0)
+        if sector == 0:
+            dy, dx = 0, 1
+        elif sector == 1:
+            dy, dx = 1, 1
+        elif sector == 2:
+            dy, dx = 1, 0
+        else:
+            dy, dx = 1, -1
+        value = magnitude[r, c]
+        ahead = np.float32(0.0)
+        if 0 <= r + dy < height and 0 <= c + dx < width:
+            ahead = magnitude[r + dy, c + dx]
+        behind = np.float32(0.0)
+        if 0 <= r - dy < height and 0 <= c - dx < width:
+            behind = magnitude[r - dy, c - dx]
+        if value >= ahead and value >= behind:
+            edges[r, c] = True
+    return edges
+
+
+@_jit
 def erode_diamond(mask: np.ndarray, radius: int) -> np.ndarray:
     """(h, w) bool: the pixels of ``mask`` whose every pixel within city-block distance
     ``radius`` lies inside the grid and in ``mask``: ``scipy.ndimage.binary_erosion(mask,

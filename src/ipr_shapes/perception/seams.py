@@ -433,7 +433,12 @@ def _linked_edges(
 def _thin(magnitude: np.ndarray, direction: np.ndarray, at: np.ndarray) -> np.ndarray:
     """(H, W) bool: of the pixels ``at`` (flat indices), those whose gradient magnitude is a
     maximum across the edge (Canny's non-maximum suppression, directions quantised to 45
-    degrees)."""
+    degrees). Compiled (``kernels.thin_edges``; ``_thin_numpy`` is its reference)."""
+    return kernels.thin_edges(magnitude, direction, np.asarray(at, dtype=np.int64))
+
+
+def _thin_numpy(magnitude: np.ndarray, direction: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """``_thin`` in numpy: the compiled kernel's reference (``tests/test_seams.py``)."""
     height, width = magnitude.shape
     sector = (np.round(direction.flat[at] / (np.pi / 4)) % 4).astype(np.int8)
     padded = np.pad(magnitude, 1)
