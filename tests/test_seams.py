@@ -571,6 +571,9 @@ def test_the_seams_pixel_kernels_are_scipys():
         for radius in (1, 2, 3):
             eroded = kernels.erode_diamond(mask, radius)
             assert np.array_equal(eroded, ndimage.binary_erosion(mask, iterations=radius))
+            sparse = mask & (rng.random(mask.shape) < 0.05)
+            dilated = kernels.dilate_diamond(sparse, radius)
+            assert np.array_equal(dilated, ndimage.binary_dilation(sparse, iterations=radius))
 
 
 def test_the_compiled_thinning_is_the_numpy_one():
@@ -592,3 +595,21 @@ def test_the_compiled_thinning_is_the_numpy_one():
         assert np.array_equal(
             _thin(magnitude, direction, at), _thin_numpy(magnitude, direction, at)
         )
+
+
+def test_linked_pixels_are_the_components_that_hold_a_seed():
+    """Exact: scipy's 8-connected components of ``pixels`` that hold a seed pixel."""
+    from scipy import ndimage
+
+    from ipr_shapes.perception import kernels
+
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        shape = tuple(rng.integers(1, 40, 2))
+        pixels = rng.random(shape) < rng.uniform(0.1, 0.6)
+        seeds = rng.random(shape) < 0.05
+        parts, count = ndimage.label(pixels, np.ones((3, 3), dtype=bool))
+        holds = np.zeros(count + 1, dtype=bool)
+        holds[parts[seeds]] = True
+        holds[0] = False
+        assert np.array_equal(kernels.linked_to(pixels, seeds), holds[parts])

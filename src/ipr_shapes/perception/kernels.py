@@ -1425,6 +1425,69 @@ def thin_edges(magnitude: np.ndarray, direction: np.ndarray, at: np.ndarray) -> 
 
 
 @_jit
+def linked_to(pixels: np.ndarray, seeds: np.ndarray) -> np.ndarray:
+    """(H, W) bool: the pixels of the (H, W) bool ``pixels`` 8-connected through ``pixels`` to
+    a pixel of ``seeds`` ((H, W) bool) that is in ``pixels``: the union of the components of
+    ``scipy.ndimage.label(pixels, np.ones((3, 3)))`` that hold a seed, by one flood fill from
+    the seeds instead of labelling the whole frame (Canny's hysteresis in the seams)."""
+    height, width = pixels.shape
+    reached = np.zeros((height, width), dtype=np.bool_)
+    stack = np.empty(height * width, dtype=np.int64)
+    top = 0
+    for r in range(height):
+        for c in range(width):
+            if seeds[r, c] and pixels[r, c] and not reached[r, c]:
+                reached[r, c] = True
+                stack[top] = r * width + c
+                top += 1
+    while top > 0:
+        top -= 1
+        r = stack[top] // width
+        c = stack[top] - r * width
+        for dr in range(-1, 2):
+            for dc in range(-1, 2):
+                rr, cc = r + dr, c + dc
+                if 0 <= rr < height and 0 <= cc < width and pixels[rr, cc] and not reached[rr, cc]:
+                    reached[rr, cc] = True
+                    stack[top] = rr * width + cc
+                    top += 1
+    return reached
+
+
+@_jit
+def dilate_diamond(mask: np.ndarray, radius: int) -> np.ndarray:
+    """(H, W) bool: the pixels within city-block distance ``radius`` of a pixel of ``mask``:
+    ``scipy.ndimage.binary_dilation(mask, iterations=radius)`` (its default cross, border 0),
+    by the two-pass city-block distance transform (the seams' ring around the segments, every
+    frame)."""
+    height, width = mask.shape
+    far = height + width + radius + 1
+    distance = np.empty((height, width), dtype=np.int64)
+    for r in range(height):
+        for c in range(width):
+            if mask[r, c]:
+                distance[r, c] = 0
+            else:
+                best = far
+                if r > 0 and distance[r - 1, c] + 1 < best:
+                    best = distance[r - 1, c] + 1
+                if c > 0 and distance[r, c - 1] + 1 < best:
+                    best = distance[r, c - 1] + 1
+                distance[r, c] = best
+    out = np.zeros((height, width), dtype=np.bool_)
+    for r in range(height - 1, -1, -1):
+        for c in range(width - 1, -1, -1):
+            best = distance[r, c]
+            if r + 1 < height and distance[r + 1, c] + 1 < best:
+                best = distance[r + 1, c] + 1
+            if c + 1 < width and distance[r, c + 1] + 1 < best:
+                best = distance[r, c + 1] + 1
+            distance[r, c] = best
+            out[r, c] = best <= radius
+    return out
+
+
+@_jit
 def erode_diamond(mask: np.ndarray, radius: int) -> np.ndarray:
     """(h, w) bool: the pixels of ``mask`` whose every pixel within city-block distance
     ``radius`` lies inside the grid and in ``mask``: ``scipy.ndimage.binary_erosion(mask,
