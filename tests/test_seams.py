@@ -500,3 +500,116 @@ def test_a_lone_seam_needs_both_strips_of_one_pair_elsewhere_to_match_both_ways(
     # A face of the strips' size still suffices alone.
     faces = np.array([[0.1, 0.031]])
     assert _sized_like(seam, (0.03, 0.03), _Sizes(lambda: (faces, np.zeros((0, 2, 2)))), ON)
+
+
+def test_an_unmoved_segment_keeps_the_previous_frames_seams():
+    """A seam the previous frame did not cut does not cut the same unmoved surface now (a
+    printed line that one frame's pass missed and the next found), but it does cut a surface
+    that moved, and every surface with ``seams.settled`` off."""
+    plain = two_boxes(lambda points: np.zeros(len(points), dtype=bool))
+    first = segment_frame(plain, config=PAIRS)
+    a, b = centres(first.labels, plain)
+    assert a > 0 and a == b  # no edge, no seam: one segment
+    still = two_boxes(gap_between)
+    still = Frame(1, still.rgb, still.depth_m, still.K, still.world_from_camera)
+    a, b = centres(segment_frame(still, config=PAIRS, previous=(plain, first)).labels, still)
+    assert a > 0 and a == b
+    unsettled = replace(PAIRS, seams=replace(PAIRS.seams, settled=False))
+    a, b = centres(segment_frame(still, config=unsettled, previous=(plain, first)).labels, still)
+    assert a > 0 and b > 0 and a != b
+    # The same two boxes moved 15 cm along x, off their old place (a top slid by less would
+    # leave pixels at an unchanged depth): the seam is searched.
+    boxes = [box(0.15, -0.05, (0.1, 0.1, TOP)), box(0.15, 0.05, (0.1, 0.1, TOP))]
+    moved = painted(render(camera(), boxes, noise_m=0.0005), gap_between)
+    moved = Frame(1, moved.rgb, moved.depth_m, moved.K, moved.world_from_camera)
+    labels = segment_frame(moved, config=PAIRS, previous=(plain, first)).labels
+    a = segment_of_point(moved, labels, [0.15, -0.05, TOP])
+    b = segment_of_point(moved, labels, [0.15, 0.05, TOP])
+    assert a > 0 and b > 0 and a != b
+
+
+def test_settled_segments_are_those_mostly_anchored_to_one_previous_segment():
+    """A segment is settled when at least ``temporal.static_fraction`` of its pixels lie in
+    supervoxels anchored to one previous segment (two previous segments' anchors do not add
+    up), never the background."""
+    from ipr_shapes.perception.segmentation import settled_segments
+    from ipr_shapes.perception.temporal import SupervoxelChange
+    from ipr_shapes.perception.types import Supervoxels
+
+    labels = np.zeros((4, 10), dtype=np.int32)
+    labels[:, 0:5] = 1
+    labels[:, 5:10] = 2
+    # Supervoxels: columns in pairs (0-1, 2-3, ...), 5 of them; -1 none.
+    voxel = np.repeat(np.arange(5), 2)[None, :].repeat(4, axis=0).astype(np.int32)
+    # Segment 1: columns 0-3 anchored to previous segment 7 (80 %), column 4 free (voxel 2).
+    # Segment 2: column 5 free, 6-7 anchored to 8, 8-9 to 9: 80 % anchored, 40 % to one.
+    anchor = np.array([7, 7, 0, 8, 9], dtype=np.int32)
+    change = SupervoxelChange(anchor, np.zeros(5, np.int64), np.zeros(5, np.int64))
+    supervoxels = Supervoxels(voxel, np.zeros((5, 3)), np.zeros((5, 3)), np.zeros((5, 3)),
+                              np.full(5, 8), np.zeros((0, 2), dtype=np.int64))  # fmt: skip
+    config = PerceptionConfig()
+    for fraction, expected in ((0.75, [False, True, False]), (0.85, [False, False, False])):
+        temporal = replace(config.temporal, static_fraction=fraction)
+        settled = settled_segments(labels, supervoxels, change, replace(config, temporal=temporal))
+        assert settled.tolist() == expected
+
+
+def test_the_seams_pixel_kernels_are_scipys():
+    """Exact: the components (numbered as scipy numbers them) and the erosion of the search."""
+    from scipy import ndimage
+
+    from ipr_shapes.perception import kernels
+
+    rng = np.random.default_rng(5)
+    for trial in range(300):
+        mask = rng.random(tuple(rng.integers(1, 30, 2))) < rng.uniform(0.3, 1.0)
+        if trial % 5 == 0:
+            mask[:] = True
+        labels, count = kernels.label_four_connected(mask)
+        expected, expected_count = ndimage.label(mask)
+        assert count == expected_count and np.array_equal(labels, expected)
+        for radius in (1, 2, 3):
+            eroded = kernels.erode_diamond(mask, radius)
+            assert np.array_equal(eroded, ndimage.binary_erosion(mask, iterations=radius))
+            sparse = mask & (rng.random(mask.shape) < 0.05)
+            dilated = kernels.dilate_diamond(sparse, radius)
+            assert np.array_equal(dilated, ndimage.binary_dilation(sparse, iterations=radius))
+
+
+def test_the_compiled_thinning_is_the_numpy_one():
+    """Exact, rounding ties included (directions at odd multiples of 22.5 degrees)."""
+    from ipr_shapes.perception.seams import _thin, _thin_numpy
+
+    rng = np.random.default_rng(6)
+    quarter = np.float32(np.pi / 4)
+    for trial in range(200):
+        height, width = rng.integers(1, 30, 2)
+        magnitude = rng.random((height, width)).astype(np.float32)
+        if trial % 3 == 0:
+            magnitude = np.round(magnitude * 4).astype(np.float32) / 4  # equal neighbours
+        direction = rng.uniform(-np.pi, np.pi, (height, width)).astype(np.float32)
+        if trial % 2 == 0:
+            halves = (rng.integers(-8, 9, (height, width)) / 2).astype(np.float32)
+            direction = quarter * halves  # float32: direction / quarter is exactly the halves
+        at = np.flatnonzero(rng.random(height * width) < 0.6)
+        assert np.array_equal(
+            _thin(magnitude, direction, at), _thin_numpy(magnitude, direction, at)
+        )
+
+
+def test_linked_pixels_are_the_components_that_hold_a_seed():
+    """Exact: scipy's 8-connected components of ``pixels`` that hold a seed pixel."""
+    from scipy import ndimage
+
+    from ipr_shapes.perception import kernels
+
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        shape = tuple(rng.integers(1, 40, 2))
+        pixels = rng.random(shape) < rng.uniform(0.1, 0.6)
+        seeds = rng.random(shape) < 0.05
+        parts, count = ndimage.label(pixels, np.ones((3, 3), dtype=bool))
+        holds = np.zeros(count + 1, dtype=bool)
+        holds[parts[seeds]] = True
+        holds[0] = False
+        assert np.array_equal(kernels.linked_to(pixels, seeds), holds[parts])

@@ -589,13 +589,11 @@ class SeamsConfig:
     (``ipr_shapes.perception.seams``): packed boxes of one height whose coplanar tops the convexity
     graph cannot tell apart.
 
-    Off by default for its time, not its accuracy: on the development sets it changes no scene
-    (docs/experiments/2026-11-26-packed-boxes.md), but with it on the perception costs 1.4-1.9
-    times as much CPU per tabletop frame and about 4 times per bin frame (about 680 ms on a
-    loaded machine; docs/experiments/2026-11-26-seams-speed.md), against a 150 ms budget,
-    and the hysteresis edges add 1.3-1.8 times to the pass
-    (docs/experiments/2026-11-27-bins-faint-seams.md). Turn it on for packed boxes (bin
-    picking).
+    Off by default for its time, not its accuracy: with it on, every development, container
+    and tabletop set scores as with it off (bins-real 28.6 -> 55.5 %), but the perception costs
+    1.2-1.7 times as much CPU per tabletop frame (129-245 ms) and about 4.5 times per bin frame
+    (about 750 ms), against a 150 ms budget (docs/experiments/2026-11-27-seams-default.md).
+    Turn it on for packed boxes (bin picking).
 
     Attributes:
         enabled: cut segments along seams (False: labels as the graph gives them).
@@ -646,6 +644,12 @@ class SeamsConfig:
             then join the pieces they face. False: an undone seam's piece joins the one piece
             it faces most, and nothing is cut across kept seams.
         max_cuts: most cuts per segment (bounds the time on a textured segment).
+        settled: in frames after the first (with ``temporal.anchoring``), a segment that is
+            mostly (``temporal.static_fraction`` of its pixels) supervoxels anchored to one
+            previous segment that stayed is not searched: the previous frame decided its seams
+            on the same unmoved surface. Without it a printed line that one frame's pass missed
+            and the next found (the potted meat can's label, dev 8100) cuts an unmoved object,
+            and the tracker carries the cut back to the earlier frames.
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -679,6 +683,7 @@ class SeamsConfig:
     rows_of_three: bool = True
     hysteresis: bool = True
     extend_planes: bool = True
+    settled: bool = True
 
     def __post_init__(self) -> None:
         check_fields(self)

@@ -1385,6 +1385,187 @@ def count_key_states(
 
 
 @_jit
+def thin_edges(magnitude: np.ndarray, direction: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """(H, W) bool: of the pixels ``at`` (int64 flat indices into the (H, W) float32
+    ``magnitude``), those whose magnitude is at least that of both neighbours across the edge
+    (Canny's non-maximum suppression), the gradient ``direction`` ((H, W) float32, rad)
+    quantised to 45 degrees as ``np.round(direction / (np.pi / 4)) % 4`` in float32
+    (half to even), neighbours outside the image 0. The seams' ``_thin`` without its
+    temporaries (every frame, strong and faint pixels)."""
+    height, width = magnitude.shape
+    edges = np.zeros((height, width), dtype=np.bool_)
+    quarter = np.float32(np.pi / 4)
+    for k in range(at.shape[0]):
+        index = at[k]
+        r = index // width
+        c = index - r * width
+        q = np.float64(np.float32(direction[r, c]) / quarter)
+        rounded = np.floor(q + 0.5)
+        if q + 0.5 == rounded and rounded % 2.0 != 0.0:
+            rounded -= 1.0  # half to even, as np.round
+        sector = int(rounded % 4.0)
+        if sector == 0:
+            dy, dx = 0, 1
+        elif sector == 1:
+            dy, dx = 1, 1
+        elif sector == 2:
+            dy, dx = 1, 0
+        else:
+            dy, dx = 1, -1
+        value = magnitude[r, c]
+        ahead = np.float32(0.0)
+        if 0 <= r + dy < height and 0 <= c + dx < width:
+            ahead = magnitude[r + dy, c + dx]
+        behind = np.float32(0.0)
+        if 0 <= r - dy < height and 0 <= c - dx < width:
+            behind = magnitude[r - dy, c - dx]
+        if value >= ahead and value >= behind:
+            edges[r, c] = True
+    return edges
+
+
+@_jit
+def linked_to(pixels: np.ndarray, seeds: np.ndarray) -> np.ndarray:
+    """(H, W) bool: the pixels of the (H, W) bool ``pixels`` 8-connected through ``pixels`` to
+    a pixel of ``seeds`` ((H, W) bool) that is in ``pixels``: the union of the components of
+    ``scipy.ndimage.label(pixels, np.ones((3, 3)))`` that hold a seed, by one flood fill from
+    the seeds instead of labelling the whole frame (Canny's hysteresis in the seams)."""
+    height, width = pixels.shape
+    reached = np.zeros((height, width), dtype=np.bool_)
+    stack = np.empty(height * width, dtype=np.int64)
+    top = 0
+    for r in range(height):
+        for c in range(width):
+            if seeds[r, c] and pixels[r, c] and not reached[r, c]:
+                reached[r, c] = True
+                stack[top] = r * width + c
+                top += 1
+    while top > 0:
+        top -= 1
+        r = stack[top] // width
+        c = stack[top] - r * width
+        for dr in range(-1, 2):
+            for dc in range(-1, 2):
+                rr, cc = r + dr, c + dc
+                if 0 <= rr < height and 0 <= cc < width and pixels[rr, cc] and not reached[rr, cc]:
+                    reached[rr, cc] = True
+                    stack[top] = rr * width + cc
+                    top += 1
+    return reached
+
+
+@_jit
+def dilate_diamond(mask: np.ndarray, radius: int) -> np.ndarray:
+    """(H, W) bool: the pixels within city-block distance ``radius`` of a pixel of ``mask``:
+    ``scipy.ndimage.binary_dilation(mask, iterations=radius)`` (its default cross, border 0),
+    by the two-pass city-block distance transform (the seams' ring around the segments, every
+    frame)."""
+    height, width = mask.shape
+    far = height + width + radius + 1
+    distance = np.empty((height, width), dtype=np.int64)
+    for r in range(height):
+        for c in range(width):
+            if mask[r, c]:
+                distance[r, c] = 0
+            else:
+                best = far
+                if r > 0 and distance[r - 1, c] + 1 < best:
+                    best = distance[r - 1, c] + 1
+                if c > 0 and distance[r, c - 1] + 1 < best:
+                    best = distance[r, c - 1] + 1
+                distance[r, c] = best
+    out = np.zeros((height, width), dtype=np.bool_)
+    for r in range(height - 1, -1, -1):
+        for c in range(width - 1, -1, -1):
+            best = distance[r, c]
+            if r + 1 < height and distance[r + 1, c] + 1 < best:
+                best = distance[r + 1, c] + 1
+            if c + 1 < width and distance[r, c + 1] + 1 < best:
+                best = distance[r, c + 1] + 1
+            distance[r, c] = best
+            out[r, c] = best <= radius
+    return out
+
+
+@_jit
+def erode_diamond(mask: np.ndarray, radius: int) -> np.ndarray:
+    """(h, w) bool: the pixels of ``mask`` whose every pixel within city-block distance
+    ``radius`` lies inside the grid and in ``mask``: ``scipy.ndimage.binary_erosion(mask,
+    iterations=radius)`` (its default cross, border 0), whose iterated crosses are that
+    diamond. One pass with a row's run of ``mask`` pixels (the seams' ``_best_cut``, once per
+    search)."""
+    height, width = mask.shape
+    # Each pixel's run of mask pixels to its left and right (inclusive), so that a row span
+    # [c - k, c + k] is inside when both runs reach k.
+    left = np.zeros((height, width), dtype=np.int64)
+    right = np.zeros((height, width), dtype=np.int64)
+    for r in range(height):
+        run = 0
+        for c in range(width):
+            run = run + 1 if mask[r, c] else 0
+            left[r, c] = run
+        run = 0
+        for c in range(width - 1, -1, -1):
+            run = run + 1 if mask[r, c] else 0
+            right[r, c] = run
+    out = np.zeros((height, width), dtype=np.bool_)
+    for r in range(radius, height - radius):
+        for c in range(radius, width - radius):
+            if not mask[r, c]:
+                continue
+            inside = True
+            for dr in range(-radius, radius + 1):
+                k = radius - abs(dr)
+                if left[r + dr, c] <= k or right[r + dr, c] <= k:
+                    inside = False
+                    break
+            out[r, c] = inside
+    return out
+
+
+@_jit
+def label_four_connected(mask: np.ndarray):
+    """(h, w) int32 labels of the 4-connected components of the (h, w) bool ``mask`` (0
+    outside) and their count: ``scipy.ndimage.label(mask)`` (its default cross structure), the
+    components numbered 1.. in the order of their first pixel in row-major order, as scipy
+    numbers them. One flood fill per component instead of scipy's two passes and its
+    set-up per call: the seams' ``_split`` labels the pieces of every candidate cut."""
+    height, width = mask.shape
+    labels = np.zeros((height, width), dtype=np.int32)
+    stack = np.empty(height * width, dtype=np.int64)
+    count = 0
+    for r0 in range(height):
+        for c0 in range(width):
+            if not mask[r0, c0] or labels[r0, c0] != 0:
+                continue
+            count += 1
+            labels[r0, c0] = count
+            top = 0
+            stack[0] = r0 * width + c0
+            top = 1
+            while top > 0:
+                top -= 1
+                r, c = divmod(stack[top], width)
+                if r > 0 and mask[r - 1, c] and labels[r - 1, c] == 0:
+                    labels[r - 1, c] = count
+                    stack[top] = (r - 1) * width + c
+                    top += 1
+                if r + 1 < height and mask[r + 1, c] and labels[r + 1, c] == 0:
+                    labels[r + 1, c] = count
+                    stack[top] = (r + 1) * width + c
+                    top += 1
+                if c > 0 and mask[r, c - 1] and labels[r, c - 1] == 0:
+                    labels[r, c - 1] = count
+                    stack[top] = r * width + c - 1
+                    top += 1
+                if c + 1 < width and mask[r, c + 1] and labels[r, c + 1] == 0:
+                    labels[r, c + 1] = count
+                    stack[top] = r * width + c + 1
+                    top += 1
+    return labels, count
+
+
+@_jit
 def largest_inscribed_squared(inside: np.ndarray, occupied: np.ndarray) -> int:
     """The largest squared Euclidean distance (px^2, exact integer) from a pixel of ``inside``
     to the nearest pixel of the (h, w) bool grid that is not ``occupied``: the square of

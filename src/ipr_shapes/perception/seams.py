@@ -31,6 +31,9 @@ object's own lines whole:
   lies between seams (a grid of boxes) or its strips have the size of a flat rectangular
   face seen elsewhere in the frame (packed boxes repeat; ``seams.pair_needs_grid``,
   ``seams.pair_sizes``);
+- **decided once per unmoved surface**: in frames after the first, a segment that is an
+  unmoved segment of the previous frame (``seams.settled``,
+  ``segmentation.settled_segments``) is not searched: the previous frame decided its seams;
 - **planes across the other faces**: a seam between two boxes goes on as a plane (its 3D line
   and the surface normal) across the boxes' other faces, where the colour edge bends over a
   crease or fades; a piece facing several pieces across a seam, with kept seams between them,
@@ -103,6 +106,7 @@ def cut_colour_seams(
     depth_m: np.ndarray,
     K: np.ndarray,
     config: PerceptionConfig,
+    settled: np.ndarray | None = None,
 ) -> np.ndarray:
     """Labels (H, W) int32 with segments cut along colour seams (module doc); new pieces take
     new ids above the largest one (renumbering is the caller's).
@@ -111,11 +115,33 @@ def cut_colour_seams(
         labels: (H, W) int segment labels, 0 = none; rgb: (H, W, 3) uint8;
         points: (H, W, 3) world points (m); normals: (H, W, 3) unit normals in the world frame,
             0 where unknown; depth_m: (H, W) depth (m, 0 = none); K: (3, 3) intrinsics.
+        settled: (labels.max() + 1,) bool, segments not searched (kept whole: unmoved since
+            the previous frame, which decided their seams; ``segmentation.settled_segments``),
+            or None (all searched). They still count as faces for ``seams.pair_sizes``.
     """
     seams = config.seams
     out = labels.astype(np.int32, copy=True)
     segment_pixels = labels > 0
     if not seams.enabled or not segment_pixels.any():
+        return out
+    focal_px = float(K[0, 0])
+    # The segments to search: not settled, and with room for two pieces of the smallest area
+    # (``_search_segment``'s own first test). A frame with none needs no edges at all.
+    segments = []
+    for segment, box in enumerate(ndimage.find_objects(labels), start=1):
+        if box is None:
+            continue
+        top = max(box[0].start - _MARGIN_PX, 0)
+        bottom = min(box[0].stop + _MARGIN_PX, labels.shape[0])
+        left = max(box[1].start - _MARGIN_PX, 0)
+        right = min(box[1].stop + _MARGIN_PX, labels.shape[1])
+        crop = (slice(top, bottom), slice(left, right))
+        mask = labels[crop] == segment
+        search = not (settled is not None and segment < len(settled) and settled[segment])
+        if search and _area_m2(mask, depth_m[crop], focal_px) < 2 * seams.min_area_m2:
+            search = False
+        segments.append((crop, mask, search))
+    if not any(search for *_, search in segments):
         return out
     magnitude, gx, gy = _colour_gradient(rgb)
     # The frame's own scale, over every pixel with depth: not over the segments, whose
@@ -131,20 +157,15 @@ def cut_colour_seams(
     # between two boxes of one colour fades along its length.
     if seams.hysteresis:
         # Only where seams are searched: the segments and a ring around them.
-        near = ndimage.binary_dilation(segment_pixels, iterations=3)
+        near = kernels.dilate_diamond(segment_pixels, 3)  # binary_dilation, iterations=3
         low = 0.5 * seams.edge_factor * max(noise, 1e-6)
         edges = _linked_edges(magnitude, gx, gy, direction, edges, low, near)
-    focal_px = float(K[0, 0])
     searched = []
-    for segment, box in enumerate(ndimage.find_objects(labels), start=1):
-        if box is None:
+    for crop, mask, search in segments:
+        if not search:
+            # Kept whole; still a face for the pairs' sizes (``_pairs_by_size``).
+            searched.append((crop, mask, mask.astype(np.int32), [], np.empty((0, 3)), []))
             continue
-        top = max(box[0].start - _MARGIN_PX, 0)
-        bottom = min(box[0].stop + _MARGIN_PX, labels.shape[0])
-        left = max(box[1].start - _MARGIN_PX, 0)
-        right = min(box[1].stop + _MARGIN_PX, labels.shape[1])
-        crop = (slice(top, bottom), slice(left, right))
-        mask = labels[crop] == segment
         cut, found = _search_segment(mask, edges[crop], direction[crop], points[crop],
                                      normals[crop], depth_m[crop], focal_px, config)  # fmt: skip
         # The segment's points with depth, and which seams have flat strips: measured once,
@@ -402,17 +423,20 @@ def _linked_edges(
     pixels from ``gx``, ``gy``."""
     weak = np.flatnonzero((magnitude > low) & near)
     direction.flat[weak] = np.arctan2(gy.flat[weak], gx.flat[weak])
-    parts, count = ndimage.label(_thin(magnitude, direction, weak), np.ones((3, 3), dtype=bool))
-    anchored = np.zeros(count + 1, dtype=bool)
-    anchored[parts[edges]] = True
-    anchored[0] = False
-    return anchored[parts] | edges
+    # The 8-connected components of the thinned faint pixels that hold a strong one (compiled:
+    # a flood fill from the strong pixels, not a label image of the frame).
+    return kernels.linked_to(_thin(magnitude, direction, weak), edges) | edges
 
 
 def _thin(magnitude: np.ndarray, direction: np.ndarray, at: np.ndarray) -> np.ndarray:
     """(H, W) bool: of the pixels ``at`` (flat indices), those whose gradient magnitude is a
     maximum across the edge (Canny's non-maximum suppression, directions quantised to 45
-    degrees)."""
+    degrees). Compiled (``kernels.thin_edges``; ``_thin_numpy`` is its reference)."""
+    return kernels.thin_edges(magnitude, direction, np.asarray(at, dtype=np.int64))
+
+
+def _thin_numpy(magnitude: np.ndarray, direction: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """``_thin`` in numpy: the compiled kernel's reference (``tests/test_seams.py``)."""
     height, width = magnitude.shape
     sector = (np.round(direction.flat[at] / (np.pi / 4)) % 4).astype(np.int8)
     padded = np.pad(magnitude, 1)
@@ -843,7 +867,8 @@ def _best_cut(
     # stay the crop's, so that the votes are the crop's).
     window = _window(part, part.shape)
     top_px, left_px = window[0].start, window[1].start
-    inner = ndimage.binary_erosion(part[window], iterations=2)
+    # Compiled: ``ndimage.binary_erosion(part[window], iterations=2)``.
+    inner = kernels.erode_diamond(part[window], 2)
     rows, cols = np.nonzero(edges[window] & inner)
     if len(rows) < 20:
         return None
@@ -1029,7 +1054,8 @@ def _split(
     inside = (r >= 0) & (r < sub.shape[0]) & (c >= 0) & (c < sub.shape[1])
     seam[r[inside], c[inside]] = True
     seam &= sub
-    pieces, count = ndimage.label(sub & ~seam)
+    # Compiled: ``ndimage.label(sub & ~seam)``'s labels and count (4-connected).
+    pieces, count = kernels.label_four_connected(sub & ~seam)
     if count < 2:
         return None
     sizes = np.bincount(pieces.ravel())[1:]
@@ -1074,8 +1100,11 @@ def _area_m2(part: np.ndarray, depth_m: np.ndarray, focal_px: float) -> float:
     """Area (m^2) of the pixels of ``part``, each a (depth / focal)^2 square (pixels without
     depth take the median depth of the others)."""
     depths = depth_m[part]
-    known = depths[depths > 0]
+    has_depth = depths > 0
+    if has_depth.all():  # nothing to fill: the median would not be used
+        return float(np.sum(depths**2)) / focal_px**2
+    known = depths[has_depth]
     if known.size == 0:
         return 0.0
-    filled = np.where(depths > 0, depths, np.median(known))
+    filled = np.where(has_depth, depths, np.median(known))
     return float(np.sum(filled**2)) / focal_px**2

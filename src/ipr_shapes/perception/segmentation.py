@@ -253,7 +253,9 @@ def segment_frame(
         borders=borders,
     )
     if config.seams.enabled:
-        labels, segment_of_supervoxel = _cut_seams(labels, supervoxels, frame, points, config)
+        labels, segment_of_supervoxel = _cut_seams(
+            labels, supervoxels, frame, points, config, change
+        )
     if config.occluder_splits.enabled:
         labels, segment_of_supervoxel, _ = join_occluder_splits(
             labels, segment_of_supervoxel, points, frame.depth_m, frame.rgb, config.occluder_splits
@@ -267,9 +269,16 @@ def _cut_seams(
     frame: Frame,
     points: np.ndarray,
     config: PerceptionConfig,
+    change: SupervoxelChange | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Labels cut along colour seams (``ipr_shapes.perception.seams``), renumbered 1..k by decreasing
-    size, and each supervoxel's segment (the one holding most of its pixels)."""
+    size, and each supervoxel's segment (the one holding most of its pixels).
+
+    With the previous frame's anchors (``change``, ``temporal.anchoring``) and
+    ``seams.settled``, a segment that is a previous segment that stayed (``settled_segments``)
+    is not searched: its grouping, seams included, was decided in the previous frame on the same
+    surface, and a seam found now on an unmoved object is a printed line the previous frame did
+    not take for one (or a cut the anchors already carry)."""
     # The seams read normals at labelled pixels only: computed there, 0 elsewhere (each
     # pixel's normal is its own neighbours', the same as ``organised_normals`` gives it).
     normals = np.zeros((*labels.shape, 3), dtype=np.float32)
@@ -278,7 +287,12 @@ def _cut_seams(
         frame.depth_m, frame.K, labelled, config
     )
     normals = normals @ frame.world_from_camera[:3, :3].T.astype(np.float32)
-    cut = cut_colour_seams(labels, frame.rgb, points, normals, frame.depth_m, frame.K, config)
+    settled = None
+    if change is not None and config.seams.settled:
+        settled = settled_segments(labels, supervoxels, change, config)
+    cut = cut_colour_seams(
+        labels, frame.rgb, points, normals, frame.depth_m, frame.K, config, settled=settled
+    )
     sizes = np.bincount(cut.ravel())
     sizes[0] = 0
     alive = np.flatnonzero(sizes)
@@ -294,6 +308,39 @@ def _cut_seams(
         has = counts.sum(axis=1) > 0
         segment_of_supervoxel[has] = np.argmax(counts[has], axis=1)
     return cut, segment_of_supervoxel
+
+
+def settled_segments(
+    labels: np.ndarray,
+    supervoxels: Supervoxels,
+    change: SupervoxelChange,
+    config: PerceptionConfig,
+) -> np.ndarray:
+    """(labels.max() + 1,) bool: the segments of ``labels`` ((H, W) int, 0 = none) of which at
+    least ``temporal.static_fraction`` of the pixels lie in supervoxels anchored to one previous
+    segment (``change.anchor``: a previous segment that stayed, ``temporal.supervoxel_anchors``):
+    the same surface, unmoved, as one segment of the previous frame."""
+    count = int(labels.max()) + 1
+    settled = np.zeros(count, dtype=bool)
+    flat_labels = labels.reshape(-1).astype(np.int64)
+    flat_supervoxels = supervoxels.labels.reshape(-1)
+    if count == 1 or len(change.anchor) == 0:
+        return settled
+    anchor = np.where(
+        flat_supervoxels >= 0, change.anchor[np.maximum(flat_supervoxels, 0)], 0
+    ).astype(np.int64)
+    pixels = np.bincount(flat_labels, minlength=count)
+    anchored = (flat_labels > 0) & (anchor > 0)
+    if not anchored.any():
+        return settled
+    anchors = int(anchor.max()) + 1
+    table = np.bincount(
+        flat_labels[anchored] * anchors + anchor[anchored], minlength=count * anchors
+    ).reshape(count, anchors)
+    best = table.max(axis=1)
+    settled = (best > 0) & (best >= config.temporal.static_fraction * pixels)
+    settled[0] = False
+    return settled
 
 
 def _on_support(
