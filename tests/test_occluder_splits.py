@@ -63,12 +63,17 @@ def _frame(pieces, bar_rows=(10, 70), bar_cols=(56, 66)):
         rgb[20:60, first:last] = colour
     bar = slice(*bar_rows), slice(*bar_cols)
     labels[bar], depth[bar], rgb[bar] = 3, 0.9, (30, 30, 200)
+    return labels, _points(depth), depth, rgb
+
+
+def _points(depth):
+    """(H, W, 3) points (m) of an (H, W) depth image (m) seen by the downward camera."""
+    height, width = depth.shape
     rows, cols = np.mgrid[0:height, 0:width]
-    points = np.stack(
+    return np.stack(
         [(cols - width / 2) / FOCAL_PX * depth, (rows - height / 2) / FOCAL_PX * depth, depth],
         axis=-1,
     )
-    return labels, points, depth, rgb
 
 
 GREY = (150, 140, 130)
@@ -130,3 +135,17 @@ def test_the_tracker_keeps_one_id_when_the_bar_is_taken_away():
         later = _labels_at(frames[1], tracked[1], LEFT, RIGHT)
         assert later[0] == later[1]
         assert (first == later) is kept
+
+
+def test_pieces_with_mostly_seen_surface_between_them_stay_apart():
+    """The bar borders both pieces along an arm across the top of the gap (rows 20-21), but
+    below the arm, on each side of the bar, another segment lies at the pieces' own depth: most
+    of the gap is seen, not hidden (the occluded share well below ``min_occluded``), so
+    nothing says one surface runs on under the bar. With the whole gap under the bar the same
+    pieces are joined."""
+    pieces = [(1, (20, 48), 1.0, GREY), (2, (74, 100), 1.0, GREY)]
+    assert _join(*_frame(pieces, (10, 70), (48, 74)))[2] == [(1, 2)]
+    strips = [(4, (48, 59), 1.0, (40, 90, 40)), (4, (63, 74), 1.0, (40, 90, 40))]
+    labels, _, depth, rgb = _frame(pieces + strips, (10, 70), (59, 63))
+    labels[20:22, 48:74], depth[20:22, 48:74], rgb[20:22, 48:74] = 3, 0.9, (30, 30, 200)
+    assert _join(labels, _points(depth), depth, rgb)[2] == []
