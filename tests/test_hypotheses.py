@@ -233,6 +233,15 @@ def _beyond(vertices: np.ndarray, view: np.ndarray) -> np.ndarray:
     return -(vertices @ view[:, :3].T + view[:, 3]).min(axis=0)
 
 
+def _with_and_without_view_bound(obj, space):
+    """The object's hypotheses with the default bound beyond the view and without it (same
+    random stream)."""
+    return [
+        generate_hypotheses(obj, space, (SUPPORT,), config, np.random.default_rng(0))
+        for config in (CONFIG, dataclasses.replace(CONFIG, outside_view_ratio=None))
+    ]
+
+
 def test_a_shape_cut_by_the_image_border_reaches_beyond_it_no_further_than_seen_inside(
     cut_by_border,
 ):
@@ -242,14 +251,7 @@ def test_a_shape_cut_by_the_image_border_reaches_beyond_it_no_further_than_seen_
     inside = obj.points @ view[:, :3].T + view[:, 3]
     right = 1
     assert inside[:, right].min() < 0.005  # the border cuts the box
-    bounded = generate_hypotheses(obj, space, (SUPPORT,), CONFIG, np.random.default_rng(0))
-    unbounded = generate_hypotheses(
-        obj,
-        space,
-        (SUPPORT,),
-        dataclasses.replace(CONFIG, outside_view_ratio=None),
-        np.random.default_rng(0),
-    )
+    bounded, unbounded = _with_and_without_view_bound(obj, space)
     seen_reach = inside.max(axis=0)
     for h in bounded:
         assert_valid(h, obj.points)
@@ -273,14 +275,7 @@ def test_a_shape_cut_by_the_image_border_reaches_beyond_it_no_further_than_seen_
 def test_a_shape_well_inside_the_view_is_not_bounded_by_it(oblique):
     obj, space = oblique
     assert space.view is not None
-    bounded = generate_hypotheses(obj, space, (SUPPORT,), CONFIG, np.random.default_rng(0))
-    unbounded = generate_hypotheses(
-        obj,
-        space,
-        (SUPPORT,),
-        dataclasses.replace(CONFIG, outside_view_ratio=None),
-        np.random.default_rng(0),
-    )
+    bounded, unbounded = _with_and_without_view_bound(obj, space)
     for a, b in zip(bounded, unbounded, strict=True):
         assert np.array_equal(a.vertices, b.vertices)
 
