@@ -3,7 +3,9 @@
 evidence the pushes can give about hidden shapes.
 
 Usage: ``python -m benchmarks.dev_push_replay [--seed 9100] [--count 10] [--friction 1.0]
-[--timestep S]`` (default: ``PhysicsConfig``'s step).
+[--timestep S] [--config FILE]`` (default: ``PhysicsConfig``'s step; ``--config``: a TOML
+whose ``[inference.physics]`` replaces the default ``PhysicsConfig`` before ``--friction`` and
+``--timestep`` apply, e.g. another contact dimensionality or solver).
 
 Generates (or reuses) development dynamic scenes with ``ipr-shapes synth`` seeds from ``--seed`` (never
 the benchmark suites). For each scene, builds ``ipr_shapes.physics``'s world from the ground-truth
@@ -92,13 +94,23 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--friction", type=float, default=1.0)
     parser.add_argument("--timestep", type=float, default=None)
     parser.add_argument("--scenes", type=Path, default=Path("/tmp/ipr-dev-inference"))
+    parser.add_argument("--config", type=Path, help="a TOML configuration (ipr-shapes config show)")
     args = parser.parse_args(argv)
     if not (args.friction > 0 and (args.timestep or 1) > 0 and args.count >= 1):
         parser.error("--friction and --timestep must be positive and --count at least 1")
     from benchmarks.common import development_scenes
     from ipr_shapes.physics import PhysicsConfig
 
-    config = PhysicsConfig(friction=args.friction)
+    config = PhysicsConfig()
+    if args.config is not None:
+        from ipr_shapes.config import read_config
+        from ipr_shapes.errors import IprError
+
+        try:
+            config = read_config(args.config).inference.physics
+        except IprError as error:
+            parser.exit(2, f"error: {error}\n")
+    config = dataclasses.replace(config, friction=args.friction)
     if args.timestep is not None:
         config = dataclasses.replace(config, timestep_s=args.timestep)
     rows = []

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import mujoco
 import numpy as np
 import pytest
 from scipy.spatial import ConvexHull
@@ -413,3 +414,65 @@ def test_meshes_given_as_cached_assets_compile_to_the_same_model():
             assert np.array_equal(value, got[name], equal_nan=True), name
     names = {_mesh_asset(v - v.mean(axis=0), f)[0] for v, f in shapes}
     assert len(names) == len(shapes)
+
+
+def test_contact_and_solver_settings_reach_mujoco_and_are_checked():
+    # Every contact and solver setting of ``PhysicsConfig`` is in the compiled model; the
+    # defaults are the elliptic cones, Newton and condim 6 the physics was measured with.
+    rng = np.random.default_rng(2)
+    directions = rng.normal(size=(120, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    points = directions * [0.03, 0.02, 0.015] + [0.0, 0.0, 0.05]  # all on its hull
+    ball = Body(points, ConvexHull(points).simplices)
+    default = build_world([ball], [SUPPORT], pusher=Pusher()).model
+    assert default.opt.cone == 1 and default.opt.solver == 2  # elliptic, Newton
+    assert set(default.geom_condim) == {6}
+    assert default.opt.disableflags == 0  # multi-point and native convex collision on
+    whole = default.mesh_graph[default.mesh_graphadr[-1]]  # vertices of the collision hull
+    assert whole == len(ConvexHull(points).vertices) > 32
+    config = PhysicsConfig(
+        condim=3, cone="pyramidal", solver="cg", solver_iterations=7, solver_tolerance=1e-5,
+        ls_iterations=4, max_hull_vertices=16, multiccd=False, nativeccd=False,
+    )  # fmt: skip
+    model = build_world([ball], [SUPPORT], config, pusher=Pusher()).model
+    assert set(model.geom_condim) == {3}
+    assert model.opt.cone == 0 and model.opt.solver == 1  # pyramidal, CG
+    assert (model.opt.iterations, model.opt.ls_iterations) == (7, 4)
+    assert model.opt.tolerance == pytest.approx(1e-5)
+    assert model.opt.disableflags & int(mujoco.mjtDisableBit.mjDSBL_MULTICCD)
+    assert model.opt.disableflags & int(mujoco.mjtDisableBit.mjDSBL_NATIVECCD)
+    assert 4 <= model.mesh_graph[model.mesh_graphadr[-1]] <= 16
+    # The bounded hull is MuJoCo's processing of the same mesh file: it has its own name in
+    # MuJoCo's asset cache, and a shape compiled with the whole hull first keeps it.
+    assert _mesh_asset(points, ball.faces)[0] != _mesh_asset(points, ball.faces, 16)[0]
+    again = build_world([ball], [SUPPORT]).model
+    assert again.mesh_graph[again.mesh_graphadr[-1]] == whole
+    for field, value in [
+        ("condim", 5), ("cone", "round"), ("solver", "newton2"), ("solver_iterations", 0),
+        ("ls_iterations", 0), ("max_hull_vertices", 3), ("multiccd", 1),
+    ]:  # fmt: skip
+        with pytest.raises(ValueError, match=field):
+            PhysicsConfig(**{field: value})
+
+
+def test_rolling_friction_stops_a_rolled_cylinder_and_condim_4_has_none():
+    # A 32-sided cylinder lying on the support, set rolling at 30 cm/s: the default contacts
+    # (condim 6, rolling friction 2 mm) stop it within 8 cm, as pushed round objects stop in
+    # the data; without rolling friction (condim 4) it rolls past 15 cm, which is why
+    # condim 4's cheaper steps replayed the pushes further from the data
+    # (docs/experiments/2026-11-27-cheaper-steps.md).
+    angles = np.linspace(0.0, 2 * np.pi, 33)[:-1]
+    ring = np.stack([np.zeros_like(angles), np.cos(angles), np.sin(angles) + 1.0], 1) * 0.03
+    points = np.vstack([ring - [0.05, 0.0, 0.0], ring + [0.05, 0.0, 0.0]])
+    cylinder = Body(points, ConvexHull(points).simplices)
+    travelled = {}
+    for condim in (6, 4):
+        world = build_world([cylinder], [SUPPORT], PhysicsConfig(condim=condim))
+        assert world.settle()
+        world.data.qvel[[1, 3]] = 0.3, -0.3 / 0.03  # rolling along +y without slipping
+        assert world.settle(3.0)
+        pose = world.poses()[0]
+        centre = points.mean(axis=0)
+        travelled[condim] = np.linalg.norm(pose[:3, :3] @ centre + pose[:3, 3] - centre)
+    assert 0.02 < travelled[6] < 0.08
+    assert travelled[4] > 0.15

@@ -36,13 +36,13 @@ from __future__ import annotations
 import hashlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Literal
 
 import mujoco
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
-from ipr_shapes.checks import Checks, Interval, Pair, check_fields
+from ipr_shapes.checks import Checks, Interval, Options, Pair, Predicate, check_fields
 from ipr_shapes.perception.types import KnownPlane
 from ipr_shapes.rendering import (
     PinholeCamera,
@@ -104,6 +104,19 @@ class PhysicsConfig:
         flung_m: an object moving further than this (m) means the simulation exploded.
         support_half_extent_m: half side of the support box (m).
         wall_min_thickness_m: thinnest wall slab (m); thinner slabs let objects tunnel.
+        condim: MuJoCo contact dimensionality of every contact: 6 (sliding, torsional and
+            rolling friction: 6 constraint rows per contact with elliptic cones), 4 (no
+            rolling), 3 (sliding only) or 1 (frictionless).
+        cone: friction cone, "elliptic" (exact) or "pyramidal" (MuJoCo's linearised).
+        solver: MuJoCo's constraint solver, "newton", "cg" or "pgs".
+        solver_iterations: most solver iterations per step.
+        solver_tolerance: the solver stops when its relative cost improvement is below this.
+        ls_iterations: most line-search iterations per solver iteration (Newton and CG).
+        max_hull_vertices: collision hull of each shape with at most this many vertices
+            (MuJoCo's ``maxhullvert``; the rendered mesh is the shape's own); 0: the whole hull.
+        multiccd: several contact points per convex pair (MuJoCo's multiccd), so that a face
+            resting on a face is held by a manifold, not one point.
+        nativeccd: MuJoCo's own convex collision (False: libccd).
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -126,6 +139,17 @@ class PhysicsConfig:
         "flung_m": Interval(0, None, closed="neither"),
         "support_half_extent_m": Interval(0, None, closed="neither"),
         "wall_min_thickness_m": Interval(0, None),
+        "condim": Options(1, 3, 4, 6),
+        "cone": Options("elliptic", "pyramidal"),
+        "solver": Options("newton", "cg", "pgs"),
+        "solver_iterations": Interval(1, None, integer=True),
+        "solver_tolerance": Interval(0, None),
+        "ls_iterations": Interval(1, None, integer=True),
+        "max_hull_vertices": Predicate(
+            lambda v: type(v) is int and (v == 0 or v >= 4), "0 or an integer of at least 4"
+        ),
+        "multiccd": Options(True, False),
+        "nativeccd": Options(True, False),
     }
 
     timestep_s: float = 0.008
@@ -147,6 +171,15 @@ class PhysicsConfig:
     flung_m: float = 0.5
     support_half_extent_m: float = 2.0
     wall_min_thickness_m: float = 0.01
+    condim: int = 6
+    cone: Literal["elliptic", "pyramidal"] = "elliptic"
+    solver: Literal["newton", "cg", "pgs"] = "newton"
+    solver_iterations: int = 100
+    solver_tolerance: float = 1e-8
+    ls_iterations: int = 50
+    max_hull_vertices: int = 0
+    multiccd: bool = True
+    nativeccd: bool = True
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -526,7 +559,9 @@ class World:
 # Building
 
 
-def _mesh_asset(vertices: np.ndarray, faces: np.ndarray) -> tuple[str, bytes]:
+def _mesh_asset(
+    vertices: np.ndarray, faces: np.ndarray, max_hull_vertices: int = 0
+) -> tuple[str, bytes]:
     """A shape's mesh as a MuJoCo binary mesh file (``.msh``: vertex, normal, texture
     coordinate and face counts as int32, then the (V, 3) vertices as float32 and the (F, 3)
     faces as int32) and its name, a digest of those bytes. Why: MuJoCo caches a mesh file's
@@ -535,7 +570,8 @@ def _mesh_asset(vertices: np.ndarray, faces: np.ndarray) -> tuple[str, bytes]:
     pile; docs/experiments/2026-11-27-whole-run-speed-3.md); named by its content and
     compiled with the same settings everywhere (convex inertia, no scale), a shape is
     processed once. The float32 vertices are what ``uservert`` stores, so the compiled model
-    is the same."""
+    is the same. ``max_hull_vertices`` (``PhysicsConfig``) enters the name: the cached
+    processing includes the collision hull it bounds."""
     vertices = np.ascontiguousarray(vertices, dtype=np.float32).reshape(-1, 3)
     faces = np.ascontiguousarray(faces, dtype=np.int32).reshape(-1, 3)
     payload = (
@@ -543,7 +579,17 @@ def _mesh_asset(vertices: np.ndarray, faces: np.ndarray) -> tuple[str, bytes]:
         + vertices.tobytes()
         + faces.tobytes()
     )
-    return f"ipr_convex_{hashlib.sha1(payload).hexdigest()}.msh", payload
+    digest = hashlib.sha1(payload).hexdigest()
+    suffix = f"_h{max_hull_vertices}" if max_hull_vertices else ""
+    return f"ipr_convex_{digest}{suffix}.msh", payload
+
+
+_CONES = {"elliptic": mujoco.mjtCone.mjCONE_ELLIPTIC, "pyramidal": mujoco.mjtCone.mjCONE_PYRAMIDAL}
+_SOLVERS = {
+    "newton": mujoco.mjtSolver.mjSOL_NEWTON,
+    "cg": mujoco.mjtSolver.mjSOL_CG,
+    "pgs": mujoco.mjtSolver.mjSOL_PGS,
+}
 
 
 def _frame_axes(normal: np.ndarray) -> np.ndarray:
@@ -633,8 +679,16 @@ def build_world(
     spec.modelname = "ipr_physics"
     spec.option.timestep = config.timestep_s
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
-    spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
+    spec.option.cone = _CONES[config.cone]
     spec.option.impratio = 10.0
+    spec.option.solver = _SOLVERS[config.solver]
+    spec.option.iterations = config.solver_iterations
+    spec.option.tolerance = config.solver_tolerance
+    spec.option.ls_iterations = config.ls_iterations
+    if not config.multiccd:
+        spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_MULTICCD
+    if not config.nativeccd:
+        spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_NATIVECCD
     support = support_of(planes)
     up = np.array([0.0, 0.0, 1.0]) if support is None else np.asarray(support.normal, float)
     spec.option.gravity = (-config.gravity_m_s2 * up).tolist()
@@ -659,7 +713,7 @@ def build_world(
             pos=(centre - thickness * up).tolist(),
             quat=_quaternion(_frame_axes(up)),
             friction=friction,
-            condim=6,
+            condim=config.condim,
             group=static_group,
         )
     for number, plane in enumerate(p for p in planes if p.kind == "wall"):
@@ -672,7 +726,7 @@ def build_world(
             type=mujoco.mjtGeom.mjGEOM_MESH,
             meshname=f"wall_{number}",
             friction=friction,
-            condim=6,
+            condim=config.condim,
             group=static_group,
         )
 
@@ -687,7 +741,7 @@ def build_world(
         origin = vertices.mean(axis=0)
         origins[k] = origin
         if cached_meshes:
-            asset, payload = _mesh_asset(vertices - origin, faces)
+            asset, payload = _mesh_asset(vertices - origin, faces, config.max_hull_vertices)
             assets[asset] = payload
             mesh = spec.add_mesh(name=f"shape_{k}", file=asset)
         else:
@@ -697,6 +751,8 @@ def build_world(
                 userface=faces.astype(np.int32).ravel().tolist(),
             )
         mesh.inertia = mujoco.mjtMeshInertia.mjMESH_INERTIA_CONVEX
+        if config.max_hull_vertices:
+            mesh.maxhullvert = config.max_hull_vertices
         if body.dynamic and body.rigid_group >= 0 and body.rigid_group in group_body:
             parent, group_origin, body_of_shape[k] = group_body[body.rigid_group]
             pos = (origin - group_origin).tolist()
@@ -720,7 +776,7 @@ def build_world(
             pos=pos,
             density=config.density_kg_m3,
             friction=friction,
-            condim=6,
+            condim=config.condim,
             contype=2 if body.candidate else 1,
             conaffinity=1,
             group=0,
@@ -734,7 +790,7 @@ def build_world(
             size=[pusher.radius_m, max(pusher.length_m / 2 - pusher.radius_m, 1e-4), 0.0],
             quat=_quaternion(_frame_axes(axis)),
             friction=friction,
-            condim=6,
+            condim=config.condim,
             group=HIDDEN_GROUP,
             # A higher priority: the pusher's contacts take its solref/solimp, not a mix.
             priority=1,
