@@ -47,7 +47,10 @@ an object first seen in a later frame that explains part of an earlier object's 
 frame before (two touching objects one segment until a push separated them) takes that part,
 back to frame 0 (``split_merged_objects``); and within one frame, a segment that holds a known
 object left unmatched besides its own (two objects pushed into contact, segmented as one) gives
-that object the pixels its colour singles out (``split_merged_segments``).
+that object the pixels its colour singles out (``split_merged_segments``). Opt-in
+(``moved_wholes``): an object that moved and whose segment, registered rigidly back onto the
+frame before, covers both its own earlier segment and a neighbour's no longer seen, was one
+object split there, and the two ids become one in every frame (``join_moved_wholes``).
 
 The cues' weights, the two-stage assignment, the earlier sightings and each correction were
 chosen on development scenes and checked on held-out ones, never on a benchmark suite; each kept
