@@ -28,6 +28,7 @@ from ipr_shapes.perception.robot import robot_pixels
 from ipr_shapes.perception.segmentation import segment_frame
 from ipr_shapes.perception.tracking import (
     follow_previous_frame,
+    join_moved_wholes,
     split_merged_objects,
     track_segments,
 )
@@ -189,8 +190,8 @@ def track_scene(
     config: PerceptionConfig,
 ) -> list[np.ndarray]:
     """Tracked (H, W) int32 labels of a scene's frames from their per-frame segment labels
-    (``track_segments``, then ``split_merged_objects`` when enabled); ``points`` are the
-    frames' (H, W, 3) world points (m)."""
+    (``track_segments``, then ``split_merged_objects`` and ``join_moved_wholes`` when enabled);
+    ``points`` are the frames' (H, W, 3) world points (m)."""
     frames = scene.frames
     follow = partial(
         follow_previous_frame,
@@ -218,6 +219,8 @@ def track_scene(
             [f.world_from_camera for f in frames],
             config,
         )
+    if config.tracking.moved_wholes:
+        labels = join_moved_wholes(labels, points, [f.depth_m for f in frames], config.tracking)
     return labels
 
 

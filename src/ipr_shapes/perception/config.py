@@ -932,6 +932,25 @@ class TrackingConfig:
             has at least this many pixels.
         segment_split_margin: the rest of the segment costs less as its object than the whole
             segment did by more than this.
+        moved_wholes: opt-in: an object ``b`` seen in frame t-1 and not in frame t, whose
+            nearest point lies within ``whole_max_gap_m`` of an object ``a`` seen in both, is
+            joined to ``a`` in every frame when ``a`` moved between the frames and its frame-t
+            segment, registered rigidly onto the two frame-(t-1) segments, covers each of them
+            (an object split in frame t-1, touching or across an occluder, moved and seen
+            whole: the rigid motion is the evidence a single frame lacks;
+            ``tracking.join_moved_wholes``). Off by default: development F >= 0.75 +2 rows, no
+            id changes (docs/experiments/2026-11-27-tracker-rigid-pieces.md).
+        whole_max_gap_m: largest distance (m) between the two frame-(t-1) segments' nearest
+            points (the occluder join's hidden parts are up to 6 cm; 10 cm leaves room).
+        whole_inlier_m: a point is covered, or in place, when a point of the other set lies
+            within this distance (m).
+        whole_min_cover: each frame-(t-1) segment has at least this share of its points covered
+            by the registered frame-t segment.
+        whole_static_share: ``a`` moved: less than this share of its frame-(t-1) points are in
+            place in frame t (an object that did not move gives no evidence: the segmentation
+            may merely have seen two objects as one there).
+        whole_min_motion_m: ``a`` moved: the registration moves its frame-t points by a median
+            of at least this (m).
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -966,6 +985,11 @@ class TrackingConfig:
         "segment_split_ratio": _POSITIVE,
         "segment_split_min_px": _COUNT,
         "segment_split_margin": _ANY,
+        "whole_max_gap_m": _NON_NEGATIVE,
+        "whole_inlier_m": _POSITIVE,
+        "whole_min_cover": _SHARE,
+        "whole_static_share": _SHARE,
+        "whole_min_motion_m": _NON_NEGATIVE,
     }
 
     overlap_weight: float = 1.0
@@ -1010,6 +1034,12 @@ class TrackingConfig:
     segment_split_ratio: float = 2.0
     segment_split_min_px: int = 100
     segment_split_margin: float = 0.0
+    moved_wholes: bool = False
+    whole_max_gap_m: float = 0.10
+    whole_inlier_m: float = 0.01
+    whole_min_cover: float = 0.7
+    whole_static_share: float = 0.5
+    whole_min_motion_m: float = 0.01
 
     def __post_init__(self) -> None:
         check_fields(self)

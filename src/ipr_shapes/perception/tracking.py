@@ -47,7 +47,10 @@ an object first seen in a later frame that explains part of an earlier object's 
 frame before (two touching objects one segment until a push separated them) takes that part,
 back to frame 0 (``split_merged_objects``); and within one frame, a segment that holds a known
 object left unmatched besides its own (two objects pushed into contact, segmented as one) gives
-that object the pixels its colour singles out (``split_merged_segments``).
+that object the pixels its colour singles out (``split_merged_segments``). Opt-in
+(``moved_wholes``): an object that moved and whose segment, registered rigidly back onto the
+frame before, covers both its own earlier segment and a neighbour's no longer seen, was one
+object split there, and the two ids become one in every frame (``join_moved_wholes``).
 
 The cues' weights, the two-stage assignment, the earlier sightings and each correction were
 chosen on development scenes and checked on held-out ones, never on a benchmark suite; each kept
@@ -1412,3 +1415,142 @@ def _relabel_part(
         nearest = flat[rows.reshape(-1) * labels.shape[1] + cols.reshape(-1)]
         flat[holes] = nearest[holes]
     return result
+
+
+#: Points per segment in ``join_moved_wholes``' registration (evenly spaced in pixel order).
+_WHOLE_POINTS = 800
+
+#: Iterations of ``rigid_registration``; after the first few, pairs farther apart than
+#: ``_REGISTRATION_GATE_M`` are dropped (parts seen in only one of the two frames).
+_REGISTRATION_ITERATIONS = 30
+_REGISTRATION_GATE_M = 0.03
+
+
+def _even_points(points: np.ndarray, count: int) -> np.ndarray:
+    """At most ``count`` of (N, 3) points, evenly spaced in their order (deterministic)."""
+    if len(points) <= count:
+        return points
+    return points[np.linspace(0, len(points) - 1, count).astype(np.int64)]
+
+
+def rigid_registration(source: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rotation (3, 3) and translation (3,) (m) moving (N, 3) ``source`` points onto (M, 3)
+    ``target`` points (world frame, m): point-to-point ICP (closed-form SVD step) started from
+    the centroid shift; from the fifth iteration on, pairs farther than 3 cm are dropped, so
+    surface seen in only one of the frames does not pull the fit."""
+    from scipy.spatial import cKDTree
+
+    tree = cKDTree(target)
+    rotation, translation = np.eye(3), target.mean(axis=0) - source.mean(axis=0)
+    for iteration in range(_REGISTRATION_ITERATIONS):
+        moved = source @ rotation.T + translation
+        gate = _REGISTRATION_GATE_M if iteration > 3 else np.inf
+        distance, nearest = tree.query(moved, distance_upper_bound=gate)
+        kept = np.isfinite(distance)
+        if kept.sum() < 10:
+            break
+        a, b = source[kept], target[nearest[kept]]
+        a_centre, b_centre = a.mean(axis=0), b.mean(axis=0)
+        u, _, vt = np.linalg.svd((a - a_centre).T @ (b - b_centre))
+        flip = np.diag([1.0, 1.0, np.sign(np.linalg.det(vt.T @ u.T))])
+        rotation = vt.T @ flip @ u.T
+        translation = b_centre - rotation @ a_centre
+    return rotation, translation
+
+
+def join_moved_wholes(
+    tracked: list[np.ndarray],
+    frames_points: list[np.ndarray],
+    frames_depth: list[np.ndarray],
+    config: TrackingConfig,
+) -> list[np.ndarray]:
+    """Join, in every frame, an object split in frame t-1 and seen whole, moved, in frame t.
+
+    An object cut in two in frame t-1 (a crease, a colour edge, or an occluder between the
+    pieces) gives each piece an id; when a push moves it and frame t sees it as one segment,
+    that segment takes one piece's id and the other piece's id is not seen again, while every
+    earlier frame keeps the two ids (``merge_split_objects`` joins such pieces only when they
+    touch and look alike). The rigid motion is the evidence: for an object ``a`` seen in frames
+    t-1 and t that moved (less than ``whole_static_share`` of its frame t-1 points in place,
+    within ``whole_inlier_m``), and an object ``b`` seen in frame t-1 but not in frame t whose
+    nearest point lies within ``whole_max_gap_m`` of ``a``'s, ``a``'s frame-t points are
+    registered (``rigid_registration``) onto the union of the two frame-(t-1) segments; ``b``
+    joins ``a`` when the registered points cover at least ``whole_min_cover`` of each
+    segment's points, move by a median of at least ``whole_min_motion_m``, and fit the union
+    at least as well as ``a``'s own registration fits ``a`` alone. Two objects that touch
+    are rarely seen whole as one segment after a push that moved them, and a still object is
+    no evidence (the frame may merely have merged two objects). Each ``b`` joins once; joins
+    chain to the first id.
+
+    Args:
+        tracked: per frame, (H, W) int tracked labels, not modified; frames_points: (H, W, 3)
+            world points (m); frames_depth: (H, W) depth (m, 0 = no reading).
+
+    Returns:
+        (H, W) int32 label images, the joined ids replaced in every frame.
+    """
+    from scipy.spatial import cKDTree
+
+    result = [np.asarray(labels, dtype=np.int32) for labels in tracked]
+    if len(result) < 2 or not config.moved_wholes:
+        return result
+    inlier = config.whole_inlier_m
+    joined: dict[int, int] = {}
+    for t in range(1, len(result)):
+        before, now = result[t - 1].reshape(-1), result[t].reshape(-1)
+        valid_before = frames_depth[t - 1].reshape(-1) > 0
+        valid_now = frames_depth[t].reshape(-1) > 0
+        points_before = frames_points[t - 1].reshape(-1, 3)
+        points_now = frames_points[t].reshape(-1, 3)
+        ids_before = {int(i) for i in np.flatnonzero(np.bincount(before))} - {0}
+        ids_now = {int(i) for i in np.flatnonzero(np.bincount(now))} - {0}
+
+        def points_of(labels, valid, points, object_id):
+            return _even_points(points[(labels == object_id) & valid], _WHOLE_POINTS)
+
+        gone = {
+            b: points_of(before, valid_before, points_before, b)
+            for b in sorted(ids_before - ids_now)
+            if b not in joined
+        }
+        gone = {b: p for b, p in gone.items() if len(p) >= 30}
+        if not gone:
+            continue
+        for a in sorted(ids_before & ids_now):
+            a_before = points_of(before, valid_before, points_before, a)
+            a_now = points_of(now, valid_now, points_now, a)
+            if len(a_before) < 30 or len(a_now) < 30:
+                continue
+            a_tree = cKDTree(a_before)
+            in_place = cKDTree(a_now).query(a_before)[0] <= inlier
+            if in_place.mean() >= config.whole_static_share:
+                continue  # a did not move: no evidence
+            for b, b_before in list(gone.items()):
+                if a_tree.query(b_before)[0].min() > config.whole_max_gap_m:
+                    continue
+                union = np.vstack([a_before, b_before])
+                rotation, translation = rigid_registration(a_now, union)
+                moved = a_now @ rotation.T + translation
+                if np.median(np.linalg.norm(moved - a_now, axis=1)) < config.whole_min_motion_m:
+                    continue
+                moved_tree = cKDTree(moved)
+                if (moved_tree.query(a_before)[0] <= inlier).mean() < config.whole_min_cover:
+                    continue
+                if (moved_tree.query(b_before)[0] <= inlier).mean() < config.whole_min_cover:
+                    continue
+                fit = (cKDTree(union).query(moved)[0] <= inlier).mean()
+                alone_rotation, alone_translation = rigid_registration(a_now, a_before)
+                alone = a_tree.query(a_now @ alone_rotation.T + alone_translation)[0]
+                if fit < (alone <= inlier).mean():
+                    continue
+                joined[b] = a
+                del gone[b]
+    if not joined:
+        return result
+    final = np.arange(max(int(labels.max()) for labels in result) + 1, dtype=np.int32)
+    for absorbed in joined:
+        target = joined[absorbed]
+        while target in joined:
+            target = joined[target]
+        final[absorbed] = target
+    return [final[labels] for labels in result]
