@@ -79,8 +79,8 @@ def test_an_object_split_then_seen_whole_after_a_push_is_one_id():
     tracked = _run([frame0, frame1])
     assert set(np.unique(tracked[0])) == {0, 1}  # the right piece joined the left's id
     assert set(np.unique(tracked[1])) == {0, 1}
-    # Off (the default): unchanged.
-    untouched = _run([frame0, frame1], TrackingConfig())
+    # Off: unchanged.
+    untouched = _run([frame0, frame1], TrackingConfig(moved_wholes=False))
     assert set(np.unique(untouched[0])) == {0, 1, 2}
 
 

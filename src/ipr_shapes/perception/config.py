@@ -932,14 +932,14 @@ class TrackingConfig:
             has at least this many pixels.
         segment_split_margin: the rest of the segment costs less as its object than the whole
             segment did by more than this.
-        moved_wholes: opt-in: an object ``b`` seen in frame t-1 and not in frame t, whose
+        moved_wholes: an object ``b`` seen in frame t-1 and not in frame t, whose
             nearest point lies within ``whole_max_gap_m`` of an object ``a`` seen in both, is
             joined to ``a`` in every frame when ``a`` moved between the frames and its frame-t
             segment, registered rigidly onto the two frame-(t-1) segments, covers each of them
             (an object split in frame t-1, touching or across an occluder, moved and seen
             whole: the rigid motion is the evidence a single frame lacks;
-            ``tracking.join_moved_wholes``). Off by default: development F >= 0.75 +2 rows, no
-            id changes (docs/experiments/2026-11-27-tracker-rigid-pieces.md).
+            ``tracking.join_moved_wholes``). On: it loses on no set; docs/DESIGN_NOTES.md, "Objects
+            split in an earlier frame are joined".
         whole_max_gap_m: largest distance (m) between the two frame-(t-1) segments' nearest
             points (the occluder join's hidden parts are up to 6 cm; 10 cm leaves room).
         whole_inlier_m: a point is covered, or in place, when a point of the other set lies
@@ -1034,7 +1034,7 @@ class TrackingConfig:
     segment_split_ratio: float = 2.0
     segment_split_min_px: int = 100
     segment_split_margin: float = 0.0
-    moved_wholes: bool = False
+    moved_wholes: bool = True
     whole_max_gap_m: float = 0.10
     whole_inlier_m: float = 0.01
     whole_min_cover: float = 0.7
