@@ -15,9 +15,9 @@ Choices made here (the paper leaves them open):
 - D_max by ray tracing. From each of a facet's points p a ray runs along -N through the frame's
   free-space map; it ends at the first voxel seen FREE, where it enters the support (below the
   plane) or a known wall's slab, where it leaves the object's bound beyond the camera's view
-  (below), or at ``max_depth_m`` (``border_max_depth_m`` for an object cut by the image border,
-  whose hidden part may extend beyond the picture). The mirror image
-  of p lies on the same line, t = 2 N.(p - c) + d behind p, and the paper asks that the space
+  or the support's seen outline (below), or at ``max_depth_m`` (``border_max_depth_m`` for an
+  object cut by the image border, whose hidden part may extend beyond the picture). The mirror
+  image of p lies on the same line, t = 2 N.(p - c) + d behind p, and the paper asks that the space
   between a facet and its mirror be hidden: 0 <= t <= limit(p), i.e. each ray allows
   d in [-2 N.(p - c), limit(p) - 2 N.(p - c)]. The lower end matters for curved facets: a
   smaller d puts the mirrored rim in front of the seen surface.
@@ -480,8 +480,9 @@ class _Context:
     same thinned to one per ``hull_spacing_m`` cell for the hulls inside Algorithm 1's loop.
     ``cuts`` (C, 4) are half-spaces n . x + offset >= 0 every hypothesis is cut to: the support
     planes (lowered to the lowest observed point), the observed facets' support planes and the
-    bounds beyond the camera's view; ``stops`` (S, 4) are the last of these, which the hidden
-    extent's rays also stop at (``_view_bounds``).
+    bounds beyond the camera's view and the support's seen outline; ``stops`` (S, 4) are the
+    last of these, which the hidden extent's rays also stop at (``_view_bounds``,
+    ``_support_bounds``).
     """
 
     object_id: int
