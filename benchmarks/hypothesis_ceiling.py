@@ -5,7 +5,7 @@ hypotheses``), or on its own for a subset::
 
     python -m benchmarks.hypothesis_ceiling --suite ycb-dynamic --limit 4 [--scene DIR ...]
         [--perception-cache DIR] [--algorithm1-only] [--neighbour-surfaces] [--superquadric N]
-        [--fitted-axis] [--unbounded-view]
+        [--fitted-axis] [--unbounded-view] [--unbounded-support]
 
 Per scene: frame 0 is perceived, the hypotheses are prepared (``prepare_hypotheses``, the
 default configuration, seed 0, as the Collision Checker's run draws them) and the Collision
@@ -262,6 +262,11 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="no bound on the hidden extent beyond the camera's view (before 2026-11-27)",
     )
+    parser.add_argument(
+        "--unbounded-support",
+        action="store_true",
+        help="no bound on the hidden extent beyond the support's seen outline (before 2026-11-27)",
+    )
     args = parser.parse_args(argv)
     from ipr_shapes.config import Config
     from ipr_shapes.suites import suite_scenes
@@ -289,6 +294,11 @@ def main(argv: list[str] | None = None) -> int:
         config = dataclasses.replace(
             config,
             hypotheses=dataclasses.replace(config.hypotheses, outside_view_ratio=None),
+        )
+    if args.unbounded_support:
+        config = dataclasses.replace(
+            config,
+            hypotheses=dataclasses.replace(config.hypotheses, outside_support_ratio=None),
         )
     groups = {name: suite_scenes(name)[: args.limit] for name in args.suite}
     if args.scene:

@@ -280,6 +280,50 @@ def test_a_shape_well_inside_the_view_is_not_bounded_by_it(oblique):
         assert np.array_equal(a.vertices, b.vertices)
 
 
+#: The table seen only up to y = 0 (its far edge, or a band hidden behind the box): the box
+#: (y from -0.03 to 0.03) stands across the seen outline's far side.
+SHORT_SUPPORT = dataclasses.replace(
+    SUPPORT, points=np.array([[x, y, 0.0] for x in (-0.4, 0.4) for y in (-0.4, 0.0)])
+)
+
+
+def _with_and_without_support_bound(obj, space, support):
+    """The object's hypotheses with the default bound beyond the support's seen outline and
+    without it (same random stream)."""
+    return [
+        generate_hypotheses(obj, space, (support,), config, np.random.default_rng(0))
+        for config in (CONFIG, dataclasses.replace(CONFIG, outside_support_ratio=None))
+    ]
+
+
+def test_a_shape_reaches_beyond_the_supports_seen_outline_no_further_than_seen_inside(low):
+    _, obj, space = low
+    # Only the front is seen; behind the box lies hidden space the rays cross up to their cap.
+    inside = -obj.points[:, 1]  # distance inside the outline's far side y = 0
+    assert inside.min() > 0.02  # the box's seen front lies within the seen support
+    seen_reach = inside.max()
+    bounded, unbounded = _with_and_without_support_bound(obj, space, SHORT_SUPPORT)
+    for h in bounded:
+        assert_valid(h, obj.points)
+        assert h.vertices[:, 1].max() <= seen_reach + 1e-6  # every generator's candidates
+    assert {h.generator for h in bounded} > {"algorithm1"}
+    # Without the bound the hidden side grew past the seen table's edge into unknown space.
+    assert max(h.vertices[:, 1].max() for h in unbounded) > 3 * seen_reach
+    assert max(h.volume_m3 for h in unbounded) > 1.5 * max(h.volume_m3 for h in bounded)
+    # The true box (its back 3 cm past the edge) lies within the bound.
+    assert box_mesh()[0][:, 1].max() <= seen_reach
+    truth = true_box_keys()
+    ious = [[iou(h.keys(0.005), truth) for h in hs] for hs in (bounded, unbounded)]
+    assert np.mean(ious[0]) > np.mean(ious[1])
+
+
+def test_a_shape_well_inside_the_supports_seen_outline_is_not_bounded_by_it(low):
+    _, obj, space = low
+    bounded, unbounded = _with_and_without_support_bound(obj, space, SUPPORT)
+    for a, b in zip(bounded, unbounded, strict=True):
+        assert np.array_equal(a.vertices, b.vertices)
+
+
 def test_minimum_shape_is_small_thick_and_contains_the_points(oblique, low):
     for obj, _ in (oblique, low[1:]):
         smallest = minimum_shape(obj, (SUPPORT,), CONFIG)

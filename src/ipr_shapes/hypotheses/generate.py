@@ -15,9 +15,9 @@ Choices made here (the paper leaves them open):
 - D_max by ray tracing. From each of a facet's points p a ray runs along -N through the frame's
   free-space map; it ends at the first voxel seen FREE, where it enters the support (below the
   plane) or a known wall's slab, where it leaves the object's bound beyond the camera's view
-  (below), or at ``max_depth_m`` (``border_max_depth_m`` for an object cut by the image border,
-  whose hidden part may extend beyond the picture). The mirror image
-  of p lies on the same line, t = 2 N.(p - c) + d behind p, and the paper asks that the space
+  or the support's seen outline (below), or at ``max_depth_m`` (``border_max_depth_m`` for an
+  object cut by the image border, whose hidden part may extend beyond the picture). The mirror
+  image of p lies on the same line, t = 2 N.(p - c) + d behind p, and the paper asks that the space
   between a facet and its mirror be hidden: 0 <= t <= limit(p), i.e. each ray allows
   d in [-2 N.(p - c), limit(p) - 2 N.(p - c)]. The lower end matters for curved facets: a
   smaller d puts the mirrored rim in front of the seen surface.
@@ -77,6 +77,17 @@ Choices made here (the paper leaves them open):
   less far than its observed points do. Each such side is a half-space every hypothesis is
   cut to (with the others below) and every ray stops at, like the support. An object far from
   the border reaches far inside, so its bound lies far outside and never binds.
+- Beyond the support's seen extent (``outside_support_ratio``): the support plane is known
+  everywhere, but the support itself was seen only within the outline of its seen points
+  (their convex hull in the plane). Beyond it lies space the camera may never have seen (behind
+  an object at the table's far edge, behind a bin's rim), where no support edge, wall or free
+  voxel stops a ray: a piece of a bin's wall in full view grew 12-litre candidates into it
+  (docs/experiments/2026-11-27-support-extent.md). The same mirror rule bounds it: across each
+  side of the outline (a half-space across the support plane through a hull edge) a
+  hypothesis reaches past the side at most ``outside_support_ratio`` (1) times as far as the
+  object's observed points reach inside it, and never less far than they do. Where the
+  camera saw that space, the seen-free voxels bound it first; an object well inside the
+  outline is unchanged.
 - Structure-aware candidates (``ipr_shapes.hypotheses.structure``; docs/DESIGN_NOTES.md,
   "Structure-aware candidates beside Algorithm 1"): ``structure_share`` of the m hypotheses
   (rounded) are made by the structure-aware generators that apply to the object, taking turns
@@ -253,6 +264,15 @@ class HypothesisConfig:
             by the border grew 5-60 litre candidates, docs/experiments/
             2026-11-27-border-cut-extent.md). None: unbounded (before 2026-11-27); also
             unbounded for a space without a ``view``.
+        outside_support_ratio: beyond each side of the support's seen outline (the convex
+            hull of its seen points in its plane, ``KnownPlane.points``; each side a half-space
+            across the plane) a hypothesis reaches at most this multiple of how far the
+            object's observed points reach inside that side (and at least as far as they do
+            beyond it; module doc). Default 1: the same mirror rule as ``outside_view_ratio``,
+            not a tuned value; beyond the support's seen extent the camera saw no support, and
+            what it did not see there (behind the object, behind a bin's rim) bounded nothing
+            (docs/experiments/2026-11-27-support-extent.md). None: unbounded (before
+            2026-11-27); also unbounded for a support with fewer than three seen points.
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -287,6 +307,7 @@ class HypothesisConfig:
         "superquadric_count": Interval(0, None, integer=True),
         "fitted_revolution_axis": Options(True, False),
         "outside_view_ratio": OrNone(Interval(0, None)),
+        "outside_support_ratio": OrNone(Interval(0, None)),
     }
 
     count: int = 32
@@ -318,6 +339,7 @@ class HypothesisConfig:
     superquadric_count: int = 3
     fitted_revolution_axis: bool = False
     outside_view_ratio: float | None = 1.0
+    outside_support_ratio: float | None = 1.0
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -458,8 +480,9 @@ class _Context:
     same thinned to one per ``hull_spacing_m`` cell for the hulls inside Algorithm 1's loop.
     ``cuts`` (C, 4) are half-spaces n . x + offset >= 0 every hypothesis is cut to: the support
     planes (lowered to the lowest observed point), the observed facets' support planes and the
-    bounds beyond the camera's view; ``stops`` (S, 4) are the last of these, which the hidden
-    extent's rays also stop at (``_view_bounds``).
+    bounds beyond the camera's view and the support's seen outline; ``stops`` (S, 4) are the
+    last of these, which the hidden extent's rays also stop at (``_view_bounds``,
+    ``_support_bounds``).
     """
 
     object_id: int
@@ -709,6 +732,9 @@ def _prepare(
     step = config.ray_step_m or pitch
     rays = bounds if bounds is not None else space
     stops = _view_bounds(points, space, config.outside_view_ratio)
+    sides = _support_bounds(points, regions, config.outside_support_ratio)
+    if len(sides):
+        stops = np.concatenate([stops, sides])
     ray_parts = (rays, regions, cap, step, stops)
     fallback = dominant_normal(obj, planes)
 
@@ -829,10 +855,55 @@ def _view_bounds(points: np.ndarray, space: SeenSpace | None, ratio: float | Non
     view = getattr(space, "view", None) if ratio is not None else None
     if view is None or len(points) == 0:
         return np.zeros((0, 4))
-    view = np.asarray(view, float).reshape(-1, 4)
-    inside = points @ view[:, :3].T + view[:, 3]  # (N, S) distances inside each side
+    return _mirror_levels(points, np.asarray(view, float).reshape(-1, 4), ratio)
+
+
+def _mirror_levels(points: np.ndarray, sides: np.ndarray, ratio: float) -> np.ndarray:
+    """Half-spaces (S, 4) n . x + b >= 0 bounding (N, 3) observed points beyond each side
+    (n, b) of ``sides`` (S, 4) (unit n inwards, so n . p + b is a point's distance inside,
+    m): the points reach s_max inside and s_min at least, and a hypothesis may reach
+    ``ratio`` * s_max beyond the side, or s_min when lower (the seen part's mirror image
+    about the side, never less than the seen part itself)."""
+    inside = points @ sides[:, :3].T + sides[:, 3]  # (N, S) distances inside each side
     level = np.minimum(inside.min(axis=0), -ratio * np.maximum(inside.max(axis=0), 0.0))
-    return np.column_stack([view[:, :3], view[:, 3] - level])
+    return np.column_stack([sides[:, :3], sides[:, 3] - level])
+
+
+@functools.lru_cache(maxsize=8)
+def _support_sides(region: PlaneRegion) -> np.ndarray:
+    """The sides (F, 4) n . x + b >= 0 of the support's seen outline (unit n in the plane,
+    pointing inwards; m): the convex hull of its seen points (``KnownPlane.points``) in the
+    plane's axes, each hull edge a half-space across the plane. Empty when the points span
+    no area. Remembered per region (regions are shared per frame, ``_plane_regions``)."""
+    points = np.asarray(region.plane.points, float).reshape(-1, 3)
+    points = points[np.all(np.isfinite(points), axis=1)]
+    sides = np.zeros((0, 4))
+    if len(points) >= 3:
+        try:
+            # 2-D rows (a, b, c): a s + b t + c <= 0 inside, (a, b) unit.
+            edges = ConvexHull(points @ region.axes.T).equations
+        except (QhullError, ValueError):
+            edges = None
+        if edges is not None:
+            normals = -(edges[:, :1] * region.axes[0] + edges[:, 1:2] * region.axes[1])
+            sides = np.column_stack([normals, -edges[:, 2]])
+    sides.setflags(write=False)
+    return sides
+
+
+def _support_bounds(
+    points: np.ndarray, regions: tuple[PlaneRegion, ...], ratio: float | None
+) -> np.ndarray:
+    """Half-spaces (S, 4) n . x + b >= 0 bounding an object beyond the support's seen outline
+    (module doc): per side of each support's outline (``_support_sides``), the observed
+    points' (N, 3) mirror level (``_mirror_levels``). Empty without a ratio or an outline."""
+    if ratio is None or len(points) == 0:
+        return np.zeros((0, 4))
+    sides = [_support_sides(r) for r in regions if r.is_support]
+    sides = [s for s in sides if len(s)]
+    if not sides:
+        return np.zeros((0, 4))
+    return _mirror_levels(points, np.concatenate(sides), ratio)
 
 
 def _distance(facet: _SourceFacet, u: float, config: HypothesisConfig) -> float:
