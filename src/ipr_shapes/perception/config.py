@@ -650,6 +650,10 @@ class SeamsConfig:
             on the same unmoved surface. Without it a printed line that one frame's pass missed
             and the next found (the potted meat can's label, dev 8100) cuts an unmoved object,
             and the tracker carries the cut back to the earlier frames.
+        flat_face_gate: a segment is searched only when it holds a flat face (normals within
+            ``max_normal_deg`` of one) at least ``min_length_m`` by twice ``min_width_m``
+            across: room for a seam and a strip each side (``seams._has_flat_face``). Cans,
+            bottles, bowls and small objects are then kept whole before any edge work.
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -684,6 +688,7 @@ class SeamsConfig:
     hysteresis: bool = True
     extend_planes: bool = True
     settled: bool = True
+    flat_face_gate: bool = True
 
     def __post_init__(self) -> None:
         check_fields(self)

@@ -74,6 +74,14 @@ _PARALLEL_DEG = 10.0
 _UNBOUNDED, _BY_OUTLINE, _BY_SEAM = 0, 1, 2
 #: Most points of a face whose size is measured (``_face_size``): larger faces are subsampled.
 _FACE_POINTS = 4096
+#: A segment's flat face (``_has_flat_face``) is found among this many of its pixels, and its
+#: normal among this many of theirs.
+_GATE_POINTS = 1024
+_FACE_CANDIDATES = 32
+#: The edge noise scale's sample: every this many rows and columns (``_edge_noise``).
+_NOISE_STEP_PX = 16
+#: How far (px) the colour gradient reads around a pixel: the Gaussian's 4 and Sobel's 1.
+_GRADIENT_REACH_PX = 5
 #: Row and column offsets of a pixel's 3 x 3 neighbourhood.
 _NEIGHBOURS = np.mgrid[-1:2, -1:2].reshape(2, -1)
 #: The colour gradient's smoothing: scipy's Gaussian of sigma 1 px (truncated at 4 sigma) as
@@ -140,14 +148,28 @@ def cut_colour_seams(
         search = not (settled is not None and segment < len(settled) and settled[segment])
         if search and _area_m2(mask, depth_m[crop], focal_px) < 2 * seams.min_area_m2:
             search = False
+        if (
+            search
+            and seams.flat_face_gate
+            and not _has_flat_face(mask, points[crop], normals[crop], config)
+        ):
+            search = False  # fmt: skip
         segments.append((crop, mask, search))
     if not any(search for *_, search in segments):
         return out
-    magnitude, gx, gy = _colour_gradient(rgb)
-    # The frame's own scale, over every pixel with depth: not over the segments, whose
-    # share of smooth surfaces depends on what the earlier steps removed (a bin's walls).
-    measured = depth_m > 0
-    noise = float(np.median(magnitude[measured if measured.any() else segment_pixels]))
+    # The gradient where edges are read: the searched segments' crops and a 1 px ring (the
+    # edges' thinning reads a pixel's neighbours), 0 elsewhere; or the frame's.
+    magnitude, gx, gy, whole = _colour_gradient_in(
+        rgb, [crop for crop, _, search in segments if search]
+    )
+    # The frame's own scale, over every pixel with depth: not over the segments, whose share
+    # of smooth surfaces depends on what the earlier steps removed (a bin's walls). Without the
+    # frame's gradient, from a sample of the frame.
+    if whole:
+        measured = depth_m > 0
+        noise = float(np.median(magnitude[measured if measured.any() else segment_pixels]))
+    else:
+        noise = _edge_noise(rgb, depth_m, segment_pixels)
     strong = np.flatnonzero(magnitude > seams.edge_factor * max(noise, 1e-6))
     # The gradient's direction is used at edge pixels only: measured at the strong ones.
     direction = np.zeros(magnitude.shape, dtype=magnitude.dtype)
@@ -156,8 +178,12 @@ def cut_colour_seams(
     # With the faint stretches that continue a strong edge (Canny's hysteresis): the edge
     # between two boxes of one colour fades along its length.
     if seams.hysteresis:
-        # Only where seams are searched: the segments and a ring around them.
-        near = kernels.dilate_diamond(segment_pixels, 3)  # binary_dilation, iterations=3
+        # Only where seams are searched: the searched segments and a ring around them.
+        searched_pixels = np.zeros(labels.shape, dtype=bool)
+        for crop, mask, search in segments:
+            if search:
+                searched_pixels[crop] |= mask
+        near = kernels.dilate_diamond(searched_pixels, 3)  # binary_dilation, iterations=3
         low = 0.5 * seams.edge_factor * max(noise, 1e-6)
         edges = _linked_edges(magnitude, gx, gy, direction, edges, low, near)
     searched = []
@@ -381,6 +407,103 @@ def _face_size(
             if span < (1.0 - tolerance) * extent[other]:
                 return None
     return float(extent.max()), float(extent.min())
+
+
+def _has_flat_face(
+    mask: np.ndarray, points: np.ndarray, normals: np.ndarray, config: PerceptionConfig
+) -> bool:
+    """Whether the segment ``mask`` ((h, w) bool; ``points``, ``normals`` (h, w, 3) world, m,
+    normals 0 where unknown) holds a flat face with room for a seam and the two strips beside
+    it: its pixels whose normals lie within ``seams.max_normal_deg`` of one normal span at least
+    ``seams.min_length_m`` (the seam) by twice ``seams.min_width_m`` (a strip each side), 2nd to
+    98th percentile along the face's principal axes. A seam's two sides must share a normal and
+    its strips lie on its plane (``_coplanar_sides``, ``_flat_strips``): a can's, a bottle's or a
+    bowl's faces within that angle are narrower (2 R sin 15 deg: 1.7 cm on a 3.3 cm soup can),
+    and small objects have no such face. The up to three best-supported normals of a sample of
+    about ``_GATE_POINTS`` pixels are tried (a box seen over an edge shows two faces)."""
+    seams = config.seams
+    usable = np.flatnonzero(mask)
+    usable = usable[:: -(-len(usable) // _GATE_POINTS)]
+    sample_normals = normals.reshape(-1, 3)[usable].astype(np.float64)
+    known = np.any(sample_normals != 0, axis=1)
+    if known.sum() < 50:
+        return False
+    usable, sample_normals = usable[known], sample_normals[known]
+    sample_points = points.reshape(-1, 3)[usable].astype(np.float64)
+    cos_limit = np.cos(np.radians(seams.max_normal_deg))
+    candidates = sample_normals[:: max(1, len(sample_normals) // _FACE_CANDIDATES)]
+    support = (candidates @ sample_normals.T >= cos_limit).sum(axis=1)
+    tried: list[np.ndarray] = []
+    long_side, short_side = seams.min_length_m, 2.0 * seams.min_width_m
+    for index in np.argsort(-support, kind="stable"):
+        if len(tried) == 3 or support[index] < 50:
+            break
+        normal = candidates[index]
+        if any(float(normal @ other) >= cos_limit for other in tried):
+            continue
+        tried.append(normal)
+        face = sample_points[sample_normals @ normal >= cos_limit]
+        centred = face - face.mean(axis=0)
+        flat = centred - np.outer(centred @ normal, normal)
+        axes = np.linalg.svd(flat, full_matrices=False)[2][:2]
+        low, high = np.percentile(flat @ axes.T, [2, 98], axis=0)
+        extent = np.sort(high - low)
+        if extent[1] >= max(long_side, short_side) and extent[0] >= min(long_side, short_side):
+            return True
+    return False
+
+
+def _edge_noise(rgb: np.ndarray, depth_m: np.ndarray, segment_pixels: np.ndarray) -> float:
+    """The median colour gradient magnitude (``_colour_gradient``) over the pixels with depth
+    (``depth_m`` > 0; none: over ``segment_pixels``, (H, W) bool) of a grid of every
+    ``_NOISE_STEP_PX``-th row and column: the frame's noise scale for the edge threshold,
+    without the frame's gradient (a median of thousands of samples moves by about a percent)."""
+    height, width = depth_m.shape
+    offset = _NOISE_STEP_PX // 2
+    rows, cols = np.mgrid[offset:height:_NOISE_STEP_PX, offset:width:_NOISE_STEP_PX]
+    rows, cols = rows.ravel(), cols.ravel()
+    for usable in (depth_m[rows, cols] > 0, segment_pixels[rows, cols]):
+        if usable.any():
+            rows, cols = rows[usable], cols[usable]
+            break
+    if len(rows) == 0 or min(height, width) <= len(_GAUSSIAN) // 2:
+        return float(np.median(_colour_gradient(rgb)[0][segment_pixels]))
+    return float(np.median(kernels.colour_gradient_at(rgb, _GAUSSIAN, rows.astype(np.int64),
+                                                      cols.astype(np.int64))))  # fmt: skip
+
+
+def _colour_gradient_in(
+    rgb: np.ndarray, crops: list[tuple[slice, slice]]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+    """``_colour_gradient`` of ``rgb`` (H, W, 3) within the ``crops`` and a 1 px ring, 0
+    elsewhere: each crop's gradient from the crop and a ring of ``_GRADIENT_REACH_PX`` (the
+    filters' reach), the same numbers as the frame's gradient there. When the crops cover
+    more than half the frame, the frame's gradient. And whether it is the frame's."""
+    height, width = rgb.shape[:2]
+    reach = _GRADIENT_REACH_PX + 1
+    boxes = [
+        (max(crop[0].start - reach, 0), min(crop[0].stop + reach, height),
+         max(crop[1].start - reach, 0), min(crop[1].stop + reach, width))
+        for crop in crops
+    ]  # fmt: skip
+    if sum((b - t) * (r - lf) for t, b, lf, r in boxes) > 0.5 * height * width:
+        return (*_colour_gradient(rgb), True)
+    magnitude = np.zeros((height, width), dtype=np.float32)
+    gx = np.zeros((height, width), dtype=np.float32)
+    gy = np.zeros((height, width), dtype=np.float32)
+    for (top, bottom, left, right), crop in zip(boxes, crops, strict=True):
+        part_m, part_x, part_y = _colour_gradient(rgb[top:bottom, left:right])
+        # Valid where the filters did not reach the box's cut sides: the crop and a 1 px ring.
+        inner = (
+            slice(max(crop[0].start - 1, 0), min(crop[0].stop + 1, height)),
+            slice(max(crop[1].start - 1, 0), min(crop[1].stop + 1, width)),
+        )
+        local = (slice(inner[0].start - top, inner[0].stop - top),
+                 slice(inner[1].start - left, inner[1].stop - left))  # fmt: skip
+        magnitude[inner] = part_m[local]
+        gx[inner] = part_x[local]
+        gy[inner] = part_y[local]
+    return magnitude, gx, gy, False
 
 
 def _colour_gradient(rgb: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -911,8 +1034,14 @@ def _best_cut(
     # The part's pixels with a normal, row-major (the side bands' pixels are among them).
     part_rows, part_cols = np.nonzero(part[window] & has_normal[window])
     part_pixels = (part_rows + top_px, part_cols + left_px)
+    room = None
     for _, a, rho, reaches_outline, line_rows, line_cols in stretches:
         if not reaches_outline:
+            continue
+        if room is None:
+            room = _Room(part, window, depth_m, focal_px)
+        # No room on one side of the line for a piece of the smallest area and width: no cut.
+        if not room.fits(cos_a[a], sin_a[a], rho, config):
             continue
         # Its length between its outermost pixels with depth (label images fill dropouts).
         measured = np.flatnonzero(depth_m[line_rows, line_cols] > 0)
@@ -934,6 +1063,36 @@ def _best_cut(
         if side is not None:
             return side, seam
     return None
+
+
+class _Room:
+    """A part's pixels in its window with their footprints (m^2) and sizes (m per px; pixels
+    without depth take the median depth of the others, as ``_area_m2``), for ``fits``."""
+
+    def __init__(self, part: np.ndarray, window: tuple[slice, slice], depth_m: np.ndarray,
+                 focal_px: float) -> None:  # fmt: skip
+        rows, cols = np.nonzero(part[window])
+        depths = depth_m[window][rows, cols].astype(np.float64)
+        known = depths > 0
+        if not known.all():
+            depths = np.where(known, depths, np.median(depths[known]) if known.any() else 0.0)
+        self.rows = rows + window[0].start
+        self.cols = cols + window[1].start
+        self.size = depths / focal_px
+        self.foot = self.size**2
+
+    def fits(self, cos_a: float, sin_a: float, rho: float, config: PerceptionConfig) -> bool:
+        """Whether each side of the line x cos a + y sin a = rho holds pixels enough for a piece
+        of ``seams.min_area_m2`` and ``seams.min_width_m`` (``kernels.line_sides``: upper bounds;
+        a trial cut that fails them fails ``_split``, which judges the pieces, for any part whose
+        pieces lie within the line's two half-planes: every convex part)."""
+        sides = kernels.line_sides(self.rows, self.cols, self.foot, self.size, float(cos_a),
+                                   float(sin_a), float(rho))  # fmt: skip
+        seams = config.seams
+        return bool(
+            np.all(sides[:, 0] >= seams.min_area_m2)
+            and np.all(np.minimum(sides[:, 1], sides[:, 2]) >= seams.min_width_m)
+        )
 
 
 def _straight_seam(
