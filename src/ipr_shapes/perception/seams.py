@@ -74,6 +74,8 @@ _PARALLEL_DEG = 10.0
 _UNBOUNDED, _BY_OUTLINE, _BY_SEAM = 0, 1, 2
 #: Most points of a face whose size is measured (``_face_size``): larger faces are subsampled.
 _FACE_POINTS = 4096
+#: Most points of a segment's cloud for the strip tests (``_flat_strips``, ``_repeated``).
+_CLOUD_POINTS = 4096
 #: A segment's flat face (``_has_flat_face``) is found among this many of its pixels, and its
 #: normal among this many of theirs.
 _GATE_POINTS = 1024
@@ -106,11 +108,66 @@ class _Seam:
     half_length_m: float
 
 
+class Normals:
+    """World unit normals (H, W, 3) float32 of a frame's labelled pixels with depth, computed
+    on demand: the pass reads them in a sample of each segment (``_has_flat_face``), then in
+    the searched segments, and in every segment only when a strip test asks for the frame's
+    face sizes (``_pairs_by_size``); most tabletop segments are never searched.
+
+    Args:
+        compute: maps (P,) flat pixel indices to their (P, 3) float32 normals (rows of 0
+            where unknown); each pixel's normal depends on its own neighbours only, so the
+            values do not depend on which pixels are asked together.
+        labelled: (H, W) bool, the pixels that have a normal at all (labelled, with depth);
+            0 elsewhere.
+    """
+
+    def __init__(self, compute, labelled: np.ndarray) -> None:
+        self._compute = compute
+        self._labelled = labelled
+        self._values = np.zeros((*labelled.shape, 3), dtype=np.float32)
+        self._done = np.zeros(labelled.shape, dtype=bool)
+
+    @classmethod
+    def of(cls, normals: np.ndarray) -> Normals:
+        """Already computed (H, W, 3) normals."""
+        known = cls(None, np.ones(normals.shape[:2], dtype=bool))
+        known._values = normals
+        known._done[:] = True
+        return known
+
+    def at(self, flat: np.ndarray) -> np.ndarray:
+        """(P, 3) normals of the (P,) flat pixel indices."""
+        self._fill(flat)
+        return self._values.reshape(-1, 3)[flat]
+
+    def within(self, crop: tuple[slice, slice], mask: np.ndarray) -> np.ndarray:
+        """(h, w, 3) normals of ``crop`` filled at least at ``mask`` ((h, w) bool)."""
+        rows, cols = np.nonzero(mask)
+        self._fill((rows + crop[0].start) * self._labelled.shape[1] + cols + crop[1].start)
+        return self._values[crop]
+
+    def everywhere(self) -> np.ndarray:
+        """The (H, W, 3) normals of every pixel."""
+        if not self._done.all():
+            self._fill(np.flatnonzero(~self._done))
+        return self._values
+
+    def _fill(self, flat: np.ndarray) -> None:
+        flat = flat[~self._done.reshape(-1)[flat]]
+        if len(flat) == 0:
+            return
+        self._done.reshape(-1)[flat] = True
+        flat = flat[self._labelled.reshape(-1)[flat]]
+        if len(flat):
+            self._values.reshape(-1, 3)[flat] = self._compute(flat)
+
+
 def cut_colour_seams(
     labels: np.ndarray,
     rgb: np.ndarray,
     points: np.ndarray,
-    normals: np.ndarray,
+    normals: np.ndarray | Normals,
     depth_m: np.ndarray,
     K: np.ndarray,
     config: PerceptionConfig,
@@ -122,7 +179,7 @@ def cut_colour_seams(
     Args:
         labels: (H, W) int segment labels, 0 = none; rgb: (H, W, 3) uint8;
         points: (H, W, 3) world points (m); normals: (H, W, 3) unit normals in the world frame,
-            0 where unknown; depth_m: (H, W) depth (m, 0 = none); K: (3, 3) intrinsics.
+            0 where unknown, or ``Normals`` that computes them where the pass reads; depth_m: (H, W) depth (m, 0 = none); K: (3, 3) intrinsics.
         settled: (labels.max() + 1,) bool, segments not searched (kept whole: unmoved since
             the previous frame, which decided their seams; ``segmentation.settled_segments``),
             or None (all searched). They still count as faces for ``seams.pair_sizes``.
@@ -132,6 +189,8 @@ def cut_colour_seams(
     segment_pixels = labels > 0
     if not seams.enabled or not segment_pixels.any():
         return out
+    if not isinstance(normals, Normals):
+        normals = Normals.of(normals)
     focal_px = float(K[0, 0])
     # The segments to search: not settled, and with room for two pieces of the smallest area
     # (``_search_segment``'s own first test). A frame with none needs no edges at all.
@@ -151,7 +210,7 @@ def cut_colour_seams(
         if (
             search
             and seams.flat_face_gate
-            and not _has_flat_face(mask, points[crop], normals[crop], config)
+            and not _has_flat_face(mask, crop, points, normals, config)
         ):
             search = False  # fmt: skip
         segments.append((crop, mask, search))
@@ -193,12 +252,16 @@ def cut_colour_seams(
             searched.append((crop, mask, mask.astype(np.int32), [], np.empty((0, 3)), []))
             continue
         cut, found = _search_segment(mask, edges[crop], direction[crop], points[crop],
-                                     normals[crop], depth_m[crop], focal_px, config)  # fmt: skip
+                                     normals.within(crop, mask), depth_m[crop], focal_px,
+                                     config)  # fmt: skip
         # The segment's points with depth, and which seams have flat strips: measured once,
         # asked by every strip test below.
         cloud = np.empty((0, 3))
         if found:
             cloud = points[crop][mask & (depth_m[crop] > 0)].astype(np.float64)
+            # Every k-th point of a large segment: the strip tests take medians and 98th
+            # percentiles of it, which move by far less than their tolerances.
+            cloud = cloud[:: -(-len(cloud) // _CLOUD_POINTS)]
         flat = [_flat_strips(seam, cloud, config) for seam in found]
         searched.append((crop, mask, cut, found, cloud, flat))
     asked = [_Sizes() for _ in searched]
@@ -207,7 +270,8 @@ def cut_colour_seams(
                for (crop, _, cut, found, cloud, flat), sizes
                in zip(searched, asked, strict=True)]  # fmt: skip
     if seams.pair_needs_grid and seams.pair_sizes:
-        decided = _pairs_by_size(searched, decided, asked, points, normals, depth_m, config)
+        decided = _pairs_by_size(searched, decided, asked, points, normals.everywhere, depth_m,
+                                 config)  # fmt: skip
     next_id = int(labels.max()) + 1
     for (crop, *_), pieces in zip(searched, decided, strict=True):
         view = out[crop]  # writes go to out
@@ -274,7 +338,7 @@ def _pairs_by_size(
     decided: list[np.ndarray],
     asked: list[_Sizes],
     points: np.ndarray,
-    normals: np.ndarray,
+    all_normals,
     depth_m: np.ndarray,
     config: PerceptionConfig,
 ) -> list[np.ndarray]:
@@ -292,6 +356,7 @@ def _pairs_by_size(
     def frame_faces() -> list[tuple[int, tuple[float, float]]]:
         if not done:
             done.append(True)
+            normals = all_normals()  # (H, W, 3), computed here only when a test asks
             measured = (depth_m > 0) & np.any(normals != 0, axis=2)
             for index, ((crop, *_), pieces) in enumerate(zip(searched, decided, strict=True)):
                 for piece in range(1, int(pieces.max()) + 1):
@@ -410,10 +475,14 @@ def _face_size(
 
 
 def _has_flat_face(
-    mask: np.ndarray, points: np.ndarray, normals: np.ndarray, config: PerceptionConfig
+    mask: np.ndarray,
+    crop: tuple[slice, slice],
+    points: np.ndarray,
+    normals: Normals,
+    config: PerceptionConfig,
 ) -> bool:
-    """Whether the segment ``mask`` ((h, w) bool; ``points``, ``normals`` (h, w, 3) world, m,
-    normals 0 where unknown) holds a flat face with room for a seam and the two strips beside
+    """Whether the segment ``mask`` ((h, w) bool in ``crop`` of the frame; ``points`` (H, W, 3)
+    world, m; ``normals`` the frame's, read at the sample only) holds a flat face with room for a seam and the two strips beside
     it: its pixels whose normals lie within ``seams.max_normal_deg`` of one normal span at least
     ``seams.min_length_m`` (the seam) by twice ``seams.min_width_m`` (a strip each side), 2nd to
     98th percentile along the face's principal axes. A seam's two sides must share a normal and
@@ -422,9 +491,10 @@ def _has_flat_face(
     and small objects have no such face. The up to three best-supported normals of a sample of
     about ``_GATE_POINTS`` pixels are tried (a box seen over an edge shows two faces)."""
     seams = config.seams
-    usable = np.flatnonzero(mask)
-    usable = usable[:: -(-len(usable) // _GATE_POINTS)]
-    sample_normals = normals.reshape(-1, 3)[usable].astype(np.float64)
+    rows, cols = np.nonzero(mask)
+    step = -(-len(rows) // _GATE_POINTS)
+    usable = (rows[::step] + crop[0].start) * points.shape[1] + cols[::step] + crop[1].start
+    sample_normals = normals.at(usable).astype(np.float64)
     known = np.any(sample_normals != 0, axis=1)
     if known.sum() < 50:
         return False
@@ -826,18 +896,21 @@ def _facing(pieces: np.ndarray, seam: _Seam) -> dict[tuple[int, int], int]:
     """How often (samples 3-5 px either side of ``seam``, along its length) each pair
     (smaller id, larger id) of different pieces faces each other across it."""
     height, width = pieces.shape
-    counts: dict[tuple[int, int], int] = {}
-    for k in (3, 4, 5):
-        rows_a = np.clip(np.round(seam.rows + k * seam.sin_a).astype(np.int64), 0, height - 1)
-        cols_a = np.clip(np.round(seam.cols + k * seam.cos_a).astype(np.int64), 0, width - 1)
-        rows_b = np.clip(np.round(seam.rows - k * seam.sin_a).astype(np.int64), 0, height - 1)
-        cols_b = np.clip(np.round(seam.cols - k * seam.cos_a).astype(np.int64), 0, width - 1)
-        a, b = pieces[rows_a, cols_a], pieces[rows_b, cols_b]
-        keep = (a > 0) & (b > 0) & (a != b)
-        for pa, pb in zip(a[keep].tolist(), b[keep].tolist(), strict=True):
-            key = (min(pa, pb), max(pa, pb))
-            counts[key] = counts.get(key, 0) + 1
-    return counts
+    k = np.array([3.0, 4.0, 5.0])[:, None]
+    rows_a = np.clip(np.round(seam.rows + k * seam.sin_a).astype(np.int64), 0, height - 1)
+    cols_a = np.clip(np.round(seam.cols + k * seam.cos_a).astype(np.int64), 0, width - 1)
+    rows_b = np.clip(np.round(seam.rows - k * seam.sin_a).astype(np.int64), 0, height - 1)
+    cols_b = np.clip(np.round(seam.cols - k * seam.cos_a).astype(np.int64), 0, width - 1)
+    a, b = pieces[rows_a, cols_a].ravel(), pieces[rows_b, cols_b].ravel()
+    keep = (a > 0) & (b > 0) & (a != b)
+    low = np.minimum(a[keep], b[keep]).astype(np.int64)
+    high = np.maximum(a[keep], b[keep]).astype(np.int64)
+    keys, counts = np.unique(low * (int(pieces.max()) + 1) + high, return_counts=True)
+    low, high = np.divmod(keys, int(pieces.max()) + 1)
+    return {
+        (int(pa), int(pb)): int(count)
+        for pa, pb, count in zip(low.tolist(), high.tolist(), counts.tolist(), strict=True)
+    }
 
 
 def _cut_by_planes(
