@@ -547,8 +547,9 @@ def _colour_gradient_in(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
     """``_colour_gradient`` of ``rgb`` (H, W, 3) within the ``crops`` and a 1 px ring, 0
     elsewhere: each crop's gradient from the crop and a ring of ``_GRADIENT_REACH_PX`` (the
-    filters' reach), the same numbers as the frame's gradient there. When the crops cover
-    more than half the frame, the frame's gradient. And whether it is the frame's."""
+    filters' reach), the same numbers as the frame's gradient there; or of the one box around
+    all crops when it has fewer pixels than the crops one by one (they overlap in a cluttered
+    frame); the frame's when that covers more than half of it. And whether it is the frame's."""
     height, width = rgb.shape[:2]
     reach = _GRADIENT_REACH_PX + 1
     boxes = [
@@ -556,7 +557,21 @@ def _colour_gradient_in(
          max(crop[1].start - reach, 0), min(crop[1].stop + reach, width))
         for crop in crops
     ]  # fmt: skip
-    if sum((b - t) * (r - lf) for t, b, lf, r in boxes) > 0.5 * height * width:
+    # The fewest pixels: the boxes one by one (they overlap in a cluttered frame), or the one
+    # box around them all; the frame's when either covers more than half of it.
+    one_by_one = sum((b - t) * (r - lf) for t, b, lf, r in boxes)
+    if boxes:
+        around = (min(b[0] for b in boxes), max(b[1] for b in boxes),
+                  min(b[2] for b in boxes), max(b[3] for b in boxes))  # fmt: skip
+        if (around[1] - around[0]) * (around[3] - around[2]) < one_by_one:
+            top, bottom, left, right = around
+            crops = [
+                (slice(min(c[0].start for c in crops), max(c[0].stop for c in crops)),
+                 slice(min(c[1].start for c in crops), max(c[1].stop for c in crops)))
+            ]  # fmt: skip
+            boxes = [around]
+            one_by_one = (bottom - top) * (right - left)
+    if one_by_one > 0.5 * height * width:
         return (*_colour_gradient(rgb), True)
     magnitude = np.zeros((height, width), dtype=np.float32)
     gx = np.zeros((height, width), dtype=np.float32)
