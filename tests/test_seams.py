@@ -628,7 +628,7 @@ def test_only_a_segment_with_a_flat_face_for_a_seam_and_two_strips_is_searched()
     twice ``min_width_m`` (a box's 10 x 10 cm top; a box seen over its edge, two faces of
     6 x 10 cm), and not a soup can's side (its normals within 15 deg of one span 1.7 cm) or a
     3 cm wide flat strip (no room for a strip of 2 cm on each side of a seam)."""
-    from ipr_shapes.perception.seams import _has_flat_face
+    from ipr_shapes.perception.seams import _GATE_POINTS, Normals, _has_flat_face
 
     def plane(width_m: float):
         shape = (100, round(width_m * 1000))
@@ -653,12 +653,25 @@ def test_only_a_segment_with_a_flat_face_for_a_seam_and_two_strips_is_searched()
         ((100, 100), can, False),
         (*plane(0.03), False),
     ):
-        points, normals = _surface(shape, surface)
+        points, values = _surface(shape, surface)
         mask = np.ones(shape, dtype=bool)
-        assert _has_flat_face(mask, points, normals, ON) is expected
+        # The normals computed on demand: the gate reads a sample of the segment only.
+        asked = []
+
+        def compute(flat, values=values, asked=asked):
+            asked.append(len(flat))
+            return values.reshape(-1, 3)[flat]
+
+        normals = Normals(compute, mask)
+        whole = (slice(0, shape[0]), slice(0, shape[1]))
+        assert _has_flat_face(mask, whole, points, normals, ON) is expected
+        assert 0 < sum(asked) <= _GATE_POINTS < mask.sum()
+        assert np.array_equal(normals.everywhere(), values)
     # Unknown normals (no depth) are no face.
-    points, normals = _surface(*plane(0.10))
-    assert not _has_flat_face(np.ones((100, 100), bool), points, 0 * normals, ON)
+    points, values = _surface(*plane(0.10))
+    whole = (slice(0, 100), slice(0, 100))
+    mask = np.ones((100, 100), bool)
+    assert not _has_flat_face(mask, whole, points, Normals.of(0 * values), ON)
     # Off: the can is searched (``cut_colour_seams`` asks the gate only when it is on).
     assert not replace(ON.seams, flat_face_gate=False).flat_face_gate
 
