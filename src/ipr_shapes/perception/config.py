@@ -591,8 +591,9 @@ class SeamsConfig:
 
     Off by default for its time, not its accuracy: with it on, every development, container
     and tabletop set scores as with it off (bins-real 28.6 -> 55.5 %), but the perception costs
-    1.2-1.7 times as much CPU per tabletop frame (129-245 ms) and about 4.5 times per bin frame
-    (about 750 ms), against a 150 ms budget (docs/experiments/2026-11-27-seams-default.md).
+    1.04-1.8 times as much CPU per tabletop frame and about 3 times per bin frame (about 430 ms),
+    against a 150 ms budget (docs/experiments/2026-11-27-seams-default.md,
+    2026-11-27-seam-search-cost.md).
     Turn it on for packed boxes (bin picking).
 
     Attributes:
