@@ -207,15 +207,22 @@ def cut_colour_seams(
         search = not (settled is not None and segment < len(settled) and settled[segment])
         if search and _area_m2(mask, depth_m[crop], focal_px) < 2 * seams.min_area_m2:
             search = False
-        if (
-            search
-            and seams.flat_face_gate
-            and not _has_flat_face(mask, crop, points, normals, config)
-        ):
-            search = False  # fmt: skip
         segments.append((crop, mask, search))
+    if seams.flat_face_gate:
+        # Every gate's sample of normals in one request (one pass of the normals' kernel).
+        samples = [_gate_sample(mask, crop, labels.shape[1]) if search else None
+                   for crop, mask, search in segments]  # fmt: skip
+        if any(sample is not None for sample in samples):
+            normals.at(np.concatenate([sample for sample in samples if sample is not None]))
+        segments = [
+            (crop, mask, search and _has_flat_face(mask, crop, points, normals, config, sample))
+            for (crop, mask, search), sample in zip(segments, samples, strict=True)
+        ]
     if not any(search for *_, search in segments):
         return out
+    # And the searched segments' normals in one request.
+    normals.at(np.concatenate([_gate_sample(mask, crop, labels.shape[1], everything=True)
+                               for crop, mask, search in segments if search]))  # fmt: skip
     # The gradient where edges are read: the searched segments' crops and a 1 px ring (the
     # edges' thinning reads a pixel's neighbours), 0 elsewhere; or the frame's.
     magnitude, gx, gy, whole = _colour_gradient_in(
@@ -474,16 +481,29 @@ def _face_size(
     return float(extent.max()), float(extent.min())
 
 
+def _gate_sample(
+    mask: np.ndarray, crop: tuple[slice, slice], width: int, everything: bool = False
+) -> np.ndarray:
+    """The flat frame indices (frame ``width`` px wide) of about ``_GATE_POINTS`` pixels of the
+    segment ``mask`` ((h, w) bool in ``crop``): every k-th of its pixels, row-major (all of
+    them with ``everything``)."""
+    rows, cols = np.nonzero(mask)
+    step = 1 if everything else -(-len(rows) // _GATE_POINTS)
+    return (rows[::step] + crop[0].start) * width + cols[::step] + crop[1].start
+
+
 def _has_flat_face(
     mask: np.ndarray,
     crop: tuple[slice, slice],
     points: np.ndarray,
     normals: Normals,
     config: PerceptionConfig,
+    sample: np.ndarray | None = None,
 ) -> bool:
     """Whether the segment ``mask`` ((h, w) bool in ``crop`` of the frame; ``points`` (H, W, 3)
-    world, m; ``normals`` the frame's, read at the sample only) holds a flat face with room for a seam and the two strips beside
-    it: its pixels whose normals lie within ``seams.max_normal_deg`` of one normal span at least
+    world, m; ``normals`` the frame's, read at ``sample`` only: ``_gate_sample``'s flat
+    indices, given when already asked for) holds a flat face with room for a seam and the two
+    strips beside it: its pixels whose normals lie within ``seams.max_normal_deg`` of one normal span at least
     ``seams.min_length_m`` (the seam) by twice ``seams.min_width_m`` (a strip each side), 2nd to
     98th percentile along the face's principal axes. A seam's two sides must share a normal and
     its strips lie on its plane (``_coplanar_sides``, ``_flat_strips``): a can's, a bottle's or a
@@ -491,9 +511,7 @@ def _has_flat_face(
     and small objects have no such face. The up to three best-supported normals of a sample of
     about ``_GATE_POINTS`` pixels are tried (a box seen over an edge shows two faces)."""
     seams = config.seams
-    rows, cols = np.nonzero(mask)
-    step = -(-len(rows) // _GATE_POINTS)
-    usable = (rows[::step] + crop[0].start) * points.shape[1] + cols[::step] + crop[1].start
+    usable = _gate_sample(mask, crop, points.shape[1]) if sample is None else sample
     sample_normals = normals.at(usable).astype(np.float64)
     known = np.any(sample_normals != 0, axis=1)
     if known.sum() < 50:
