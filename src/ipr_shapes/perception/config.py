@@ -591,7 +591,7 @@ class SeamsConfig:
 
     Off by default for its time, not its accuracy: with it on, every development, container
     and tabletop set scores as with it off (bins-real 28.6 -> 55.5 %), but the perception costs
-    1.04-1.8 times as much CPU per tabletop frame and about 3 times per bin frame (about 430 ms),
+    1.04-1.9 times as much CPU per tabletop frame and 3-4 times per bin frame (430-620 ms),
     against a 150 ms budget (docs/experiments/2026-11-27-seams-default.md,
     2026-11-27-seam-search-cost.md).
     Turn it on for packed boxes (bin picking).
