@@ -613,3 +613,134 @@ def test_linked_pixels_are_the_components_that_hold_a_seed():
         holds[parts[seeds]] = True
         holds[0] = False
         assert np.array_equal(kernels.linked_to(pixels, seeds), holds[parts])
+
+
+def _surface(shape: tuple[int, int], point_and_normal) -> tuple[np.ndarray, np.ndarray]:
+    """(h, w, 3) points and unit normals of a surface sampled on a grid of pixels: ``point_and
+    _normal(u, v)`` maps the (h, w) grid coordinates u (rows), v (cols) in metres to both."""
+    v, u = np.meshgrid(np.arange(shape[1]) * 0.001, np.arange(shape[0]) * 0.001)
+    points, normals = point_and_normal(u, v)
+    return points.astype(np.float32), normals.astype(np.float32)
+
+
+def test_only_a_segment_with_a_flat_face_for_a_seam_and_two_strips_is_searched():
+    """The search's gate (``seams.flat_face_gate``): a flat face at least ``min_length_m`` by
+    twice ``min_width_m`` (a box's 10 x 10 cm top; a box seen over its edge, two faces of
+    6 x 10 cm), and not a soup can's side (its normals within 15 deg of one span 1.7 cm) or a
+    3 cm wide flat strip (no room for a strip of 2 cm on each side of a seam)."""
+    from ipr_shapes.perception.seams import _GATE_POINTS, Normals, _has_flat_face
+
+    def plane(width_m: float):
+        shape = (100, round(width_m * 1000))
+        up = np.zeros((*shape, 3))
+        up[..., 2] = 1.0
+        return shape, lambda u, v: (np.stack([u, v, np.zeros_like(u)], axis=-1), up)
+
+    def can(u, v):  # radius 3.3 cm, axis along u, seen over 160 deg of its side
+        angle = (v / 0.1 - 0.5) * np.radians(160.0)
+        normal = np.stack([np.zeros_like(u), np.sin(angle), np.cos(angle)], axis=-1)
+        return np.stack([u, 0.033 * np.sin(angle), 0.033 * np.cos(angle)], axis=-1), normal
+
+    def edge(u, v):  # two faces meeting at v = 6 cm
+        top = v < 0.06
+        normal = np.where(top[..., None], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0])
+        points = np.stack([u, np.minimum(v, 0.06), np.where(top, 0.0, 0.06 - v)], axis=-1)
+        return points, normal
+
+    for shape, surface, expected in (
+        (*plane(0.10), True),
+        ((100, 120), edge, True),
+        ((100, 100), can, False),
+        (*plane(0.03), False),
+    ):
+        points, values = _surface(shape, surface)
+        mask = np.ones(shape, dtype=bool)
+        # The normals computed on demand: the gate reads a sample of the segment only.
+        asked = []
+
+        def compute(flat, values=values, asked=asked):
+            asked.append(len(flat))
+            return values.reshape(-1, 3)[flat]
+
+        normals = Normals(compute, mask)
+        whole = (slice(0, shape[0]), slice(0, shape[1]))
+        assert _has_flat_face(mask, whole, points, normals, ON) is expected
+        assert 0 < sum(asked) <= _GATE_POINTS < mask.sum()
+        assert np.array_equal(normals.everywhere(), values)
+    # Unknown normals (no depth) are no face.
+    points, values = _surface(*plane(0.10))
+    whole = (slice(0, 100), slice(0, 100))
+    mask = np.ones((100, 100), bool)
+    assert not _has_flat_face(mask, whole, points, Normals.of(0 * values), ON)
+    # Off: the can is searched (``cut_colour_seams`` asks the gate only when it is on).
+    assert not replace(ON.seams, flat_face_gate=False).flat_face_gate
+
+
+def test_a_trial_cut_without_room_for_two_pieces_is_skipped():
+    """``_Room.fits``: the half-planes' footprints and extents bound the pieces of a convex
+    part; a line 1 cm from a 10 x 6 cm part's side (a sliver narrower than ``min_width_m``)
+    has no room, its middle has. ``kernels.line_sides`` is the brute-force half-plane sums."""
+    from ipr_shapes.perception import kernels
+    from ipr_shapes.perception.seams import _Room
+
+    part = np.zeros((80, 120), dtype=bool)
+    part[10:70, 10:110] = True
+    depth = np.full(part.shape, 0.5)
+    depth[20, 30] = 0.0  # filled with the median
+    room = _Room(part, (slice(0, 80), slice(0, 120)), depth, 500.0)  # 1 mm per px
+    assert room.fits(1.0, 0.0, 60.0, ON)  # x = 60: two 5 x 6 cm halves
+    assert not room.fits(1.0, 0.0, 19.0, ON)  # x = 19: a 1 cm sliver
+    assert not room.fits(0.0, 1.0, 15.0, ON)  # y = 15: a 0.5 cm sliver
+    rng = np.random.default_rng(8)
+    rows, cols = np.nonzero(part)
+    for _ in range(20):
+        angle, rho = rng.uniform(0, np.pi), rng.uniform(0, 120)
+        sides = kernels.line_sides(rows.astype(np.int64), cols.astype(np.int64),
+                                   np.full(len(rows), 1e-6), np.full(len(rows), 1e-3),
+                                   np.cos(angle), np.sin(angle), rho)  # fmt: skip
+        distance = cols * np.cos(angle) + rows * np.sin(angle) - rho
+        along = -cols * np.sin(angle) + rows * np.cos(angle)
+        for side, chosen in enumerate((distance > 0, distance <= 0)):
+            if not chosen.any():
+                assert np.all(sides[side] == 0)
+                continue
+            assert sides[side, 0] == pytest.approx(chosen.sum() * 1e-6)
+            assert sides[side, 1] == pytest.approx((np.abs(distance[chosen]).max() + 0.5) * 1e-3)
+            spread = np.ptp(along[chosen]) + 1.0
+            assert sides[side, 2] == pytest.approx(spread * 1e-3)
+
+
+def test_the_gradient_in_the_searched_crops_is_the_frames_and_the_noise_its_median():
+    """``_colour_gradient_in``: the frame's gradient, number for number, in each crop and a
+    1 px ring (frame borders included), 0 elsewhere; ``kernels.colour_gradient_at``: the
+    frame's magnitude at any pixel; ``_edge_noise``: the median over pixels with depth within
+    a few percent from its sample."""
+    from ipr_shapes.perception import kernels
+    from ipr_shapes.perception.seams import (
+        _GAUSSIAN,
+        _colour_gradient,
+        _colour_gradient_in,
+        _edge_noise,
+    )
+
+    rng = np.random.default_rng(9)
+    rgb = rng.integers(0, 256, (120, 160, 3)).astype(np.uint8)
+    rgb = (rgb // 32 * 32).astype(np.uint8)
+    magnitude, gx, gy = _colour_gradient(rgb)
+    crops = [(slice(0, 30), slice(5, 50)), (slice(60, 120), slice(100, 160))]
+    local, local_x, local_y, whole = _colour_gradient_in(rgb, crops)
+    assert not whole
+    ring = np.zeros(magnitude.shape, dtype=bool)
+    for rows, cols in crops:
+        ring[max(rows.start - 1, 0) : rows.stop + 1, max(cols.start - 1, 0) : cols.stop + 1] = True
+    for got, expected in ((local, magnitude), (local_x, gx), (local_y, gy)):
+        assert np.array_equal(got[ring], expected[ring])
+        assert not got[~ring].any()
+    # Crops over most of the frame: the frame's gradient.
+    assert _colour_gradient_in(rgb, [(slice(0, 120), slice(0, 150))])[3]
+    rows, cols = np.nonzero(np.ones(magnitude.shape, dtype=bool))
+    at = kernels.colour_gradient_at(rgb, _GAUSSIAN, rows.astype(np.int64), cols.astype(np.int64))
+    assert np.allclose(at, magnitude.ravel(), atol=1e-5)
+    depth = np.where(rng.random(magnitude.shape) < 0.8, 0.7, 0.0)
+    noise = _edge_noise(rgb, depth, np.ones(depth.shape, dtype=bool))
+    assert noise == pytest.approx(float(np.median(magnitude[depth > 0])), rel=0.05)

@@ -591,8 +591,9 @@ class SeamsConfig:
 
     Off by default for its time, not its accuracy: with it on, every development, container
     and tabletop set scores as with it off (bins-real 28.6 -> 55.5 %), but the perception costs
-    1.2-1.7 times as much CPU per tabletop frame (129-245 ms) and about 4.5 times per bin frame
-    (about 750 ms), against a 150 ms budget (docs/experiments/2026-11-27-seams-default.md).
+    1.04-1.9 times as much CPU per tabletop frame and 3-4 times per bin frame (430-620 ms),
+    against a 150 ms budget (docs/experiments/2026-11-27-seams-default.md,
+    2026-11-27-seam-search-cost.md).
     Turn it on for packed boxes (bin picking).
 
     Attributes:
@@ -650,6 +651,10 @@ class SeamsConfig:
             on the same unmoved surface. Without it a printed line that one frame's pass missed
             and the next found (the potted meat can's label, dev 8100) cuts an unmoved object,
             and the tracker carries the cut back to the earlier frames.
+        flat_face_gate: a segment is searched only when it holds a flat face (normals within
+            ``max_normal_deg`` of one) at least ``min_length_m`` by twice ``min_width_m``
+            across: room for a seam and a strip each side (``seams._has_flat_face``). Cans,
+            bottles, bowls and small objects are then kept whole before any edge work.
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -684,6 +689,7 @@ class SeamsConfig:
     hysteresis: bool = True
     extend_planes: bool = True
     settled: bool = True
+    flat_face_gate: bool = True
 
     def __post_init__(self) -> None:
         check_fields(self)

@@ -1798,6 +1798,71 @@ def colour_gradient(rgb: np.ndarray, weights: np.ndarray):
 
 
 @_jit
+def colour_gradient_at(
+    rgb: np.ndarray, weights: np.ndarray, rows: np.ndarray, cols: np.ndarray
+) -> np.ndarray:
+    """(N,) float64 gradient magnitudes of ``colour_gradient`` at the N pixels (rows, cols)
+    (int64) of the (H, W, 3) uint8 image only: the same filters (the symmetric (2r + 1,)
+    ``weights`` along columns and rows, Sobel, the channel with the largest squared gradient,
+    borders reflected), summed in float64 per pixel (not float32 per pass: equal to
+    ``np.hypot`` of ``colour_gradient``'s components within float32 rounding). For a noise
+    scale from a sample of the frame (``seams._edge_noise``) without the frame's gradient."""
+    height, width = rgb.shape[0], rgb.shape[1]
+    radius = weights.shape[0] // 2
+    out = np.zeros(rows.shape[0])
+    smooth = np.empty((3, 3))
+    sums = np.empty(2 * radius + 3)
+    for i in range(rows.shape[0]):
+        best = -1.0
+        for channel in range(3):
+            # The smoothed image at the pixel's 3 x 3 neighbourhood (each neighbour's position
+            # reflected, then its taps: the Sobel pass reads the smoothed image's border),
+            # along the columns, then along the rows.
+            inside = (radius < rows[i] < height - radius - 1) and (
+                radius < cols[i] < width - radius - 1
+            )
+            if inside:
+                # Away from the border: the columns' sums shared by the three neighbours.
+                for dy in range(3):
+                    for xx in range(2 * radius + 3):
+                        column = 0.0
+                        for j in range(-radius, radius + 1):
+                            column += (
+                                weights[j + radius]
+                                * rgb[rows[i] + dy - 1 + j, cols[i] + xx - radius - 1, channel]
+                            )
+                        sums[xx] = column
+                    for dx in range(3):
+                        total = 0.0
+                        for k in range(-radius, radius + 1):
+                            total += weights[k + radius] * sums[dx + k + radius]
+                        smooth[dy, dx] = total / 255.0
+            for dy in range(3 if not inside else 0):
+                y0 = _reflected(rows[i] + dy - 1, height)
+                for dx in range(3):
+                    x0 = _reflected(cols[i] + dx - 1, width)
+                    total = 0.0
+                    for k in range(-radius, radius + 1):
+                        x = _reflected(x0 + k, width)
+                        column = 0.0
+                        for j in range(-radius, radius + 1):
+                            column += (
+                                weights[j + radius] * rgb[_reflected(y0 + j, height), x, channel]
+                            )
+                        total += weights[k + radius] * column
+                    smooth[dy, dx] = total / 255.0
+            gx = (smooth[0, 2] - smooth[0, 0]) + 2.0 * (smooth[1, 2] - smooth[1, 0])
+            gx += smooth[2, 2] - smooth[2, 0]
+            gy = (smooth[2, 0] - smooth[0, 0]) + 2.0 * (smooth[2, 1] - smooth[0, 1])
+            gy += smooth[2, 2] - smooth[0, 2]
+            square = gx * gx + gy * gy
+            if square > best:
+                best = square
+        out[i] = np.sqrt(best)
+    return out
+
+
+@_jit
 def line_stretches(
     part: np.ndarray,
     near_edge: np.ndarray,
@@ -1905,6 +1970,53 @@ def line_stretches(
                 break
         reaches[k] = both
     return lengths, reaches, out_rows[:total].copy(), out_cols[:total].copy(), bounds
+
+
+@_jit
+def line_sides(
+    rows: np.ndarray,
+    cols: np.ndarray,
+    foot_m2: np.ndarray,
+    size_m: np.ndarray,
+    cos_a: float,
+    sin_a: float,
+    rho: float,
+) -> np.ndarray:
+    """Room on the two sides of the line x cos a + y sin a = rho among the (N,) pixels
+    (rows, cols) of a part (int64), each with its footprint ``foot_m2`` (m^2) and its size
+    ``size_m`` (m per px, depth / focal). Returns (2, 3) float64: per side (x cos a + y sin a
+    above rho, below it) the summed footprint (m^2), the side's extent across the line (its
+    farthest pixel's distance + 0.5 px) and along it (px, + 1), the latter two times the
+    side's largest ``size_m``: upper bounds of the area and of the width (twice the inscribed
+    radius) of any piece of the part within that half-plane (the seams' cheap test before a
+    trial cut, ``seams._room_for_pieces``). Sides with no pixel give zeros."""
+    area = np.zeros(2)
+    across = np.zeros(2)
+    low = np.full(2, np.inf)
+    high = np.full(2, -np.inf)
+    scale = np.zeros(2)
+    for i in range(rows.shape[0]):
+        distance = cols[i] * cos_a + rows[i] * sin_a - rho
+        along = -cols[i] * sin_a + rows[i] * cos_a
+        side = 0 if distance > 0 else 1
+        area[side] += foot_m2[i]
+        distance = abs(distance)
+        if distance > across[side]:
+            across[side] = distance
+        if along < low[side]:
+            low[side] = along
+        if along > high[side]:
+            high[side] = along
+        if size_m[i] > scale[side]:
+            scale[side] = size_m[i]
+    out = np.zeros((2, 3))
+    for side in range(2):
+        if high[side] < low[side]:
+            continue
+        out[side, 0] = area[side]
+        out[side, 1] = (across[side] + 0.5) * scale[side]
+        out[side, 2] = (high[side] - low[side] + 1.0) * scale[side]
+    return out
 
 
 @_jit

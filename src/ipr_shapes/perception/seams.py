@@ -74,6 +74,16 @@ _PARALLEL_DEG = 10.0
 _UNBOUNDED, _BY_OUTLINE, _BY_SEAM = 0, 1, 2
 #: Most points of a face whose size is measured (``_face_size``): larger faces are subsampled.
 _FACE_POINTS = 4096
+#: Most points of a segment's cloud for the strip tests (``_flat_strips``, ``_repeated``).
+_CLOUD_POINTS = 4096
+#: A segment's flat face (``_has_flat_face``) is found among this many of its pixels, and its
+#: normal among this many of theirs.
+_GATE_POINTS = 1024
+_FACE_CANDIDATES = 32
+#: The edge noise scale's sample: every this many rows and columns (``_edge_noise``).
+_NOISE_STEP_PX = 16
+#: How far (px) the colour gradient reads around a pixel: the Gaussian's 4 and Sobel's 1.
+_GRADIENT_REACH_PX = 5
 #: Row and column offsets of a pixel's 3 x 3 neighbourhood.
 _NEIGHBOURS = np.mgrid[-1:2, -1:2].reshape(2, -1)
 #: The colour gradient's smoothing: scipy's Gaussian of sigma 1 px (truncated at 4 sigma) as
@@ -98,11 +108,66 @@ class _Seam:
     half_length_m: float
 
 
+class Normals:
+    """World unit normals (H, W, 3) float32 of a frame's labelled pixels with depth, computed
+    on demand: the pass reads them in a sample of each segment (``_has_flat_face``), then in
+    the searched segments, and in every segment only when a strip test asks for the frame's
+    face sizes (``_pairs_by_size``); most tabletop segments are never searched.
+
+    Args:
+        compute: maps (P,) flat pixel indices to their (P, 3) float32 normals (rows of 0
+            where unknown); each pixel's normal depends on its own neighbours only, so the
+            values do not depend on which pixels are asked together.
+        labelled: (H, W) bool, the pixels that have a normal at all (labelled, with depth);
+            0 elsewhere.
+    """
+
+    def __init__(self, compute, labelled: np.ndarray) -> None:
+        self._compute = compute
+        self._labelled = labelled
+        self._values = np.zeros((*labelled.shape, 3), dtype=np.float32)
+        self._done = np.zeros(labelled.shape, dtype=bool)
+
+    @classmethod
+    def of(cls, normals: np.ndarray) -> Normals:
+        """Already computed (H, W, 3) normals."""
+        known = cls(None, np.ones(normals.shape[:2], dtype=bool))
+        known._values = normals
+        known._done[:] = True
+        return known
+
+    def at(self, flat: np.ndarray) -> np.ndarray:
+        """(P, 3) normals of the (P,) flat pixel indices."""
+        self._fill(flat)
+        return self._values.reshape(-1, 3)[flat]
+
+    def within(self, crop: tuple[slice, slice], mask: np.ndarray) -> np.ndarray:
+        """(h, w, 3) normals of ``crop`` filled at least at ``mask`` ((h, w) bool)."""
+        rows, cols = np.nonzero(mask)
+        self._fill((rows + crop[0].start) * self._labelled.shape[1] + cols + crop[1].start)
+        return self._values[crop]
+
+    def everywhere(self) -> np.ndarray:
+        """The (H, W, 3) normals of every pixel."""
+        if not self._done.all():
+            self._fill(np.flatnonzero(~self._done))
+        return self._values
+
+    def _fill(self, flat: np.ndarray) -> None:
+        flat = flat[~self._done.reshape(-1)[flat]]
+        if len(flat) == 0:
+            return
+        self._done.reshape(-1)[flat] = True
+        flat = flat[self._labelled.reshape(-1)[flat]]
+        if len(flat):
+            self._values.reshape(-1, 3)[flat] = self._compute(flat)
+
+
 def cut_colour_seams(
     labels: np.ndarray,
     rgb: np.ndarray,
     points: np.ndarray,
-    normals: np.ndarray,
+    normals: np.ndarray | Normals,
     depth_m: np.ndarray,
     K: np.ndarray,
     config: PerceptionConfig,
@@ -114,7 +179,7 @@ def cut_colour_seams(
     Args:
         labels: (H, W) int segment labels, 0 = none; rgb: (H, W, 3) uint8;
         points: (H, W, 3) world points (m); normals: (H, W, 3) unit normals in the world frame,
-            0 where unknown; depth_m: (H, W) depth (m, 0 = none); K: (3, 3) intrinsics.
+            0 where unknown, or ``Normals`` that computes them where the pass reads; depth_m: (H, W) depth (m, 0 = none); K: (3, 3) intrinsics.
         settled: (labels.max() + 1,) bool, segments not searched (kept whole: unmoved since
             the previous frame, which decided their seams; ``segmentation.settled_segments``),
             or None (all searched). They still count as faces for ``seams.pair_sizes``.
@@ -124,6 +189,8 @@ def cut_colour_seams(
     segment_pixels = labels > 0
     if not seams.enabled or not segment_pixels.any():
         return out
+    if not isinstance(normals, Normals):
+        normals = Normals.of(normals)
     focal_px = float(K[0, 0])
     # The segments to search: not settled, and with room for two pieces of the smallest area
     # (``_search_segment``'s own first test). A frame with none needs no edges at all.
@@ -141,13 +208,34 @@ def cut_colour_seams(
         if search and _area_m2(mask, depth_m[crop], focal_px) < 2 * seams.min_area_m2:
             search = False
         segments.append((crop, mask, search))
+    if seams.flat_face_gate:
+        # Every gate's sample of normals in one request (one pass of the normals' kernel).
+        samples = [_gate_sample(mask, crop, labels.shape[1]) if search else None
+                   for crop, mask, search in segments]  # fmt: skip
+        if any(sample is not None for sample in samples):
+            normals.at(np.concatenate([sample for sample in samples if sample is not None]))
+        segments = [
+            (crop, mask, search and _has_flat_face(mask, crop, points, normals, config, sample))
+            for (crop, mask, search), sample in zip(segments, samples, strict=True)
+        ]
     if not any(search for *_, search in segments):
         return out
-    magnitude, gx, gy = _colour_gradient(rgb)
-    # The frame's own scale, over every pixel with depth: not over the segments, whose
-    # share of smooth surfaces depends on what the earlier steps removed (a bin's walls).
-    measured = depth_m > 0
-    noise = float(np.median(magnitude[measured if measured.any() else segment_pixels]))
+    # And the searched segments' normals in one request.
+    normals.at(np.concatenate([_gate_sample(mask, crop, labels.shape[1], everything=True)
+                               for crop, mask, search in segments if search]))  # fmt: skip
+    # The gradient where edges are read: the searched segments' crops and a 1 px ring (the
+    # edges' thinning reads a pixel's neighbours), 0 elsewhere; or the frame's.
+    magnitude, gx, gy, whole = _colour_gradient_in(
+        rgb, [crop for crop, _, search in segments if search]
+    )
+    # The frame's own scale, over every pixel with depth: not over the segments, whose share
+    # of smooth surfaces depends on what the earlier steps removed (a bin's walls). Without the
+    # frame's gradient, from a sample of the frame.
+    if whole:
+        measured = depth_m > 0
+        noise = float(np.median(magnitude[measured if measured.any() else segment_pixels]))
+    else:
+        noise = _edge_noise(rgb, depth_m, segment_pixels)
     strong = np.flatnonzero(magnitude > seams.edge_factor * max(noise, 1e-6))
     # The gradient's direction is used at edge pixels only: measured at the strong ones.
     direction = np.zeros(magnitude.shape, dtype=magnitude.dtype)
@@ -156,8 +244,12 @@ def cut_colour_seams(
     # With the faint stretches that continue a strong edge (Canny's hysteresis): the edge
     # between two boxes of one colour fades along its length.
     if seams.hysteresis:
-        # Only where seams are searched: the segments and a ring around them.
-        near = kernels.dilate_diamond(segment_pixels, 3)  # binary_dilation, iterations=3
+        # Only where seams are searched: the searched segments and a ring around them.
+        searched_pixels = np.zeros(labels.shape, dtype=bool)
+        for crop, mask, search in segments:
+            if search:
+                searched_pixels[crop] |= mask
+        near = kernels.dilate_diamond(searched_pixels, 3)  # binary_dilation, iterations=3
         low = 0.5 * seams.edge_factor * max(noise, 1e-6)
         edges = _linked_edges(magnitude, gx, gy, direction, edges, low, near)
     searched = []
@@ -167,12 +259,16 @@ def cut_colour_seams(
             searched.append((crop, mask, mask.astype(np.int32), [], np.empty((0, 3)), []))
             continue
         cut, found = _search_segment(mask, edges[crop], direction[crop], points[crop],
-                                     normals[crop], depth_m[crop], focal_px, config)  # fmt: skip
+                                     normals.within(crop, mask), depth_m[crop], focal_px,
+                                     config)  # fmt: skip
         # The segment's points with depth, and which seams have flat strips: measured once,
         # asked by every strip test below.
         cloud = np.empty((0, 3))
         if found:
             cloud = points[crop][mask & (depth_m[crop] > 0)].astype(np.float64)
+            # Every k-th point of a large segment: the strip tests take medians and 98th
+            # percentiles of it, which move by far less than their tolerances.
+            cloud = cloud[:: -(-len(cloud) // _CLOUD_POINTS)]
         flat = [_flat_strips(seam, cloud, config) for seam in found]
         searched.append((crop, mask, cut, found, cloud, flat))
     asked = [_Sizes() for _ in searched]
@@ -181,7 +277,8 @@ def cut_colour_seams(
                for (crop, _, cut, found, cloud, flat), sizes
                in zip(searched, asked, strict=True)]  # fmt: skip
     if seams.pair_needs_grid and seams.pair_sizes:
-        decided = _pairs_by_size(searched, decided, asked, points, normals, depth_m, config)
+        decided = _pairs_by_size(searched, decided, asked, points, normals.everywhere, depth_m,
+                                 config)  # fmt: skip
     next_id = int(labels.max()) + 1
     for (crop, *_), pieces in zip(searched, decided, strict=True):
         view = out[crop]  # writes go to out
@@ -248,7 +345,7 @@ def _pairs_by_size(
     decided: list[np.ndarray],
     asked: list[_Sizes],
     points: np.ndarray,
-    normals: np.ndarray,
+    all_normals,
     depth_m: np.ndarray,
     config: PerceptionConfig,
 ) -> list[np.ndarray]:
@@ -266,6 +363,7 @@ def _pairs_by_size(
     def frame_faces() -> list[tuple[int, tuple[float, float]]]:
         if not done:
             done.append(True)
+            normals = all_normals()  # (H, W, 3), computed here only when a test asks
             measured = (depth_m > 0) & np.any(normals != 0, axis=2)
             for index, ((crop, *_), pieces) in enumerate(zip(searched, decided, strict=True)):
                 for piece in range(1, int(pieces.max()) + 1):
@@ -381,6 +479,134 @@ def _face_size(
             if span < (1.0 - tolerance) * extent[other]:
                 return None
     return float(extent.max()), float(extent.min())
+
+
+def _gate_sample(
+    mask: np.ndarray, crop: tuple[slice, slice], width: int, everything: bool = False
+) -> np.ndarray:
+    """The flat frame indices (frame ``width`` px wide) of about ``_GATE_POINTS`` pixels of the
+    segment ``mask`` ((h, w) bool in ``crop``): every k-th of its pixels, row-major (all of
+    them with ``everything``)."""
+    rows, cols = np.nonzero(mask)
+    step = 1 if everything else -(-len(rows) // _GATE_POINTS)
+    return (rows[::step] + crop[0].start) * width + cols[::step] + crop[1].start
+
+
+def _has_flat_face(
+    mask: np.ndarray,
+    crop: tuple[slice, slice],
+    points: np.ndarray,
+    normals: Normals,
+    config: PerceptionConfig,
+    sample: np.ndarray | None = None,
+) -> bool:
+    """Whether the segment ``mask`` ((h, w) bool in ``crop`` of the frame; ``points`` (H, W, 3)
+    world, m; ``normals`` the frame's, read at ``sample`` only: ``_gate_sample``'s flat
+    indices, given when already asked for) holds a flat face with room for a seam and the two
+    strips beside it: its pixels whose normals lie within ``seams.max_normal_deg`` of one normal span at least
+    ``seams.min_length_m`` (the seam) by twice ``seams.min_width_m`` (a strip each side), 2nd to
+    98th percentile along the face's principal axes. A seam's two sides must share a normal and
+    its strips lie on its plane (``_coplanar_sides``, ``_flat_strips``): a can's, a bottle's or a
+    bowl's faces within that angle are narrower (2 R sin 15 deg: 1.7 cm on a 3.3 cm soup can),
+    and small objects have no such face. The up to three best-supported normals of a sample of
+    about ``_GATE_POINTS`` pixels are tried (a box seen over an edge shows two faces)."""
+    seams = config.seams
+    usable = _gate_sample(mask, crop, points.shape[1]) if sample is None else sample
+    sample_normals = normals.at(usable).astype(np.float64)
+    known = np.any(sample_normals != 0, axis=1)
+    if known.sum() < 50:
+        return False
+    usable, sample_normals = usable[known], sample_normals[known]
+    sample_points = points.reshape(-1, 3)[usable].astype(np.float64)
+    cos_limit = np.cos(np.radians(seams.max_normal_deg))
+    candidates = sample_normals[:: max(1, len(sample_normals) // _FACE_CANDIDATES)]
+    support = (candidates @ sample_normals.T >= cos_limit).sum(axis=1)
+    tried: list[np.ndarray] = []
+    long_side, short_side = seams.min_length_m, 2.0 * seams.min_width_m
+    for index in np.argsort(-support, kind="stable"):
+        if len(tried) == 3 or support[index] < 50:
+            break
+        normal = candidates[index]
+        if any(float(normal @ other) >= cos_limit for other in tried):
+            continue
+        tried.append(normal)
+        face = sample_points[sample_normals @ normal >= cos_limit]
+        centred = face - face.mean(axis=0)
+        flat = centred - np.outer(centred @ normal, normal)
+        axes = np.linalg.svd(flat, full_matrices=False)[2][:2]
+        low, high = np.percentile(flat @ axes.T, [2, 98], axis=0)
+        extent = np.sort(high - low)
+        if extent[1] >= max(long_side, short_side) and extent[0] >= min(long_side, short_side):
+            return True
+    return False
+
+
+def _edge_noise(rgb: np.ndarray, depth_m: np.ndarray, segment_pixels: np.ndarray) -> float:
+    """The median colour gradient magnitude (``_colour_gradient``) over the pixels with depth
+    (``depth_m`` > 0; none: over ``segment_pixels``, (H, W) bool) of a grid of every
+    ``_NOISE_STEP_PX``-th row and column: the frame's noise scale for the edge threshold,
+    without the frame's gradient (a median of thousands of samples moves by about a percent)."""
+    height, width = depth_m.shape
+    offset = _NOISE_STEP_PX // 2
+    rows, cols = np.mgrid[offset:height:_NOISE_STEP_PX, offset:width:_NOISE_STEP_PX]
+    rows, cols = rows.ravel(), cols.ravel()
+    for usable in (depth_m[rows, cols] > 0, segment_pixels[rows, cols]):
+        if usable.any():
+            rows, cols = rows[usable], cols[usable]
+            break
+    if len(rows) == 0 or min(height, width) <= len(_GAUSSIAN) // 2:
+        return float(np.median(_colour_gradient(rgb)[0][segment_pixels]))
+    return float(np.median(kernels.colour_gradient_at(rgb, _GAUSSIAN, rows.astype(np.int64),
+                                                      cols.astype(np.int64))))  # fmt: skip
+
+
+def _colour_gradient_in(
+    rgb: np.ndarray, crops: list[tuple[slice, slice]]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+    """``_colour_gradient`` of ``rgb`` (H, W, 3) within the ``crops`` and a 1 px ring, 0
+    elsewhere: each crop's gradient from the crop and a ring of ``_GRADIENT_REACH_PX`` (the
+    filters' reach), the same numbers as the frame's gradient there; or of the one box around
+    all crops when it has fewer pixels than the crops one by one (they overlap in a cluttered
+    frame); the frame's when that covers more than half of it. And whether it is the frame's."""
+    height, width = rgb.shape[:2]
+    reach = _GRADIENT_REACH_PX + 1
+    boxes = [
+        (max(crop[0].start - reach, 0), min(crop[0].stop + reach, height),
+         max(crop[1].start - reach, 0), min(crop[1].stop + reach, width))
+        for crop in crops
+    ]  # fmt: skip
+    # The fewest pixels: the boxes one by one (they overlap in a cluttered frame), or the one
+    # box around them all; the frame's when either covers more than half of it.
+    one_by_one = sum((b - t) * (r - lf) for t, b, lf, r in boxes)
+    if boxes:
+        around = (min(b[0] for b in boxes), max(b[1] for b in boxes),
+                  min(b[2] for b in boxes), max(b[3] for b in boxes))  # fmt: skip
+        if (around[1] - around[0]) * (around[3] - around[2]) < one_by_one:
+            top, bottom, left, right = around
+            crops = [
+                (slice(min(c[0].start for c in crops), max(c[0].stop for c in crops)),
+                 slice(min(c[1].start for c in crops), max(c[1].stop for c in crops)))
+            ]  # fmt: skip
+            boxes = [around]
+            one_by_one = (bottom - top) * (right - left)
+    if one_by_one > 0.5 * height * width:
+        return (*_colour_gradient(rgb), True)
+    magnitude = np.zeros((height, width), dtype=np.float32)
+    gx = np.zeros((height, width), dtype=np.float32)
+    gy = np.zeros((height, width), dtype=np.float32)
+    for (top, bottom, left, right), crop in zip(boxes, crops, strict=True):
+        part_m, part_x, part_y = _colour_gradient(rgb[top:bottom, left:right])
+        # Valid where the filters did not reach the box's cut sides: the crop and a 1 px ring.
+        inner = (
+            slice(max(crop[0].start - 1, 0), min(crop[0].stop + 1, height)),
+            slice(max(crop[1].start - 1, 0), min(crop[1].stop + 1, width)),
+        )
+        local = (slice(inner[0].start - top, inner[0].stop - top),
+                 slice(inner[1].start - left, inner[1].stop - left))  # fmt: skip
+        magnitude[inner] = part_m[local]
+        gx[inner] = part_x[local]
+        gy[inner] = part_y[local]
+    return magnitude, gx, gy, False
 
 
 def _colour_gradient(rgb: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -703,18 +929,21 @@ def _facing(pieces: np.ndarray, seam: _Seam) -> dict[tuple[int, int], int]:
     """How often (samples 3-5 px either side of ``seam``, along its length) each pair
     (smaller id, larger id) of different pieces faces each other across it."""
     height, width = pieces.shape
-    counts: dict[tuple[int, int], int] = {}
-    for k in (3, 4, 5):
-        rows_a = np.clip(np.round(seam.rows + k * seam.sin_a).astype(np.int64), 0, height - 1)
-        cols_a = np.clip(np.round(seam.cols + k * seam.cos_a).astype(np.int64), 0, width - 1)
-        rows_b = np.clip(np.round(seam.rows - k * seam.sin_a).astype(np.int64), 0, height - 1)
-        cols_b = np.clip(np.round(seam.cols - k * seam.cos_a).astype(np.int64), 0, width - 1)
-        a, b = pieces[rows_a, cols_a], pieces[rows_b, cols_b]
-        keep = (a > 0) & (b > 0) & (a != b)
-        for pa, pb in zip(a[keep].tolist(), b[keep].tolist(), strict=True):
-            key = (min(pa, pb), max(pa, pb))
-            counts[key] = counts.get(key, 0) + 1
-    return counts
+    k = np.array([3.0, 4.0, 5.0])[:, None]
+    rows_a = np.clip(np.round(seam.rows + k * seam.sin_a).astype(np.int64), 0, height - 1)
+    cols_a = np.clip(np.round(seam.cols + k * seam.cos_a).astype(np.int64), 0, width - 1)
+    rows_b = np.clip(np.round(seam.rows - k * seam.sin_a).astype(np.int64), 0, height - 1)
+    cols_b = np.clip(np.round(seam.cols - k * seam.cos_a).astype(np.int64), 0, width - 1)
+    a, b = pieces[rows_a, cols_a].ravel(), pieces[rows_b, cols_b].ravel()
+    keep = (a > 0) & (b > 0) & (a != b)
+    low = np.minimum(a[keep], b[keep]).astype(np.int64)
+    high = np.maximum(a[keep], b[keep]).astype(np.int64)
+    keys, counts = np.unique(low * (int(pieces.max()) + 1) + high, return_counts=True)
+    low, high = np.divmod(keys, int(pieces.max()) + 1)
+    return {
+        (int(pa), int(pb)): int(count)
+        for pa, pb, count in zip(low.tolist(), high.tolist(), counts.tolist(), strict=True)
+    }
 
 
 def _cut_by_planes(
@@ -911,8 +1140,14 @@ def _best_cut(
     # The part's pixels with a normal, row-major (the side bands' pixels are among them).
     part_rows, part_cols = np.nonzero(part[window] & has_normal[window])
     part_pixels = (part_rows + top_px, part_cols + left_px)
+    room = None
     for _, a, rho, reaches_outline, line_rows, line_cols in stretches:
         if not reaches_outline:
+            continue
+        if room is None:
+            room = _Room(part, window, depth_m, focal_px)
+        # No room on one side of the line for a piece of the smallest area and width: no cut.
+        if not room.fits(cos_a[a], sin_a[a], rho, config):
             continue
         # Its length between its outermost pixels with depth (label images fill dropouts).
         measured = np.flatnonzero(depth_m[line_rows, line_cols] > 0)
@@ -934,6 +1169,36 @@ def _best_cut(
         if side is not None:
             return side, seam
     return None
+
+
+class _Room:
+    """A part's pixels in its window with their footprints (m^2) and sizes (m per px; pixels
+    without depth take the median depth of the others, as ``_area_m2``), for ``fits``."""
+
+    def __init__(self, part: np.ndarray, window: tuple[slice, slice], depth_m: np.ndarray,
+                 focal_px: float) -> None:  # fmt: skip
+        rows, cols = np.nonzero(part[window])
+        depths = depth_m[window][rows, cols].astype(np.float64)
+        known = depths > 0
+        if not known.all():
+            depths = np.where(known, depths, np.median(depths[known]) if known.any() else 0.0)
+        self.rows = rows + window[0].start
+        self.cols = cols + window[1].start
+        self.size = depths / focal_px
+        self.foot = self.size**2
+
+    def fits(self, cos_a: float, sin_a: float, rho: float, config: PerceptionConfig) -> bool:
+        """Whether each side of the line x cos a + y sin a = rho holds pixels enough for a piece
+        of ``seams.min_area_m2`` and ``seams.min_width_m`` (``kernels.line_sides``: upper bounds;
+        a trial cut that fails them fails ``_split``, which judges the pieces, for any part whose
+        pieces lie within the line's two half-planes: every convex part)."""
+        sides = kernels.line_sides(self.rows, self.cols, self.foot, self.size, float(cos_a),
+                                   float(sin_a), float(rho))  # fmt: skip
+        seams = config.seams
+        return bool(
+            np.all(sides[:, 0] >= seams.min_area_m2)
+            and np.all(np.minimum(sides[:, 1], sides[:, 2]) >= seams.min_width_m)
+        )
 
 
 def _straight_seam(

@@ -43,7 +43,7 @@ from ipr_shapes.perception.fragments import fragment_borders, join_fragments
 from ipr_shapes.perception.occluder_splits import join_occluder_splits
 from ipr_shapes.perception.planes import find_support_plane, find_walls, static_geometry_mask
 from ipr_shapes.perception.robot import robot_pixels
-from ipr_shapes.perception.seams import cut_colour_seams
+from ipr_shapes.perception.seams import Normals, cut_colour_seams
 from ipr_shapes.perception.supervoxels import compute_supervoxels, organised_normals_at
 from ipr_shapes.perception.temporal import (
     SupervoxelChange,
@@ -279,14 +279,14 @@ def _cut_seams(
     is not searched: its grouping, seams included, was decided in the previous frame on the same
     surface, and a seam found now on an unmoved object is a printed line the previous frame did
     not take for one (or a cut the anchors already carry)."""
-    # The seams read normals at labelled pixels only: computed there, 0 elsewhere (each
+    # The seams read normals at labelled pixels only, and only where they look (a sample of
+    # each segment, the searched segments): computed there on demand, 0 elsewhere (each
     # pixel's normal is its own neighbours', the same as ``organised_normals`` gives it).
-    normals = np.zeros((*labels.shape, 3), dtype=np.float32)
-    labelled = np.flatnonzero((labels.reshape(-1) > 0) & (frame.depth_m.reshape(-1) > 0))
-    normals.reshape(-1, 3)[labelled] = organised_normals_at(
-        frame.depth_m, frame.K, labelled, config
+    rotation = frame.world_from_camera[:3, :3].T.astype(np.float32)
+    normals = Normals(
+        lambda flat: organised_normals_at(frame.depth_m, frame.K, flat, config) @ rotation,
+        (labels > 0) & (frame.depth_m > 0),
     )
-    normals = normals @ frame.world_from_camera[:3, :3].T.astype(np.float32)
     settled = None
     if change is not None and config.seams.settled:
         settled = settled_segments(labels, supervoxels, change, config)
