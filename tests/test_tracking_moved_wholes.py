@@ -93,6 +93,19 @@ def test_an_object_split_across_a_gap_is_joined_too():
     assert set(np.unique(_run([frame0, frame1])[0])) == {0, 1}
 
 
+def test_pieces_farther_apart_than_the_gap_are_not_joined():
+    # The same cut box, its pieces 14 cm apart (more than ``whole_max_gap_m``, 10 cm): however
+    # well the pushed whole covers both, they are not taken for one object.
+    box = _box_surface((0.0, 0.0, 0.0), (0.26, 0.06, 0.04))
+    left, right = box[box[:, 0] < 0.06], box[box[:, 0] >= 0.20]
+    frame0 = _frame([left, right])
+    frame1 = _frame([_moved(box, -10.0, (0.03, -0.03, 0.0))])
+    assert set(np.unique(_run([frame0, frame1])[0])) == {0, 1, 2}
+    # Within a wider gap the very same frames are joined: the gap alone decided.
+    wider = replace(ON, whole_max_gap_m=0.2)
+    assert set(np.unique(_run([frame0, frame1], wider)[0])) == {0, 1}
+
+
 def test_a_neighbour_that_vanished_is_not_joined_to_a_pushed_object():
     # Two boxes side by side; the push moves the first, the second is hidden in frame 1. The
     # first's frame-1 surface, registered, covers its own frame-0 surface and not the second's.

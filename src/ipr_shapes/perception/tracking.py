@@ -47,8 +47,8 @@ an object first seen in a later frame that explains part of an earlier object's 
 frame before (two touching objects one segment until a push separated them) takes that part,
 back to frame 0 (``split_merged_objects``); and within one frame, a segment that holds a known
 object left unmatched besides its own (two objects pushed into contact, segmented as one) gives
-that object the pixels its colour singles out (``split_merged_segments``). Opt-in
-(``moved_wholes``): an object that moved and whose segment, registered rigidly back onto the
+that object the pixels its colour singles out (``split_merged_segments``). And
+(``moved_wholes``, on by default): an object that moved and whose segment, registered rigidly back onto the
 frame before, covers both its own earlier segment and a neighbour's no longer seen, was one
 object split there, and the two ids become one in every frame (``join_moved_wholes``).
 
@@ -1525,6 +1525,7 @@ def join_moved_wholes(
             in_place = cKDTree(a_now).query(a_before)[0] <= inlier
             if in_place.mean() >= config.whole_static_share:
                 continue  # a did not move: no evidence
+            alone_fit = None  # how well a's own registration fits a alone: once per a
             for b, b_before in list(gone.items()):
                 if a_tree.query(b_before)[0].min() > config.whole_max_gap_m:
                     continue
@@ -1539,9 +1540,11 @@ def join_moved_wholes(
                 if (moved_tree.query(b_before)[0] <= inlier).mean() < config.whole_min_cover:
                     continue
                 fit = (cKDTree(union).query(moved)[0] <= inlier).mean()
-                alone_rotation, alone_translation = rigid_registration(a_now, a_before)
-                alone = a_tree.query(a_now @ alone_rotation.T + alone_translation)[0]
-                if fit < (alone <= inlier).mean():
+                if alone_fit is None:
+                    alone_rotation, alone_translation = rigid_registration(a_now, a_before)
+                    alone = a_tree.query(a_now @ alone_rotation.T + alone_translation)[0]
+                    alone_fit = (alone <= inlier).mean()
+                if fit < alone_fit:
                     continue
                 joined[b] = a
                 del gone[b]
