@@ -25,16 +25,16 @@ Constraints(X), and each object's output is read from its marginal over its own 
 - Medoid weights (``CollisionCheckerConfig.medoid_weights``): "candidate" (default) weights
   each feasible candidate equally. "family" (opt-in) gives each generator family
   (``ShapeHypothesis.generator``: Algorithm 1, symmetry, box, sphere, ...) with a jointly
-  feasible candidate an equal share, split equally among its feasible candidates: a uniform prior over the families that explain the object, then over each
-  family's candidates. How many candidates a family holds is the configuration's slot budget
-  (Algorithm 1 makes half of them, the superquadric three), not evidence about the object;
-  with each candidate counted once, Algorithm 1's many near-copies decided the medoid, and
-  for an occluded object they are mostly its seen part mirrored short. Each candidate is then
-  scored against the others only (``posterior_medoid``'s leave-one-out), so that a family's
-  lone candidate does not vote for itself with its family's whole share. Opt-in: it gains
-  0.020-0.035 on the three development sets but loses 0.004 on ycb-static, where minority
-  families over-fill well-seen objects and mirror slivers of occluded ones short (docs/
-  experiments/2026-11-28-collision-checker-choice.md).
+  feasible candidate an equal share, split equally among its feasible candidates: a uniform
+  prior over the families that explain the object, then over each family's candidates. How
+  many candidates a family holds is the configuration's slot budget (Algorithm 1 makes half
+  of them, the superquadric three), not evidence about the object; with each candidate
+  counted once, Algorithm 1's many near-copies decide the medoid, and for an occluded object
+  they are mostly its seen part mirrored short. Each candidate is then scored against the
+  others only (``posterior_medoid``'s leave-one-out), so that a family's lone candidate does
+  not vote for itself with its family's whole share. Opt-in: it gains on the development
+  sets and loses on ycb-static and bins-real, where a wrong family's equal share is an equal
+  say (docs/experiments/2026-11-28-collision-checker-choice.md).
 """
 
 from __future__ import annotations
