@@ -5,7 +5,7 @@ hypotheses``), or on its own for a subset::
 
     python -m benchmarks.hypothesis_ceiling --suite ycb-dynamic --limit 4 [--scene DIR ...]
         [--perception-cache DIR] [--algorithm1-only] [--neighbour-surfaces] [--superquadric N]
-        [--fitted-axis] [--unbounded-view] [--unbounded-support]
+        [--fitted-axis] [--unbounded-view] [--unbounded-support] [--medoid-weights W]
 
 Per scene: frame 0 is perceived, the hypotheses are prepared (``prepare_hypotheses``, the
 default configuration, seed 0, as the Collision Checker's run draws them) and the Collision
@@ -277,6 +277,13 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="no bound on the hidden extent beyond the support's seen outline (before 2026-11-27)",
     )
+    parser.add_argument(
+        "--medoid-weights",
+        choices=("candidate", "family"),
+        default=None,
+        help="the Collision Checker's medoid weights (default: the config's; family: each "
+        "generator family an equal share, opt-in)",
+    )
     args = parser.parse_args(argv)
     from ipr_shapes.config import Config
     from ipr_shapes.suites import suite_scenes
@@ -309,6 +316,13 @@ def main(argv: list[str] | None = None) -> int:
         config = dataclasses.replace(
             config,
             hypotheses=dataclasses.replace(config.hypotheses, outside_support_ratio=None),
+        )
+    if args.medoid_weights is not None:
+        config = dataclasses.replace(
+            config,
+            collision_checker=dataclasses.replace(
+                config.collision_checker, medoid_weights=args.medoid_weights
+            ),
         )
     groups = {name: suite_scenes(name)[: args.limit] for name in args.suite}
     if args.scene:

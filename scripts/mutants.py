@@ -382,8 +382,26 @@ MUTANTS: tuple[Mutant, ...] = (
         "medoid-weighted-by-marginals",
         "collision_checker",
         "the Collision Checker's medoid weights the feasible candidates by their marginals",
-        "posterior_medoid(hyps, feasible / feasible.sum()),",
-        "posterior_medoid(hyps, probabilities),",
+        "hyps, weights, table, leave_one_out=",
+        "hyps, probabilities, table, leave_one_out=",
+        _t("collision_checker"),
+    ),
+    Mutant(
+        "family-medoid-counts-its-own-vote",
+        "collision_checker",
+        "the family-weighted medoid scores each candidate against itself too, so a family's "
+        "lone candidate votes for itself with its family's whole share",
+        'leave_one_out=config.medoid_weights == "family"',
+        "leave_one_out=False",
+        _t("collision_checker"),
+    ),
+    Mutant(
+        "medoid-families-not-weighted",
+        "collision_checker",
+        "the Collision Checker's medoid counts each feasible candidate once, so one family's "
+        "many near-copies outvote the other families",
+        'if config.medoid_weights == "family":',
+        "if False:",
         _t("collision_checker"),
     ),
     Mutant(

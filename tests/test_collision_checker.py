@@ -200,3 +200,80 @@ def test_output_is_the_medoid_of_the_feasible_candidates_each_counted_once():
     assert box.probabilities == pytest.approx([11 / 13, 1 / 13, 1 / 13])
     assert box.best == 1
     assert posterior_medoid(box.hypotheses, box.probabilities) == 0  # the test means something
+
+
+def _nested_cubes(sizes_and_generators):
+    """One object's cube candidates sharing a corner at the origin, (size m, generator) each,
+    all unary-feasible, no neighbour."""
+    import dataclasses
+
+    from ipr_shapes.products import PreparedHypotheses, ShapeHypothesis
+
+    from .box_scene import box_mesh
+
+    hypotheses = []
+    for k, (size, generator) in enumerate(sizes_and_generators):
+        half = np.full(3, size / 2)
+        vertices, faces = box_mesh(half, half)
+        hypothesis = ShapeHypothesis(1, k, vertices, faces, size**3, np.zeros(0), np.zeros((0, 3)))
+        hypotheses.append(dataclasses.replace(hypothesis, generator=generator))
+    return PreparedHypotheses(
+        ids=[1],
+        generated={1: tuple(hypotheses)},
+        minima={1: hypotheses[0]},
+        candidates={1: list(range(len(hypotheses)))},
+        seconds={1: 0.0},
+        depths={},
+        thresholds={},
+    )
+
+
+def test_family_weights_give_each_family_with_a_feasible_candidate_an_equal_share():
+    from ipr_shapes.collision_checker import family_weights
+
+    generators = ["algorithm1"] * 4 + ["sphere", "box", "box"]
+    feasible = np.array([True, True, True, False, True, True, False])
+    weights = family_weights(generators, feasible)
+    assert weights == pytest.approx([1 / 9, 1 / 9, 1 / 9, 0, 1 / 3, 1 / 3, 0])
+    assert family_weights(generators, np.zeros(7, bool)) == pytest.approx(np.zeros(7))
+
+
+def test_one_familys_many_near_copies_do_not_outvote_the_other_families():
+    """Six near-copies of a 4 cm cube from Algorithm 1 and one 7 cm cube from each of two
+    other families (the 7 and 7.2 cm cubes agree with each other, IoU 0.92, and not with the
+    small ones, 0.19). Counting each candidate once, the six copies decide the medoid (a small
+    cube); with each family an equal share, two of three families agree on the large cube."""
+    sizes = [(0.040 + 2e-4 * k, "algorithm1") for k in range(6)]
+    prepared = _nested_cubes([*sizes, (0.070, "sphere"), (0.072, "superquadric")])
+    (family,) = uniform_posteriors(prepared, CollisionCheckerConfig(medoid_weights="family"))
+    (candidate,) = uniform_posteriors(prepared, CollisionCheckerConfig(medoid_weights="candidate"))
+    assert CollisionCheckerConfig().medoid_weights == "candidate"  # opt-in
+    assert family.hypotheses[family.best].generator in ("sphere", "superquadric")
+    assert candidate.hypotheses[candidate.best].generator == "algorithm1"
+    # The written probabilities are the marginals either way (uniform here).
+    assert family.probabilities == pytest.approx(candidate.probabilities)
+
+
+def test_family_weights_equal_candidate_weights_within_one_family():
+    """With a single family the two weightings are the same: the nested 4, 5, 6 cm cubes'
+    medoid is the 5 cm cube under both."""
+    prepared = _nested_cubes([(0.04, "algorithm1"), (0.05, "algorithm1"), (0.06, "algorithm1")])
+    for weights in ("family", "candidate"):
+        (posterior,) = uniform_posteriors(prepared, CollisionCheckerConfig(medoid_weights=weights))
+        assert posterior.best == 1
+
+
+def test_a_lone_candidate_of_a_second_family_does_not_win_by_its_own_vote():
+    """Eight Algorithm 1 cubes of 5.0-6.05 cm and one 4.2 cm symmetry cube: two families, half
+    each. Scored against itself too, the lone cube's own half (IoU 1 with itself) outweighs
+    that it matches the other family worse (IoU 0.36-0.59) than they match each other; scored
+    against the other candidates only (leave one out), an Algorithm 1 cube is the choice."""
+    sizes = [(0.050 + 0.0015 * k, "algorithm1") for k in range(8)]
+    prepared = _nested_cubes([*sizes, (0.042, "symmetry")])
+    (posterior,) = uniform_posteriors(prepared, CollisionCheckerConfig(medoid_weights="family"))
+    assert posterior.hypotheses[posterior.best].generator == "algorithm1"
+    from ipr_shapes.collision_checker import family_weights
+
+    weights = family_weights([h.generator for h in posterior.hypotheses], np.ones(9, bool))
+    assert posterior_medoid(posterior.hypotheses, weights) == 8  # the test means something
+    assert posterior_medoid(posterior.hypotheses, weights, leave_one_out=True) == posterior.best

@@ -15,27 +15,39 @@ Constraints(X), and each object's output is read from its marginal over its own 
   tolerance of that component is doubled, up to ``relax_steps`` times, then its pairwise
   constraints are dropped (each object uniform over its feasible hypotheses); logged.
 - Output shape: the medoid under voxel IoU of the jointly feasible hypotheses (non-zero
-  probability), each weighted equally: the Bayes choice under IoU loss if each were equally
-  likely to be the object; the minimum shape when no hypothesis is feasible. The marginals
-  themselves are not the weights: a candidate's marginal also counts the joint models it is
-  in, i.e. how many of its neighbours' *generated* candidates it fits with, which says how the
-  neighbours were sampled, not what this object is; small candidates fit with more and the
-  marginals fall with volume (median correlation of marginal and log volume -0.57 on 75
-  development objects), so their medoid leaned small (docs/experiments/
+  probability): the Bayes choice under IoU loss; the minimum shape when no hypothesis is
+  feasible. The marginals themselves are not the weights: a candidate's marginal also counts
+  the joint models it is in, i.e. how many of its neighbours' *generated* candidates it fits
+  with, which says how the neighbours were sampled, not what this object is; small candidates
+  fit with more and the marginals fall with volume (median correlation of marginal and log
+  volume -0.57 on 75 development objects), so their medoid leaned small (docs/experiments/
   2026-11-27-thin-candidates-overlap.md). The marginals are still the written probabilities.
+- Medoid weights (``CollisionCheckerConfig.medoid_weights``): "candidate" (default) weights
+  each feasible candidate equally. "family" (opt-in) gives each generator family
+  (``ShapeHypothesis.generator``: Algorithm 1, symmetry, box, sphere, ...) with a jointly
+  feasible candidate an equal share, split equally among its feasible candidates: a uniform
+  prior over the families that explain the object, then over each family's candidates. How
+  many candidates a family holds is the configuration's slot budget (Algorithm 1 makes half
+  of them, the superquadric three), not evidence about the object; with each candidate
+  counted once, Algorithm 1's many near-copies decide the medoid, and for an occluded object
+  they are mostly its seen part mirrored short. Each candidate is then scored against the
+  others only (``posterior_medoid``'s leave-one-out), so that a family's lone candidate does
+  not vote for itself with its family's whole share. Opt-in: it gains on the development
+  sets and loses on ycb-static and bins-real, where a wrong family's equal share is an equal
+  say (docs/experiments/2026-11-28-collision-checker-choice.md).
 """
 
 from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
 
-from ipr_shapes.checks import Checks, Interval, check_fields
+from ipr_shapes.checks import Checks, Interval, Options, check_fields
 from ipr_shapes.factor_graph import (
     PairwiseIoU,
     TableTooLarge,
@@ -71,6 +83,12 @@ class CollisionCheckerConfig:
         gibbs_burn_in: sweeps after a chain first becomes feasible before counting.
         relax_steps: doublings of the pairwise tolerance before dropping a component's
             pairwise constraints when nothing is jointly feasible.
+        medoid_weights: the weights of the jointly feasible candidates in the output medoid:
+            "candidate" (default), each feasible candidate the same weight; "family"
+            (opt-in), each generator family with a feasible candidate an equal share, split
+            equally among its feasible candidates (``family_weights``), each candidate scored
+            against the others only. The written probabilities are the marginals either way
+            (module doc).
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -79,6 +97,7 @@ class CollisionCheckerConfig:
         "gibbs_sweeps": Interval(1, None, integer=True),
         "gibbs_burn_in": Interval(0, None, integer=True),
         "relax_steps": Interval(0, None, integer=True),
+        "medoid_weights": Options("candidate", "family"),
     }
 
     max_exact_table: int = 2_000_000
@@ -86,6 +105,7 @@ class CollisionCheckerConfig:
     gibbs_sweeps: int = 300
     gibbs_burn_in: int = 30
     relax_steps: int = 3
+    medoid_weights: str = "candidate"
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -139,6 +159,26 @@ def _component_marginals(
 
 
 # --------------------------------------------------------------------------------------------
+# Medoid weights
+
+
+def family_weights(generators: Sequence[str], feasible: np.ndarray) -> np.ndarray:
+    """(m,) medoid weights of one object's candidates: each generator family (``generators``,
+    (m,) ``ShapeHypothesis.generator``) with a candidate in ``feasible`` ((m,) bool) an equal
+    share, split equally among its feasible candidates; 0 for the others (sum 1; all 0 when
+    none is feasible). Why: a uniform prior over the families that can explain the object,
+    then over each one's candidates; a family's candidate count is the configuration's slot
+    budget, not evidence (module doc)."""
+    feasible = np.asarray(feasible, dtype=bool)
+    weights = np.zeros(feasible.size)
+    families = sorted({generators[k] for k in np.flatnonzero(feasible)})
+    for family in families:
+        members = [k for k in np.flatnonzero(feasible) if generators[k] == family]
+        weights[members] = 1.0 / (len(families) * len(members))
+    return weights
+
+
+# --------------------------------------------------------------------------------------------
 # Public API
 
 
@@ -179,9 +219,14 @@ def uniform_posteriors(
         probabilities[candidates[i]] = marginals[i]
         probabilities /= probabilities.sum()
         inference = "minimum" if hyps[0].index == -1 else how[i]
-        # The medoid of the jointly feasible candidates, each counted once (module doc): a
-        # marginal also counts how many of the neighbours' candidates a candidate fits with.
-        feasible = (probabilities > 0).astype(float)
+        # The medoid of the jointly feasible candidates, not under the marginals (module
+        # doc): a marginal also counts how many of the neighbours' candidates a candidate fits
+        # with. Each family an equal share, or each candidate counted once.
+        feasible = probabilities > 0
+        if config.medoid_weights == "family":
+            weights = family_weights([h.generator for h in hyps], feasible)
+        else:
+            weights = feasible / feasible.sum()
         table = PairwiseIoU(hyps)
         if tables is not None:
             tables[i] = table
@@ -190,7 +235,9 @@ def uniform_posteriors(
                 i,
                 hyps,
                 probabilities,
-                posterior_medoid(hyps, feasible / feasible.sum(), table),
+                posterior_medoid(
+                    hyps, weights, table, leave_one_out=config.medoid_weights == "family"
+                ),
                 prepared.minima[i],
                 inference,
                 prepared.seconds[i],

@@ -225,11 +225,17 @@ def posterior_medoid(
     hypotheses: Sequence[ShapeHypothesis],
     probabilities: np.ndarray,
     table: PairwiseIoU | None = None,
+    *,
+    leave_one_out: bool = False,
 ) -> int:
     """Index of the hypothesis with the highest expected voxel IoU under ``probabilities``
     (the Bayes choice under IoU loss), among those with non-zero probability. ``table``: the
     pairs' IoU already computed for ``hypotheses`` (a ``PairwiseIoU`` of the same list; None:
-    computed here), filled with the pairs computed."""
+    computed here), filled with the pairs computed. ``leave_one_out``: each hypothesis is
+    scored against the others only (its own weight left out and the rest renormalised): the
+    candidates are draws standing for a continuum of shapes, and matching itself (IoU 1) is a
+    vote of its own weight, which with unequal weights favours a heavy lone candidate (with
+    equal weights it is the same choice)."""
     support = np.flatnonzero(probabilities > 0)
     if support.size <= 1:
         return int(support[0]) if support.size else 0
@@ -237,5 +243,8 @@ def posterior_medoid(
         table = PairwiseIoU(hypotheses)
     elif table.hypotheses is not hypotheses:
         raise ValueError("the IoU table belongs to another list of hypotheses")
-    expected = table.matrix(support) @ probabilities[support]
+    weights = probabilities[support]
+    expected = table.matrix(support) @ weights
+    if leave_one_out:
+        expected = (expected - weights) / np.maximum(weights.sum() - weights, 1e-300)
     return int(support[int(np.argmax(expected))])
