@@ -408,8 +408,8 @@ MUTANTS: tuple[Mutant, ...] = (
         "medoid-ignores-iou",
         "collision_checker",
         "the posterior medoid ranks by probability alone",
-        "expected = iou @ probabilities[support]",
-        "expected = probabilities[support]",
+        "expected = table.matrix(support) @ weights",
+        "expected = weights.copy()",
         _t("inference_method", "collision_checker"),
     ),
     Mutant(
