@@ -17,18 +17,12 @@ HEIGHT, WIDTH = 60, 80
 RGB = np.full((HEIGHT, WIDTH, 3), 120, dtype=np.uint8)
 
 
-def _config(
-    area_m2: float = 3e-4, share: float = 0.3, colour: float | None = None
-) -> PerceptionConfig:
+def _config(area_m2: float = 3e-4, share: float = 0.3) -> PerceptionConfig:
     base = PerceptionConfig()
-    colour = base.segmentation.fragment_colour if colour is None else colour
     return dataclasses.replace(
         base,
         segmentation=dataclasses.replace(
-            base.segmentation,
-            fragment_area_m2=area_m2,
-            fragment_contact_share=share,
-            fragment_colour=colour,
+            base.segmentation, fragment_area_m2=area_m2, fragment_contact_share=share
         ),
     )
 
@@ -119,34 +113,12 @@ def test_the_contact_share_decides(share):
     assert (len(np.unique(joined[joined > 0])) == 2) == (share <= 0.75)
 
 
-def test_a_piece_of_another_colour_on_a_running_surface_joins_by_default():
-    # A red cap, lid or printed band on segment 1's grey surface: the surface runs on (no
-    # step, one normal), so by default it joins whatever its colour; the opt-in colour gate
-    # (``fragment_colour`` 0.04, the default until 2026-11-28) keeps it apart.
+def test_a_touching_piece_of_another_colour_is_kept():
     labels, depth, segments = _scene(step_m=0.05)
     rgb = RGB.copy()
-    rgb[labels == 2] = (200, 60, 60)
-    points = _points(depth)
+    rgb[labels == 2] = (200, 60, 60)  # a red object packed into segment 1's grey one
     joined, _ = join_fragments(
-        labels, segments, points, depth, K, rgb, _supervoxels(labels), _config()
-    )
-    assert np.all(joined[20:30, 40:50] == 1)
-    gated, _ = join_fragments(
-        labels, segments, points, depth, K, rgb, _supervoxels(labels), _config(colour=0.04)
-    )
-    assert len(np.unique(gated[gated > 0])) == 3
-
-
-def test_a_piece_of_another_colour_meeting_at_a_crease_is_kept():
-    # A red object packed into segment 1's grey one meets it at a crease: the normals, not
-    # the colour, keep it apart.
-    labels, depth, segments = _scene(step_m=0.05)
-    rgb = RGB.copy()
-    rgb[labels == 2] = (200, 60, 60)
-    normals = np.tile([0.0, 0.0, -1.0], (4, 1))
-    normals[1] = [-1.0, 0.0, 0.0]
-    joined, _ = join_fragments(
-        labels, segments, _points(depth), depth, K, rgb, _supervoxels(labels, normals), _config()
+        labels, segments, _points(depth), depth, K, rgb, _supervoxels(labels), _config()
     )
     assert len(np.unique(joined[joined > 0])) == 3
 

@@ -364,11 +364,8 @@ class SegmentationConfig:
             lie on one continuing surface.
         fragment_bend_deg: ... and the surface normals of their supervoxels differ by at most
             this (deg): a surface running on, not two objects meeting at a crease.
-        fragment_colour: ... and, when positive, the two segments' mean chromaticities are at
-            most this far apart (as ``curved_segment_colour``); 0 (the default): colour is not
-            asked, the normals already refuse a small object packed against another (a
-            crease), and caps, lids and printed bands differ in colour on one surface
-            (docs/experiments/2026-11-28-lab-frames-segments.md; 0.04 until then).
+        fragment_colour: ... and the two segments' mean chromaticities are at most this far
+            apart (as ``curved_segment_colour``).
         thin_radius_m: touching segments are joined when the points of both lie on one
             cylinder of at most this radius (m; a marker, a pen, a handle: the seen half of its
             circumference, pi r, at most two supervoxel seeds, where the graph's convexity
@@ -473,7 +470,7 @@ class SegmentationConfig:
     fragment_area_m2: float = 0.0016
     fragment_contact_share: float = 0.5
     fragment_gap_m: float = 0.01
-    fragment_colour: float = 0.0
+    fragment_colour: float = 0.04
     fragment_bend_deg: float = 45.0
     thin_radius_m: float = 0.0125
     thin_rms_m: float = 0.003

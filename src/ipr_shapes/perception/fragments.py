@@ -41,12 +41,9 @@ def join_fragments(
     the most continuous pixel pairs (world points closer than ``fragment_gap_m``, their
     supervoxels' normals within ``fragment_bend_deg``: the surface runs on), when those are
     at least ``fragment_contact_share`` of its outline (its pixel pairs with any other label,
-    the support and background included, both with depth) and, when ``fragment_colour`` is
-    positive, the two mean chromaticities are within it. By default colour is not asked: a
-    small object packed against another meets it at a crease, which the normals refuse,
-    while a cap, a lid or a printed band is another colour on a surface that runs on
-    (docs/DESIGN_NOTES.md, "Fragments of curved surfaces joined by their outline"). Joined
-    segments add their areas and
+    the support and background included, both with depth) and the two mean chromaticities are
+    within ``fragment_colour`` (objects packed tightly touch along much of a small one's
+    outline; their colours tell them apart). Joined segments add their areas and
     outlines, so a fragment of a fragment can join through it. A joined fragment takes its
     neighbour's label; every other label is kept (as ``containers.join_container_insides``
     does), so objects elsewhere keep their ids.
@@ -86,7 +83,7 @@ def join_fragments(
         chroma = (
             colour[[piece, best]] / np.maximum(colour[[piece, best]].sum(axis=1), 1e-9)[:, None]
         )
-        if seg.fragment_colour > 0 and np.linalg.norm(chroma[0] - chroma[1]) > seg.fragment_colour:
+        if np.linalg.norm(chroma[0] - chroma[1]) > seg.fragment_colour:
             continue
         root[root == piece] = best
         for counts in (outline, continuous):
