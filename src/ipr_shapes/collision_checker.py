@@ -171,10 +171,12 @@ def family_weights(generators: Sequence[str], feasible: np.ndarray) -> np.ndarra
     budget, not evidence (module doc)."""
     feasible = np.asarray(feasible, dtype=bool)
     weights = np.zeros(feasible.size)
-    families = sorted({generators[k] for k in np.flatnonzero(feasible)})
-    for family in families:
-        members = [k for k in np.flatnonzero(feasible) if generators[k] == family]
-        weights[members] = 1.0 / (len(families) * len(members))
+    kept = np.flatnonzero(feasible)
+    if kept.size:
+        _, family, members = np.unique(
+            [generators[k] for k in kept], return_inverse=True, return_counts=True
+        )
+        weights[kept] = 1.0 / (members.size * members[family])
     return weights
 
 
