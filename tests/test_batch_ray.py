@@ -173,7 +173,25 @@ def ray_head() -> Iterator[tuple[str, str]]:
             if head.poll() is not None or time.monotonic() > deadline:
                 pytest.fail(f"the Ray head did not start: {(temp / 'head.log').read_text()}")
             time.sleep(0.5)
-        yield f"127.0.0.1:{port}", f"ray://127.0.0.1:{client_port}"
+        # "Ray runtime started" comes before the Ray Client server can serve: its first
+        # connection starts a server process per client, which on a fresh venv's cold start can
+        # fail ("Initialization failure from server"). Connect until one succeeds.
+        client = f"ray://127.0.0.1:{client_port}"
+        probe = f"import ray; ray.init({client!r}); ray.shutdown()"
+        while True:
+            connected = subprocess.run(
+                [sys.executable, "-c", probe],
+                capture_output=True,
+                text=True,
+                timeout=300,
+                env={**os.environ, **LOOPBACK_ENV},
+            )
+            if connected.returncode == 0:
+                break
+            if head.poll() is not None or time.monotonic() > deadline:
+                pytest.fail(f"the Ray Client server did not serve: {connected.stderr[-2000:]}")
+            time.sleep(1.0)
+        yield f"127.0.0.1:{port}", client
     finally:
         head.send_signal(signal.SIGTERM)  # ray start --block stops what it started
         with contextlib.suppress(subprocess.TimeoutExpired):
