@@ -787,7 +787,7 @@ def _add_run_options(parser: argparse.ArgumentParser) -> None:
         type=float,
         metavar="SECONDS",
         help="wall-clock budget of the whole run; the best answer so far is written when it "
-        "runs out (default: 1.75 s of inference per object after the hypotheses)",
+        "runs out (default: 0.8 s of sampling per object after the hypotheses)",
     )
 
 
