@@ -86,6 +86,7 @@ def measure_scene(path: Path, config=None, cache: Path | None = None) -> dict:
     from ipr_shapes.config import Config
     from ipr_shapes.ground_truth import frame0_ground_truth, visible_pixel_counts
     from ipr_shapes.hypotheses import prepare_hypotheses
+    from ipr_shapes.perception.outline import hidden_outline_fractions
 
     config = config or Config()
     scene, objects_per_frame, space, planes = _perceive(path, cache)
@@ -96,7 +97,14 @@ def measure_scene(path: Path, config=None, cache: Path | None = None) -> dict:
         objects, space, planes, config.hypotheses, config.constraints, rng=generation_rng
     )
     cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
-    posteriors = uniform_posteriors(prepared, config.collision_checker, rng=sampler_rng)
+    hidden = None
+    if config.collision_checker.medoid_weights == "outline":
+        hidden = hidden_outline_fractions(
+            scene.frames[0].depth_m, objects, config.perception.segmentation.contour_gap_m
+        )
+    posteriors = uniform_posteriors(
+        prepared, config.collision_checker, rng=sampler_rng, hidden=hidden
+    )
     views = surface_views(scene.frames, objects_per_frame, None, config.carving)
     carved = carve_posteriors(posteriors, views) if config.carving.enabled else posteriors
 
@@ -279,10 +287,11 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument(
         "--medoid-weights",
-        choices=("candidate", "family"),
+        choices=("candidate", "family", "outline"),
         default=None,
         help="the Collision Checker's medoid weights (default: the config's; family: each "
-        "generator family an equal share, opt-in)",
+        "generator family an equal share; outline: the two mixed by the object's hidden "
+        "outline fraction; both opt-in)",
     )
     args = parser.parse_args(argv)
     from ipr_shapes.config import Config

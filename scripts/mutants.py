@@ -391,8 +391,25 @@ MUTANTS: tuple[Mutant, ...] = (
         "collision_checker",
         "the family-weighted medoid scores each candidate against itself too, so a family's "
         "lone candidate votes for itself with its family's whole share",
-        'leave_one_out=config.medoid_weights == "family"',
-        "leave_one_out=False",
+        'leave_one_out = config.medoid_weights == "family"',
+        "leave_one_out = False",
+        _t("collision_checker"),
+    ),
+    Mutant(
+        "outline-medoid-ignores-the-hidden-outline",
+        "collision_checker",
+        "the outline-weighted medoid counts each candidate once whatever the object's hidden "
+        "outline fraction",
+        "weights = outline_weights([h.generator for h in hyps], feasible, hidden[i])",
+        "weights = outline_weights([h.generator for h in hyps], feasible, 0.0)",
+        _t("collision_checker"),
+    ),
+    Mutant(
+        "hidden-outline-counts-farther-neighbours",
+        "collision_checker",
+        "the hidden outline fraction counts an outside pixel farther than the object as hiding it",
+        "nearer = read & (outside_depth < depth - step_m)",
+        "nearer = read & (np.abs(outside_depth - depth) > step_m)",
         _t("collision_checker"),
     ),
     Mutant(

@@ -277,3 +277,69 @@ def test_a_lone_candidate_of_a_second_family_does_not_win_by_its_own_vote():
     weights = family_weights([h.generator for h in posterior.hypotheses], np.ones(9, bool))
     assert posterior_medoid(posterior.hypotheses, weights) == 8  # the test means something
     assert posterior_medoid(posterior.hypotheses, weights, leave_one_out=True) == posterior.best
+
+
+def test_outline_weights_mix_each_candidate_once_and_each_family_by_the_hidden_fraction():
+    from ipr_shapes.collision_checker import family_weights, outline_weights
+
+    generators = ["algorithm1"] * 4 + ["sphere", "box", "box"]
+    feasible = np.array([True, True, True, False, True, True, False])
+    equal = feasible / 5
+    family = family_weights(generators, feasible)
+    assert outline_weights(generators, feasible, 0.0) == pytest.approx(equal)
+    assert outline_weights(generators, feasible, 1.0) == pytest.approx(family)
+    assert outline_weights(generators, feasible, 0.25) == pytest.approx(
+        0.75 * equal + 0.25 * family
+    )
+    assert outline_weights(generators, feasible, 0.25).sum() == pytest.approx(1.0)
+    with pytest.raises(ValueError):
+        outline_weights(generators, feasible, 1.5)
+
+
+def test_outline_medoid_trusts_the_families_only_as_far_as_the_outline_is_hidden():
+    """The six 4 cm near-copies from Algorithm 1 and a 7 and a 7.2 cm cube from two other
+    families: an object whose outline is all its own (hidden 0, or not measured) keeps the
+    medoid of its candidates each counted once (a small cube); one whose outline is hidden
+    gets the families' choice (a large cube)."""
+    sizes = [(0.040 + 2e-4 * k, "algorithm1") for k in range(6)]
+    prepared = _nested_cubes([*sizes, (0.070, "sphere"), (0.072, "superquadric")])
+    config = CollisionCheckerConfig(medoid_weights="outline")
+    (candidate,) = uniform_posteriors(prepared, CollisionCheckerConfig())
+    (seen,) = uniform_posteriors(prepared, config, hidden={1: 0.0})
+    (unmeasured,) = uniform_posteriors(prepared, config)
+    (hidden,) = uniform_posteriors(prepared, config, hidden={1: 0.9})
+    assert seen.best == unmeasured.best == candidate.best
+    assert candidate.hypotheses[candidate.best].generator == "algorithm1"
+    assert hidden.hypotheses[hidden.best].generator in ("sphere", "superquadric")
+    assert hidden.probabilities == pytest.approx(candidate.probabilities)
+
+
+def test_hidden_outline_fraction_counts_nearer_neighbours_and_the_image_border():
+    """A 6 x 6 image, background 1 m. Object 1 (2 x 2 at 0.5 m) stands free: its outline is
+    its own (0). Object 2 (2 x 2 at 0.8 m) has object 3 (0.4 m, in front) along its right
+    side: 2 of its 8 outline pairs are hidden. Object 3 touches the image's right end: 2 of
+    its 8 pairs beyond the image, its left pairs face the farther object 2 (seen). A pixel with
+    no reading beside object 1 says nothing."""
+    from ipr_shapes.perception.outline import hidden_outline_fractions
+
+    depth = np.ones((6, 6))
+    depth[0, 0] = 0.0  # no reading: left out
+    depth[1:3, 0:2] = 0.5
+    depth[3:5, 2:4] = 0.8
+    depth[3:5, 4:6] = 0.4
+
+    def obj(object_id, rows, cols):
+        pixels = np.array([r * 6 + c for r in rows for c in cols])
+        return PartialObject(
+            object_id, 0, pixels, np.zeros((pixels.size, 3)), np.zeros((pixels.size, 3), np.uint8)
+        )
+
+    objects = [obj(1, (1, 2), (0, 1)), obj(2, (3, 4), (2, 3)), obj(3, (3, 4), (4, 5))]
+    fractions = hidden_outline_fractions(depth, objects, step_m=0.01)
+    # Object 1: left side beyond the image (2 pairs) of 7 counted (the unread pixel above left).
+    assert fractions[1] == pytest.approx(2 / 7)
+    assert fractions[2] == pytest.approx(2 / 8)
+    assert fractions[3] == pytest.approx(2 / 8)
+    # A step within the sensor's gap is the surface running on, not an occluder.
+    depth[3:5, 4:6] = 0.795
+    assert hidden_outline_fractions(depth, objects, step_m=0.01)[2] == pytest.approx(0.0)

@@ -35,6 +35,17 @@ Constraints(X), and each object's output is read from its marginal over its own 
   not vote for itself with its family's whole share. Opt-in: it gains on the development
   sets and loses on ycb-static and bins-real, where a wrong family's equal share is an equal
   say (docs/experiments/2026-11-28-collision-checker-choice.md).
+- "outline" (opt-in) trusts the families per object as far as the object's image outline is
+  hidden: the weights are ``1 - h`` each candidate once and ``h`` each family an equal share,
+  ``h`` the fraction of the object's frame-0 outline behind which a nearer surface or the
+  image border hides its continuation (``ipr_shapes.perception.outline``; measured by the
+  pipeline's Collision Checker run and ``benchmarks.hypothesis_ceiling``; an object with no
+  measure, as in the physics methods' starting answer, counts each candidate once). An object
+  whose outline is all its own keeps the default's choice bit for bit. Opt-in: it gains on two
+  development sets and loses on ycb-static; no per-object signal tried (hidden outline, the
+  candidates' continuation behind the occluders, the families' agreement, the visible
+  fraction itself) tells which family to trust there
+  (docs/experiments/2026-11-28-per-object-family-trust.md).
 """
 
 from __future__ import annotations
@@ -87,8 +98,9 @@ class CollisionCheckerConfig:
             "candidate" (default), each feasible candidate the same weight; "family"
             (opt-in), each generator family with a feasible candidate an equal share, split
             equally among its feasible candidates (``family_weights``), each candidate scored
-            against the others only. The written probabilities are the marginals either way
-            (module doc).
+            against the others only; "outline" (opt-in), per object the mixture of the two by
+            the fraction of its image outline a nearer surface hides (``outline_weights``).
+            The written probabilities are the marginals either way (module doc).
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -97,7 +109,7 @@ class CollisionCheckerConfig:
         "gibbs_sweeps": Interval(1, None, integer=True),
         "gibbs_burn_in": Interval(0, None, integer=True),
         "relax_steps": Interval(0, None, integer=True),
-        "medoid_weights": Options("candidate", "family"),
+        "medoid_weights": Options("candidate", "family", "outline"),
     }
 
     max_exact_table: int = 2_000_000
@@ -180,6 +192,26 @@ def family_weights(generators: Sequence[str], feasible: np.ndarray) -> np.ndarra
     return weights
 
 
+def outline_weights(generators: Sequence[str], feasible: np.ndarray, hidden: float) -> np.ndarray:
+    """(m,) medoid weights of one object's candidates: ``1 - hidden`` of the weight spread
+    equally over the feasible candidates, ``hidden`` over them as ``family_weights`` does
+    (sum 1; all 0 when none is feasible).
+
+    ``hidden`` in [0, 1]: the fraction of the object's image outline that a nearer surface or
+    the image border hides (``ipr_shapes.perception.outline.hidden_outline_fractions``). Why:
+    Algorithm 1 makes half the candidates by mirroring and extending the seen part; where the
+    whole outline is the object's own, the seen part spans the object and those candidates are
+    evidence of its extent, so each counts once (the default). Where the outline is hidden, the
+    hidden side's extent is not in the seen part, and a family's candidate count is only its
+    slot budget; there each family that explains the object gets an equal share. The fraction
+    is the share of the outline whose continuation the camera did not see: no threshold."""
+    feasible = np.asarray(feasible, dtype=bool)
+    if not 0.0 <= hidden <= 1.0:
+        raise ValueError(f"hidden outline fraction {hidden} outside [0, 1]")
+    equal = feasible / max(int(feasible.sum()), 1)
+    return (1.0 - hidden) * equal + hidden * family_weights(generators, feasible)
+
+
 # --------------------------------------------------------------------------------------------
 # Public API
 
@@ -190,12 +222,15 @@ def uniform_posteriors(
     rng: np.random.Generator | None = None,
     deadline: float = np.inf,
     tables: dict[int, PairwiseIoU] | None = None,
+    hidden: Mapping[int, float] | None = None,
 ) -> list[ObjectPosterior]:
     """The Collision Checker's marginals from prepared hypotheses (module doc): uniform over
     jointly feasible joint models; the Gibbs sampler stops at ``deadline``
     (``time.perf_counter()`` seconds). ``tables``, when given, receives per object id the
     pairwise IoU of its hypotheses its medoid computed (``PairwiseIoU``), for a later medoid
-    of the same object."""
+    of the same object. ``hidden``: per object id the hidden fraction of its image outline
+    (``hidden_outline_fractions``), read by ``medoid_weights = "outline"`` (an object absent:
+    0, each candidate counted once)."""
     config = config or CollisionCheckerConfig()
     rng = rng if rng is not None else np.random.default_rng(0)
     ids, generated, candidates = prepared.ids, prepared.generated, prepared.candidates
@@ -225,8 +260,12 @@ def uniform_posteriors(
         # doc): a marginal also counts how many of the neighbours' candidates a candidate fits
         # with. Each family an equal share, or each candidate counted once.
         feasible = probabilities > 0
+        leave_one_out = config.medoid_weights == "family"
         if config.medoid_weights == "family":
             weights = family_weights([h.generator for h in hyps], feasible)
+        elif config.medoid_weights == "outline" and (hidden or {}).get(i, 0.0) > 0.0:
+            weights = outline_weights([h.generator for h in hyps], feasible, hidden[i])
+            leave_one_out = True
         else:
             weights = feasible / feasible.sum()
         table = PairwiseIoU(hyps)
@@ -237,9 +276,7 @@ def uniform_posteriors(
                 i,
                 hyps,
                 probabilities,
-                posterior_medoid(
-                    hyps, weights, table, leave_one_out=config.medoid_weights == "family"
-                ),
+                posterior_medoid(hyps, weights, table, leave_one_out=leave_one_out),
                 prepared.minima[i],
                 inference,
                 prepared.seconds[i],
@@ -260,6 +297,7 @@ def collision_checker(
     hypotheses: HypothesisConfig | None = None,
     constraints: ConstraintConfig | None = None,
     progress: ProgressCallback | None = None,
+    hidden: Mapping[int, float] | None = None,
 ) -> list[ObjectPosterior]:
     """Marginal shape posteriors of the objects of one frame (frame 0) under a uniform prior
     restricted to jointly feasible models (module doc).
@@ -276,6 +314,8 @@ def collision_checker(
             (``prepare_hypotheses``).
         hypotheses, constraints: settings of generation and of the constraints (defaults).
         progress: observer of the hypotheses' progress (``ipr_shapes.progress``).
+        hidden: per object id the hidden fraction of its image outline in frame 0
+            (``hidden_outline_fractions``), for ``config.medoid_weights = "outline"``.
 
     Returns:
         One ObjectPosterior per object, in the order of ``objects``.
@@ -290,7 +330,7 @@ def collision_checker(
         objects, space, planes, hypotheses, constraints, generation_rng, time_budget_s,
         object_spaces, progress,
     )  # fmt: skip
-    posteriors = uniform_posteriors(prepared, config, sampler_rng, deadline)
+    posteriors = uniform_posteriors(prepared, config, sampler_rng, deadline, hidden=hidden)
     logger.debug(
         "collision checker: %d objects in %.3f s", len(objects), time.perf_counter() - started
     )

@@ -51,6 +51,7 @@ from ipr_shapes.likelihood import observed_frames
 from ipr_shapes.methods import DEFAULT_METHOD, Method, get_method
 from ipr_shapes.perception import Perception, check_objects_found, perceive_scene
 from ipr_shapes.perception.occlusion import join_first_frame_pieces
+from ipr_shapes.perception.outline import hidden_outline_fractions
 from ipr_shapes.perception.types import PartialObject
 from ipr_shapes.physics import wall_slabs
 from ipr_shapes.products import ObjectPosterior, RunSummary, StageTimings
@@ -406,6 +407,13 @@ def run_pipeline(
             ),
         )
     elif not chosen.physics:
+        hidden = None
+        if config.collision_checker.medoid_weights == "outline":
+            hidden = hidden_outline_fractions(
+                scene.frames[0].depth_m,
+                perception.objects[0],
+                config.perception.segmentation.contour_gap_m,
+            )
         posteriors = collision_checker(
             fused.objects,
             perception.free_space[0],
@@ -417,6 +425,7 @@ def run_pipeline(
             hypotheses=config.hypotheses,
             constraints=config.constraints,
             progress=progress,
+            hidden=hidden,
         )
         generation = float(sum(p.generation_s for p in posteriors))
         timing = StageTimings(
