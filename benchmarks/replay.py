@@ -125,7 +125,7 @@ def rebuild_generator_scene(path: Path) -> GeneratorScene:
     the scene's frame-0 ground truth."""
     from ipr_shapes.scene import load_ground_truth, load_scene
     from ipr_shapes.synth import object_pool
-    from ipr_shapes.synth.piles import PileWorld, sample_layout
+    from ipr_shapes.synth.piles import PileWorld, Rejected, sample_layout
 
     info_path = path / "synth.json"
     if not info_path.is_file():
@@ -158,7 +158,13 @@ def rebuild_generator_scene(path: Path) -> GeneratorScene:
         ]
     )
     world = PileWorld(layout, objects, frictions, config, light_dir)
-    world.drop_all(rng)
+    try:
+        world.drop_all(rng)
+    except Rejected as error:
+        raise ValueError(
+            f"{path}: the rebuilt pile is not the scene's (the generator rejects it: {error}); "
+            "the generator changed since the scene was written (regenerate the scenes)"
+        ) from error
 
     scene = load_scene(path)
     world_from_camera = {f.index: f.world_from_camera for f in scene.frames}

@@ -68,14 +68,9 @@ def test_the_generator_world_is_rebuilt_and_replays_its_pushes_exactly(tmp_path)
 
     from benchmarks.replay import generator_rungs, rebuild_generator_scene
 
-    from ipr_shapes.data import ycb_models_dir
     from ipr_shapes.synth import SynthConfig, generate_scene
 
-    if ycb_models_dir() is None:
-        # The ladder replays YCB-model scenes (ycb-dynamic); with the procedural objects that
-        # stand in for absent models the rebuilt world's pushes drift from the scene's after
-        # the first (DESIGN_NOTES, "The replay ladder on the benchmark page": open).
-        pytest.skip("YCB models (../shared/data or $IPR_DATA) are absent")
+    # YCB models when present, else the procedural objects (both must replay exactly).
     config = SynthConfig(width=160, height=120, min_visible_px=20, max_objects=4)
     path = generate_scene(tmp_path, kind="dynamic", seed=4, arrangement="table", config=config)
     rows = generator_rungs(rebuild_generator_scene(path))

@@ -266,6 +266,22 @@ def test_push_non_unit_direction(scene_dir: Path):
     assert "normalise" in error.fix
 
 
+def test_push_direction_of_unit_length_is_kept_bit_for_bit(scene_dir: Path):
+    # (cos a, sin a, 0): unit to float64 rounding, yet dividing it by its norm changes its last
+    # bits, which a replayed push amplifies (a generated scene's pushes replay exactly).
+    given = [-0.6520162635843662, -0.7582049802141122, 0.0]
+    assert not np.array_equal(np.array(given) / np.linalg.norm(given), given)
+    _edit_json(scene_dir / "actions.json", lambda c: c["pushes"][0].update(direction=given))
+    assert np.array_equal(load_scene(scene_dir).pushes[0].direction, given)
+
+
+def test_push_direction_within_tolerance_is_normalised(scene_dir: Path):
+    _edit_json(
+        scene_dir / "actions.json", lambda c: c["pushes"][0].update(direction=[1.0005, 0, 0])
+    )
+    assert np.array_equal(load_scene(scene_dir).pushes[0].direction, [1.0, 0.0, 0.0])
+
+
 @pytest.mark.parametrize("key", ["distance_m", "speed_m_s"])
 @pytest.mark.parametrize("value", [0, -0.1])
 def test_push_non_positive_distance_or_speed(scene_dir: Path, key: str, value: float):

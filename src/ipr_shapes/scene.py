@@ -40,6 +40,9 @@ FRAME_NAME = re.compile(r"^(\d{6})\.(png|jpg|jpeg)$")
 PLAUSIBLE_DEPTH_M = (0.1, 5.0)
 #: Tolerance on |direction| = 1 and on rotation orthonormality.
 UNIT_TOLERANCE = 1e-3
+#: A vector this close to length 1 is unit to float64 rounding (a norm's three products and
+#: sum round by a few ulps) and is kept as given.
+UNIT_ROUNDING = 8 * float(np.finfo(np.float64).eps)
 #: Plausible ``depth_scale`` (mm per depth unit): 1.0 for millimetre PNGs, 0.1 for 0.1 mm; far
 #: outside it the depths underflow or overflow.
 PLAUSIBLE_DEPTH_SCALE = (1e-3, 100.0)
@@ -316,6 +319,10 @@ def _positive_number(value: Any, path: Path, key: str) -> float:
 
 
 def _unit_vector(value: Any, path: Path, key: str) -> np.ndarray:
+    """``value`` as a unit (3,) vector, within ``UNIT_TOLERANCE`` of length 1. A vector already
+    of length 1 to float64 rounding is kept bit for bit: dividing it by its norm again moves
+    its last bits, and a replayed push is chaotic: the generator's recorded pushes must replay
+    exactly (DESIGN_NOTES, "The replay ladder on the benchmark page")."""
     vector = _number_array(value, 3, path, key)
     norm = float(np.linalg.norm(vector))
     if norm < 1e-9:
@@ -324,6 +331,8 @@ def _unit_vector(value: Any, path: Path, key: str) -> np.ndarray:
         raise SceneError(
             path, f"'{key}' is not a unit vector (length {norm:.4f})", "normalise it to length 1"
         )
+    if abs(norm - 1.0) <= UNIT_ROUNDING:
+        return vector
     return vector / norm
 
 
