@@ -89,8 +89,9 @@ class InferenceConfig:
             simulation an object's settled and pushed pose depends on the shapes it rests on
             or is pushed against, so a hidden part too small to hold a neighbour up shows in
             the neighbour's term, which "own" gives to the neighbour alone. "own" stays the
-            default: on the development sets the neighbours' residuals were not correlated
-            with a candidate's size or IoU and moved object IoU by less than 0.01
+            default: on the development sets the residuals' signal on an occluded object's
+            hidden extent was small against their noise and moved object IoU by less than
+            0.01 either way; with the pushes a set lost, as did ycb-dynamic
             (docs/experiments/2026-11-28-neighbour-evidence.md).
     """
 
