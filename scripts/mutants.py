@@ -156,6 +156,22 @@ MUTANTS: tuple[Mutant, ...] = (
         _t("inference"),
     ),
     Mutant(
+        "neighbour-evidence-ignored",
+        "inference",
+        'evidence "neighbours" gives each candidate its own term alone, as "own" does',
+        'if problem.config.evidence == "neighbours":',
+        "if False:",
+        _t("inference"),
+    ),
+    Mutant(
+        "neighbour-residual-not-centred",
+        "inference",
+        "a neighbour's whole term counts for the candidate, its own candidate's fit included",
+        "residuals[rows, k] = values - (np.logaddexp.reduce(values) - math.log(len(values)))",
+        "residuals[rows, k] = values",
+        _t("inference"),
+    ),
+    Mutant(
         "gravity-only-compares-every-frame",
         "inference",
         "gravity-only variants also compare the frames after the first push",

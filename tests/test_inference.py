@@ -542,3 +542,43 @@ def test_the_medoid_weighs_each_candidates_own_evidence_not_the_joint_models_it_
     weights = medoid_weights(results, problem)[0]
     assert weights[2] / weights[0] == pytest.approx(np.exp(scale * 0.01))
     assert weights[1] == pytest.approx(weights[0])
+
+
+def test_neighbour_evidence_gives_a_candidate_what_its_neighbours_terms_say_of_it():
+    """Object 2 rests on object 1's hidden part: whenever object 1 takes its small candidate
+    (0) object 2 falls and its term is worse by 0.04 of depth error norm, whatever object 2's
+    own candidate. Object 1's own term is the same in every sample. With "own" evidence (the
+    default) object 1's candidates weigh the same; with "neighbours" the candidate that holds
+    object 2 up weighs exp(alpha * 0.04) more, and object 2's weights are its own evidence's
+    (object 1's residuals are 0: its term is what its candidate says). Objects that cannot
+    touch (no neighbours) keep their own evidence."""
+    from ipr_shapes.inference import medoid_weights, neighbour_residuals
+
+    problem = dataclasses.replace(_fabricated_problem(2), neighbours=((1,), (0,)))
+    assert problem.config.evidence == "own"
+    drawn = [(0, 0), (0, 1), (1, 0), (1, 1)]
+    results = [
+        _result(s, c, [0.02, 0.05 if c[0] == 0 else 0.01], (0.0, 0.0)) for s, c in enumerate(drawn)
+    ]
+    scale = problem.config.likelihood.alpha_per_m * problem.observed.decimation
+    own = medoid_weights(results, problem)
+    assert own[0] == pytest.approx([0.5, 0.5])
+    neighbours = dataclasses.replace(
+        problem, config=dataclasses.replace(problem.config, evidence="neighbours")
+    )
+    weights = medoid_weights(results, neighbours)
+    assert weights[0][1] / weights[0][0] == pytest.approx(np.exp(scale * 0.04))
+    assert weights[1] == pytest.approx(own[1])
+    apart = dataclasses.replace(neighbours, neighbours=((), ()))
+    assert medoid_weights(results, apart)[0] == pytest.approx([0.5, 0.5])
+    # The residuals: a term minus its candidate's log mean exp; 0 for a candidate drawn once
+    # and for a failed sample.
+    choices = np.array([[0, 0], [0, 1], [1, 2], [1, 1], [0, 1]])
+    terms = np.array([[-1.0, -2.0], [-1.0, -3.0], [-2.0, -4.0], [-np.inf, -1.0], [-1.0, -5.0]])
+    residuals = neighbour_residuals(choices, terms)
+    assert residuals[2, 0] == 0.0 and residuals[2, 1] == 0.0  # drawn once (finite rows)
+    assert residuals[3].tolist() == [0.0, 0.0]  # failed
+    mean = np.logaddexp(-3.0, -5.0) - np.log(2)
+    assert residuals[1, 1] == pytest.approx(-3.0 - mean)
+    assert residuals[4, 1] == pytest.approx(-5.0 - mean)
+    assert residuals[0, 0] == pytest.approx(0.0)  # -1, -1 (and -1 in row 4): all equal

@@ -259,12 +259,25 @@ def test_gravity_decides_the_hidden_depth_of_the_object_holding_another(
 @pytest.mark.xfail(
     strict=True,
     reason="per-object weightings score each candidate by its own Eq. 2 term only: the top "
-    "object's fall is not evidence about the bottom object's shape (reported, not fixed)",
+    "object's fall is not evidence about the bottom object's shape (reported; the opt-in "
+    '"neighbours" evidence gives it, the next test)',
 )
 @pytest.mark.parametrize("weighting", ["hypothesis", "object"])
 def test_per_object_weightings_miss_evidence_that_another_object_gives(stack_observed, weighting):
     prepared = _prepared({1: [TOP_THICK], 2: [BOTTOM_MID, BOTTOM_DEEP]}, STACK_MINIMA)
     config = dataclasses.replace(STEEP, max_samples=12, weighting=weighting)
+    outcome = infer_shapes(
+        prepared, (SUPPORT,), stack_observed, method="ipr+uniform", config=config, workers=1
+    )
+    assert outcome.posteriors[1].probabilities[1] > 0.9
+
+
+def test_neighbour_evidence_gives_the_top_objects_fall_to_the_bottom_objects_shape(stack_observed):
+    """The case above with ``InferenceConfig.evidence = "neighbours"`` (opt-in): the top
+    object's term, worse when the bottom's shape lets it tip off and not explained by its own
+    (single) candidate, counts for the bottom object's candidates."""
+    prepared = _prepared({1: [TOP_THICK], 2: [BOTTOM_MID, BOTTOM_DEEP]}, STACK_MINIMA)
+    config = dataclasses.replace(STEEP, max_samples=12, evidence="neighbours")
     outcome = infer_shapes(
         prepared, (SUPPORT,), stack_observed, method="ipr+uniform", config=config, workers=1
     )

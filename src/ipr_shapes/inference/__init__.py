@@ -89,7 +89,13 @@ and likelihood), ``pool`` (sampling threads and deadlines), ``estimators`` (samp
 marginals), ``exhaustive`` (the exact posterior), ``infer`` (``infer_shapes``).
 """
 
-from ipr_shapes.inference.config import FRICTION_GRID, PROPOSALS, WEIGHTINGS, InferenceConfig
+from ipr_shapes.inference.config import (
+    EVIDENCES,
+    FRICTION_GRID,
+    PROPOSALS,
+    WEIGHTINGS,
+    InferenceConfig,
+)
 from ipr_shapes.inference.estimators import (
     at_friction,
     effective_sample_size,
@@ -99,6 +105,7 @@ from ipr_shapes.inference.estimators import (
     hypothesis_unary,
     marginals,
     medoid_weights,
+    neighbour_residuals,
     object_log_weights,
     own_log_likelihoods,
     sample_log_weights,
@@ -117,6 +124,7 @@ from ipr_shapes.inference.sampler import Sampler
 __all__ = [
     "FRICTION_GRID",
     "PROPOSALS",
+    "EVIDENCES",
     "WEIGHTINGS",
     "at_friction",
     "InferenceConfig",
@@ -135,6 +143,7 @@ __all__ = [
     "infer_shapes",
     "marginals",
     "medoid_weights",
+    "neighbour_residuals",
     "object_log_weights",
     "own_log_likelihoods",
     "run_samples",

@@ -19,6 +19,9 @@ PROPOSALS: tuple[str, ...] = get_args(Proposal)
 #: Scene frictions to search (``InferenceConfig.frictions``): ratio sqrt(2) from 0.25 to 1.0,
 #: the range of everyday objects sliding on a table.
 FRICTION_GRID: tuple[float, ...] = (0.25, 0.35, 0.5, 0.7, 1.0)
+#: Which terms of Eq. 2 are a candidate's evidence (``InferenceConfig.evidence``).
+Evidence = Literal["own", "neighbours"]
+EVIDENCES: tuple[str, ...] = get_args(Evidence)
 #: What a stability test measures per hypothesis (``InferenceConfig.stability_measure``).
 StabilityMeasure = Literal["drop", "displacement"]
 STABILITY_MEASURES: tuple[str, ...] = get_args(StabilityMeasure)
@@ -79,6 +82,18 @@ class InferenceConfig:
             less on the ycb-dynamic check (0.650 against 0.771), and its object IoU at 30 samples
             fell on one development set (0.639 against 0.651; 0.587 against 0.588)
             (docs/experiments/2026-11-27-sampler-agreement.md).
+        evidence: which of a sample's Eq. 2 terms count for a candidate under "hypothesis"
+            weighting: "own" (its object's own term) or "neighbours" (its own term plus, for
+            each object it can touch (``InferenceProblem.neighbours``), the part of that
+            object's term its own candidate does not explain: the term minus the log mean of
+            exp(term) over the samples that chose the same candidate for it). Why: in the
+            simulation an object's settled and pushed pose depends on the shapes it rests on
+            or is pushed against, so a hidden part too small to hold a neighbour up shows in
+            the neighbour's term, which "own" gives to the neighbour alone. "own" stays the
+            default: on the development sets the residuals' signal on an occluded object's
+            hidden extent was small against their noise and moved object IoU by less than
+            0.01 either way; with the pushes a set lost, as did ycb-dynamic
+            (docs/experiments/2026-11-28-neighbour-evidence.md).
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -93,6 +108,7 @@ class InferenceConfig:
         "weighting": Options(*WEIGHTINGS),
         "stability_measure": Options(*STABILITY_MEASURES),
         "proposal": Options(*PROPOSALS),
+        "evidence": Options(*EVIDENCES),
         "max_factor_table": Interval(1, None),
         "screen_gap_m": Interval(0, None),
         "screen_margin_m": Interval(0, None),
@@ -124,6 +140,7 @@ class InferenceConfig:
     screen_margin_m: float = 0.005
     frictions: tuple[float, ...] = ()
     proposal: Proposal = "tree"
+    evidence: Evidence = "own"
 
     def __post_init__(self) -> None:
         check_fields(self)

@@ -67,21 +67,54 @@ def hypothesis_log_likelihoods(
     results: Sequence[SampleResult], problem: InferenceProblem
 ) -> list[np.ndarray]:
     """Per object, (m_k,) the log of the mean over the samples that chose each candidate of
-    exp(its own Eq. 2 term) (module doc, step 3); NaN for candidates no sample chose (the
-    marginals give them the object's mean). Samples
-    scored under several frictions take their first (``at_friction`` picks another)."""
-    terms: list[list[list[float]]] = [[[] for _ in c] for c in problem.candidates]
+    exp(its evidence term) (module doc, step 3): its object's own Eq. 2 term, plus its
+    neighbours' residual terms with ``InferenceConfig.evidence`` "neighbours"
+    (``neighbour_residuals``); NaN for candidates no sample chose (the marginals give them the
+    object's mean). Samples scored under several frictions take their first (``at_friction``
+    picks another)."""
+    choices, own = [], []
     for result in results:
         scored = own_log_likelihoods(result, problem)
         if scored is None:
             continue
-        own = scored[0]
-        for k, j in enumerate(result.choice):
-            terms[k][j].append(float(own[k]))
-    return [
-        np.array([np.logaddexp.reduce(t) - math.log(len(t)) if t else math.nan for t in per_object])
-        for per_object in terms
-    ]
+        choices.append(result.choice)
+        own.append(scored[0])
+    terms = np.array(own, dtype=float).reshape(len(own), problem.count)
+    choices = np.array(choices, dtype=np.int64).reshape(len(own), problem.count)
+    if problem.config.evidence == "neighbours":
+        residuals = neighbour_residuals(choices, terms)
+        terms = terms + np.stack(
+            [residuals[:, list(problem.neighbours[k])].sum(axis=1) for k in range(problem.count)],
+            axis=1,
+        ).reshape(terms.shape)
+    out = []
+    for k, candidates in enumerate(problem.candidates):
+        means = np.full(len(candidates), math.nan)
+        for j in np.unique(choices[:, k]):
+            values = terms[choices[:, k] == j, k]
+            means[j] = np.logaddexp.reduce(values) - math.log(len(values))
+        out.append(means)
+    return out
+
+
+def neighbour_residuals(choices: np.ndarray, terms: np.ndarray) -> np.ndarray:
+    """(S, n) each object's Eq. 2 term (log) in each sample minus the log mean of exp(its term)
+    over the samples that chose the same candidate for it: the part of its term that its own
+    candidate does not explain, which the shapes it touches do (``InferenceConfig.evidence``).
+    0 where a term is not finite (a failed simulation) and for a candidate drawn once.
+
+    Args:
+        choices: (S, n) each sample's candidate per object.
+        terms: (S, n) each sample's own Eq. 2 term per object (log, -inf: failed).
+    """
+    residuals = np.zeros_like(terms)
+    finite = np.isfinite(terms).all(axis=1)
+    for k in range(terms.shape[1]):
+        for j in np.unique(choices[finite, k]):
+            rows = np.flatnonzero(finite & (choices[:, k] == j))
+            values = terms[rows, k]
+            residuals[rows, k] = values - (np.logaddexp.reduce(values) - math.log(len(values)))
+    return residuals
 
 
 def factor_marginals(
