@@ -26,8 +26,9 @@ else, and the timing, need the full run.
 ``--lost`` also lists every lost (object, later frame) pair (``LostId``) and counts them by
 kind: no segment with F >= 0.5 in the later frame (segmentation), a new id, or another frame-0
 object's id, each split by whether the frame-0 id went to another visible object, is shown but
-on no object's best segment, or is not shown at all; the diagnosis each session used to rebuild
-in a throwaway script.
+on no object's best segment, or is not shown at all, and marks the piece flips (the later
+label was another frame-0 piece of the same object: ``LostId.piece_flip``); the diagnosis each
+session used to rebuild in a throwaway script.
 """
 
 from __future__ import annotations
@@ -197,9 +198,10 @@ def _lost_line(lost: LostId) -> str:
     """One ``LostId`` as a line."""
     later = "-" if lost.label is None else str(lost.label)
     holder = "" if lost.frame0_label_holder is None else f" {lost.frame0_label_holder}"
+    flip = "; piece flip" if lost.piece_flip else ""
     return (
         f"frame {lost.frame} object {lost.obj_id}/{lost.occurrence}: id {lost.frame0_label} -> "
-        f"{later} ({lost.kind}; frame-0 id {_lost_where(lost)}{holder})"
+        f"{later} ({lost.kind}; frame-0 id {_lost_where(lost)}{holder}{flip})"
     )
 
 
@@ -208,8 +210,13 @@ def _lost_counts(results: list[SceneSegmentation]) -> str:
     from collections import Counter
 
     counts = Counter((lost.kind, _lost_where(lost)) for r in results for lost in r.lost_ids)
-    return "  lost: " + "; ".join(
-        f"{kind}, frame-0 id {where}: {n}" for (kind, where), n in sorted(counts.items())
+    flips = sum(lost.piece_flip for r in results for lost in r.lost_ids)
+    return (
+        "  lost: "
+        + "; ".join(
+            f"{kind}, frame-0 id {where}: {n}" for (kind, where), n in sorted(counts.items())
+        )
+        + f" (piece flips among them: {flips})"
     )
 
 

@@ -209,6 +209,27 @@ def test_lost_ids_say_what_happened_to_each_pair() -> None:
     assert all(x.frame0_label == {5: 11, 9: 12}[x.obj_id] for x in counts.lost)
     written = json.loads(json.dumps(counts.to_dict()))
     assert written["lost"][0]["frame0_label_holder"] == [9, 0]
+    assert not any(x.piece_flip for x in counts.lost)
+
+
+def test_a_lost_pair_whose_label_was_another_piece_of_the_object_is_a_piece_flip() -> None:
+    truth = _two_objects()  # object 2: columns 10-29
+    frame0 = np.where(truth == 1, 11, 0)
+    frame0[5:15, 10:21] = 21  # object 2 in two pieces: 105 px (its best segment) ...
+    frame0[5:15, 21:30] = 22  # ... and 90 px
+    frame0[5:10, 10] = 11  # object 1's segment holds 5 px of object 2
+    flipped = frame0.copy()
+    flipped[5:15, 10:19] = 21  # the same two pieces, now 90 px ...
+    flipped[5:15, 19:30] = 22  # ... and 110 px: the best segment is the other piece
+    renamed = np.where(flipped == 22, 30, flipped)  # the larger piece under a new id
+    stolen = np.where(truth == 1, 40, np.where(flipped == 22, 11, flipped))
+    counts = id_consistency_counts([frame0, flipped, renamed, stolen], [truth] * 4, [[5, 9]] * 4)
+    lost = {(x.frame, x.obj_id): x for x in counts.lost}
+    assert sorted(lost) == [(1, 9), (2, 9), (3, 5), (3, 9)]
+    assert (lost[1, 9].kind, lost[1, 9].label, lost[1, 9].piece_flip) == ("new id", 22, True)
+    assert (lost[2, 9].label, lost[2, 9].piece_flip) == (30, False)
+    # Label 11 held 5 px of object 2 in frame 0, but mostly object 1: another object's id.
+    assert (lost[3, 9].kind, lost[3, 9].label, lost[3, 9].piece_flip) == ("other id", 11, False)
 
 
 # --------------------------------------------------------------------------------------------

@@ -677,6 +677,10 @@ class LostId:
         frame0_label_holder: (obj_id, occurrence) of a visible object whose best segment in
             ``frame`` (F >= ``ID_MATCH_MIN_F``) carries ``frame0_label`` (another object took
             the id), else None.
+        piece_flip: ``label`` was, in frame 0, another piece of this object (more than half of
+            its frame-0 pixels on the object): the object stays split, each piece keeps its
+            id, and which piece is the best segment changed (its pieces' sizes swapped). A
+            tracker that keeps each piece's id loses such a pair; joining the pieces ends it.
     """
 
     frame: int
@@ -687,6 +691,7 @@ class LostId:
     kind: str
     frame0_label_shown: bool
     frame0_label_holder: tuple[int, int] | None
+    piece_flip: bool = False
 
 
 @dataclass(frozen=True)
@@ -777,6 +782,11 @@ def id_consistency_counts(
         return IdConsistency(0, 0, math.nan)
     first = {key: label for key, label in ids[0].items() if label is not None}
     frame0_labels = set(first.values())
+    frame0_predicted = np.asarray(predicted_labels_per_frame[0])
+    frame0_truth = np.asarray(gt_labels_per_frame[0])
+    frame0_values = {
+        key: value for value, key in enumerate(_object_keys(gt_obj_ids_per_frame[0]), 1)
+    }
     consistent = counted = 0
     lost = []
     for frame, (later, predicted) in enumerate(
@@ -798,7 +808,14 @@ def id_consistency_counts(
                 else "new id"
             )
             shown = bool(np.any(np.asarray(predicted) == label))
-            lost.append(LostId(frame, *key, label, later[key], kind, shown, holders.get(label)))
+            flip = False
+            if later[key] is not None:
+                piece = frame0_predicted == later[key]
+                on_object = np.count_nonzero(piece & (frame0_truth == frame0_values[key]))
+                flip = bool(2 * on_object > np.count_nonzero(piece))
+            lost.append(
+                LostId(frame, *key, label, later[key], kind, shown, holders.get(label), flip)
+            )
     share = consistent / counted if counted else math.nan
     return IdConsistency(consistent, counted, share, tuple(lost))
 
