@@ -45,6 +45,13 @@ def at_friction(
     return out
 
 
+def _log_mean_exp(values: np.ndarray) -> np.ndarray:
+    """log of the mean of exp(values) over the first axis (log terms averaged as
+    probabilities); -inf entries count as zero probability."""
+    values = np.asarray(values, dtype=float)
+    return np.logaddexp.reduce(values, axis=0) - math.log(values.shape[0])
+
+
 def object_log_weights(results: Sequence[SampleResult], problem: InferenceProblem) -> np.ndarray:
     """(S, n) per-object log importance weights of the samples (module doc):
     log P(O_i | X, mu) + log P(X_i) - log q_i, with object i's own term of Eq. 2 (averaged over
@@ -55,7 +62,7 @@ def object_log_weights(results: Sequence[SampleResult], problem: InferenceProble
         own = own_log_likelihoods(result, problem)
         if own is None:
             continue
-        own = np.logaddexp.reduce(own, axis=0) - math.log(len(own))
+        own = _log_mean_exp(own)
         for k, j in enumerate(result.choice):
             weights[row, k] = (
                 own[k] + float(problem.log_prior[k][j]) - float(result.object_log_proposal[k])
@@ -92,7 +99,7 @@ def hypothesis_log_likelihoods(
         means = np.full(len(candidates), math.nan)
         for j in np.unique(choices[:, k]):
             values = terms[choices[:, k] == j, k]
-            means[j] = np.logaddexp.reduce(values) - math.log(len(values))
+            means[j] = _log_mean_exp(values)
         out.append(means)
     return out
 
@@ -113,7 +120,7 @@ def neighbour_residuals(choices: np.ndarray, terms: np.ndarray) -> np.ndarray:
         for j in np.unique(choices[finite, k]):
             rows = np.flatnonzero(finite & (choices[:, k] == j))
             values = terms[rows, k]
-            residuals[rows, k] = values - (np.logaddexp.reduce(values) - math.log(len(values)))
+            residuals[rows, k] = values - _log_mean_exp(values)
     return residuals
 
 
