@@ -582,3 +582,64 @@ def test_neighbour_evidence_gives_a_candidate_what_its_neighbours_terms_say_of_i
     assert residuals[1, 1] == pytest.approx(-3.0 - mean)
     assert residuals[4, 1] == pytest.approx(-5.0 - mean)
     assert residuals[0, 0] == pytest.approx(0.0)  # -1, -1 (and -1 in row 4): all equal
+
+
+def test_rest_evidence_scores_each_objects_fall_in_its_stability_test_with_every_other_object():
+    """``InferenceConfig.rest_drop_m``: each object's term gains -drop / rest_drop_m, its chosen
+    candidate's fall (``SampleResult.drops``). Object 0's candidate 1 falls 4 mm more than
+    candidate 0 in every sample, with the same depth terms: equal weights when off (the
+    default), exp(4 mm / rest_drop_m) apart when on; object 1 (no fall) unchanged; a sample
+    whose drops are unknown (None) adds nothing, an infinite drop (flung) counts as failed."""
+    from ipr_shapes.inference import SampleResult, medoid_weights, own_log_likelihoods
+
+    problem = _fabricated_problem(2)
+    assert problem.config.rest_drop_m is None
+    drawn = [(0, 0), (0, 1), (1, 0), (1, 1)]
+    results = [
+        dataclasses.replace(
+            _result(s, c, [0.02, 0.03], (0.0, 0.0)),
+            drops=np.array([0.001 + 0.004 * c[0], 0.0005]),
+        )
+        for s, c in enumerate(drawn)
+    ]
+    assert medoid_weights(results, problem)[0] == pytest.approx([0.5, 0.5])
+    on = dataclasses.replace(problem, config=dataclasses.replace(problem.config, rest_drop_m=0.002))
+    weights = medoid_weights(results, on)
+    assert weights[0][0] / weights[0][1] == pytest.approx(np.exp(0.004 / 0.002))
+    assert weights[1] == pytest.approx([0.5, 0.5])
+    depth = own_log_likelihoods(results[0], problem)
+    rest = own_log_likelihoods(results[0], on)
+    assert rest - depth == pytest.approx(np.array([[-0.001, -0.0005]]) / 0.002)
+    unknown = dataclasses.replace(results[0], drops=None)
+    assert own_log_likelihoods(unknown, on) == pytest.approx(depth)
+    flung = dataclasses.replace(results[0], drops=np.array([np.inf, 0.0]))
+    assert own_log_likelihoods(flung, on)[0, 0] == -np.inf
+    assert isinstance(results[0], SampleResult)
+
+
+def test_rest_evidence_tells_a_shape_that_falls_from_the_true_one_where_the_depth_cannot():
+    """The true box and the top slab that hangs 2.5 cm above the table, with the depth made
+    nearly blind (alpha 1e-6) and the stability tests not steering the draws (alpha 0): off,
+    the two weigh about the same; on, the slab's 2.5 cm fall in its test counts against it
+    (``Sampler.rest_drops``), and each sample's likelihood holds the rest terms."""
+    frame, labels = _frame(0, (0.0, -0.35, 0.3))
+    observed = observed_frames([frame], [labels], 4)
+    blind = InferenceConfig(
+        max_samples=12, stability_alpha_per_m=0.0, likelihood=LikelihoodConfig(alpha_per_m=1e-6)
+    )
+    outcomes = {}
+    for scale in (None, 0.004):
+        outcomes[scale] = infer_shapes(
+            _prepared(TRUE_BOX, TOP_SLAB), (SUPPORT,), observed, method="ipr+uniform",
+            config=dataclasses.replace(blind, rest_drop_m=scale), workers=1,
+        )  # fmt: skip
+    off, on = outcomes[None], outcomes[0.004]
+    assert {s.choice for s in off.samples} == {(0,), (1,)}
+    assert all(s.drops is None for s in off.samples)
+    assert 0.3 < off.posteriors[0].probabilities[0] < 0.7
+    drops = {s.choice: s.drops[0] for s in on.samples}
+    assert drops[(0,)] < 1e-3 and drops[(1,)] > 0.02
+    for s in on.samples:
+        depth = next(o for o in off.samples if o.choice == s.choice).log_likelihood
+        assert s.log_likelihood == pytest.approx(depth - s.drops[0] / 0.004)
+    assert on.posteriors[0].probabilities[0] > 0.99 and on.posteriors[0].best == 0

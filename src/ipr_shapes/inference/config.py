@@ -94,6 +94,19 @@ class InferenceConfig:
             hidden extent was small against their noise and moved object IoU by less than
             0.01 either way; with the pushes a set lost, as did ycb-dynamic
             (docs/experiments/2026-11-28-neighbour-evidence.md).
+        rest_drop_m: the rest evidence's scale (m; None: off). Each object is seen at rest,
+            its neighbours too, so a joint model is also scored by log P(object k at rest
+            where seen | X) = -drop_k / rest_drop_m (+ a constant) per object, drop_k being
+            how far its chosen candidate falls in its stability test with every other object
+            static at its chosen shape (``Sampler.rest_drops``): an exponential law (the
+            maximum-entropy law of a non-negative quantity of known mean) whose mean is the
+            measured mean fall of the candidates nearest the true shapes in that test,
+            RESTCALIB. Why: an occluded object's hidden part is where its predicted depth is
+            not compared, so a short hidden part and a true-size one score alike in Eq. 2,
+            while the short one cannot hold the object (or a neighbour resting on it) where
+            it is seen. Added to the object's own term (every weighting; "joint" through
+            the sample's likelihood); costs one stability test per object and joint model
+            context not already tested (docs/experiments/2026-11-28-stability-evidence.md).
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -109,6 +122,7 @@ class InferenceConfig:
         "stability_measure": Options(*STABILITY_MEASURES),
         "proposal": Options(*PROPOSALS),
         "evidence": Options(*EVIDENCES),
+        "rest_drop_m": OrNone(Interval(0, None, closed="neither")),
         "max_factor_table": Interval(1, None),
         "screen_gap_m": Interval(0, None),
         "screen_margin_m": Interval(0, None),
@@ -141,6 +155,7 @@ class InferenceConfig:
     frictions: tuple[float, ...] = ()
     proposal: Proposal = "tree"
     evidence: Evidence = "own"
+    rest_drop_m: float | None = None
 
     def __post_init__(self) -> None:
         check_fields(self)

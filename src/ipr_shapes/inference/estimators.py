@@ -17,16 +17,31 @@ from ipr_shapes.inference.problem import InferenceProblem, SampleResult
 
 def own_log_likelihoods(result: SampleResult, problem: InferenceProblem) -> np.ndarray | None:
     """(F, n) each object's own term of Eq. 2 (log) per friction of ``result``: -alpha *
-    decimation * its norms summed over the frames; -inf under a friction whose simulation
-    failed; None when it failed under every friction."""
+    decimation * its norms summed over the frames, plus its rest term
+    (``rest_log_likelihoods``, the same under every friction); -inf under a friction whose
+    simulation failed; None when it failed under every friction."""
     if result.norms is None:
         return None
     scale = problem.config.likelihood.alpha_per_m * problem.observed.decimation
     sums = np.asarray(result.norms, float).sum(axis=1)
     failed = ~np.isfinite(sums).all(axis=1)
     own = -scale * np.where(np.isfinite(sums), sums, 0.0)
+    own = own + rest_log_likelihoods(result, problem)
     own[failed] = -np.inf
     return own
+
+
+def rest_log_likelihoods(result: SampleResult, problem: InferenceProblem) -> np.ndarray:
+    """(n,) each object's rest term (log; ``InferenceConfig.rest_drop_m``): log P(the
+    object is at rest where seen | the joint model) = -drop / rest_drop_m (+ a constant), its
+    centre of mass's fall while the model settled (``SampleResult.drops``) under the
+    exponential law of the true shapes' own fall in the simulator; zeros when off or not
+    simulated, -inf for a model whose settling failed."""
+    scale = problem.config.rest_drop_m
+    if scale is None or result.drops is None:
+        return np.zeros(problem.count)
+    drops = np.asarray(result.drops, float)
+    return np.where(np.isfinite(drops), -drops / scale, -np.inf)
 
 
 def at_friction(
