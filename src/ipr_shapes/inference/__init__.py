@@ -108,6 +108,7 @@ from ipr_shapes.inference.estimators import (
     neighbour_residuals,
     object_log_weights,
     own_log_likelihoods,
+    rest_evidence,
     rest_log_likelihoods,
     sample_log_weights,
 )
@@ -147,6 +148,7 @@ __all__ = [
     "neighbour_residuals",
     "object_log_weights",
     "own_log_likelihoods",
+    "rest_evidence",
     "rest_log_likelihoods",
     "run_samples",
     "sample_log_weights",
