@@ -109,7 +109,7 @@ class InferenceConfig:
             depth is not compared, so a short hidden part and a true-size one score alike
             in Eq. 2, while the short one cannot hold the object where it is seen. Off by
             default: it gained on the three development sets (+0.001 to +0.020 object IoU at
-            equal samples) but lost on ycb-dynamic (-0.005 with gravity alone): it only
+            equal samples) but lost on ycb-dynamic (-0.005 with either method): it only
             says "not too short", and with nothing as strong saying "not too large" (a
             hidden extent is not compared, the prior is uniform) it moves choices to larger
             shapes, right where they were too small and wrong where they were not; and
