@@ -9,8 +9,8 @@ import pytest
 
 from ipr_shapes.perception import kernels
 from ipr_shapes.perception.config import PerceptionConfig
-from ipr_shapes.perception.fragments import join_fragments
-from ipr_shapes.perception.types import Supervoxels
+from ipr_shapes.perception.fragments import join_fragments, lies_on
+from ipr_shapes.perception.types import KnownPlane, Supervoxels
 
 K = np.array([[500.0, 0.0, 40.0], [0.0, 500.0, 30.0], [0.0, 0.0, 1.0]])
 HEIGHT, WIDTH = 60, 80
@@ -207,3 +207,162 @@ def test_merged_counts_are_those_of_the_joined_labels():
     expected = np.array([[0, 6, 1, 0], [6, 0, 10, 0], [1, 10, 0, 0], [0, 0, 0, 0]])
     np.testing.assert_array_equal(counts, expected)
     np.testing.assert_array_equal(counts, counts.T)
+
+
+#: The support for the tests below: world up is the camera's -y (image rows grow downwards).
+SUPPORT = KnownPlane("support", np.array([0.0, -1.0, 0.0]), 0.0, np.zeros((0, 3)))
+
+
+def _tilted_scene(piece_rows: slice) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``_scene`` without the band, on a surface tilted away from the camera (depth grows by
+    2 mm a row, so footprints on the support have an extent), with segment 2 red: a cap or a
+    printed band of another colour than its grey body, at ``piece_rows`` of the body's right
+    edge. Returns (labels, depth, segments, rgb)."""
+    labels, _, _ = _scene(step_m=0.0)
+    segments = np.array([1, 2, 0, 0], dtype=np.int32)
+    labels[labels == 2] = 1
+    labels[labels == 3] = 0
+    labels[piece_rows, 40:50] = 2
+    depth = 0.5 + 0.002 * np.arange(HEIGHT)[:, None] * np.ones((1, WIDTH))
+    depth[labels == 0] = 0.8
+    rgb = RGB.copy()
+    rgb[labels == 2] = (200, 60, 60)
+    return labels, depth, segments, rgb
+
+
+def _on_body_config(on_body: bool = True) -> PerceptionConfig:
+    config = _config()
+    return dataclasses.replace(
+        config,
+        segmentation=dataclasses.replace(config.segmentation, fragment_on_body=on_body),
+    )
+
+
+def test_a_piece_of_another_colour_on_its_body_joins():
+    # The red piece lies within the grey body's footprint, in its upper half (a cap, a lid, a
+    # band on a shoulder): the colours do not keep it apart.
+    labels, depth, segments, rgb = _tilted_scene(slice(12, 22))
+    points = _points(depth)
+    sv = _supervoxels(labels)
+    joined, _ = join_fragments(
+        labels, segments, points, depth, K, rgb, sv, _on_body_config(), support=SUPPORT
+    )
+    assert np.all(joined[12:22, 40:50] == 1)
+    # The rule's switch, and no support to measure heights on: the colour gate refuses it.
+    for config, support in ((_on_body_config(False), SUPPORT), (_on_body_config(), None)):
+        kept, _ = join_fragments(
+            labels, segments, points, depth, K, rgb, sv, config, support=support
+        )
+        assert len(np.unique(kept[kept > 0])) == 2
+
+
+def test_a_piece_of_another_colour_under_its_neighbour_is_kept():
+    # The same red piece at the bottom of the grey surface: within its footprint but below it
+    # (a ball wedged under a block that rests on it) stays a segment of its own.
+    labels, depth, segments, rgb = _tilted_scene(slice(40, 50))
+    joined, _ = join_fragments(
+        labels,
+        segments,
+        _points(depth),
+        depth,
+        K,
+        rgb,
+        _supervoxels(labels),
+        _on_body_config(),
+        support=SUPPORT,
+    )
+    assert len(np.unique(joined[joined > 0])) == 2
+
+
+def test_a_piece_lies_on_its_body_only_within_its_footprint_and_not_below_it():
+    # A body: a 10 cm square box's top at 10 cm above the support (world up is -y here) and
+    # its front face below it; pieces of 2 x 2 cm at 12 cm high on the box (a cap), 5 cm beside
+    # its footprint at that height, and within its footprint but at 4 cm (under an overhang).
+    grid = np.linspace(0.0, 0.1, 21)
+    top = np.array([[x, -0.10, z] for x in grid for z in grid])
+    front = np.array([[x, -h, 0.0] for x in grid for h in np.linspace(0.0, 0.1, 21)])
+    body = np.concatenate([top, front])
+    square = np.array(
+        [[x, 0.0, z] for x in np.linspace(0, 0.02, 5) for z in np.linspace(0, 0.02, 5)]
+    )
+    cases = {
+        "cap": (square + [0.04, -0.12, 0.04], True),
+        "beside": (square + [0.15, -0.12, 0.04], False),
+        "under": (square + [0.04, -0.04, 0.04], False),
+    }
+    for name, (piece, on) in cases.items():
+        points = np.concatenate([body, piece]).reshape(1, -1, 3)
+        labels = np.concatenate([np.full(len(body), 1), np.full(len(piece), 2)]).reshape(1, -1)
+        depth = np.ones(labels.shape)
+        got = lies_on(labels, 2, 1, points, depth, SUPPORT, PerceptionConfig())
+        assert got == on, name
+
+
+def _specks_config(specks: bool = True) -> PerceptionConfig:
+    config = _config(area_m2=16e-4)  # the default: a speck is a fragment too
+    return dataclasses.replace(
+        config, segmentation=dataclasses.replace(config.segmentation, fragment_specks=specks)
+    )
+
+
+def _speck_scene() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A grey segment 1 (rows 10-50, columns 0-40) and a red 4 x 6 px speck 2 (0.1 cm^2 at
+    0.5 m) on its right edge, at rows 20-24, reaching 6 px into the background: mixed pixels
+    at a silhouette. The speck bends away from segment 1 (its supervoxel's normal is square to
+    segment 1's) and differs in colour; along its outline with segments it touches segment 1
+    only. Returns (labels, depth, segments, rgb)."""
+    labels = np.zeros((HEIGHT, WIDTH), dtype=np.int32)
+    labels[10:50, 0:40] = 1
+    labels[20:24, 40:46] = 2
+    depth = np.full((HEIGHT, WIDTH), 0.5)
+    depth[labels == 0] = 0.8
+    rgb = RGB.copy()
+    rgb[labels == 2] = (200, 60, 60)
+    return labels, depth, np.array([1, 2, 0, 0], dtype=np.int32), rgb
+
+
+def test_a_speck_joins_the_one_segment_it_touches():
+    labels, depth, segments, rgb = _speck_scene()
+    normals = np.tile([0.0, 0.0, -1.0], (4, 1))
+    normals[1] = [-1.0, 0.0, 0.0]
+    sv = _supervoxels(labels, normals)
+    points = _points(depth)
+    joined, _ = join_fragments(labels, segments, points, depth, K, rgb, sv, _specks_config())
+    assert np.all(joined[20:24, 40:46] == 1)
+    # Off, the fragment rules refuse it: it meets segment 1 at a crease and in another colour.
+    kept, _ = join_fragments(labels, segments, points, depth, K, rgb, sv, _specks_config(False))
+    assert len(np.unique(kept[kept > 0])) == 2
+
+
+def test_a_speck_between_two_segments_is_kept():
+    # A third segment below the speck, touching it too: a small object wedged between two.
+    labels, depth, segments, rgb = _speck_scene()
+    labels[24:30, 40:46] = 3
+    depth[24:30, 40:46] = 0.5
+    segments = np.array([1, 2, 3, 0], dtype=np.int32)
+    joined, _ = join_fragments(
+        labels, segments, _points(depth), depth, K, rgb, _supervoxels(labels), _specks_config()
+    )
+    assert len(np.unique(joined[joined > 0])) == 3
+
+
+def test_a_segment_of_a_seed_square_is_no_speck():
+    # The speck grown to 6 x 11 px at 1.2 m (3.8 cm^2 by the footprint; the seed's square is
+    # 4 cm^2 when the seed is 2 cm): at seed 1.9 cm it is no speck and stays.
+    labels, depth, segments, rgb = _speck_scene()
+    labels[labels == 2] = 0
+    labels[18:24, 40:51] = 2
+    depth[labels > 0] = 1.2
+    depth[labels == 0] = 1.6
+    config = _specks_config()
+    joined, _ = join_fragments(
+        labels, segments, _points(depth), depth, K, rgb, _supervoxels(labels), config
+    )
+    assert np.all(joined[18:24, 40:51] == 1)
+    smaller_seed = dataclasses.replace(
+        config, supervoxels=dataclasses.replace(config.supervoxels, seed_size_m=0.019)
+    )
+    kept, _ = join_fragments(
+        labels, segments, _points(depth), depth, K, rgb, _supervoxels(labels), smaller_seed
+    )
+    assert len(np.unique(kept[kept > 0])) == 2

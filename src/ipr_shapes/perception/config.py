@@ -365,7 +365,19 @@ class SegmentationConfig:
         fragment_bend_deg: ... and the surface normals of their supervoxels differ by at most
             this (deg): a surface running on, not two objects meeting at a crease.
         fragment_colour: ... and the two segments' mean chromaticities are at most this far
-            apart (as ``curved_segment_colour``).
+            apart (as ``curved_segment_colour``),
+        fragment_on_body: ... or, whatever the colours, the small segment lies on its
+            neighbour (``fragments.lies_on``: within its footprint on the support, by the
+            containers' ``footprint_fraction`` and ``margin_m``, and not lower by median
+            height): a cap, a lid or a printed band carried by its body, where a separate
+            object wedged under another lies below it. Off: a golf ball resting on a box
+            lies on it too (docs/experiments/2026-11-28-lab-frames-joins.md).
+        fragment_specks: after the fragments, a segment smaller than one supervoxel seed's
+            square (``supervoxels.seed_size_m`` squared: below the graph's resolution) joins
+            the one segment it touches (points within ``fragment_gap_m``, any normals) when
+            that contact is at least ``fragment_contact_share`` of its outline with segments
+            and it touches no other segment; colours are not compared (mixed pixels at a
+            silhouette or a junction take both sides' colours).
         thin_radius_m: touching segments are joined when the points of both lie on one
             cylinder of at most this radius (m; a marker, a pen, a handle: the seen half of its
             circumference, pi r, at most two supervoxel seeds, where the graph's convexity
@@ -472,6 +484,8 @@ class SegmentationConfig:
     fragment_gap_m: float = 0.01
     fragment_colour: float = 0.04
     fragment_bend_deg: float = 45.0
+    fragment_on_body: bool = False
+    fragment_specks: bool = False
     thin_radius_m: float = 0.0125
     thin_rms_m: float = 0.003
     thin_min_contact_px: int = 5

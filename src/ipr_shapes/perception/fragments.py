@@ -19,7 +19,8 @@ import numpy as np
 
 from ipr_shapes.perception import kernels
 from ipr_shapes.perception.config import PerceptionConfig
-from ipr_shapes.perception.types import Supervoxels
+from ipr_shapes.perception.containers import support_axes, within_footprint
+from ipr_shapes.perception.types import KnownPlane, Supervoxels
 
 
 def join_fragments(
@@ -33,6 +34,7 @@ def join_fragments(
     config: PerceptionConfig,
     *,
     borders: tuple | None = None,
+    support: KnownPlane | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Join small segments to the neighbour their surface continues into.
 
@@ -66,31 +68,95 @@ def join_fragments(
     n = int(labels.max()) + 1
     if borders is None:
         borders = fragment_borders(labels, points, depth_m, K, rgb, supervoxels, config)
-    area, colour, outline, continuous, _ = borders
+    area, colour, outline, continuous, touching = borders
+    speck_m2 = config.supervoxels.seed_size_m**2 if seg.fragment_specks else 0.0
     order = [int(s) for s in np.argsort(area, kind="stable") if s > 0 and area[s] > 0]
     small = [s for s in order if area[s] < seg.fragment_area_m2]
     if not small:
         return labels, segment_of_supervoxel
     root = np.arange(n)
-    for piece in small:
-        if area[piece] >= seg.fragment_area_m2:
-            continue  # grown by the fragments joined to it
-        best = int(np.argmax(continuous[piece]))
-        if continuous[piece, best] == 0 or continuous[piece, best] < (
-            seg.fragment_contact_share * outline[piece].sum()
-        ):
-            continue
-        chroma = (
-            colour[[piece, best]] / np.maximum(colour[[piece, best]].sum(axis=1), 1e-9)[:, None]
-        )
-        if np.linalg.norm(chroma[0] - chroma[1]) > seg.fragment_colour:
-            continue
-        root[root == piece] = best
-        for counts in (outline, continuous):
-            merge_counts(counts, piece, best)
-        area[best] += area[piece]
-        colour[best] += colour[piece]
+    # Fragments first, then specks (``fragment_specks``): a speck's mixed colours must not
+    # move the mean colour a fragment's gate compares with.
+    for specks in (False, True) if speck_m2 > 0 else (False,):
+        for piece in small:
+            if root[piece] != piece or area[piece] >= (
+                speck_m2 if specks else seg.fragment_area_m2
+            ):
+                continue  # joined, or grown by the fragments joined to it
+            runs_on = touching if specks else continuous
+            best = int(np.argmax(runs_on[piece]))
+            # A speck's share is of its outline with segments: the rest is mixed pixels.
+            rim = outline[piece, 1:] if specks else outline[piece]
+            if runs_on[piece, best] == 0 or runs_on[piece, best] < (
+                seg.fragment_contact_share * rim.sum()
+            ):
+                continue
+            if specks and np.count_nonzero(touching[piece]) > 1:
+                continue  # between two segments: a small object wedged there, or a junction
+            if (
+                not specks
+                and not _alike(colour, piece, best, seg.fragment_colour)
+                and not (
+                    seg.fragment_on_body
+                    and support is not None
+                    and lies_on(root[labels], piece, best, points, depth_m, support, config)
+                )
+            ):
+                continue
+            root[root == piece] = best
+            for counts in (outline, continuous, touching):
+                merge_counts(counts, piece, best)
+            area[best] += area[piece]
+            colour[best] += colour[piece]
     return relabelled_by_root(labels, segment_of_supervoxel, root)
+
+
+def _alike(colour: np.ndarray, first: int, second: int, within: float) -> bool:
+    """Whether two segments' mean chromaticities (from their (L, 3) RGB sums ``colour``) are
+    at most ``within`` apart (L2)."""
+    pair = colour[[first, second]]
+    chroma = pair / np.maximum(pair.sum(axis=1), 1e-9)[:, None]
+    return bool(np.linalg.norm(chroma[0] - chroma[1]) <= within)
+
+
+def lies_on(
+    labels: np.ndarray,
+    piece: int,
+    body: int,
+    points: np.ndarray,
+    depth_m: np.ndarray,
+    support: KnownPlane,
+    config: PerceptionConfig,
+) -> bool:
+    """Whether segment ``piece`` lies on segment ``body``: its footprint on the support within
+    the body's (``containers.within_footprint``: the circle fitted to the body's footprint or
+    its hull, grown by ``containers.margin_m``) and its median height above the support at least
+    the body's. A cap, a lid or a band on a bottle's shoulder is carried by its body, on top of
+    it; a separate object within another's footprint but under it (a ball wedged beneath a
+    block resting on it) is not (docs/DESIGN_NOTES.md, "Fragments of curved surfaces joined by
+    their outline").
+
+    ``labels`` (H, W) int; ``points`` (H, W, 3) world (m); ``depth_m`` (H, W) (0: no reading,
+    such pixels are left out); ``support`` the support plane.
+    """
+    axis_u, axis_v = support_axes(support)
+    normal = np.asarray(support.normal, dtype=np.float64)
+    footprints, heights = [], []
+    for segment in (piece, body):
+        pixels = np.flatnonzero((labels == segment) & (depth_m > 0))
+        pixels = pixels[:: -(-pixels.size // _MAX_POINTS)] if pixels.size else pixels
+        world = kernels.rows_at(points.reshape(-1, 3), pixels).astype(np.float64)
+        footprints.append(np.stack([world @ axis_u, world @ axis_v], axis=1))
+        heights.append(world @ normal)
+    if len(heights[0]) == 0 or len(heights[1]) < 3:
+        return False
+    return bool(np.median(heights[0]) >= np.median(heights[1])) and within_footprint(
+        footprints[0], footprints[1], config.containers
+    )
+
+
+#: Points of a segment used for its footprint (an even subset), as ``contours._MAX_POINTS``.
+_MAX_POINTS = 2000
 
 
 def fragment_borders(

@@ -237,6 +237,7 @@ def segment_frame(
         supervoxels,
         config,
         borders=borders,
+        support=support,
     )
     if labels is not before_fragments:
         borders = None  # joined: its counts no longer those of the labels
