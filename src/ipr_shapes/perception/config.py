@@ -373,11 +373,12 @@ class SegmentationConfig:
             object wedged under another lies below it. Off: a golf ball resting on a box
             lies on it too (docs/experiments/2026-11-28-lab-frames-joins.md).
         fragment_specks: after the fragments, a segment smaller than one supervoxel seed's
-            square (``supervoxels.seed_size_m`` squared: below the graph's resolution) joins
-            the one segment it touches (points within ``fragment_gap_m``, any normals) when
-            that contact is at least ``fragment_contact_share`` of its outline with segments
-            and it touches no other segment; colours are not compared (mixed pixels at a
-            silhouette or a junction take both sides' colours).
+            square (``supervoxels.seed_size_m`` squared: below the graph's resolution) most
+            of whose pixels lie on supervoxels seen edge-on (``contour_facing_cos``: mixed
+            pixels along a depth step lie along the rays between its two surfaces) joins the
+            segment it touches (points within ``fragment_gap_m``, any normals) along at least
+            ``fragment_contact_share`` of its outline with segments; colours are not compared
+            (mixed pixels take both sides' colours).
         thin_radius_m: touching segments are joined when the points of both lie on one
             cylinder of at most this radius (m; a marker, a pen, a handle: the seen half of its
             circumference, pi r, at most two supervoxel seeds, where the graph's convexity

@@ -35,6 +35,7 @@ def join_fragments(
     *,
     borders: tuple | None = None,
     support: KnownPlane | None = None,
+    viewpoint: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Join small segments to the neighbour their surface continues into.
 
@@ -77,7 +78,9 @@ def join_fragments(
     root = np.arange(n)
     # Fragments first, then specks (``fragment_specks``): a speck's mixed colours must not
     # move the mean colour a fragment's gate compares with.
-    for specks in (False, True) if speck_m2 > 0 else (False,):
+    for specks in (False, True) if speck_m2 > 0 and viewpoint is not None else (False,):
+        if specks:
+            edge_on, seen = _edge_on_pixels(root[labels], supervoxels, viewpoint, config)
         for piece in small:
             if root[piece] != piece or area[piece] >= (
                 speck_m2 if specks else seg.fragment_area_m2
@@ -91,8 +94,8 @@ def join_fragments(
                 seg.fragment_contact_share * rim.sum()
             ):
                 continue
-            if specks and np.count_nonzero(touching[piece]) > 1:
-                continue  # between two segments: a small object wedged there, or a junction
+            if specks and edge_on[piece] * 2 <= seen[piece]:
+                continue  # it faces the camera: a surface, perhaps a small object's
             if (
                 not specks
                 and not _alike(colour, piece, best, seg.fragment_colour)
@@ -109,6 +112,26 @@ def join_fragments(
             area[best] += area[piece]
             colour[best] += colour[piece]
     return relabelled_by_root(labels, segment_of_supervoxel, root)
+
+
+def _edge_on_pixels(
+    labels: np.ndarray, supervoxels: Supervoxels, viewpoint: np.ndarray, config: PerceptionConfig
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per label (L,), its pixels on supervoxels seen edge-on (the cosine of the normal with
+    the ray to the camera under ``segmentation.contour_facing_cos``, as the contour split
+    reads it) and its pixels on any supervoxel. Mixed pixels along a depth step lie along the
+    rays between the two surfaces: a surface seen edge-on."""
+    ray = np.asarray(viewpoint, dtype=np.float64)[None, :] - supervoxels.centres
+    facing_cos = np.einsum("mc,mc->m", supervoxels.normals, ray) / np.maximum(
+        np.linalg.norm(ray, axis=1), 1e-12
+    )
+    on = supervoxels.labels >= 0
+    edge_on = facing_cos[supervoxels.labels[on]] < config.segmentation.contour_facing_cos
+    count = int(labels.max()) + 1
+    return (
+        np.bincount(labels[on][edge_on], minlength=count),
+        np.bincount(labels[on], minlength=count),
+    )
 
 
 def _alike(colour: np.ndarray, first: int, second: int, within: float) -> bool:

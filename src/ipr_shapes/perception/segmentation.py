@@ -238,6 +238,7 @@ def segment_frame(
         config,
         borders=borders,
         support=support,
+        viewpoint=frame.world_from_camera[:3, 3],
     )
     if labels is not before_fragments:
         borders = None  # joined: its counts no longer those of the labels
