@@ -358,6 +358,45 @@ def test_a_speck_facing_the_camera_is_kept():
     assert len(np.unique(joined[joined > 0])) == 2
 
 
+def test_a_speck_seen_behind_the_background_is_kept():
+    # What lies around the speck (label 0) is nearer than it: a wall or a drawer's rim in
+    # front, the speck an object's part seen past it, not mixed pixels in front of it.
+    labels, depth, segments, rgb, _, sv = _speck_scene()
+    depth[labels == 0] = 0.3
+    joined, _ = join_fragments(
+        labels,
+        segments,
+        _points(depth),
+        depth,
+        K,
+        rgb,
+        sv,
+        _specks_config(),
+        viewpoint=np.zeros(3),
+    )
+    assert len(np.unique(joined[joined > 0])) == 2
+
+
+def test_a_speck_between_two_segments_is_kept():
+    # A third segment below the speck, 5 cm in front of it (not touching it): the speck is
+    # between two objects, a small object's part as well as mixed pixels.
+    labels, depth, segments, rgb, points, sv = _speck_scene()
+    labels[24:30, 40:46] = 3
+    depth[24:30, 40:46] = 0.45
+    joined, _ = join_fragments(
+        labels,
+        np.array([1, 2, 3, 0], dtype=np.int32),
+        _points(depth),
+        depth,
+        K,
+        rgb,
+        sv,
+        _specks_config(),
+        viewpoint=np.zeros(3),
+    )
+    assert len(np.unique(joined[joined > 0])) == 3
+
+
 def test_a_segment_of_a_seed_square_is_no_speck():
     # The speck grown to 6 x 11 px at 1.2 m (3.8 cm^2 by the footprint; the seed's square is
     # 4 cm^2 when the seed is 2 cm): at seed 1.9 cm it is no speck and stays.

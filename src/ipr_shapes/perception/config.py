@@ -373,12 +373,15 @@ class SegmentationConfig:
             object wedged under another lies below it. Off: a golf ball resting on a box
             lies on it too (docs/experiments/2026-11-28-lab-frames-joins.md).
         fragment_specks: after the fragments, a segment smaller than one supervoxel seed's
-            square (``supervoxels.seed_size_m`` squared: below the graph's resolution) most
-            of whose pixels lie on supervoxels seen edge-on (``contour_facing_cos``: mixed
-            pixels along a depth step lie along the rays between its two surfaces) joins the
-            segment it touches (points within ``fragment_gap_m``, any normals) along at least
-            ``fragment_contact_share`` of its outline with segments; colours are not compared
-            (mixed pixels take both sides' colours).
+            square (``supervoxels.seed_size_m`` squared: below the graph's resolution) joins
+            the segment it touches (points within ``fragment_gap_m``, any normals; colours
+            not compared: mixed pixels take both sides' colours) when it is mixed pixels at
+            that segment's silhouette: most of its pixels on supervoxels seen edge-on
+            (``contour_facing_cos``: mixed pixels lie along the rays across a depth step),
+            its outline only that segment (touched along at least
+            ``fragment_contact_share`` of it) and the background or support, which is not
+            nearer than it by more than ``fragment_gap_m`` at the median (a speck seen past
+            a wall is an object's part).
         thin_radius_m: touching segments are joined when the points of both lie on one
             cylinder of at most this radius (m; a marker, a pen, a handle: the seen half of its
             circumference, pi r, at most two supervoxel seeds, where the graph's convexity

@@ -80,7 +80,8 @@ def join_fragments(
     # move the mean colour a fragment's gate compares with.
     for specks in (False, True) if speck_m2 > 0 and viewpoint is not None else (False,):
         if specks:
-            edge_on, seen = _edge_on_pixels(root[labels], supervoxels, viewpoint, config)
+            current = root[labels]
+            edge_on, seen = _edge_on_pixels(current, supervoxels, viewpoint, config)
         for piece in small:
             if root[piece] != piece or area[piece] >= (
                 speck_m2 if specks else seg.fragment_area_m2
@@ -94,8 +95,15 @@ def join_fragments(
                 seg.fragment_contact_share * rim.sum()
             ):
                 continue
-            if specks and edge_on[piece] * 2 <= seen[piece]:
-                continue  # it faces the camera: a surface, perhaps a small object's
+            if (
+                specks
+                and (
+                    edge_on[piece] * 2 <= seen[piece]  # it faces the camera: a surface
+                    or np.count_nonzero(outline[piece, 1:]) > 1  # between two segments
+                    or _behind(current, piece, depth_m, seg.fragment_gap_m)
+                )
+            ):
+                continue
             if (
                 not specks
                 and not _alike(colour, piece, best, seg.fragment_colour)
@@ -132,6 +140,24 @@ def _edge_on_pixels(
         np.bincount(labels[on][edge_on], minlength=count),
         np.bincount(labels[on], minlength=count),
     )
+
+
+def _behind(labels: np.ndarray, piece: int, depth_m: np.ndarray, gap_m: float) -> bool:
+    """Whether segment ``piece`` is seen behind the background or support around it: along
+    its 4-neighbour pixel pairs with label 0 (both with depth), the median depth step to them
+    is nearer than ``-gap_m`` (m). Mixed pixels at a silhouette lie in front of what is
+    behind it; a speck seen behind a wall or over a drawer's rim is a hidden object's part."""
+    rows, cols = np.nonzero(labels == piece)
+    height, width = labels.shape
+    steps = []
+    for d_row, d_col in ((0, 1), (1, 0), (0, -1), (-1, 0)):
+        r, c = rows + d_row, cols + d_col
+        inside = (r >= 0) & (r < height) & (c >= 0) & (c < width)
+        r, c, r0, c0 = r[inside], c[inside], rows[inside], cols[inside]
+        pair = (labels[r, c] == 0) & (depth_m[r, c] > 0) & (depth_m[r0, c0] > 0)
+        steps.append(depth_m[r, c][pair] - depth_m[r0, c0][pair])
+    steps = np.concatenate(steps)
+    return bool(steps.size and np.median(steps) < -gap_m)
 
 
 def _alike(colour: np.ndarray, first: int, second: int, within: float) -> bool:
