@@ -489,7 +489,7 @@ class SegmentationConfig:
     fragment_colour: float = 0.04
     fragment_bend_deg: float = 45.0
     fragment_on_body: bool = False
-    fragment_specks: bool = False
+    fragment_specks: bool = True
     thin_radius_m: float = 0.0125
     thin_rms_m: float = 0.003
     thin_min_contact_px: int = 5

@@ -10,7 +10,14 @@ its surface continues, when that continuation is at least ``segmentation.fragmen
 of its outline. Continuing means no step between neighbouring points and no crease between
 their supervoxels' normals (two objects packed together touch along a crease), and the two
 segments must have alike colours (docs/DESIGN_NOTES.md, "Fragments of curved surfaces joined by
-their outline").
+their outline"), unless the piece lies on its neighbour (``segmentation.fragment_on_body``,
+opt-in: a cap, a lid; an object resting on another lies on it too).
+
+Then specks (``segmentation.fragment_specks``): a segment smaller than one supervoxel seed's
+square that is mixed pixels at one segment's silhouette (seen edge-on, bordering only that
+segment and the background or support behind it) joins that segment whatever its colour or
+normals. A real sensor averages the two depths at a silhouette; a small object's visible part
+faces the camera or borders a second object, or is seen past what is around it.
 """
 
 from __future__ import annotations
@@ -46,7 +53,9 @@ def join_fragments(
     at least ``fragment_contact_share`` of its outline (its pixel pairs with any other label,
     the support and background included, both with depth) and the two mean chromaticities are
     within ``fragment_colour`` (objects packed tightly touch along much of a small one's
-    outline; their colours tell them apart). Joined segments add their areas and
+    outline; their colours tell them apart), or the segment lies on it (``fragment_on_body``,
+    ``lies_on``). Then each speck (under ``supervoxels.seed_size_m`` squared) that is mixed
+    pixels at one segment's silhouette joins it (module doc). Joined segments add their areas and
     outlines, so a fragment of a fragment can join through it. A joined fragment takes its
     neighbour's label; every other label is kept (as ``containers.join_container_insides``
     does), so objects elsewhere keep their ids.
@@ -59,6 +68,9 @@ def join_fragments(
             supervoxels (their normals; ``labels`` (H, W), -1 = none).
         borders: ``fragment_borders(labels, ...)`` if already computed (its arrays change in
             place when a fragment joins).
+        support: the support plane (``fragment_on_body`` measures footprints and heights on
+            it; None: that rule is off); viewpoint: (3,) camera centre, world (m) (the specks
+            are judged edge-on from it; None: no specks).
 
     Returns:
         The relabelled (labels, segment_of_supervoxel); the inputs when nothing is joined.
