@@ -92,6 +92,8 @@ def join_fragments(
     # move the mean colour a fragment's gate compares with.
     for specks in (False, True) if speck_m2 > 0 and viewpoint is not None else (False,):
         if specks:
+            if not any(root[p] == p and area[p] < speck_m2 for p in small):
+                break  # no speck left: the per-pixel measures are not needed
             current = root[labels]
             edge_on, seen = _edge_on_pixels(current, supervoxels, viewpoint, config)
         for piece in small:
