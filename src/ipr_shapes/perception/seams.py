@@ -236,6 +236,18 @@ def cut_colour_seams(
         noise = float(np.median(magnitude[measured if measured.any() else segment_pixels]))
     else:
         noise = _edge_noise(rgb, depth_m, segment_pixels)
+    # The edges are read only in the searched segments' crops: found in the box around them
+    # and a 1 px ring (the thinning reads a pixel's neighbours; the faint edges lie within 3 px
+    # of a searched segment, at least ``_MARGIN_PX`` inside its crop unless at the frame's
+    # border), the same edges there as the frame's.
+    crops = [crop for crop, _, search in segments if search]
+    box = (
+        slice(max(min(crop[0].start for crop in crops) - 1, 0),
+              min(max(crop[0].stop for crop in crops) + 1, labels.shape[0])),
+        slice(max(min(crop[1].start for crop in crops) - 1, 0),
+              min(max(crop[1].stop for crop in crops) + 1, labels.shape[1])),
+    )  # fmt: skip
+    magnitude, gx, gy = (np.ascontiguousarray(array[box]) for array in (magnitude, gx, gy))
     strong = np.flatnonzero(magnitude > seams.edge_factor * max(noise, 1e-6))
     # The gradient's direction is used at edge pixels only: measured at the strong ones.
     direction = np.zeros(magnitude.shape, dtype=magnitude.dtype)
@@ -245,10 +257,10 @@ def cut_colour_seams(
     # between two boxes of one colour fades along its length.
     if seams.hysteresis:
         # Only where seams are searched: the searched segments and a ring around them.
-        searched_pixels = np.zeros(labels.shape, dtype=bool)
+        searched_pixels = np.zeros(magnitude.shape, dtype=bool)
         for crop, mask, search in segments:
             if search:
-                searched_pixels[crop] |= mask
+                searched_pixels[_within(crop, box)] |= mask
         near = kernels.dilate_diamond(searched_pixels, 3)  # binary_dilation, iterations=3
         low = 0.5 * seams.edge_factor * max(noise, 1e-6)
         edges = _linked_edges(magnitude, gx, gy, direction, edges, low, near)
@@ -258,7 +270,8 @@ def cut_colour_seams(
             # Kept whole; still a face for the pairs' sizes (``_pairs_by_size``).
             searched.append((crop, mask, mask.astype(np.int32), [], np.empty((0, 3)), []))
             continue
-        cut, found = _search_segment(mask, edges[crop], direction[crop], points[crop],
+        cut, found = _search_segment(mask, edges[_within(crop, box)],
+                                     direction[_within(crop, box)], points[crop],
                                      normals.within(crop, mask), depth_m[crop], focal_px,
                                      config)  # fmt: skip
         # The segment's points with depth, and which seams have flat strips: measured once,
@@ -277,7 +290,7 @@ def cut_colour_seams(
                for (crop, _, cut, found, cloud, flat), sizes
                in zip(searched, asked, strict=True)]  # fmt: skip
     if seams.pair_needs_grid and seams.pair_sizes:
-        decided = _pairs_by_size(searched, decided, asked, points, normals.everywhere, depth_m,
+        decided = _pairs_by_size(searched, decided, asked, points, normals, depth_m,
                                  config)  # fmt: skip
     next_id = int(labels.max()) + 1
     for (crop, *_), pieces in zip(searched, decided, strict=True):
@@ -286,6 +299,14 @@ def cut_colour_seams(
             view[pieces == piece] = next_id
             next_id += 1
     return out
+
+
+def _within(crop: tuple[slice, slice], box: tuple[slice, slice]) -> tuple[slice, slice]:
+    """``crop`` of the frame in the coordinates of ``box`` (a box of the frame holding it)."""
+    return (
+        slice(crop[0].start - box[0].start, crop[0].stop - box[0].start),
+        slice(crop[1].start - box[1].start, crop[1].stop - box[1].start),
+    )
 
 
 def _decide(
@@ -323,7 +344,8 @@ def _decide(
 
 
 class _Sizes:
-    """The (M, 2) face sizes (longer, shorter; m) of boxes seen elsewhere in the frame and the
+    """The face sizes (longer, shorter; m) of boxes seen elsewhere in the frame ((M, 2), or an
+    iterable of such arrays read only as far as needed: ``_FacesElsewhere``) and the
     (P, 2, 2) sizes of the two strips of each lone seam elsewhere (``_lone_strips``), made by
     ``make`` on first use (None: no sizes), and whether they were asked for: a segment whose
     strip tests never asked is decided without them (``_pairs_by_size``)."""
@@ -345,7 +367,7 @@ def _pairs_by_size(
     decided: list[np.ndarray],
     asked: list[_Sizes],
     points: np.ndarray,
-    all_normals,
+    normals: Normals,
     depth_m: np.ndarray,
     config: PerceptionConfig,
 ) -> list[np.ndarray]:
@@ -355,26 +377,11 @@ def _pairs_by_size(
     packed boxes repeat across the frame, a printed line through one box's middle makes halves
     that nothing else in the frame matches. Only segments whose first tests asked for sizes
     (``asked``) are run again (the others' tests go the same way), and the frame's faces are
-    measured only when one of them asks."""
-    faces: list[tuple[int, tuple[float, float]]] = []
+    measured segment by segment only until both strips of the seam asking have a match
+    (``_FrameFaces``)."""
     pairs: list[tuple[int, tuple[tuple[float, float], tuple[float, float]]]] = []
     done = []
-
-    def frame_faces() -> list[tuple[int, tuple[float, float]]]:
-        if not done:
-            done.append(True)
-            normals = all_normals()  # (H, W, 3), computed here only when a test asks
-            measured = (depth_m > 0) & np.any(normals != 0, axis=2)
-            for index, ((crop, *_), pieces) in enumerate(zip(searched, decided, strict=True)):
-                for piece in range(1, int(pieces.max()) + 1):
-                    size = _face_size(pieces == piece, measured[crop], points[crop],
-                                      normals[crop], config)  # fmt: skip
-                    if size is not None:
-                        faces.append((index, size))
-            for index, (_, _, _, found, cloud, flat) in enumerate(searched):
-                pairs.extend((index, pair) for pair in _lone_strips(found, cloud, flat, config))
-        return faces
-
+    faces = _FrameFaces(searched, decided, points, normals, depth_m, config)
     result = []
     for index, ((crop, _, cut, found, cloud, flat), pieces) in enumerate(
         zip(searched, decided, strict=True)
@@ -383,17 +390,59 @@ def _pairs_by_size(
             result.append(pieces)
             continue
 
-        def others(index: int = index) -> tuple[np.ndarray, np.ndarray]:
-            faces_elsewhere = [size for owner, size in frame_faces() if owner != index]
+        def others(index: int = index) -> tuple[_FacesElsewhere, np.ndarray]:
+            if not done:  # the lone seams' strips of every segment, once
+                done.append(True)
+                for owner, (_, _, _, seams_of, cloud_of, flat_of) in enumerate(searched):
+                    pairs.extend((owner, pair) for pair in _lone_strips(seams_of, cloud_of,
+                                                                         flat_of, config))  # fmt: skip
             pairs_elsewhere = [pair for owner, pair in pairs if owner != index]
-            return (
-                np.array(faces_elsewhere).reshape(-1, 2),
-                np.array(pairs_elsewhere).reshape(-1, 2, 2),
-            )
+            return _FacesElsewhere(faces, index), np.array(pairs_elsewhere).reshape(-1, 2, 2)
 
         result.append(_decide(cut, found, cloud, flat, config, _Sizes(others), points[crop],
                               depth_m[crop] > 0))  # fmt: skip
     return result
+
+
+class _FrameFaces:
+    """The face sizes (``_face_size``; (k, 2) arrays of (longer, shorter), m) of every piece of
+    every segment of the frame (``searched``, as first ``decided``), measured one segment at a
+    time when first asked and kept: a strip test stops asking once both strips have a match
+    (``_covered``), so that most of the frame's faces are never measured. The normals are
+    computed only in the segments measured."""
+
+    def __init__(self, searched, decided, points, normals, depth_m, config) -> None:
+        self._searched, self._decided = searched, decided
+        self._points, self._normals, self._depth_m, self._config = points, normals, depth_m, config
+        self._sizes: dict[int, np.ndarray] = {}
+
+    def __len__(self) -> int:
+        return len(self._searched)
+
+    def of(self, index: int) -> np.ndarray:
+        """The (k, 2) face sizes of segment ``index``'s pieces."""
+        if index not in self._sizes:
+            crop, mask = self._searched[index][:2]
+            pieces = self._decided[index]
+            normals = self._normals.within(crop, mask)
+            measured = (self._depth_m[crop] > 0) & np.any(normals != 0, axis=2)
+            sizes = [_face_size(pieces == piece, measured, self._points[crop], normals,
+                                self._config) for piece in range(1, int(pieces.max()) + 1)]  # fmt: skip
+            self._sizes[index] = np.array([size for size in sizes if size is not None]).reshape(
+                -1, 2
+            )
+        return self._sizes[index]
+
+
+class _FacesElsewhere:
+    """The ``faces`` of every segment but ``owner``: an iterable of (k, 2) arrays, segment by
+    segment, measured as they are read."""
+
+    def __init__(self, faces: _FrameFaces, owner: int) -> None:
+        self._faces, self._owner = faces, owner
+
+    def __iter__(self):
+        return (self._faces.of(index) for index in range(len(self._faces)) if index != self._owner)
 
 
 def _lone_strips(
@@ -693,7 +742,7 @@ def _search_segment(
     piece, 2.. the cut-off pieces), and the seams in the order cut (best first, then the
     pieces searched again)."""
     pieces = mask.astype(np.int32)
-    near_edge = ndimage.binary_dilation(edges, np.ones((3, 3), dtype=bool))
+    near_edge = _dilate_square(edges)  # ndimage.binary_dilation(edges, np.ones((3, 3)))
     has_normal = np.any(normals != 0, axis=2)
     queue = [1]
     found: list[_Seam] = []
@@ -712,6 +761,18 @@ def _search_segment(
         found.append(seam)
         queue.extend((piece, new))
     return pieces, found
+
+
+def _dilate_square(mask: np.ndarray) -> np.ndarray:
+    """(h, w) bool: the pixels whose 3 x 3 neighbourhood holds a pixel of ``mask`` ((h, w)
+    bool; ``ndimage.binary_dilation`` by a 3 x 3 square, border 0), by shifted ORs."""
+    height, width = mask.shape
+    padded = np.pad(mask, 1)
+    out = np.zeros((height, width), dtype=bool)
+    for dr in range(3):
+        for dc in range(3):
+            out |= padded[dr : dr + height, dc : dc + width]
+    return out
 
 
 def _unrepeated(
@@ -770,13 +831,24 @@ def _sized_like(
     length = 2.0 * seam.half_length_m
     strips = np.array([[max(length, width), min(length, width)] for width in widths])
     tolerance = config.seams.size_tolerance_m
-    # (2, M): strip i within the tolerance of face j in both extents.
-    on_faces = np.all(np.abs(strips[:, None, :] - faces[None, :, :]) <= tolerance, axis=2)
-    if on_faces.any(axis=1).all():
-        return True
     # (P, 2, 2): this seam's strip i against strip j of lone pair p.
     alike = np.all(np.abs(strips[None, :, None, :] - pairs[:, None, :, :]) <= tolerance, axis=3)
-    return bool(np.any(alike.any(axis=2).all(axis=1) & alike.any(axis=1).all(axis=1)))
+    if np.any(alike.any(axis=2).all(axis=1) & alike.any(axis=1).all(axis=1)):
+        return True
+    return _covered(strips, [faces] if isinstance(faces, np.ndarray) else faces, tolerance)
+
+
+def _covered(strips: np.ndarray, faces, tolerance: float) -> bool:
+    """Whether each of the (2, 2) ``strips`` sizes (m) is within ``tolerance`` of some face size
+    in both extents; ``faces``: an iterable of (k, 2) arrays, read only until both match."""
+    matched = np.zeros(len(strips), dtype=bool)
+    for sizes in faces:
+        # (2, k): strip i within the tolerance of face j in both extents.
+        on = np.all(np.abs(strips[:, None, :] - sizes[None, :, :]) <= tolerance, axis=2)
+        matched |= on.any(axis=1)
+        if matched.all():
+            return True
+    return False
 
 
 def _flat_strips(seam: _Seam, cloud: np.ndarray, config: PerceptionConfig) -> bool:
