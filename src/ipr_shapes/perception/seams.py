@@ -740,7 +740,8 @@ def _search_segment(
 ) -> tuple[np.ndarray, list[_Seam]]:
     """(h, w) int pieces of one segment's crop cut at every seam found (0 outside, 1 the first
     piece, 2.. the cut-off pieces), and the seams in the order cut (best first, then the
-    pieces searched again)."""
+    pieces searched again). Each piece needs room for two pieces of ``seams.min_area_m2``
+    (the whole segment's is the caller's first test; ``_split`` judges every cut anyway)."""
     pieces = mask.astype(np.int32)
     near_edge = _dilate_square(edges)  # ndimage.binary_dilation(edges, np.ones((3, 3)))
     has_normal = np.any(normals != 0, axis=2)
@@ -749,7 +750,8 @@ def _search_segment(
     while queue and len(found) < config.seams.max_cuts:
         piece = queue.pop()
         part = pieces == piece
-        if _area_m2(part, depth_m, focal_px) < 2 * config.seams.min_area_m2:
+        # (The whole segment's area was the caller's first test.)
+        if found and _area_m2(part, depth_m, focal_px) < 2 * config.seams.min_area_m2:
             continue
         cut = _best_cut(part, edges, near_edge, direction, points, normals, has_normal,
                         depth_m, focal_px, config)  # fmt: skip
@@ -1216,18 +1218,20 @@ def _best_cut(
     for _, a, rho, reaches_outline, line_rows, line_cols in stretches:
         if not reaches_outline:
             continue
-        if room is None:
-            room = _Room(part, window, depth_m, focal_px)
-        # No room on one side of the line for a piece of the smallest area and width: no cut.
-        if not room.fits(cos_a[a], sin_a[a], rho, config):
-            continue
         # Its length between its outermost pixels with depth (label images fill dropouts).
+        # (The checks in order of their cost: the first candidate that passes them all is the
+        # same in any order.)
         measured = np.flatnonzero(depth_m[line_rows, line_cols] > 0)
         if measured.size < 2:
             continue
         ends = measured[[0, -1]]
         ends_3d = points[line_rows[ends], line_cols[ends]]
         if np.linalg.norm(ends_3d[0] - ends_3d[1]) < seams.min_length_m:
+            continue
+        if room is None:
+            room = _Room(part, window, depth_m, focal_px)
+        # No room on one side of the line for a piece of the smallest area and width: no cut.
+        if not room.fits(cos_a[a], sin_a[a], rho, config):
             continue
         normal = _coplanar_sides(part_pixels, part.shape, line_rows, line_cols, cos_a[a],
                                  sin_a[a], rho, points, normals, config)  # fmt: skip
