@@ -19,7 +19,9 @@ import pytest
 
 from ipr_shapes.perception.config import PerceptionConfig, SeamsConfig
 from ipr_shapes.perception.seams import (
+    _covered,
     _cut_by_planes,
+    _dilate_square,
     _equally_spaced,
     _linked_edges,
     _Seam,
@@ -30,7 +32,7 @@ from ipr_shapes.perception.seams import (
     _unrepeated,
     cut_colour_seams,
 )
-from ipr_shapes.perception.segmentation import segment_frame
+from ipr_shapes.perception.segmentation import _cut_seams, segment_frame
 from ipr_shapes.scene import Frame
 from tests.test_segmentation import box, camera, render, segment_of_point
 
@@ -574,6 +576,8 @@ def test_the_seams_pixel_kernels_are_scipys():
             sparse = mask & (rng.random(mask.shape) < 0.05)
             dilated = kernels.dilate_diamond(sparse, radius)
             assert np.array_equal(dilated, ndimage.binary_dilation(sparse, iterations=radius))
+        square = ndimage.binary_dilation(sparse, np.ones((3, 3), dtype=bool))
+        assert np.array_equal(_dilate_square(sparse), square)
 
 
 def test_the_compiled_thinning_is_the_numpy_one():
@@ -744,3 +748,44 @@ def test_the_gradient_in_the_searched_crops_is_the_frames_and_the_noise_its_medi
     depth = np.where(rng.random(magnitude.shape) < 0.8, 0.7, 0.0)
     noise = _edge_noise(rgb, depth, np.ones(depth.shape, dtype=bool))
     assert noise == pytest.approx(float(np.median(magnitude[depth > 0])), rel=0.05)
+
+
+def test_the_frames_faces_are_read_only_until_both_strips_match():
+    """A lone seam's strips (10 x 3 and 10 x 4 cm) each need a face of their size elsewhere,
+    possibly in two segments; the segments' faces are measured one by one, and no further once
+    both matched."""
+    strips = np.array([[0.10, 0.03], [0.10, 0.04]])
+    read = []
+
+    def segments(*chunks):
+        for chunk in chunks:
+            read.append(len(read))
+            if chunk is None:
+                raise AssertionError("read past the match")
+            yield np.array(chunk, dtype=np.float64).reshape(-1, 2)
+
+    assert _covered(strips, segments([[0.2, 0.2]], [[0.104, 0.028]], [[0.1, 0.045]], None), 0.01)
+    assert read == [0, 1, 2]
+    read.clear()
+    # One strip matched in every segment, the other in none: every segment is read.
+    assert not _covered(strips, segments([[0.1, 0.03]], [], [[0.1, 0.029]]), 0.01)
+    assert read == [0, 1, 2]
+
+
+def test_a_frame_with_no_seam_cut_is_segmented_as_without_the_seams():
+    """Labels, their numbering and the supervoxels' segments: the seams change nothing where
+    they cut nothing (two boxes of different heights, one plain box elsewhere)."""
+    boxes = [box(0.0, -0.06, (0.1, 0.1, TOP)), box(0.0, 0.06, (0.1, 0.1, 0.1)),
+             box(0.15, 0.0, (0.05, 0.05, 0.03))]  # fmt: skip
+    frame = painted(render(camera(), boxes, noise_m=0.0005), lambda p: p[:, 0] > 0.12)
+    off, on = segment_frame(frame), segment_frame(frame, config=ON)
+    assert off.labels.max() >= 3
+    assert np.array_equal(on.labels, off.labels)
+    assert np.array_equal(on.segment_of_supervoxel, off.segment_of_supervoxel)
+    # Whatever the numbering (here the reverse of the segments' sizes): not renumbered.
+    flipped = np.where(off.labels > 0, off.labels.max() + 1 - off.labels, 0)
+    owners = np.where(off.segment_of_supervoxel > 0,
+                      off.labels.max() + 1 - off.segment_of_supervoxel, 0)  # fmt: skip
+    points = frame.points_world().reshape(*frame.depth_m.shape, 3)
+    labels, segments = _cut_seams(flipped, off.supervoxels, frame, points, ON, None, owners)
+    assert np.array_equal(labels, flipped) and np.array_equal(segments, owners)
