@@ -425,7 +425,7 @@ class _FrameFaces:
             crop, mask = self._searched[index][:2]
             pieces = self._decided[index]
             normals = self._normals.within(crop, mask)
-            measured = (self._depth_m[crop] > 0) & np.any(normals != 0, axis=2)
+            measured = (self._depth_m[crop] > 0) & _known(normals)
             sizes = [_face_size(pieces == piece, measured, self._points[crop], normals,
                                 self._config) for piece in range(1, int(pieces.max()) + 1)]  # fmt: skip
             self._sizes[index] = np.array([size for size in sizes if size is not None]).reshape(
@@ -562,7 +562,7 @@ def _has_flat_face(
     seams = config.seams
     usable = _gate_sample(mask, crop, points.shape[1]) if sample is None else sample
     sample_normals = normals.at(usable).astype(np.float64)
-    known = np.any(sample_normals != 0, axis=1)
+    known = _known(sample_normals)
     if known.sum() < 50:
         return False
     usable, sample_normals = usable[known], sample_normals[known]
@@ -744,7 +744,7 @@ def _search_segment(
     (the whole segment's is the caller's first test; ``_split`` judges every cut anyway)."""
     pieces = mask.astype(np.int32)
     near_edge = _dilate_square(edges)  # ndimage.binary_dilation(edges, np.ones((3, 3)))
-    has_normal = np.any(normals != 0, axis=2)
+    has_normal = _known(normals)
     queue = [1]
     found: list[_Seam] = []
     while queue and len(found) < config.seams.max_cuts:
@@ -763,6 +763,12 @@ def _search_segment(
         found.append(seam)
         queue.extend((piece, new))
     return pieces, found
+
+
+def _known(normals: np.ndarray) -> np.ndarray:
+    """(...) bool: the (..., 3) ``normals`` that are known (not all 0): ``np.any(normals != 0,
+    axis=-1)``, by three comparisons (numpy's reduction over a last axis of 3 is slow)."""
+    return (normals[..., 0] != 0) | (normals[..., 1] != 0) | (normals[..., 2] != 0)
 
 
 def _dilate_square(mask: np.ndarray) -> np.ndarray:
