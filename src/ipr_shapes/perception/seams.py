@@ -62,6 +62,9 @@ from ipr_shapes.perception.config import PerceptionConfig
 #: Hough resolution: line directions per half turn, and the candidates tried per search.
 _DIRECTIONS = 180
 _CANDIDATES = 40
+#: The Hough's line directions' cosines and sines.
+_COS = np.cos(np.linspace(0.0, np.pi, _DIRECTIONS, endpoint=False))
+_SIN = np.sin(np.linspace(0.0, np.pi, _DIRECTIONS, endpoint=False))
 #: An edge pixel votes for line directions within this of its own edge direction (deg).
 _VOTE_SPREAD_DEG = 10.0
 #: Pixels either side of a seam whose normals and points are compared (near, far; px).
@@ -1184,8 +1187,7 @@ def _best_cut(
     rows += top_px
     cols += left_px
     height, width = part.shape
-    angles = np.linspace(0.0, np.pi, _DIRECTIONS, endpoint=False)
-    cos_a, sin_a = np.cos(angles), np.sin(angles)
+    cos_a, sin_a = _COS, _SIN
     reach = int(np.ceil(np.hypot(height, width)))
     own = np.round((direction[rows, cols] % np.pi) / np.pi * _DIRECTIONS).astype(np.int64)
     spread = int(np.ceil(_VOTE_SPREAD_DEG / 180.0 * _DIRECTIONS))
