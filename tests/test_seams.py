@@ -19,10 +19,12 @@ import pytest
 
 from ipr_shapes.perception.config import PerceptionConfig, SeamsConfig
 from ipr_shapes.perception.seams import (
+    _area_m2,
     _covered,
     _cut_by_planes,
     _dilate_square,
     _equally_spaced,
+    _has_area,
     _linked_edges,
     _Seam,
     _sized_like,
@@ -789,3 +791,25 @@ def test_a_frame_with_no_seam_cut_is_segmented_as_without_the_seams():
     points = frame.points_world().reshape(*frame.depth_m.shape, 3)
     labels, segments = _cut_seams(flipped, off.supervoxels, frame, points, ON, None, owners)
     assert np.array_equal(labels, flipped) and np.array_equal(segments, owners)
+
+
+def test_an_area_test_decided_by_its_bounds_is_the_area_compared():
+    """``_has_area`` answers as ``_area_m2 >= area`` does, whether the bounds (the pixels
+    without depth at the smallest or the largest depth) decide or the median has to."""
+    rng = np.random.default_rng(8)
+    decided_by_median = 0
+    for _ in range(400):
+        depth = rng.uniform(0.5, 1.5, (20, 20)).astype(np.float32)
+        depth[rng.random(depth.shape) < rng.uniform(0.0, 0.6)] = 0.0
+        part = rng.random(depth.shape) < 0.7
+        area = _area_m2(part, depth, 600.0)
+        for threshold in (0.5 * area, 0.98 * area, area, 1.02 * area, 2.0 * area):
+            assert _has_area(part, depth, 600.0, threshold) == (area >= threshold)
+        known = depth[part][depth[part] > 0]
+        missing = int((depth[part] == 0).sum())
+        base = float(np.sum(known.astype(np.float64) ** 2))
+        if missing and known.size:
+            low = (base + missing * float(known.min()) ** 2) / 600.0**2
+            high = (base + missing * float(known.max()) ** 2) / 600.0**2
+            decided_by_median += low < area < high
+    assert decided_by_median > 100

@@ -208,7 +208,7 @@ def cut_colour_seams(
         crop = (slice(top, bottom), slice(left, right))
         mask = labels[crop] == segment
         search = not (settled is not None and segment < len(settled) and settled[segment])
-        if search and _area_m2(mask, depth_m[crop], focal_px) < 2 * seams.min_area_m2:
+        if search and not _has_area(mask, depth_m[crop], focal_px, 2 * seams.min_area_m2):
             search = False
         segments.append((crop, mask, search))
     if seams.flat_face_gate:
@@ -754,7 +754,7 @@ def _search_segment(
         piece = queue.pop()
         part = pieces == piece
         # (The whole segment's area was the caller's first test.)
-        if found and _area_m2(part, depth_m, focal_px) < 2 * config.seams.min_area_m2:
+        if found and not _has_area(part, depth_m, focal_px, 2 * config.seams.min_area_m2):
             continue
         cut = _best_cut(part, edges, near_edge, direction, points, normals, has_normal,
                         depth_m, focal_px, config)  # fmt: skip
@@ -1413,7 +1413,7 @@ def _split(
     # Areas first, then the widths, the smaller piece first each time: cheaper, and the one
     # that fails when either does (a sliver cut off the outline); either failing is a None.
     for inside in masks[::-1]:
-        if _area_m2(inside, sub_depth, focal_px) < config.seams.min_area_m2:
+        if not _has_area(inside, sub_depth, focal_px, config.seams.min_area_m2):
             return None
     for inside in masks[::-1]:
         box = _window(inside, sub.shape)
@@ -1443,6 +1443,35 @@ def _window(mask: np.ndarray, shape: tuple[int, int]) -> tuple[slice, slice]:
         slice(max(int(rows[0]) - 1, 0), min(int(rows[-1]) + 2, shape[0])),
         slice(max(int(cols[0]) - 1, 0), min(int(cols[-1]) + 2, shape[1])),
     )
+
+
+#: Relative margin of ``_has_area``'s bounds: well above the float32 rounding of ``_area_m2``'s
+#: sum (about 1e-6 relative for a million pixels), so that a bound decides only what
+#: ``_area_m2`` would decide the same way.
+_AREA_ROUNDING = 1e-4
+
+
+def _has_area(part: np.ndarray, depth_m: np.ndarray, focal_px: float, area_m2: float) -> bool:
+    """Whether ``_area_m2(part, depth_m, focal_px) >= area_m2``, without the median of its
+    pixels with depth where it cannot decide: the pixels without depth take that median,
+    which lies between their smallest and largest depth, so the area lies between the bounds
+    with either; only when ``area_m2`` lies between them is the area itself computed."""
+    depths = depth_m[part]
+    has_depth = depths > 0
+    if has_depth.all():
+        return float(np.sum(depths**2)) / focal_px**2 >= area_m2
+    known = depths[has_depth]
+    if known.size == 0:
+        return area_m2 <= 0.0
+    missing = depths.size - known.size
+    base = float(np.sum(known.astype(np.float64) ** 2))
+    low = (base + missing * float(known.min()) ** 2) / focal_px**2
+    high = (base + missing * float(known.max()) ** 2) / focal_px**2
+    if low * (1.0 - _AREA_ROUNDING) >= area_m2:
+        return True
+    if high * (1.0 + _AREA_ROUNDING) < area_m2:
+        return False
+    return _area_m2(part, depth_m, focal_px) >= area_m2
 
 
 def _area_m2(part: np.ndarray, depth_m: np.ndarray, focal_px: float) -> float:
