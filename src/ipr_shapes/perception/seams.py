@@ -62,6 +62,11 @@ from ipr_shapes.perception.config import PerceptionConfig
 #: Hough resolution: line directions per half turn, and the candidates tried per search.
 _DIRECTIONS = 180
 _CANDIDATES = 40
+#: The compiled screen of a part's candidate seams (``_best_cut``) drops a candidate only this far
+#: (relative length, degrees) beyond the exact checks' thresholds: far above the rounding of
+#: its float64 norms against numpy's float32 and BLAS ones, so that it drops only what those
+#: checks drop.
+_SCREEN_MARGIN = 1e-6
 #: The Hough's line directions' cosines and sines.
 _COS = np.cos(np.linspace(0.0, np.pi, _DIRECTIONS, endpoint=False))
 _SIN = np.sin(np.linspace(0.0, np.pi, _DIRECTIONS, endpoint=False))
@@ -1215,20 +1220,47 @@ def _best_cut(
     )
     stretches = [
         (int(lengths[k]), int(line_a[k]), int(line_rho[k]), bool(reaches[k]),
-         stretch_rows[bounds[k] : bounds[k + 1]], stretch_cols[bounds[k] : bounds[k + 1]])
+         stretch_rows[bounds[k] : bounds[k + 1]], stretch_cols[bounds[k] : bounds[k + 1]], k)
         for k in np.flatnonzero(lengths)
     ]  # fmt: skip
     stretches.sort(key=lambda item: -item[0])  # stable: ties keep the vote order
+    # Only a stretch that reaches the outline at both ends can cut.
+    stretches = [stretch for stretch in stretches if stretch[3]]
+    if not stretches:
+        return None
+    # A compiled screen first: every candidate's 3D length (``kernels.stretch_lengths``), then
+    # the next one with room for two pieces and side bands of one normal
+    # (``kernels.seam_screen``). It drops only candidates that the checks below drop (its
+    # margins exceed its rounding), and the one it finds takes those checks as before, in the
+    # same order: the first candidate that passes them all is the same.
+    which = np.array([stretch[6] for stretch in stretches], dtype=np.int64)
+    long_enough = kernels.stretch_lengths(stretch_rows, stretch_cols, bounds, which, depth_m,
+                                          points) >= seams.min_length_m * (1.0 - _SCREEN_MARGIN)  # fmt: skip
+    if not long_enough.any():
+        return None
+    stretches = [stretch for stretch, keep in zip(stretches, long_enough, strict=True) if keep]
     # The part's pixels with a normal, row-major (the side bands' pixels are among them).
     part_rows, part_cols = np.nonzero(part[window] & has_normal[window])
     part_pixels = (part_rows + top_px, part_cols + left_px)
-    room = None
-    for _, a, rho, reaches_outline, line_rows, line_cols in stretches:
-        if not reaches_outline:
-            continue
+    room = _Room(part, window, depth_m, focal_px)
+    near, far = _SIDE_BAND_PX
+    candidates = np.array([stretch[6] for stretch in stretches], dtype=np.int64)
+    line_cos, line_sin = cos_a[line_a], sin_a[line_a]
+    line_offsets = line_rho.astype(np.float64)
+    found = -1
+    while True:
+        # The next candidate that passes the screen (compiled), then the checks as before.
+        found = kernels.seam_screen(
+            candidates, line_cos, line_sin, line_offsets, stretch_rows, stretch_cols, bounds,
+            room.rows, room.cols, room.foot, room.size,
+            float(seams.min_area_m2), float(seams.min_width_m),
+            part_pixels[0], part_pixels[1], height, width, float(near), float(far),
+            normals, float(seams.max_normal_deg) + _SCREEN_MARGIN, found + 1,
+        )  # fmt: skip
+        if found < 0:
+            return None
+        _, a, rho, _, line_rows, line_cols, _ = stretches[found]
         # Its length between its outermost pixels with depth (label images fill dropouts).
-        # (The checks in order of their cost: the first candidate that passes them all is the
-        # same in any order.)
         measured = np.flatnonzero(depth_m[line_rows, line_cols] > 0)
         if measured.size < 2:
             continue
@@ -1236,11 +1268,8 @@ def _best_cut(
         ends_3d = points[line_rows[ends], line_cols[ends]]
         if np.linalg.norm(ends_3d[0] - ends_3d[1]) < seams.min_length_m:
             continue
-        if room is None:
-            room = _Room(part, window, depth_m, focal_px)
-        # No room on one side of the line for a piece of the smallest area and width: no cut.
-        if not room.fits(cos_a[a], sin_a[a], rho, config):
-            continue
+        # (Room for a piece of the smallest area and width on each side of the line: the
+        # screen's ``_Room.fits``, the same numbers.)
         normal = _coplanar_sides(part_pixels, part.shape, line_rows, line_cols, cos_a[a],
                                  sin_a[a], rho, points, normals, config)  # fmt: skip
         if normal is None:
@@ -1252,7 +1281,6 @@ def _best_cut(
         side = _split(part, line_rows, line_cols, depth_m, focal_px, config)
         if side is not None:
             return side, seam
-    return None
 
 
 class _Room:
@@ -1273,7 +1301,8 @@ class _Room:
 
     def fits(self, cos_a: float, sin_a: float, rho: float, config: PerceptionConfig) -> bool:
         """Whether each side of the line x cos a + y sin a = rho holds pixels enough for a piece
-        of ``seams.min_area_m2`` and ``seams.min_width_m`` (``kernels.line_sides``: upper bounds;
+        of ``seams.min_area_m2`` and ``seams.min_width_m`` (the search's compiled screen,
+        ``kernels.seam_screen``, computes the same; ``kernels.line_sides``: upper bounds;
         a trial cut that fails them fails ``_split``, which judges the pieces, for any part whose
         pieces lie within the line's two half-planes: every convex part)."""
         sides = kernels.line_sides(self.rows, self.cols, self.foot, self.size, float(cos_a),
