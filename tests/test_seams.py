@@ -19,8 +19,12 @@ import pytest
 
 from ipr_shapes.perception.config import PerceptionConfig, SeamsConfig
 from ipr_shapes.perception.seams import (
+    _area_m2,
+    _covered,
     _cut_by_planes,
+    _dilate_square,
     _equally_spaced,
+    _has_area,
     _linked_edges,
     _Seam,
     _sized_like,
@@ -30,7 +34,7 @@ from ipr_shapes.perception.seams import (
     _unrepeated,
     cut_colour_seams,
 )
-from ipr_shapes.perception.segmentation import segment_frame
+from ipr_shapes.perception.segmentation import _cut_seams, segment_frame
 from ipr_shapes.scene import Frame
 from tests.test_segmentation import box, camera, render, segment_of_point
 
@@ -574,6 +578,8 @@ def test_the_seams_pixel_kernels_are_scipys():
             sparse = mask & (rng.random(mask.shape) < 0.05)
             dilated = kernels.dilate_diamond(sparse, radius)
             assert np.array_equal(dilated, ndimage.binary_dilation(sparse, iterations=radius))
+        square = ndimage.binary_dilation(sparse, np.ones((3, 3), dtype=bool))
+        assert np.array_equal(_dilate_square(sparse), square)
 
 
 def test_the_compiled_thinning_is_the_numpy_one():
@@ -744,3 +750,144 @@ def test_the_gradient_in_the_searched_crops_is_the_frames_and_the_noise_its_medi
     depth = np.where(rng.random(magnitude.shape) < 0.8, 0.7, 0.0)
     noise = _edge_noise(rgb, depth, np.ones(depth.shape, dtype=bool))
     assert noise == pytest.approx(float(np.median(magnitude[depth > 0])), rel=0.05)
+
+
+def test_the_frames_faces_are_read_only_until_both_strips_match():
+    """A lone seam's strips (10 x 3 and 10 x 4 cm) each need a face of their size elsewhere,
+    possibly in two segments; the segments' faces are measured one by one, and no further once
+    both matched."""
+    strips = np.array([[0.10, 0.03], [0.10, 0.04]])
+    read = []
+
+    def segments(*chunks):
+        for chunk in chunks:
+            read.append(len(read))
+            if chunk is None:
+                raise AssertionError("read past the match")
+            yield np.array(chunk, dtype=np.float64).reshape(-1, 2)
+
+    assert _covered(strips, segments([[0.2, 0.2]], [[0.104, 0.028]], [[0.1, 0.045]], None), 0.01)
+    assert read == [0, 1, 2]
+    read.clear()
+    # One strip matched in every segment, the other in none: every segment is read.
+    assert not _covered(strips, segments([[0.1, 0.03]], [], [[0.1, 0.029]]), 0.01)
+    assert read == [0, 1, 2]
+
+
+def test_a_frame_with_no_seam_cut_is_segmented_as_without_the_seams():
+    """Labels, their numbering and the supervoxels' segments: the seams change nothing where
+    they cut nothing (two boxes of different heights, one plain box elsewhere)."""
+    boxes = [box(0.0, -0.06, (0.1, 0.1, TOP)), box(0.0, 0.06, (0.1, 0.1, 0.1)),
+             box(0.15, 0.0, (0.05, 0.05, 0.03))]  # fmt: skip
+    frame = painted(render(camera(), boxes, noise_m=0.0005), lambda p: p[:, 0] > 0.12)
+    off, on = segment_frame(frame), segment_frame(frame, config=ON)
+    assert off.labels.max() >= 3
+    assert np.array_equal(on.labels, off.labels)
+    assert np.array_equal(on.segment_of_supervoxel, off.segment_of_supervoxel)
+    # Whatever the numbering (here the reverse of the segments' sizes): not renumbered.
+    flipped = np.where(off.labels > 0, off.labels.max() + 1 - off.labels, 0)
+    owners = np.where(off.segment_of_supervoxel > 0,
+                      off.labels.max() + 1 - off.segment_of_supervoxel, 0)  # fmt: skip
+    points = frame.points_world().reshape(*frame.depth_m.shape, 3)
+    labels, segments = _cut_seams(flipped, off.supervoxels, frame, points, ON, None, owners)
+    assert np.array_equal(labels, flipped) and np.array_equal(segments, owners)
+
+
+def test_an_area_test_decided_by_its_bounds_is_the_area_compared():
+    """``_has_area`` answers as ``_area_m2 >= area`` does, whether the bounds (the pixels
+    without depth at the smallest or the largest depth) decide or the median has to."""
+    rng = np.random.default_rng(8)
+    decided_by_median = 0
+    for _ in range(400):
+        depth = rng.uniform(0.5, 1.5, (20, 20)).astype(np.float32)
+        depth[rng.random(depth.shape) < rng.uniform(0.0, 0.6)] = 0.0
+        part = rng.random(depth.shape) < 0.7
+        area = _area_m2(part, depth, 600.0)
+        for threshold in (0.5 * area, 0.98 * area, area, 1.02 * area, 2.0 * area):
+            assert _has_area(part, depth, 600.0, threshold) == (area >= threshold)
+        known = depth[part][depth[part] > 0]
+        missing = int((depth[part] == 0).sum())
+        base = float(np.sum(known.astype(np.float64) ** 2))
+        if missing and known.size:
+            low = (base + missing * float(known.min()) ** 2) / 600.0**2
+            high = (base + missing * float(known.max()) ** 2) / 600.0**2
+            decided_by_median += low < area < high
+    assert decided_by_median > 100
+
+
+def test_the_compiled_screen_of_candidate_seams_is_the_room_and_side_band_tests():
+    """``kernels.seam_screen`` finds, from any start, the first candidate line that has room
+    for two pieces (``_Room.fits``) and whose side bands have one normal (``_coplanar_sides``
+    without its step test); ``kernels.stretch_lengths`` is numpy's length between a stretch's
+    outermost pixels with depth. A part whose left third is tilted by 30 degrees: lines along
+    the crease fail the normals, lines near the border the room."""
+    from ipr_shapes.perception import kernels
+    from ipr_shapes.perception.seams import _SIDE_BAND_PX, _coplanar_sides, _Room
+
+    rng = np.random.default_rng(11)
+    height, width = 60, 90
+    part = np.zeros((height, width), dtype=bool)
+    part[5:55, 5:85] = True
+    part[rng.random(part.shape) < 0.03] = False
+    depth = rng.uniform(0.45, 0.55, part.shape).astype(np.float32)
+    depth[rng.random(part.shape) < 0.05] = 0.0
+    rows_px, cols_px = np.mgrid[0:height, 0:width]
+    points = np.stack([cols_px * 1e-3, rows_px * 1e-3, depth], axis=2).astype(np.float32)
+    normals = np.zeros((height, width, 3), dtype=np.float32)
+    normals[..., 2] = 1.0
+    tilt = np.radians(30.0)
+    normals[:, :30] = (np.sin(tilt), 0.0, np.cos(tilt))
+    normals += rng.normal(0.0, 0.02, normals.shape).astype(np.float32)
+    normals[~part] = 0.0
+    room = _Room(part, (slice(0, height), slice(0, width)), depth, 500.0)
+    has_normal = part & np.any(normals != 0, axis=2)
+    part_pixels = tuple(axis.astype(np.int64) for axis in np.nonzero(has_normal))
+    # Candidate lines: vertical ones across the part (the crease at x = 30, slivers at the
+    # border) and oblique ones; each stretch the part's pixels within half a pixel of it.
+    lines = [(0.0, x) for x in (7.0, 29.5, 30.0, 45.0, 60.0, 83.0)]
+    lines += [(rng.uniform(0, np.pi), rng.uniform(10, 80)) for _ in range(30)]
+    cos_l = np.array([np.cos(angle) for angle, _ in lines])
+    sin_l = np.array([np.sin(angle) for angle, _ in lines])
+    rho_l = np.array([rho for _, rho in lines])
+    stretch_rows, stretch_cols, bounds = [], [], [0]
+    for cos_a, sin_a, rho in zip(cos_l, sin_l, rho_l, strict=True):
+        on = part & (np.abs(cols_px * cos_a + rows_px * sin_a - rho) <= 0.5)
+        r, c = np.nonzero(on)
+        stretch_rows.append(r)
+        stretch_cols.append(c)
+        bounds.append(bounds[-1] + len(r))
+    stretch_rows = np.concatenate(stretch_rows).astype(np.int64)
+    stretch_cols = np.concatenate(stretch_cols).astype(np.int64)
+    bounds = np.array(bounds, dtype=np.int64)
+    no_step = replace(ON, seams=replace(ON.seams, max_step_m=1e9))
+    expected = []
+    for k in range(len(lines)):
+        r, c = stretch_rows[bounds[k] : bounds[k + 1]], stretch_cols[bounds[k] : bounds[k + 1]]
+        ok = len(r) > 0 and room.fits(cos_l[k], sin_l[k], rho_l[k], ON)
+        ok = ok and _coplanar_sides(part_pixels, part.shape, r, c, cos_l[k], sin_l[k],
+                                    rho_l[k], points, normals, no_step) is not None  # fmt: skip
+        expected.append(ok)
+    assert 3 <= sum(expected) < len(lines) - 3  # both ways
+    assert not expected[1] and not expected[2] and not expected[0] and expected[4]
+    which = np.array([k for k in range(len(lines)) if bounds[k + 1] > bounds[k]], np.int64)
+    near, far = _SIDE_BAND_PX
+    found, screened = -1, []
+    while True:
+        found = kernels.seam_screen(which, cos_l, sin_l, rho_l, stretch_rows, stretch_cols,
+                                    bounds, room.rows, room.cols, room.foot, room.size,
+                                    ON.seams.min_area_m2, ON.seams.min_width_m, *part_pixels,
+                                    height, width, float(near), float(far), normals,
+                                    ON.seams.max_normal_deg, found + 1)  # fmt: skip
+        if found < 0:
+            break
+        screened.append(int(which[found]))
+    assert screened == [k for k in which if expected[k]]
+    lengths = kernels.stretch_lengths(stretch_rows, stretch_cols, bounds, which, depth, points)
+    for k, length in zip(which, lengths, strict=True):
+        r, c = stretch_rows[bounds[k] : bounds[k + 1]], stretch_cols[bounds[k] : bounds[k + 1]]
+        measured = np.flatnonzero(depth[r, c] > 0)
+        if measured.size < 2:
+            assert length == -1.0
+            continue
+        ends = points[r[measured[[0, -1]]], c[measured[[0, -1]]]]
+        assert length == pytest.approx(float(np.linalg.norm(ends[0] - ends[1])), rel=1e-6)

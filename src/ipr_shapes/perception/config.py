@@ -608,10 +608,12 @@ class SeamsConfig:
     graph cannot tell apart.
 
     Off by default for its time, not its accuracy: with it on, every development, container
-    and tabletop set scores as with it off (bins-real 28.6 -> 55.5 %), but the perception costs
-    1.04-1.9 times as much CPU per tabletop frame and 3-4 times per bin frame (430-620 ms),
-    against a 150 ms budget (docs/experiments/2026-11-27-seams-default.md,
-    2026-11-27-seam-search-cost.md).
+    and tabletop set scores as with it off (bins-real 28.6 -> 55.5 %; a frame it leaves uncut
+    keeps the seams-off labels, numbering included), but the perception costs 1.05-1.6 times
+    as much CPU per tabletop frame (1.5-1.6 on ycb-static and the lab frames) and 2.7-3 times
+    per bin frame (about 290 ms), against a 150 ms budget
+    (docs/experiments/2026-11-27-seams-default.md, 2026-11-27-seam-search-cost.md,
+    2026-11-28-seam-search-structure.md).
     Turn it on for packed boxes (bin picking).
 
     Attributes:

@@ -2390,3 +2390,128 @@ def segment_surface_parts(
         else:
             part[node] = part[root]
     return part, steps[:n_steps].copy()
+
+
+@_jit
+def stretch_lengths(
+    stretch_rows: np.ndarray,
+    stretch_cols: np.ndarray,
+    bounds: np.ndarray,
+    which: np.ndarray,
+    depth: np.ndarray,
+    points: np.ndarray,
+) -> np.ndarray:
+    """(K,) float64 3D length (m) of each stretch ``which`` ((K,) int64 into ``bounds``; the
+    stretch k is ``stretch_rows/cols[bounds[k]:bounds[k + 1]]``) between its outermost pixels
+    with depth (``depth`` (h, w) > 0; ``points`` (h, w, 3), m), -1 for fewer than two: the
+    seams' length test, in float64 (numpy's is a float32 norm; ``seams._best_cut`` screens
+    with it and a margin, then tests the survivors as before)."""
+    out = np.full(which.shape[0], -1.0)
+    for index in range(which.shape[0]):
+        k = which[index]
+        first = -1
+        last = -1
+        for i in range(bounds[k], bounds[k + 1]):
+            if depth[stretch_rows[i], stretch_cols[i]] > 0:
+                if first < 0:
+                    first = i
+                last = i
+        if first < 0 or last == first:
+            continue
+        total = 0.0
+        for axis in range(3):
+            step = np.float64(
+                points[stretch_rows[first], stretch_cols[first], axis]
+                - points[stretch_rows[last], stretch_cols[last], axis]
+            )
+            total += step * step
+        out[index] = np.sqrt(total)
+    return out
+
+
+@_jit
+def seam_screen(
+    which: np.ndarray,
+    line_cos: np.ndarray,
+    line_sin: np.ndarray,
+    line_rho: np.ndarray,
+    stretch_rows: np.ndarray,
+    stretch_cols: np.ndarray,
+    bounds: np.ndarray,
+    room_rows: np.ndarray,
+    room_cols: np.ndarray,
+    room_foot: np.ndarray,
+    room_size: np.ndarray,
+    min_area: float,
+    min_width: float,
+    part_rows: np.ndarray,
+    part_cols: np.ndarray,
+    height: int,
+    width: int,
+    near: float,
+    far: float,
+    normals: np.ndarray,
+    max_angle_deg: float,
+    start: int,
+) -> int:
+    """The first of the candidate seams ``which[start:]`` (line k: x cos + y sin = rho, its stretch
+    ``stretch_rows/cols[bounds[k]:bounds[k + 1]]``), whether it passes the seams' room test
+    (``line_sides`` over the part's pixels ``room_*`` against ``min_area`` and ``min_width``:
+    the same numbers as ``seams._Room.fits``) and whether the mean normals (``normals`` (h, w,
+    3)) of its side bands among ``part_rows/cols`` (the part's pixels with a normal; the bands
+    ``near``-``far`` px off the line within the stretch's extent, each of at least 20 pixels,
+    as ``seams._coplanar_sides`` chooses them) lie within ``max_angle_deg``: one pass for all
+    candidates instead of one numpy call each; its position in ``which``, or -1 if none. The
+    angle is compared with a float64 norm (numpy's is BLAS's): the caller adds a margin and tests
+    the one found as before."""
+    box = np.empty(4, dtype=np.int64)
+    along_range = np.empty(2)
+    for index in range(start, which.shape[0]):
+        k = which[index]
+        cos_a = line_cos[k]
+        sin_a = line_sin[k]
+        rho = line_rho[k]
+        sides = line_sides(room_rows, room_cols, room_foot, room_size, cos_a, sin_a, rho)
+        if not (sides[0, 0] >= min_area and sides[1, 0] >= min_area):
+            continue
+        if not (min(sides[0, 1], sides[0, 2]) >= min_width):
+            continue
+        if not (min(sides[1, 1], sides[1, 2]) >= min_width):
+            continue
+        start, stop = bounds[k], bounds[k + 1]
+        low_r = stretch_rows[start]
+        high_r = low_r
+        low_c = stretch_cols[start]
+        high_c = low_c
+        along_low = np.inf
+        along_high = -np.inf
+        for i in range(start, stop):
+            r = stretch_rows[i]
+            c = stretch_cols[i]
+            low_r = min(low_r, r)
+            high_r = max(high_r, r)
+            low_c = min(low_c, c)
+            high_c = max(high_c, c)
+            along = float(-c) * sin_a + float(r) * cos_a
+            along_low = min(along_low, along)
+            along_high = max(along_high, along)
+        far_px = int(far)
+        box[0] = max(low_r - far_px, 0)
+        box[1] = min(high_r + far_px + 1, height)
+        box[2] = max(low_c - far_px, 0)
+        box[3] = min(high_c + far_px + 1, width)
+        along_range[0] = along_low
+        along_range[1] = along_high
+        band_a, band_b = seam_side_bands(
+            part_rows, part_cols, box, cos_a, sin_a, rho, along_range, near, far
+        )
+        if band_a.shape[0] < 20 or band_b.shape[0] < 20:
+            continue
+        normal_a = mean_at(normals, part_rows[band_a], part_cols[band_a])
+        normal_b = mean_at(normals, part_rows[band_b], part_cols[band_b])
+        normal_a /= max(np.sqrt(np.sum(normal_a * normal_a)), 1e-12)
+        normal_b /= max(np.sqrt(np.sum(normal_b * normal_b)), 1e-12)
+        cos_angle = min(max(np.sum(normal_a * normal_b), -1.0), 1.0)
+        if np.degrees(np.arccos(cos_angle)) <= max_angle_deg:
+            return index
+    return -1

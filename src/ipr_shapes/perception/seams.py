@@ -62,6 +62,14 @@ from ipr_shapes.perception.config import PerceptionConfig
 #: Hough resolution: line directions per half turn, and the candidates tried per search.
 _DIRECTIONS = 180
 _CANDIDATES = 40
+#: The compiled screen of a part's candidate seams (``_best_cut``) drops a candidate only this far
+#: (relative length, degrees) beyond the exact checks' thresholds: far above the rounding of
+#: its float64 norms against numpy's float32 and BLAS ones, so that it drops only what those
+#: checks drop.
+_SCREEN_MARGIN = 1e-6
+#: The Hough's line directions' cosines and sines.
+_COS = np.cos(np.linspace(0.0, np.pi, _DIRECTIONS, endpoint=False))
+_SIN = np.sin(np.linspace(0.0, np.pi, _DIRECTIONS, endpoint=False))
 #: An edge pixel votes for line directions within this of its own edge direction (deg).
 _VOTE_SPREAD_DEG = 10.0
 #: Pixels either side of a seam whose normals and points are compared (near, far; px).
@@ -205,7 +213,7 @@ def cut_colour_seams(
         crop = (slice(top, bottom), slice(left, right))
         mask = labels[crop] == segment
         search = not (settled is not None and segment < len(settled) and settled[segment])
-        if search and _area_m2(mask, depth_m[crop], focal_px) < 2 * seams.min_area_m2:
+        if search and not _has_area(mask, depth_m[crop], focal_px, 2 * seams.min_area_m2):
             search = False
         segments.append((crop, mask, search))
     if seams.flat_face_gate:
@@ -236,6 +244,18 @@ def cut_colour_seams(
         noise = float(np.median(magnitude[measured if measured.any() else segment_pixels]))
     else:
         noise = _edge_noise(rgb, depth_m, segment_pixels)
+    # The edges are read only in the searched segments' crops: found in the box around them
+    # and a 1 px ring (the thinning reads a pixel's neighbours; the faint edges lie within 3 px
+    # of a searched segment, at least ``_MARGIN_PX`` inside its crop unless at the frame's
+    # border), the same edges there as the frame's.
+    crops = [crop for crop, _, search in segments if search]
+    box = (
+        slice(max(min(crop[0].start for crop in crops) - 1, 0),
+              min(max(crop[0].stop for crop in crops) + 1, labels.shape[0])),
+        slice(max(min(crop[1].start for crop in crops) - 1, 0),
+              min(max(crop[1].stop for crop in crops) + 1, labels.shape[1])),
+    )  # fmt: skip
+    magnitude, gx, gy = (np.ascontiguousarray(array[box]) for array in (magnitude, gx, gy))
     strong = np.flatnonzero(magnitude > seams.edge_factor * max(noise, 1e-6))
     # The gradient's direction is used at edge pixels only: measured at the strong ones.
     direction = np.zeros(magnitude.shape, dtype=magnitude.dtype)
@@ -245,10 +265,10 @@ def cut_colour_seams(
     # between two boxes of one colour fades along its length.
     if seams.hysteresis:
         # Only where seams are searched: the searched segments and a ring around them.
-        searched_pixels = np.zeros(labels.shape, dtype=bool)
+        searched_pixels = np.zeros(magnitude.shape, dtype=bool)
         for crop, mask, search in segments:
             if search:
-                searched_pixels[crop] |= mask
+                searched_pixels[_within(crop, box)] |= mask
         near = kernels.dilate_diamond(searched_pixels, 3)  # binary_dilation, iterations=3
         low = 0.5 * seams.edge_factor * max(noise, 1e-6)
         edges = _linked_edges(magnitude, gx, gy, direction, edges, low, near)
@@ -258,7 +278,8 @@ def cut_colour_seams(
             # Kept whole; still a face for the pairs' sizes (``_pairs_by_size``).
             searched.append((crop, mask, mask.astype(np.int32), [], np.empty((0, 3)), []))
             continue
-        cut, found = _search_segment(mask, edges[crop], direction[crop], points[crop],
+        cut, found = _search_segment(mask, edges[_within(crop, box)],
+                                     direction[_within(crop, box)], points[crop],
                                      normals.within(crop, mask), depth_m[crop], focal_px,
                                      config)  # fmt: skip
         # The segment's points with depth, and which seams have flat strips: measured once,
@@ -277,7 +298,7 @@ def cut_colour_seams(
                for (crop, _, cut, found, cloud, flat), sizes
                in zip(searched, asked, strict=True)]  # fmt: skip
     if seams.pair_needs_grid and seams.pair_sizes:
-        decided = _pairs_by_size(searched, decided, asked, points, normals.everywhere, depth_m,
+        decided = _pairs_by_size(searched, decided, asked, points, normals, depth_m,
                                  config)  # fmt: skip
     next_id = int(labels.max()) + 1
     for (crop, *_), pieces in zip(searched, decided, strict=True):
@@ -286,6 +307,14 @@ def cut_colour_seams(
             view[pieces == piece] = next_id
             next_id += 1
     return out
+
+
+def _within(crop: tuple[slice, slice], box: tuple[slice, slice]) -> tuple[slice, slice]:
+    """``crop`` of the frame in the coordinates of ``box`` (a box of the frame holding it)."""
+    return (
+        slice(crop[0].start - box[0].start, crop[0].stop - box[0].start),
+        slice(crop[1].start - box[1].start, crop[1].stop - box[1].start),
+    )
 
 
 def _decide(
@@ -323,7 +352,8 @@ def _decide(
 
 
 class _Sizes:
-    """The (M, 2) face sizes (longer, shorter; m) of boxes seen elsewhere in the frame and the
+    """The face sizes (longer, shorter; m) of boxes seen elsewhere in the frame ((M, 2), or an
+    iterable of such arrays read only as far as needed: ``_FacesElsewhere``) and the
     (P, 2, 2) sizes of the two strips of each lone seam elsewhere (``_lone_strips``), made by
     ``make`` on first use (None: no sizes), and whether they were asked for: a segment whose
     strip tests never asked is decided without them (``_pairs_by_size``)."""
@@ -345,7 +375,7 @@ def _pairs_by_size(
     decided: list[np.ndarray],
     asked: list[_Sizes],
     points: np.ndarray,
-    all_normals,
+    normals: Normals,
     depth_m: np.ndarray,
     config: PerceptionConfig,
 ) -> list[np.ndarray]:
@@ -355,26 +385,11 @@ def _pairs_by_size(
     packed boxes repeat across the frame, a printed line through one box's middle makes halves
     that nothing else in the frame matches. Only segments whose first tests asked for sizes
     (``asked``) are run again (the others' tests go the same way), and the frame's faces are
-    measured only when one of them asks."""
-    faces: list[tuple[int, tuple[float, float]]] = []
+    measured segment by segment only until both strips of the seam asking have a match
+    (``_FrameFaces``)."""
     pairs: list[tuple[int, tuple[tuple[float, float], tuple[float, float]]]] = []
     done = []
-
-    def frame_faces() -> list[tuple[int, tuple[float, float]]]:
-        if not done:
-            done.append(True)
-            normals = all_normals()  # (H, W, 3), computed here only when a test asks
-            measured = (depth_m > 0) & np.any(normals != 0, axis=2)
-            for index, ((crop, *_), pieces) in enumerate(zip(searched, decided, strict=True)):
-                for piece in range(1, int(pieces.max()) + 1):
-                    size = _face_size(pieces == piece, measured[crop], points[crop],
-                                      normals[crop], config)  # fmt: skip
-                    if size is not None:
-                        faces.append((index, size))
-            for index, (_, _, _, found, cloud, flat) in enumerate(searched):
-                pairs.extend((index, pair) for pair in _lone_strips(found, cloud, flat, config))
-        return faces
-
+    faces = _FrameFaces(searched, decided, points, normals, depth_m, config)
     result = []
     for index, ((crop, _, cut, found, cloud, flat), pieces) in enumerate(
         zip(searched, decided, strict=True)
@@ -383,17 +398,59 @@ def _pairs_by_size(
             result.append(pieces)
             continue
 
-        def others(index: int = index) -> tuple[np.ndarray, np.ndarray]:
-            faces_elsewhere = [size for owner, size in frame_faces() if owner != index]
+        def others(index: int = index) -> tuple[_FacesElsewhere, np.ndarray]:
+            if not done:  # the lone seams' strips of every segment, once
+                done.append(True)
+                for owner, (_, _, _, seams_of, cloud_of, flat_of) in enumerate(searched):
+                    pairs.extend((owner, pair) for pair in _lone_strips(seams_of, cloud_of,
+                                                                         flat_of, config))  # fmt: skip
             pairs_elsewhere = [pair for owner, pair in pairs if owner != index]
-            return (
-                np.array(faces_elsewhere).reshape(-1, 2),
-                np.array(pairs_elsewhere).reshape(-1, 2, 2),
-            )
+            return _FacesElsewhere(faces, index), np.array(pairs_elsewhere).reshape(-1, 2, 2)
 
         result.append(_decide(cut, found, cloud, flat, config, _Sizes(others), points[crop],
                               depth_m[crop] > 0))  # fmt: skip
     return result
+
+
+class _FrameFaces:
+    """The face sizes (``_face_size``; (k, 2) arrays of (longer, shorter), m) of every piece of
+    every segment of the frame (``searched``, as first ``decided``), measured one segment at a
+    time when first asked and kept: a strip test stops asking once both strips have a match
+    (``_covered``), so that most of the frame's faces are never measured. The normals are
+    computed only in the segments measured."""
+
+    def __init__(self, searched, decided, points, normals, depth_m, config) -> None:
+        self._searched, self._decided = searched, decided
+        self._points, self._normals, self._depth_m, self._config = points, normals, depth_m, config
+        self._sizes: dict[int, np.ndarray] = {}
+
+    def __len__(self) -> int:
+        return len(self._searched)
+
+    def of(self, index: int) -> np.ndarray:
+        """The (k, 2) face sizes of segment ``index``'s pieces."""
+        if index not in self._sizes:
+            crop, mask = self._searched[index][:2]
+            pieces = self._decided[index]
+            normals = self._normals.within(crop, mask)
+            measured = (self._depth_m[crop] > 0) & _known(normals)
+            sizes = [_face_size(pieces == piece, measured, self._points[crop], normals,
+                                self._config) for piece in range(1, int(pieces.max()) + 1)]  # fmt: skip
+            self._sizes[index] = np.array([size for size in sizes if size is not None]).reshape(
+                -1, 2
+            )
+        return self._sizes[index]
+
+
+class _FacesElsewhere:
+    """The ``faces`` of every segment but ``owner``: an iterable of (k, 2) arrays, segment by
+    segment, measured as they are read."""
+
+    def __init__(self, faces: _FrameFaces, owner: int) -> None:
+        self._faces, self._owner = faces, owner
+
+    def __iter__(self):
+        return (self._faces.of(index) for index in range(len(self._faces)) if index != self._owner)
 
 
 def _lone_strips(
@@ -513,7 +570,7 @@ def _has_flat_face(
     seams = config.seams
     usable = _gate_sample(mask, crop, points.shape[1]) if sample is None else sample
     sample_normals = normals.at(usable).astype(np.float64)
-    known = np.any(sample_normals != 0, axis=1)
+    known = _known(sample_normals)
     if known.sum() < 50:
         return False
     usable, sample_normals = usable[known], sample_normals[known]
@@ -691,16 +748,18 @@ def _search_segment(
 ) -> tuple[np.ndarray, list[_Seam]]:
     """(h, w) int pieces of one segment's crop cut at every seam found (0 outside, 1 the first
     piece, 2.. the cut-off pieces), and the seams in the order cut (best first, then the
-    pieces searched again)."""
+    pieces searched again). Each piece needs room for two pieces of ``seams.min_area_m2``
+    (the whole segment's is the caller's first test; ``_split`` judges every cut anyway)."""
     pieces = mask.astype(np.int32)
-    near_edge = ndimage.binary_dilation(edges, np.ones((3, 3), dtype=bool))
-    has_normal = np.any(normals != 0, axis=2)
+    near_edge = _dilate_square(edges)  # ndimage.binary_dilation(edges, np.ones((3, 3)))
+    has_normal = _known(normals)
     queue = [1]
     found: list[_Seam] = []
     while queue and len(found) < config.seams.max_cuts:
         piece = queue.pop()
         part = pieces == piece
-        if _area_m2(part, depth_m, focal_px) < 2 * config.seams.min_area_m2:
+        # (The whole segment's area was the caller's first test.)
+        if found and not _has_area(part, depth_m, focal_px, 2 * config.seams.min_area_m2):
             continue
         cut = _best_cut(part, edges, near_edge, direction, points, normals, has_normal,
                         depth_m, focal_px, config)  # fmt: skip
@@ -712,6 +771,24 @@ def _search_segment(
         found.append(seam)
         queue.extend((piece, new))
     return pieces, found
+
+
+def _known(normals: np.ndarray) -> np.ndarray:
+    """(...) bool: the (..., 3) ``normals`` that are known (not all 0): ``np.any(normals != 0,
+    axis=-1)``, by three comparisons (numpy's reduction over a last axis of 3 is slow)."""
+    return (normals[..., 0] != 0) | (normals[..., 1] != 0) | (normals[..., 2] != 0)
+
+
+def _dilate_square(mask: np.ndarray) -> np.ndarray:
+    """(h, w) bool: the pixels whose 3 x 3 neighbourhood holds a pixel of ``mask`` ((h, w)
+    bool; ``ndimage.binary_dilation`` by a 3 x 3 square, border 0), by shifted ORs."""
+    height, width = mask.shape
+    padded = np.pad(mask, 1)
+    out = np.zeros((height, width), dtype=bool)
+    for dr in range(3):
+        for dc in range(3):
+            out |= padded[dr : dr + height, dc : dc + width]
+    return out
 
 
 def _unrepeated(
@@ -770,13 +847,24 @@ def _sized_like(
     length = 2.0 * seam.half_length_m
     strips = np.array([[max(length, width), min(length, width)] for width in widths])
     tolerance = config.seams.size_tolerance_m
-    # (2, M): strip i within the tolerance of face j in both extents.
-    on_faces = np.all(np.abs(strips[:, None, :] - faces[None, :, :]) <= tolerance, axis=2)
-    if on_faces.any(axis=1).all():
-        return True
     # (P, 2, 2): this seam's strip i against strip j of lone pair p.
     alike = np.all(np.abs(strips[None, :, None, :] - pairs[:, None, :, :]) <= tolerance, axis=3)
-    return bool(np.any(alike.any(axis=2).all(axis=1) & alike.any(axis=1).all(axis=1)))
+    if np.any(alike.any(axis=2).all(axis=1) & alike.any(axis=1).all(axis=1)):
+        return True
+    return _covered(strips, [faces] if isinstance(faces, np.ndarray) else faces, tolerance)
+
+
+def _covered(strips: np.ndarray, faces, tolerance: float) -> bool:
+    """Whether each of the (2, 2) ``strips`` sizes (m) is within ``tolerance`` of some face size
+    in both extents; ``faces``: an iterable of (k, 2) arrays, read only until both match."""
+    matched = np.zeros(len(strips), dtype=bool)
+    for sizes in faces:
+        # (2, k): strip i within the tolerance of face j in both extents.
+        on = np.all(np.abs(strips[:, None, :] - sizes[None, :, :]) <= tolerance, axis=2)
+        matched |= on.any(axis=1)
+        if matched.all():
+            return True
+    return False
 
 
 def _flat_strips(seam: _Seam, cloud: np.ndarray, config: PerceptionConfig) -> bool:
@@ -1104,8 +1192,7 @@ def _best_cut(
     rows += top_px
     cols += left_px
     height, width = part.shape
-    angles = np.linspace(0.0, np.pi, _DIRECTIONS, endpoint=False)
-    cos_a, sin_a = np.cos(angles), np.sin(angles)
+    cos_a, sin_a = _COS, _SIN
     reach = int(np.ceil(np.hypot(height, width)))
     own = np.round((direction[rows, cols] % np.pi) / np.pi * _DIRECTIONS).astype(np.int64)
     spread = int(np.ceil(_VOTE_SPREAD_DEG / 180.0 * _DIRECTIONS))
@@ -1133,22 +1220,46 @@ def _best_cut(
     )
     stretches = [
         (int(lengths[k]), int(line_a[k]), int(line_rho[k]), bool(reaches[k]),
-         stretch_rows[bounds[k] : bounds[k + 1]], stretch_cols[bounds[k] : bounds[k + 1]])
+         stretch_rows[bounds[k] : bounds[k + 1]], stretch_cols[bounds[k] : bounds[k + 1]], k)
         for k in np.flatnonzero(lengths)
     ]  # fmt: skip
     stretches.sort(key=lambda item: -item[0])  # stable: ties keep the vote order
+    # Only a stretch that reaches the outline at both ends can cut.
+    stretches = [stretch for stretch in stretches if stretch[3]]
+    if not stretches:
+        return None
+    # A compiled screen first: every candidate's 3D length (``kernels.stretch_lengths``), then
+    # the next one with room for two pieces and side bands of one normal
+    # (``kernels.seam_screen``). It drops only candidates that the checks below drop (its
+    # margins exceed its rounding), and the one it finds takes those checks as before, in the
+    # same order: the first candidate that passes them all is the same.
+    which = np.array([stretch[6] for stretch in stretches], dtype=np.int64)
+    long_enough = kernels.stretch_lengths(stretch_rows, stretch_cols, bounds, which, depth_m,
+                                          points) >= seams.min_length_m * (1.0 - _SCREEN_MARGIN)  # fmt: skip
+    if not long_enough.any():
+        return None
+    stretches = [stretch for stretch, keep in zip(stretches, long_enough, strict=True) if keep]
     # The part's pixels with a normal, row-major (the side bands' pixels are among them).
     part_rows, part_cols = np.nonzero(part[window] & has_normal[window])
     part_pixels = (part_rows + top_px, part_cols + left_px)
-    room = None
-    for _, a, rho, reaches_outline, line_rows, line_cols in stretches:
-        if not reaches_outline:
-            continue
-        if room is None:
-            room = _Room(part, window, depth_m, focal_px)
-        # No room on one side of the line for a piece of the smallest area and width: no cut.
-        if not room.fits(cos_a[a], sin_a[a], rho, config):
-            continue
+    room = _Room(part, window, depth_m, focal_px)
+    near, far = _SIDE_BAND_PX
+    candidates = np.array([stretch[6] for stretch in stretches], dtype=np.int64)
+    line_cos, line_sin = cos_a[line_a], sin_a[line_a]
+    line_offsets = line_rho.astype(np.float64)
+    found = -1
+    while True:
+        # The next candidate that passes the screen (compiled), then the checks as before.
+        found = kernels.seam_screen(
+            candidates, line_cos, line_sin, line_offsets, stretch_rows, stretch_cols, bounds,
+            room.rows, room.cols, room.foot, room.size,
+            float(seams.min_area_m2), float(seams.min_width_m),
+            part_pixels[0], part_pixels[1], height, width, float(near), float(far),
+            normals, float(seams.max_normal_deg) + _SCREEN_MARGIN, found + 1,
+        )  # fmt: skip
+        if found < 0:
+            return None
+        _, a, rho, _, line_rows, line_cols, _ = stretches[found]
         # Its length between its outermost pixels with depth (label images fill dropouts).
         measured = np.flatnonzero(depth_m[line_rows, line_cols] > 0)
         if measured.size < 2:
@@ -1157,6 +1268,8 @@ def _best_cut(
         ends_3d = points[line_rows[ends], line_cols[ends]]
         if np.linalg.norm(ends_3d[0] - ends_3d[1]) < seams.min_length_m:
             continue
+        # (Room for a piece of the smallest area and width on each side of the line: the
+        # screen's ``_Room.fits``, the same numbers.)
         normal = _coplanar_sides(part_pixels, part.shape, line_rows, line_cols, cos_a[a],
                                  sin_a[a], rho, points, normals, config)  # fmt: skip
         if normal is None:
@@ -1168,7 +1281,6 @@ def _best_cut(
         side = _split(part, line_rows, line_cols, depth_m, focal_px, config)
         if side is not None:
             return side, seam
-    return None
 
 
 class _Room:
@@ -1189,7 +1301,8 @@ class _Room:
 
     def fits(self, cos_a: float, sin_a: float, rho: float, config: PerceptionConfig) -> bool:
         """Whether each side of the line x cos a + y sin a = rho holds pixels enough for a piece
-        of ``seams.min_area_m2`` and ``seams.min_width_m`` (``kernels.line_sides``: upper bounds;
+        of ``seams.min_area_m2`` and ``seams.min_width_m`` (the search's compiled screen,
+        ``kernels.seam_screen``, computes the same; ``kernels.line_sides``: upper bounds;
         a trial cut that fails them fails ``_split``, which judges the pieces, for any part whose
         pieces lie within the line's two half-planes: every convex part)."""
         sides = kernels.line_sides(self.rows, self.cols, self.foot, self.size, float(cos_a),
@@ -1329,7 +1442,7 @@ def _split(
     # Areas first, then the widths, the smaller piece first each time: cheaper, and the one
     # that fails when either does (a sliver cut off the outline); either failing is a None.
     for inside in masks[::-1]:
-        if _area_m2(inside, sub_depth, focal_px) < config.seams.min_area_m2:
+        if not _has_area(inside, sub_depth, focal_px, config.seams.min_area_m2):
             return None
     for inside in masks[::-1]:
         box = _window(inside, sub.shape)
@@ -1359,6 +1472,35 @@ def _window(mask: np.ndarray, shape: tuple[int, int]) -> tuple[slice, slice]:
         slice(max(int(rows[0]) - 1, 0), min(int(rows[-1]) + 2, shape[0])),
         slice(max(int(cols[0]) - 1, 0), min(int(cols[-1]) + 2, shape[1])),
     )
+
+
+#: Relative margin of ``_has_area``'s bounds: well above the float32 rounding of ``_area_m2``'s
+#: sum (about 1e-6 relative for a million pixels), so that a bound decides only what
+#: ``_area_m2`` would decide the same way.
+_AREA_ROUNDING = 1e-4
+
+
+def _has_area(part: np.ndarray, depth_m: np.ndarray, focal_px: float, area_m2: float) -> bool:
+    """Whether ``_area_m2(part, depth_m, focal_px) >= area_m2``, without the median of its
+    pixels with depth where it cannot decide: the pixels without depth take that median,
+    which lies between their smallest and largest depth, so the area lies between the bounds
+    with either; only when ``area_m2`` lies between them is the area itself computed."""
+    depths = depth_m[part]
+    has_depth = depths > 0
+    if has_depth.all():
+        return float(np.sum(depths**2)) / focal_px**2 >= area_m2
+    known = depths[has_depth]
+    if known.size == 0:
+        return area_m2 <= 0.0
+    missing = depths.size - known.size
+    base = float(np.sum(known.astype(np.float64) ** 2))
+    low = (base + missing * float(known.min()) ** 2) / focal_px**2
+    high = (base + missing * float(known.max()) ** 2) / focal_px**2
+    if low * (1.0 - _AREA_ROUNDING) >= area_m2:
+        return True
+    if high * (1.0 + _AREA_ROUNDING) < area_m2:
+        return False
+    return _area_m2(part, depth_m, focal_px) >= area_m2
 
 
 def _area_m2(part: np.ndarray, depth_m: np.ndarray, focal_px: float) -> float:

@@ -256,7 +256,7 @@ def segment_frame(
     )
     if config.seams.enabled:
         labels, segment_of_supervoxel = _cut_seams(
-            labels, supervoxels, frame, points, config, change
+            labels, supervoxels, frame, points, config, change, segment_of_supervoxel
         )
     if config.occluder_splits.enabled:
         labels, segment_of_supervoxel, _ = join_occluder_splits(
@@ -272,9 +272,12 @@ def _cut_seams(
     points: np.ndarray,
     config: PerceptionConfig,
     change: SupervoxelChange | None = None,
+    segment_of_supervoxel: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Labels cut along colour seams (``ipr_shapes.perception.seams``), renumbered 1..k by decreasing
-    size, and each supervoxel's segment (the one holding most of its pixels).
+    size, and each supervoxel's segment (the one holding most of its pixels). When no segment
+    is cut, ``labels`` and the given ``segment_of_supervoxel`` ((supervoxels,) int) as they came:
+    the segmentation is then the one without the seams, numbering included.
 
     With the previous frame's anchors (``change``, ``temporal.anchoring``) and
     ``seams.settled``, a segment that is a previous segment that stayed (``settled_segments``)
@@ -295,6 +298,8 @@ def _cut_seams(
     cut = cut_colour_seams(
         labels, frame.rgb, points, normals, frame.depth_m, frame.K, config, settled=settled
     )
+    if segment_of_supervoxel is not None and int(cut.max()) == int(labels.max()):
+        return labels, segment_of_supervoxel  # nothing cut: new pieces take new ids
     sizes = np.bincount(cut.ravel())
     sizes[0] = 0
     alive = np.flatnonzero(sizes)
