@@ -391,7 +391,8 @@ def test_fit_medoid_keeps_the_families_whose_surface_runs_through_the_seen_point
     families. Seen points on the small cubes' far face (x = 4.05 cm): the large cubes' surfaces
     run 1.5-3 cm away from them, so the families lose their shares and a small cube is the
     choice, where each family's equal share gives a large one. Seen points on the large
-    cubes' far face (x = 7 cm): the small cubes leave them outside, and a large cube stays."""
+    cubes' far face (x = 7 cm): the small cubes leave them outside, and a large cube stays.
+    Points not given: each candidate once; none seen: each family an equal share."""
     sizes = [(0.040 + 2e-4 * k, "algorithm1") for k in range(6)]
     prepared = _nested_cubes([*sizes, (0.070, "sphere"), (0.072, "superquadric")])
     grid = np.stack(np.meshgrid(np.linspace(0.015, 0.025, 5), np.linspace(0.015, 0.025, 5)), -1)
@@ -406,7 +407,10 @@ def test_fit_medoid_keeps_the_families_whose_surface_runs_through_the_seen_point
     assert family.hypotheses[family.best].generator in ("sphere", "superquadric")
     assert small.hypotheses[small.best].generator == "algorithm1"
     assert large.hypotheses[large.best].generator in ("sphere", "superquadric")
-    assert unseen.best == family.best  # no points: the family weights
+    (candidate,) = uniform_posteriors(prepared, CollisionCheckerConfig())
+    (empty,) = uniform_posteriors(prepared, config, points={1: np.zeros((0, 3))})
+    assert unseen.best == candidate.best  # points not given: each candidate once
+    assert empty.best == family.best  # no point seen: the family weights
     assert small.probabilities == pytest.approx(family.probabilities)  # marginals written
 
 

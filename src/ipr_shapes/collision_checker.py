@@ -54,7 +54,8 @@ Constraints(X), and each object's output is read from its marginal over its own 
   the object's concavity and noise, cancels), scored as a Gaussian likelihood whose variance
   is the voxel quantisation (pitch^2 / 12) plus the shared part's mean square. A sphere whose
   surface runs through a box's faces loses its family's share; a family that fits the seen
-  surface keeps it. Opt-in (docs/experiments/2026-11-28-family-choice.md).
+  surface keeps it. An object whose points are not given (the physics methods' starting
+  answer) counts each candidate once. Opt-in (docs/experiments/2026-11-28-family-choice.md).
 """
 
 from __future__ import annotations
@@ -296,8 +297,8 @@ def uniform_posteriors(
     of the same object. ``hidden``: per object id the hidden fraction of its image outline
     (``hidden_outline_fractions``), read by ``medoid_weights = "outline"`` (an object absent:
     0, each candidate counted once). ``points``: per object id its observed points ((N, 3),
-    world, m), read by ``medoid_weights = "fit"`` (an object absent: no points, the family
-    weights)."""
+    world, m), read by ``medoid_weights = "fit"`` (an object absent, as in the physics
+    methods' starting answer: each candidate counted once)."""
     config = config or CollisionCheckerConfig()
     rng = rng if rng is not None else np.random.default_rng(0)
     ids, generated, candidates = prepared.ids, prepared.generated, prepared.candidates
@@ -330,10 +331,10 @@ def uniform_posteriors(
         leave_one_out = config.medoid_weights == "family"
         if config.medoid_weights == "family":
             weights = family_weights([h.generator for h in hyps], feasible)
-        elif config.medoid_weights == "fit":
+        elif config.medoid_weights == "fit" and i in (points or {}):
             kept = np.flatnonzero(feasible)
             pitch = hyps[kept[0]].voxel_pitch_m
-            cells = surface_cells((points or {}).get(i, np.zeros((0, 3))), pitch)
+            cells = surface_cells(points[i], pitch)
             distances = np.array([surface_distances(hyps[k], cells) for k in kept])
             weights = fit_weights([h.generator for h in hyps], feasible, distances, pitch)
             leave_one_out = True
