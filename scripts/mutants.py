@@ -448,6 +448,15 @@ MUTANTS: tuple[Mutant, ...] = (
         _t("collision_checker"),
     ),
     Mutant(
+        "fit-medoid-not-given-the-points",
+        "collision_checker",
+        "the Collision Checker run does not hand the objects' observed points to the fit-weighted "
+        "medoid, which then counts each candidate once",
+        "points = {o.id: o.points for o in objects}",
+        "points = None",
+        _t("collision_checker"),
+    ),
+    Mutant(
         "medoid-families-not-weighted",
         "collision_checker",
         "the Collision Checker's medoid counts each feasible candidate once, so one family's "
