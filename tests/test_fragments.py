@@ -9,8 +9,8 @@ import pytest
 
 from ipr_shapes.perception import kernels
 from ipr_shapes.perception.config import PerceptionConfig
-from ipr_shapes.perception.fragments import join_fragments
-from ipr_shapes.perception.types import Supervoxels
+from ipr_shapes.perception.fragments import join_fragments, lies_on
+from ipr_shapes.perception.types import KnownPlane, Supervoxels
 
 K = np.array([[500.0, 0.0, 40.0], [0.0, 500.0, 30.0], [0.0, 0.0, 1.0]])
 HEIGHT, WIDTH = 60, 80
@@ -207,3 +207,220 @@ def test_merged_counts_are_those_of_the_joined_labels():
     expected = np.array([[0, 6, 1, 0], [6, 0, 10, 0], [1, 10, 0, 0], [0, 0, 0, 0]])
     np.testing.assert_array_equal(counts, expected)
     np.testing.assert_array_equal(counts, counts.T)
+
+
+#: The support for the tests below: world up is the camera's -y (image rows grow downwards).
+SUPPORT = KnownPlane("support", np.array([0.0, -1.0, 0.0]), 0.0, np.zeros((0, 3)))
+
+
+def _tilted_scene(piece_rows: slice) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``_scene`` without the band, on a surface tilted away from the camera (depth grows by
+    2 mm a row, so footprints on the support have an extent), with segment 2 red: a cap or a
+    printed band of another colour than its grey body, at ``piece_rows`` of the body's right
+    edge. Returns (labels, depth, segments, rgb)."""
+    labels, _, _ = _scene(step_m=0.0)
+    segments = np.array([1, 2, 0, 0], dtype=np.int32)
+    labels[labels == 2] = 1
+    labels[labels == 3] = 0
+    labels[piece_rows, 40:50] = 2
+    depth = 0.5 + 0.002 * np.arange(HEIGHT)[:, None] * np.ones((1, WIDTH))
+    depth[labels == 0] = 0.8
+    rgb = RGB.copy()
+    rgb[labels == 2] = (200, 60, 60)
+    return labels, depth, segments, rgb
+
+
+def _on_body_config(on_body: bool = True) -> PerceptionConfig:
+    config = _config()
+    return dataclasses.replace(
+        config,
+        segmentation=dataclasses.replace(config.segmentation, fragment_on_body=on_body),
+    )
+
+
+def test_a_piece_of_another_colour_on_its_body_joins():
+    # The red piece lies within the grey body's footprint, in its upper half (a cap, a lid, a
+    # band on a shoulder): the colours do not keep it apart.
+    labels, depth, segments, rgb = _tilted_scene(slice(12, 22))
+    points = _points(depth)
+    sv = _supervoxels(labels)
+    joined, _ = join_fragments(
+        labels, segments, points, depth, K, rgb, sv, _on_body_config(), support=SUPPORT
+    )
+    assert np.all(joined[12:22, 40:50] == 1)
+    # The rule's switch, and no support to measure heights on: the colour gate refuses it.
+    for config, support in ((_on_body_config(False), SUPPORT), (_on_body_config(), None)):
+        kept, _ = join_fragments(
+            labels, segments, points, depth, K, rgb, sv, config, support=support
+        )
+        assert len(np.unique(kept[kept > 0])) == 2
+
+
+def test_a_piece_of_another_colour_under_its_neighbour_is_kept():
+    # The same red piece at the bottom of the grey surface: within its footprint but below it
+    # (a ball wedged under a block that rests on it) stays a segment of its own.
+    labels, depth, segments, rgb = _tilted_scene(slice(40, 50))
+    joined, _ = join_fragments(
+        labels,
+        segments,
+        _points(depth),
+        depth,
+        K,
+        rgb,
+        _supervoxels(labels),
+        _on_body_config(),
+        support=SUPPORT,
+    )
+    assert len(np.unique(joined[joined > 0])) == 2
+
+
+def test_a_piece_lies_on_its_body_only_within_its_footprint_and_not_below_it():
+    # A body: a 10 cm square box's top at 10 cm above the support (world up is -y here) and
+    # its front face below it; pieces of 2 x 2 cm at 12 cm high on the box (a cap), 5 cm beside
+    # its footprint at that height, and within its footprint but at 4 cm (under an overhang).
+    grid = np.linspace(0.0, 0.1, 21)
+    top = np.array([[x, -0.10, z] for x in grid for z in grid])
+    front = np.array([[x, -h, 0.0] for x in grid for h in np.linspace(0.0, 0.1, 21)])
+    body = np.concatenate([top, front])
+    square = np.array(
+        [[x, 0.0, z] for x in np.linspace(0, 0.02, 5) for z in np.linspace(0, 0.02, 5)]
+    )
+    cases = {
+        "cap": (square + [0.04, -0.12, 0.04], True),
+        "beside": (square + [0.15, -0.12, 0.04], False),
+        "under": (square + [0.04, -0.04, 0.04], False),
+    }
+    for name, (piece, on) in cases.items():
+        points = np.concatenate([body, piece]).reshape(1, -1, 3)
+        labels = np.concatenate([np.full(len(body), 1), np.full(len(piece), 2)]).reshape(1, -1)
+        depth = np.ones(labels.shape)
+        got = lies_on(labels, 2, 1, points, depth, SUPPORT, PerceptionConfig())
+        assert got == on, name
+
+
+def _specks_config(specks: bool = True) -> PerceptionConfig:
+    config = _config(area_m2=16e-4)  # the default: a speck is a fragment too
+    return dataclasses.replace(
+        config, segmentation=dataclasses.replace(config.segmentation, fragment_specks=specks)
+    )
+
+
+def _speck_scene(
+    speck_normal: tuple[float, float, float] = (-1.0, 0.0, 0.0),
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, Supervoxels]:
+    """A grey segment 1 (rows 10-50, columns 0-40) facing the camera (at the origin) and a
+    red 4 x 6 px speck 2 (0.1 cm^2 at 0.5 m) on its right edge, at rows 20-24, reaching 6 px
+    into the background: mixed pixels at a silhouette, whose supervoxel is seen edge-on
+    (normal ``speck_normal``, square to the ray) and whose colour differs. Along its outline
+    with segments it touches segment 1 only. Returns (labels, depth, segments, rgb, points,
+    supervoxels)."""
+    labels = np.zeros((HEIGHT, WIDTH), dtype=np.int32)
+    labels[10:50, 0:40] = 1
+    labels[20:24, 40:46] = 2
+    depth = np.full((HEIGHT, WIDTH), 0.5)
+    depth[labels == 0] = 0.8
+    rgb = RGB.copy()
+    rgb[labels == 2] = (200, 60, 60)
+    points = _points(depth)
+    normals = np.tile([0.0, 0.0, -1.0], (4, 1))
+    normals[1] = speck_normal
+    centres = np.zeros((4, 3))
+    for segment in (1, 2):
+        centres[segment - 1] = points[labels == segment].mean(axis=0)
+    sv = Supervoxels(labels - 1, centres, normals, np.zeros((4, 3)), np.ones(4), np.zeros((0, 2)))
+    return labels, depth, np.array([1, 2, 0, 0], dtype=np.int32), rgb, points, sv
+
+
+def test_a_speck_seen_edge_on_joins_the_segment_it_touches():
+    labels, depth, segments, rgb, points, sv = _speck_scene()
+    eye = np.zeros(3)
+    joined, _ = join_fragments(
+        labels, segments, points, depth, K, rgb, sv, _specks_config(), viewpoint=eye
+    )
+    assert np.all(joined[20:24, 40:46] == 1)
+    # Off (or no camera to judge edge-on by), the fragment rules refuse it: it meets segment
+    # 1 at a crease and in another colour.
+    for config, viewpoint in ((_specks_config(False), eye), (_specks_config(), None)):
+        kept, _ = join_fragments(
+            labels, segments, points, depth, K, rgb, sv, config, viewpoint=viewpoint
+        )
+        assert len(np.unique(kept[kept > 0])) == 2
+
+
+def test_a_speck_facing_the_camera_is_kept():
+    # The same speck facing the camera: a surface (a small object's visible part, as in the
+    # generated scenes, where objects peek out between others), not mixed pixels.
+    labels, depth, segments, rgb, points, sv = _speck_scene(speck_normal=(0.0, 0.0, -1.0))
+    # It meets segment 1 with its own normal: the fragment rule's colours refuse it.
+    joined, _ = join_fragments(
+        labels, segments, points, depth, K, rgb, sv, _specks_config(), viewpoint=np.zeros(3)
+    )
+    assert len(np.unique(joined[joined > 0])) == 2
+
+
+def test_a_speck_seen_behind_the_background_is_kept():
+    # What lies around the speck (label 0) is nearer than it: a wall or a drawer's rim in
+    # front, the speck an object's part seen past it, not mixed pixels in front of it.
+    labels, depth, segments, rgb, _, sv = _speck_scene()
+    depth[labels == 0] = 0.3
+    joined, _ = join_fragments(
+        labels,
+        segments,
+        _points(depth),
+        depth,
+        K,
+        rgb,
+        sv,
+        _specks_config(),
+        viewpoint=np.zeros(3),
+    )
+    assert len(np.unique(joined[joined > 0])) == 2
+
+
+def test_a_speck_between_two_segments_is_kept():
+    # A third segment below the speck, 5 cm in front of it (not touching it): the speck is
+    # between two objects, a small object's part as well as mixed pixels.
+    labels, depth, segments, rgb, points, sv = _speck_scene()
+    labels[24:30, 40:46] = 3
+    depth[24:30, 40:46] = 0.45
+    joined, _ = join_fragments(
+        labels,
+        np.array([1, 2, 3, 0], dtype=np.int32),
+        _points(depth),
+        depth,
+        K,
+        rgb,
+        sv,
+        _specks_config(),
+        viewpoint=np.zeros(3),
+    )
+    assert len(np.unique(joined[joined > 0])) == 3
+
+
+def test_a_segment_of_a_seed_square_is_no_speck():
+    # The speck grown to 6 x 11 px at 1.2 m (3.8 cm^2 by the footprint; the seed's square is
+    # 4 cm^2 when the seed is 2 cm): at seed 1.9 cm it is no speck and stays.
+    labels, depth, segments, rgb, _, _ = _speck_scene()
+    labels[labels == 2] = 0
+    labels[18:24, 40:51] = 2
+    depth[labels > 0] = 1.2
+    depth[labels == 0] = 1.6
+    points = _points(depth)
+    normals = np.tile([0.0, 0.0, -1.0], (4, 1))
+    normals[1] = [-1.0, 0.0, 0.0]
+    centres = np.zeros((4, 3))
+    for segment in (1, 2):
+        centres[segment - 1] = points[labels == segment].mean(axis=0)
+    sv = Supervoxels(labels - 1, centres, normals, np.zeros((4, 3)), np.ones(4), np.zeros((0, 2)))
+    config = _specks_config()
+    joined, _ = join_fragments(
+        labels, segments, points, depth, K, rgb, sv, config, viewpoint=np.zeros(3)
+    )
+    assert np.all(joined[18:24, 40:51] == 1)
+    smaller_seed = dataclasses.replace(
+        config, supervoxels=dataclasses.replace(config.supervoxels, seed_size_m=0.019)
+    )
+    kept, _ = join_fragments(
+        labels, segments, points, depth, K, rgb, sv, smaller_seed, viewpoint=np.zeros(3)
+    )
+    assert len(np.unique(kept[kept > 0])) == 2

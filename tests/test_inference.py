@@ -582,3 +582,85 @@ def test_neighbour_evidence_gives_a_candidate_what_its_neighbours_terms_say_of_i
     assert residuals[1, 1] == pytest.approx(-3.0 - mean)
     assert residuals[4, 1] == pytest.approx(-5.0 - mean)
     assert residuals[0, 0] == pytest.approx(0.0)  # -1, -1 (and -1 in row 4): all equal
+
+
+def test_rest_evidence_scores_each_candidates_fall_over_the_sampled_contexts_it_fits():
+    """``InferenceConfig.rest_drop_m``: every candidate j of object k gets log mean exp(-drop_kj
+    / rest_drop_m) over the samples whose other choices it is compatible with
+    (``rest_evidence``), drop_kj its fall among that sample's other shapes
+    (``SampleResult.drops``), and its chosen candidate's term is in its own term
+    (``rest_log_likelihoods``). Object 0's deep candidate (1) falls 5 mm beside object 1's
+    candidate 0 and would stand beside its candidate 1, with which it overlaps: that context
+    does not count. Off (the default): equal weights; on: exp(4 mm / rest_drop_m) apart,
+    object 1 (the same fall for both) unchanged."""
+    from ipr_shapes.inference import (
+        medoid_weights,
+        own_log_likelihoods,
+        rest_evidence,
+        rest_log_likelihoods,
+    )
+
+    overlap = np.array([[True, True], [True, False]])  # object 0's 1 with object 1's 1
+    problem = _fabricated_problem(2, compatible={(0, 1): overlap})
+    assert problem.config.rest_drop_m is None
+    drawn = [(0, 0), (1, 0), (0, 1), (0, 0)]
+
+    def drops(choice):
+        deep = 0.005 if choice[1] == 0 else 0.0
+        return (np.array([0.001, deep]), np.array([0.0005, 0.0005]))
+
+    results = [
+        dataclasses.replace(_result(s, c, [0.02, 0.03], (0.0, 0.0)), drops=drops(c))
+        for s, c in enumerate(drawn)
+    ]
+    assert medoid_weights(results, problem)[0] == pytest.approx([0.5, 0.5])
+    assert rest_evidence(results, problem) is None
+    on = dataclasses.replace(problem, config=dataclasses.replace(problem.config, rest_drop_m=0.002))
+    evidence = rest_evidence(results, on)
+    assert evidence[0] == pytest.approx([-0.001 / 0.002, -0.005 / 0.002])
+    assert evidence[1] == pytest.approx([-0.0005 / 0.002] * 2)
+    weights = medoid_weights(results, on)
+    assert weights[0][0] / weights[0][1] == pytest.approx(np.exp(0.004 / 0.002))
+    assert weights[1] == pytest.approx([0.5, 0.5])
+    # The chosen candidate's term in its own term; nothing without drops; flung: impossible.
+    depth = own_log_likelihoods(results[1], problem)
+    assert own_log_likelihoods(results[1], on) - depth == pytest.approx(
+        np.array([[-0.005, -0.0005]]) / 0.002
+    )
+    assert rest_log_likelihoods(dataclasses.replace(results[1], drops=None), on).tolist() == [0, 0]
+    flung = dataclasses.replace(results[0], drops=(np.array([np.inf, 0.0]), np.zeros(2)))
+    assert own_log_likelihoods(flung, on)[0, 0] == -np.inf
+    # A candidate no sample chose takes its object's mean depth evidence and its own rest
+    # evidence (not the exploration ratio, here 1/9).
+    explored = (np.array([0.9, 0.1]), np.array([0.5, 0.5]))
+    undrawn = [dataclasses.replace(r, exploration=explored) for r in results if r.choice[0] == 0]
+    assert medoid_weights(undrawn, problem)[0][1] == pytest.approx(0.1)
+    weights = medoid_weights(undrawn, on)
+    assert weights[0][0] / weights[0][1] == pytest.approx(np.exp(0.004 / 0.002))
+
+
+def test_rest_evidence_tells_a_shape_that_falls_from_the_true_one_where_the_depth_cannot():
+    """The true box and the top slab that hangs 2.5 cm above the table, with the depth made
+    nearly blind (alpha 1e-6) and the stability tests not steering the draws (alpha 0): off,
+    the two weigh about the same; on, the slab's 2.5 cm fall in its test counts against it
+    (``Sampler.rest_drops``), and each sample's likelihood holds the rest terms."""
+    frame, labels = _frame(0, (0.0, -0.35, 0.3))
+    observed = observed_frames([frame], [labels], 4)
+    blind = InferenceConfig(
+        max_samples=12, stability_alpha_per_m=0.0, likelihood=LikelihoodConfig(alpha_per_m=1e-6)
+    )
+    outcomes = {}
+    for scale in (None, 0.004):
+        outcomes[scale] = infer_shapes(
+            _prepared(TRUE_BOX, TOP_SLAB), (SUPPORT,), observed, method="ipr+uniform",
+            config=dataclasses.replace(blind, rest_drop_m=scale), workers=1,
+        )  # fmt: skip
+    off, on = outcomes[None], outcomes[0.004]
+    assert {s.choice for s in off.samples} == {(0,), (1,)}
+    assert all(s.drops is None for s in off.samples)
+    assert 0.3 < off.posteriors[0].probabilities[0] < 0.7
+    for s in on.samples:  # both candidates tested in every sample
+        assert s.drops[0][0] < 1e-3 and s.drops[0][1] > 0.02
+        depth = next(o for o in off.samples if o.choice == s.choice).log_likelihood
+        assert s.log_likelihood == pytest.approx(depth - s.drops[0][s.choice[0]] / 0.004)
+    assert on.posteriors[0].probabilities[0] > 0.99 and on.posteriors[0].best == 0

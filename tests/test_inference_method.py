@@ -284,6 +284,22 @@ def test_neighbour_evidence_gives_the_top_objects_fall_to_the_bottom_objects_sha
     assert outcome.posteriors[1].probabilities[1] > 0.9
 
 
+def test_rest_drops_test_each_object_among_every_other_objects_chosen_shape(stack_observed):
+    """``Sampler.rest_drops``: the top's fall is tested with the bottom at its chosen shape (not
+    at its minimum shape, nor at the shapes placed before the top): it tips off the middle
+    bottom and stays on the deep one; the bottom stands on the support either way."""
+    prepared = _prepared({1: [TOP_THIN, TOP_THICK], 2: [BOTTOM_MID, BOTTOM_DEEP]}, STACK_MINIMA)
+    problem = _problem(prepared, stack_observed, "ipr+uniform", config=STEEP)
+    sampler = Sampler(problem)
+    try:
+        on_middle = sampler.rest_drops((1, 0))
+        on_deep = sampler.rest_drops((1, 1))
+    finally:
+        sampler.close()
+    assert on_middle[0][1] > 0.01 and on_deep[0][1] < 1e-3
+    assert max(on_middle[1].max(), on_deep[1].max()) < 1e-3
+
+
 # --------------------------------------------------------------------------------------------
 # Pushes that decide, object by object
 

@@ -108,6 +108,8 @@ from ipr_shapes.inference.estimators import (
     neighbour_residuals,
     object_log_weights,
     own_log_likelihoods,
+    rest_evidence,
+    rest_log_likelihoods,
     sample_log_weights,
 )
 from ipr_shapes.inference.exhaustive import exhaustive_models
@@ -146,6 +148,8 @@ __all__ = [
     "neighbour_residuals",
     "object_log_weights",
     "own_log_likelihoods",
+    "rest_evidence",
+    "rest_log_likelihoods",
     "run_samples",
     "sample_log_weights",
     "size_log_prior",

@@ -15,18 +15,74 @@ from ipr_shapes.factor_graph import TableTooLarge, exact_marginals, interaction_
 from ipr_shapes.inference.problem import InferenceProblem, SampleResult
 
 
-def own_log_likelihoods(result: SampleResult, problem: InferenceProblem) -> np.ndarray | None:
+def own_log_likelihoods(
+    result: SampleResult, problem: InferenceProblem, *, rest: bool = True
+) -> np.ndarray | None:
     """(F, n) each object's own term of Eq. 2 (log) per friction of ``result``: -alpha *
-    decimation * its norms summed over the frames; -inf under a friction whose simulation
-    failed; None when it failed under every friction."""
+    decimation * its norms summed over the frames, plus (``rest``) its chosen candidate's rest
+    term (``rest_log_likelihoods``, the same under every friction); -inf under a friction
+    whose simulation failed; None when it failed under every friction."""
     if result.norms is None:
         return None
     scale = problem.config.likelihood.alpha_per_m * problem.observed.decimation
     sums = np.asarray(result.norms, float).sum(axis=1)
     failed = ~np.isfinite(sums).all(axis=1)
     own = -scale * np.where(np.isfinite(sums), sums, 0.0)
+    if rest:
+        own = own + rest_log_likelihoods(result, problem)
     own[failed] = -np.inf
     return own
+
+
+def rest_log_likelihoods(result: SampleResult, problem: InferenceProblem) -> np.ndarray:
+    """(n,) each object's rest term in ``result`` (log; ``InferenceConfig.rest_drop_m``): log
+    P(the object is at rest where seen | the joint model) = -drop / rest_drop_m (+ a
+    constant), its chosen candidate's fall in its stability test among the others' chosen
+    shapes (``SampleResult.drops``), under the exponential law of the fall of the candidates
+    nearest the true shapes; zeros when off or not simulated, -inf for an infinite fall
+    (flung)."""
+    scale = problem.config.rest_drop_m
+    if scale is None or result.drops is None:
+        return np.zeros(problem.count)
+    drops = np.array([float(d[j]) for d, j in zip(result.drops, result.choice, strict=True)])
+    return np.where(np.isfinite(drops), -drops / scale, -np.inf)
+
+
+def rest_evidence(
+    results: Sequence[SampleResult], problem: InferenceProblem
+) -> list[np.ndarray] | None:
+    """Per object k, (m_k,) log P(k at rest where seen | X_k = j) for every candidate j (module
+    doc, step 3): the log mean over the samples whose other objects' choices are compatible
+    with j (``InferenceProblem.compatibility``) of exp(-drop_kj / rest_drop_m), drop_kj being
+    j's fall in the stability test among that sample's other chosen shapes
+    (``SampleResult.drops``): the neighbours marginalised over the joint models drawn, for
+    the candidates no sample chose too. A candidate compatible with no sampled context takes
+    its object's least rest evidence. None when the rest evidence is off or no sample has
+    it."""
+    scale = problem.config.rest_drop_m
+    rows = [r for r in results if scale is not None and r.drops is not None and r.norms is not None]
+    if not rows:
+        return None
+    out = []
+    for k, candidates in enumerate(problem.candidates):
+        terms = np.full((len(rows), len(candidates)), -np.inf)
+        usable = np.zeros((len(rows), len(candidates)), dtype=bool)
+        for row, result in enumerate(rows):
+            allowed = np.ones(len(candidates), dtype=bool)
+            for i, j in enumerate(result.choice):
+                if i != k:
+                    allowed &= problem.compatibility(k, i)[:, j]
+            drops = np.asarray(result.drops[k], float)
+            usable[row] = allowed
+            terms[row] = np.where(np.isfinite(drops), -drops / scale, -np.inf)
+        counts = usable.sum(axis=0)
+        with np.errstate(divide="ignore"):
+            summed = np.logaddexp.reduce(np.where(usable, terms, -np.inf), axis=0)
+            evidence = np.where(counts > 0, summed - np.log(np.maximum(counts, 1)), np.nan)
+        seen = np.isfinite(evidence)
+        least = float(evidence[seen].min()) if seen.any() else 0.0
+        out.append(np.where(counts > 0, evidence, least))
+    return out
 
 
 def at_friction(
@@ -74,14 +130,15 @@ def hypothesis_log_likelihoods(
     results: Sequence[SampleResult], problem: InferenceProblem
 ) -> list[np.ndarray]:
     """Per object, (m_k,) the log of the mean over the samples that chose each candidate of
-    exp(its evidence term) (module doc, step 3): its object's own Eq. 2 term, plus its
+    exp(its evidence term) (module doc, step 3): its object's own Eq. 2 term (the depth's; the
+    rest evidence is ``rest_evidence``, over every sampled context), plus its
     neighbours' residual terms with ``InferenceConfig.evidence`` "neighbours"
     (``neighbour_residuals``); NaN for candidates no sample chose (the marginals give them the
     object's mean). Samples scored under several frictions take their first (``at_friction``
     picks another)."""
     choices, own = [], []
     for result in results:
-        scored = own_log_likelihoods(result, problem)
+        scored = own_log_likelihoods(result, problem, rest=False)
         if scored is None:
             continue
         choices.append(result.choice)
@@ -217,14 +274,24 @@ def hypothesis_unary(
     under one friction: each candidate's log evidence (``hypothesis_log_likelihoods``) plus its
     log prior. An object whose samples all failed keeps its prior; a candidate no sample
     chose takes the mean likelihood of its object's sampled candidates, scaled by its mean
-    exploration probability against theirs (module doc, step 3)."""
+    exploration probability against theirs (module doc, step 3). With the rest evidence
+    (``InferenceConfig.rest_drop_m``) every candidate also gets its ``rest_evidence``, which
+    then takes the place of the exploration ratio for the candidates no sample chose (both
+    are the stability tests' verdict; the rest evidence is calibrated and measured in the
+    whole joint models' contexts)."""
+    rest = rest_evidence(results, problem)
     unary = []
     for k, means in enumerate(hypothesis_log_likelihoods(results, problem)):
         evidence = np.zeros(len(means))
         chosen = np.isfinite(means)
         if chosen.any():
             mean = np.logaddexp.reduce(means[chosen]) - math.log(int(chosen.sum()))
-            evidence = np.where(chosen, means, mean + _exploration_ratio(results, k, chosen))
+            if rest is None:
+                evidence = np.where(chosen, means, mean + _exploration_ratio(results, k, chosen))
+            else:
+                evidence = np.where(chosen, means, mean)
+        if rest is not None:
+            evidence = evidence + rest[k]
         unary.append(evidence + problem.log_prior[k])
     return unary
 

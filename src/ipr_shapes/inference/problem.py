@@ -87,8 +87,12 @@ class SampleResult:
     simulation failed; None when it failed under every one); ``object_log_proposal`` (n,) each
     object's own log exploration probability; ``exploration`` per object (m_k,) the
     normalised exploration probabilities it was drawn from (empty for exhaustive): what the
-    stability tests said of the candidates the sample did not choose. ``log_likelihood`` is
-    averaged over the frictions (their uniform prior).
+    stability tests said of the candidates the sample did not choose; ``drops`` per object
+    (m_k,) how far (m) each of its candidates falls in its stability test with every other
+    object static at its chosen shape (``Sampler.rest_drops``; None when the rest evidence is
+    off or the simulation failed): what ``InferenceConfig.rest_drop_m`` scores.
+    ``log_likelihood`` is the depth terms averaged over the frictions (their uniform prior)
+    plus the chosen candidates' rest terms.
     """
 
     index: int
@@ -101,6 +105,7 @@ class SampleResult:
     norms: np.ndarray | None = None
     object_log_proposal: tuple[float, ...] = ()
     exploration: tuple[np.ndarray, ...] = ()
+    drops: tuple[np.ndarray, ...] | None = None
 
     @property
     def log_weight(self) -> float:

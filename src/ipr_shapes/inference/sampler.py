@@ -596,6 +596,37 @@ class Sampler:
         ]
         return float(np.logaddexp.reduce(per_friction) - math.log(len(per_friction)))
 
+    def rest_drops(
+        self, choice: Sequence[int], deadline: float = math.inf
+    ) -> tuple[np.ndarray, ...]:
+        """Per object k, (m_k,) how far (m) each of its candidates falls in its stability test
+        with every other object static at its chosen shape in ``choice``: the evidence that
+        the object is at rest where seen, its neighbours at rest where seen
+        (``InferenceConfig.rest_drop_m``). The tests are the tree sampler's (``_distances``,
+        cached by the neighbours' shapes), in the context of the whole joint model rather
+        than of the objects placed before it; every candidate is tested (they share one
+        simulation), the chosen one and the others."""
+        choice = tuple(choice)
+        return tuple(
+            self._distances(k, {i: c for i, c in enumerate(choice) if i != k}, deadline)
+            for k in range(len(choice))
+        )
+
+    def _rest(self, choice: Sequence[int], norms, deadline: float):
+        """``rest_drops`` of ``choice`` when the rest evidence is on and its simulation did not
+        fail (``norms`` not None), else None."""
+        if self.problem.config.rest_drop_m is None or norms is None:
+            return None
+        return self.rest_drops(choice, deadline)
+
+    def rest_log_likelihood(self, choice: Sequence[int], drops) -> float:
+        """The chosen candidates' rest terms' sum (log; ``InferenceConfig.rest_drop_m``; 0 when
+        ``drops`` is None)."""
+        if drops is None:
+            return 0.0
+        total = sum(float(d[j]) for d, j in zip(drops, choice, strict=True))
+        return -total / self.problem.config.rest_drop_m
+
     def log_prior(self, choice: Sequence[int]) -> float:
         """log P(X) of a joint model (product of the objects' priors)."""
         return float(sum(self.problem.log_prior[k][j] for k, j in enumerate(choice)))
@@ -610,26 +641,31 @@ class Sampler:
         else:
             choice, object_log_proposal, explored = self.tree_sample_explored(rng, deadline)
         norms = self._norms_of(choice, deadline)
+        drops = self._rest(choice, norms, deadline)
         return SampleResult(
             index,
             choice,
             float(sum(object_log_proposal)),
-            self.log_likelihood_of(norms),
+            self.log_likelihood_of(norms) + self.rest_log_likelihood(choice, drops),
             self.log_prior(choice),
             time.perf_counter() - started,
             self._thread_state().tests - tests,
             norms,
             object_log_proposal,
             explored,
+            drops,
         )
 
     def score(self, index: int, choice: Sequence[int], deadline: float = math.inf):
         """Score a given joint model (exhaustive enumeration): proposal probability 1."""
         started = time.perf_counter()
         norms = self._norms_of(tuple(choice), deadline)
+        drops = self._rest(choice, norms, deadline)
         return SampleResult(
-            index, tuple(choice), 0.0, self.log_likelihood_of(norms), self.log_prior(choice),
-            time.perf_counter() - started, 0, norms, (0.0,) * len(choice),
+            index, tuple(choice), 0.0,
+            self.log_likelihood_of(norms) + self.rest_log_likelihood(choice, drops),
+            self.log_prior(choice), time.perf_counter() - started, 0, norms,
+            (0.0,) * len(choice), (), drops,
         )  # fmt: skip
 
     def release(self) -> None:

@@ -365,7 +365,23 @@ class SegmentationConfig:
         fragment_bend_deg: ... and the surface normals of their supervoxels differ by at most
             this (deg): a surface running on, not two objects meeting at a crease.
         fragment_colour: ... and the two segments' mean chromaticities are at most this far
-            apart (as ``curved_segment_colour``).
+            apart (as ``curved_segment_colour``),
+        fragment_on_body: ... or, whatever the colours, the small segment lies on its
+            neighbour (``fragments.lies_on``: within its footprint on the support, by the
+            containers' ``footprint_fraction`` and ``margin_m``, and not lower by median
+            height): a cap, a lid or a printed band carried by its body, where a separate
+            object wedged under another lies below it. Off: a golf ball resting on a box
+            lies on it too (docs/experiments/2026-11-28-lab-frames-joins.md).
+        fragment_specks: after the fragments, a segment smaller than one supervoxel seed's
+            square (``supervoxels.seed_size_m`` squared: below the graph's resolution) joins
+            the segment it touches (points within ``fragment_gap_m``, any normals; colours
+            not compared: mixed pixels take both sides' colours) when it is mixed pixels at
+            that segment's silhouette: most of its pixels on supervoxels seen edge-on
+            (``contour_facing_cos``: mixed pixels lie along the rays across a depth step),
+            its outline only that segment (touched along at least
+            ``fragment_contact_share`` of it) and the background or support, which is not
+            nearer than it by more than ``fragment_gap_m`` at the median (a speck seen past
+            a wall is an object's part).
         thin_radius_m: touching segments are joined when the points of both lie on one
             cylinder of at most this radius (m; a marker, a pen, a handle: the seen half of its
             circumference, pi r, at most two supervoxel seeds, where the graph's convexity
@@ -472,6 +488,8 @@ class SegmentationConfig:
     fragment_gap_m: float = 0.01
     fragment_colour: float = 0.04
     fragment_bend_deg: float = 45.0
+    fragment_on_body: bool = False
+    fragment_specks: bool = True
     thin_radius_m: float = 0.0125
     thin_rms_m: float = 0.003
     thin_min_contact_px: int = 5

@@ -78,7 +78,7 @@ from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 from ipr_shapes.geometry import order
 from ipr_shapes.perception import kernels
-from ipr_shapes.perception.config import PerceptionConfig
+from ipr_shapes.perception.config import ContainersConfig, PerceptionConfig
 from ipr_shapes.perception.types import DepthView, KnownPlane
 
 #: Points of a segment used for its footprint figures (an even subset).
@@ -147,6 +147,39 @@ def footprint_circle(
     if radius > max_radius_m or np.sqrt(np.mean(residual**2)) > circle_rms_m:
         return None
     return centre + origin, radius
+
+
+def support_axes(support: KnownPlane) -> tuple[np.ndarray, np.ndarray]:
+    """Two orthonormal (3,) world axes spanning the support plane: footprints on the support
+    are a point's coordinates along them (m)."""
+    normal = np.asarray(support.normal, dtype=np.float64)
+    axis_u = np.cross(normal, [1.0, 0.0, 0.0])
+    if np.linalg.norm(axis_u) < 0.1:
+        axis_u = np.cross(normal, [0.0, 1.0, 0.0])
+    axis_u /= np.linalg.norm(axis_u)
+    return axis_u, np.cross(normal, axis_u)
+
+
+def within_footprint(inner: np.ndarray, outer: np.ndarray, settings: ContainersConfig) -> bool:
+    """Whether the (N, 2) footprint ``inner`` lies within the (M, 2) footprint ``outer`` (m, on
+    the support): at least ``settings.footprint_fraction`` of its points within the circle
+    fitted to ``outer`` (``footprint_circle``) or within its convex hull, either grown by
+    ``settings.margin_m`` (an open container's inside within its wall, a cap within its
+    bottle)."""
+    fraction, margin = settings.footprint_fraction, settings.margin_m
+    if len(inner) == 0:
+        return False
+    circle = footprint_circle(outer, settings.circle_rms_m, settings.max_radius_m)
+    if circle is not None:
+        distance = np.linalg.norm(inner - circle[0], axis=1)
+        if np.mean(distance <= circle[1] + margin) >= fraction:
+            return True
+    try:
+        hull = ConvexHull(outer).equations
+    except (QhullError, ValueError):
+        return False
+    outside = inner @ hull[:, :2].T + hull[:, 2]
+    return bool(np.mean(outside.max(axis=1) <= margin) >= fraction)
 
 
 def join_container_insides(

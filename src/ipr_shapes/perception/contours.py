@@ -20,11 +20,10 @@ docs/experiments/2026-11-27-touching-objects.md has the measurements.
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import ConvexHull, QhullError
 
 from ipr_shapes.perception import kernels
 from ipr_shapes.perception.config import PerceptionConfig
-from ipr_shapes.perception.containers import footprint_circle
+from ipr_shapes.perception.containers import support_axes, within_footprint
 from ipr_shapes.perception.types import KnownPlane, Supervoxels
 
 
@@ -143,33 +142,13 @@ def _one_within_other(
 
     ``pixel_part`` (H * W,) part of each pixel (-1 = none); ``large`` the two parts;
     ``points`` (H * W, 3) world (m)."""
-    normal = np.asarray(support.normal, dtype=np.float64)
-    axis_u = np.cross(normal, [1.0, 0.0, 0.0])
-    if np.linalg.norm(axis_u) < 0.1:
-        axis_u = np.cross(normal, [0.0, 1.0, 0.0])
-    axis_u /= np.linalg.norm(axis_u)
-    axis_v = np.cross(normal, axis_u)
+    axis_u, axis_v = support_axes(support)
     footprints = []
     for p in large:
         pixels = np.flatnonzero(pixel_part == p)
         pixels = pixels[:: -(-pixels.size // _MAX_POINTS)]
         world = kernels.rows_at(points, pixels)
         footprints.append(np.stack([world @ axis_u, world @ axis_v], axis=1))
-    containers = config.containers
-    fraction, margin = containers.footprint_fraction, containers.margin_m
-    for inner, outer in ((0, 1), (1, 0)):
-        circle = footprint_circle(
-            footprints[outer], containers.circle_rms_m, containers.max_radius_m
-        )
-        if circle is not None:
-            distance = np.linalg.norm(footprints[inner] - circle[0], axis=1)
-            if np.mean(distance <= circle[1] + margin) >= fraction:
-                return True
-        try:
-            hull = ConvexHull(footprints[outer]).equations
-        except QhullError:
-            continue
-        outside = footprints[inner] @ hull[:, :2].T + hull[:, 2]
-        if np.mean(outside.max(axis=1) <= margin) >= fraction:
-            return True
-    return False
+    return within_footprint(footprints[0], footprints[1], config.containers) or within_footprint(
+        footprints[1], footprints[0], config.containers
+    )

@@ -10,7 +10,14 @@ its surface continues, when that continuation is at least ``segmentation.fragmen
 of its outline. Continuing means no step between neighbouring points and no crease between
 their supervoxels' normals (two objects packed together touch along a crease), and the two
 segments must have alike colours (docs/DESIGN_NOTES.md, "Fragments of curved surfaces joined by
-their outline").
+their outline"), unless the piece lies on its neighbour (``segmentation.fragment_on_body``,
+opt-in: a cap, a lid; an object resting on another lies on it too).
+
+Then specks (``segmentation.fragment_specks``): a segment smaller than one supervoxel seed's
+square that is mixed pixels at one segment's silhouette (seen edge-on, bordering only that
+segment and the background or support behind it) joins that segment whatever its colour or
+normals. A real sensor averages the two depths at a silhouette; a small object's visible part
+faces the camera or borders a second object, or is seen past what is around it.
 """
 
 from __future__ import annotations
@@ -19,7 +26,8 @@ import numpy as np
 
 from ipr_shapes.perception import kernels
 from ipr_shapes.perception.config import PerceptionConfig
-from ipr_shapes.perception.types import Supervoxels
+from ipr_shapes.perception.containers import support_axes, within_footprint
+from ipr_shapes.perception.types import KnownPlane, Supervoxels
 
 
 def join_fragments(
@@ -33,6 +41,8 @@ def join_fragments(
     config: PerceptionConfig,
     *,
     borders: tuple | None = None,
+    support: KnownPlane | None = None,
+    viewpoint: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Join small segments to the neighbour their surface continues into.
 
@@ -43,7 +53,9 @@ def join_fragments(
     at least ``fragment_contact_share`` of its outline (its pixel pairs with any other label,
     the support and background included, both with depth) and the two mean chromaticities are
     within ``fragment_colour`` (objects packed tightly touch along much of a small one's
-    outline; their colours tell them apart). Joined segments add their areas and
+    outline; their colours tell them apart), or the segment lies on it (``fragment_on_body``,
+    ``lies_on``). Then each speck (under ``supervoxels.seed_size_m`` squared) that is mixed
+    pixels at one segment's silhouette joins it (module doc). Joined segments add their areas and
     outlines, so a fragment of a fragment can join through it. A joined fragment takes its
     neighbour's label; every other label is kept (as ``containers.join_container_insides``
     does), so objects elsewhere keep their ids.
@@ -56,6 +68,9 @@ def join_fragments(
             supervoxels (their normals; ``labels`` (H, W), -1 = none).
         borders: ``fragment_borders(labels, ...)`` if already computed (its arrays change in
             place when a fragment joins).
+        support: the support plane (``fragment_on_body`` measures footprints and heights on
+            it; None: that rule is off); viewpoint: (3,) camera centre, world (m) (the specks
+            are judged edge-on from it; None: no specks).
 
     Returns:
         The relabelled (labels, segment_of_supervoxel); the inputs when nothing is joined.
@@ -66,31 +81,145 @@ def join_fragments(
     n = int(labels.max()) + 1
     if borders is None:
         borders = fragment_borders(labels, points, depth_m, K, rgb, supervoxels, config)
-    area, colour, outline, continuous, _ = borders
+    area, colour, outline, continuous, touching = borders
+    speck_m2 = config.supervoxels.seed_size_m**2 if seg.fragment_specks else 0.0
     order = [int(s) for s in np.argsort(area, kind="stable") if s > 0 and area[s] > 0]
     small = [s for s in order if area[s] < seg.fragment_area_m2]
     if not small:
         return labels, segment_of_supervoxel
     root = np.arange(n)
-    for piece in small:
-        if area[piece] >= seg.fragment_area_m2:
-            continue  # grown by the fragments joined to it
-        best = int(np.argmax(continuous[piece]))
-        if continuous[piece, best] == 0 or continuous[piece, best] < (
-            seg.fragment_contact_share * outline[piece].sum()
-        ):
-            continue
-        chroma = (
-            colour[[piece, best]] / np.maximum(colour[[piece, best]].sum(axis=1), 1e-9)[:, None]
-        )
-        if np.linalg.norm(chroma[0] - chroma[1]) > seg.fragment_colour:
-            continue
-        root[root == piece] = best
-        for counts in (outline, continuous):
-            merge_counts(counts, piece, best)
-        area[best] += area[piece]
-        colour[best] += colour[piece]
+    # Fragments first, then specks (``fragment_specks``): a speck's mixed colours must not
+    # move the mean colour a fragment's gate compares with.
+    for specks in (False, True) if speck_m2 > 0 and viewpoint is not None else (False,):
+        if specks:
+            if not any(root[p] == p and area[p] < speck_m2 for p in small):
+                break  # no speck left: the per-pixel measures are not needed
+            current = root[labels]
+            edge_on, seen = _edge_on_pixels(current, supervoxels, viewpoint, config)
+        for piece in small:
+            if root[piece] != piece or area[piece] >= (
+                speck_m2 if specks else seg.fragment_area_m2
+            ):
+                continue  # joined, or grown by the fragments joined to it
+            runs_on = touching if specks else continuous
+            best = int(np.argmax(runs_on[piece]))
+            # A speck's share is of its outline with segments: the rest is mixed pixels.
+            rim = outline[piece, 1:] if specks else outline[piece]
+            if runs_on[piece, best] == 0 or runs_on[piece, best] < (
+                seg.fragment_contact_share * rim.sum()
+            ):
+                continue
+            if (
+                specks
+                and (
+                    edge_on[piece] * 2 <= seen[piece]  # it faces the camera: a surface
+                    or np.count_nonzero(outline[piece, 1:]) > 1  # between two segments
+                    or _behind(current, piece, depth_m, seg.fragment_gap_m)
+                )
+            ):
+                continue
+            if (
+                not specks
+                and not _alike(colour, piece, best, seg.fragment_colour)
+                and not (
+                    seg.fragment_on_body
+                    and support is not None
+                    and lies_on(root[labels], piece, best, points, depth_m, support, config)
+                )
+            ):
+                continue
+            root[root == piece] = best
+            for counts in (outline, continuous, touching):
+                merge_counts(counts, piece, best)
+            area[best] += area[piece]
+            colour[best] += colour[piece]
     return relabelled_by_root(labels, segment_of_supervoxel, root)
+
+
+def _edge_on_pixels(
+    labels: np.ndarray, supervoxels: Supervoxels, viewpoint: np.ndarray, config: PerceptionConfig
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per label (L,), its pixels on supervoxels seen edge-on (the cosine of the normal with
+    the ray to the camera under ``segmentation.contour_facing_cos``, as the contour split
+    reads it) and its pixels on any supervoxel. Mixed pixels along a depth step lie along the
+    rays between the two surfaces: a surface seen edge-on."""
+    ray = np.asarray(viewpoint, dtype=np.float64)[None, :] - supervoxels.centres
+    facing_cos = np.einsum("mc,mc->m", supervoxels.normals, ray) / np.maximum(
+        np.linalg.norm(ray, axis=1), 1e-12
+    )
+    on = supervoxels.labels >= 0
+    edge_on = facing_cos[supervoxels.labels[on]] < config.segmentation.contour_facing_cos
+    count = int(labels.max()) + 1
+    return (
+        np.bincount(labels[on][edge_on], minlength=count),
+        np.bincount(labels[on], minlength=count),
+    )
+
+
+def _behind(labels: np.ndarray, piece: int, depth_m: np.ndarray, gap_m: float) -> bool:
+    """Whether segment ``piece`` is seen behind the background or support around it: along
+    its 4-neighbour pixel pairs with label 0 (both with depth), the median depth step to them
+    is nearer than ``-gap_m`` (m). Mixed pixels at a silhouette lie in front of what is
+    behind it; a speck seen behind a wall or over a drawer's rim is a hidden object's part."""
+    rows, cols = np.nonzero(labels == piece)
+    height, width = labels.shape
+    steps = []
+    for d_row, d_col in ((0, 1), (1, 0), (0, -1), (-1, 0)):
+        r, c = rows + d_row, cols + d_col
+        inside = (r >= 0) & (r < height) & (c >= 0) & (c < width)
+        r, c, r0, c0 = r[inside], c[inside], rows[inside], cols[inside]
+        pair = (labels[r, c] == 0) & (depth_m[r, c] > 0) & (depth_m[r0, c0] > 0)
+        steps.append(depth_m[r, c][pair] - depth_m[r0, c0][pair])
+    steps = np.concatenate(steps)
+    return bool(steps.size and np.median(steps) < -gap_m)
+
+
+def _alike(colour: np.ndarray, first: int, second: int, within: float) -> bool:
+    """Whether two segments' mean chromaticities (from their (L, 3) RGB sums ``colour``) are
+    at most ``within`` apart (L2)."""
+    pair = colour[[first, second]]
+    chroma = pair / np.maximum(pair.sum(axis=1), 1e-9)[:, None]
+    return bool(np.linalg.norm(chroma[0] - chroma[1]) <= within)
+
+
+def lies_on(
+    labels: np.ndarray,
+    piece: int,
+    body: int,
+    points: np.ndarray,
+    depth_m: np.ndarray,
+    support: KnownPlane,
+    config: PerceptionConfig,
+) -> bool:
+    """Whether segment ``piece`` lies on segment ``body``: its footprint on the support within
+    the body's (``containers.within_footprint``: the circle fitted to the body's footprint or
+    its hull, grown by ``containers.margin_m``) and its median height above the support at least
+    the body's. A cap, a lid or a band on a bottle's shoulder is carried by its body, on top of
+    it; a separate object within another's footprint but under it (a ball wedged beneath a
+    block resting on it) is not (docs/DESIGN_NOTES.md, "Fragments of curved surfaces joined by
+    their outline").
+
+    ``labels`` (H, W) int; ``points`` (H, W, 3) world (m); ``depth_m`` (H, W) (0: no reading,
+    such pixels are left out); ``support`` the support plane.
+    """
+    axis_u, axis_v = support_axes(support)
+    normal = np.asarray(support.normal, dtype=np.float64)
+    footprints, heights = [], []
+    for segment in (piece, body):
+        pixels = np.flatnonzero((labels == segment) & (depth_m > 0))
+        pixels = pixels[:: -(-pixels.size // _MAX_POINTS)] if pixels.size else pixels
+        world = kernels.rows_at(points.reshape(-1, 3), pixels).astype(np.float64)
+        footprints.append(np.stack([world @ axis_u, world @ axis_v], axis=1))
+        heights.append(world @ normal)
+    if len(heights[0]) == 0 or len(heights[1]) < 3:
+        return False
+    return bool(np.median(heights[0]) >= np.median(heights[1])) and within_footprint(
+        footprints[0], footprints[1], config.containers
+    )
+
+
+#: Points of a segment used for its footprint (an even subset), as ``contours._MAX_POINTS``.
+_MAX_POINTS = 2000
 
 
 def fragment_borders(

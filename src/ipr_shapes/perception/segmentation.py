@@ -237,6 +237,8 @@ def segment_frame(
         supervoxels,
         config,
         borders=borders,
+        support=support,
+        viewpoint=frame.world_from_camera[:3, 3],
     )
     if labels is not before_fragments:
         borders = None  # joined: its counts no longer those of the labels
