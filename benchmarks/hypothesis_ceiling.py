@@ -102,8 +102,11 @@ def measure_scene(path: Path, config=None, cache: Path | None = None) -> dict:
         hidden = hidden_outline_fractions(
             scene.frames[0].depth_m, objects, config.perception.segmentation.contour_gap_m
         )
+    points = None
+    if config.collision_checker.medoid_weights == "fit":
+        points = {o.id: o.points for o in objects}
     posteriors = uniform_posteriors(
-        prepared, config.collision_checker, rng=sampler_rng, hidden=hidden
+        prepared, config.collision_checker, rng=sampler_rng, hidden=hidden, points=points
     )
     views = surface_views(scene.frames, objects_per_frame, None, config.carving)
     carved = carve_posteriors(posteriors, views) if config.carving.enabled else posteriors
@@ -287,11 +290,12 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument(
         "--medoid-weights",
-        choices=("candidate", "family", "outline"),
+        choices=("candidate", "family", "outline", "fit"),
         default=None,
         help="the Collision Checker's medoid weights (default: the config's; family: each "
         "generator family an equal share; outline: the two mixed by the object's hidden "
-        "outline fraction; both opt-in)",
+        "outline fraction; fit: each family's share times its candidates' likelihood of the "
+        "observed points on their surface; all opt-in)",
     )
     args = parser.parse_args(argv)
     from ipr_shapes.config import Config

@@ -454,6 +454,33 @@ MUTANTS: tuple[Mutant, ...] = (
         _t("collision_checker"),
     ),
     Mutant(
+        "fit-medoid-ignores-the-surface-misfit",
+        "collision_checker",
+        "the fit-weighted medoid gives each family its equal share whatever its candidates' "
+        "surfaces' distance from the observed points",
+        "weights[kept] *= np.exp(log_likelihood - log_likelihood.max())",
+        "weights[kept] *= 1.0",
+        _t("collision_checker"),
+    ),
+    Mutant(
+        "fit-misfit-keeps-the-shared-floor",
+        "collision_checker",
+        "the fit weights score each candidate's whole distance from the observed points, not its "
+        "excess over the closest candidate's",
+        "excess = np.sqrt(np.mean((distances - floor) ** 2, axis=1))",
+        "excess = np.sqrt(np.mean(distances**2, axis=1))",
+        _t("collision_checker"),
+    ),
+    Mutant(
+        "fit-medoid-not-given-the-points",
+        "collision_checker",
+        "the Collision Checker run does not hand the objects' observed points to the fit-weighted "
+        "medoid, which then counts each candidate once",
+        "points = {o.id: o.points for o in objects}",
+        "points = None",
+        _t("collision_checker"),
+    ),
+    Mutant(
         "medoid-families-not-weighted",
         "collision_checker",
         "the Collision Checker's medoid counts each feasible candidate once, so one family's "

@@ -343,3 +343,99 @@ def test_hidden_outline_fraction_counts_nearer_neighbours_and_the_image_border()
     # A step within the sensor's gap is the surface running on, not an occluder.
     depth[3:5, 4:6] = 0.795
     assert hidden_outline_fractions(depth, objects, step_m=0.01)[2] == pytest.approx(0.0)
+
+
+def test_surface_distances_are_the_distance_from_a_convex_candidates_boundary():
+    from ipr_shapes.collision_checker import surface_distances
+
+    prepared = _nested_cubes([(0.10, "box")])
+    (cube,) = prepared.generated[1]
+    points = np.array(
+        [[0.05, 0.05, 0.05], [0.10, 0.03, 0.07], [0.02, 0.03, 0.04], [0.12, 0.05, 0.05]]
+    )
+    assert surface_distances(cube, points) == pytest.approx([0.05, 0.0, 0.02, 0.02], abs=1e-12)
+
+
+def test_surface_cells_keep_one_point_per_cell():
+    from ipr_shapes.collision_checker import surface_cells
+
+    points = np.array([[0.001, 0.001, 0.001], [0.002, 0.004, 0.003], [0.006, 0.001, 0.001]])
+    assert surface_cells(points, 0.005) == pytest.approx(points[[0, 2]])
+    assert surface_cells(np.zeros((0, 3)), 0.005).shape == (0, 3)
+
+
+def test_fit_weights_are_the_family_shares_times_a_gaussian_of_the_excess_misfit():
+    """Two candidates of two families, two points: the first candidate's surface is 2 mm from
+    both points, the second's 4 mm. The 2 mm both share (the floor) cancels; the second's
+    excess of 2 mm is scored against the voxel quantisation's variance plus the floor's."""
+    from ipr_shapes.collision_checker import family_weights, fit_weights
+
+    generators = ["algorithm1", "sphere", "box"]
+    feasible = np.array([True, True, False])
+    distances = np.array([[0.002, 0.002], [0.004, 0.004]])
+    variance = 0.005**2 / 12 + 0.002**2
+    second = np.exp(-(0.002**2) / (2 * variance))
+    expected = np.array([1.0, second, 0.0]) / (1.0 + second)
+    assert fit_weights(generators, feasible, distances, 0.005) == pytest.approx(expected)
+    # No points: each family an equal share.
+    assert fit_weights(generators, feasible, np.zeros((2, 0)), 0.005) == pytest.approx(
+        family_weights(generators, feasible)
+    )
+    # A misfit all candidates share (the object's concavity) changes nothing.
+    shared = np.array([[0.01, 0.02], [0.01, 0.02]])
+    assert fit_weights(generators, feasible, shared, 0.005) == pytest.approx([0.5, 0.5, 0.0])
+
+
+def test_fit_medoid_keeps_the_families_whose_surface_runs_through_the_seen_points():
+    """The six 4 cm near-copies from Algorithm 1 and a 7 and a 7.2 cm cube from two other
+    families. Seen points on the small cubes' far face (x = 4.05 cm): the large cubes' surfaces
+    run 1.5-3 cm away from them, so the families lose their shares and a small cube is the
+    choice, where each family's equal share gives a large one. Seen points on the large
+    cubes' far face (x = 7 cm): the small cubes leave them outside, and a large cube stays.
+    Points not given: each candidate once; none seen: each family an equal share."""
+    sizes = [(0.040 + 2e-4 * k, "algorithm1") for k in range(6)]
+    prepared = _nested_cubes([*sizes, (0.070, "sphere"), (0.072, "superquadric")])
+    grid = np.stack(np.meshgrid(np.linspace(0.015, 0.025, 5), np.linspace(0.015, 0.025, 5)), -1)
+    grid = grid.reshape(-1, 2)
+    small_face = np.column_stack([np.full(len(grid), 0.0405), grid])
+    large_face = np.column_stack([np.full(len(grid), 0.070), grid])
+    config = CollisionCheckerConfig(medoid_weights="fit")
+    (family,) = uniform_posteriors(prepared, CollisionCheckerConfig(medoid_weights="family"))
+    (small,) = uniform_posteriors(prepared, config, points={1: small_face})
+    (large,) = uniform_posteriors(prepared, config, points={1: large_face})
+    (unseen,) = uniform_posteriors(prepared, config)
+    assert family.hypotheses[family.best].generator in ("sphere", "superquadric")
+    assert small.hypotheses[small.best].generator == "algorithm1"
+    assert large.hypotheses[large.best].generator in ("sphere", "superquadric")
+    (candidate,) = uniform_posteriors(prepared, CollisionCheckerConfig())
+    (empty,) = uniform_posteriors(prepared, config, points={1: np.zeros((0, 3))})
+    assert unseen.best == candidate.best  # points not given: each candidate once
+    assert empty.best == family.best  # no point seen: the family weights
+    assert small.probabilities == pytest.approx(family.probabilities)  # marginals written
+
+
+def test_the_collision_checker_hands_the_objects_points_to_the_fit_medoid(scene, monkeypatch):
+    """With ``medoid_weights = "fit"`` the run's medoid reads each object's observed points
+    (without them the fit weights would be the family weights); with the default it reads
+    none."""
+    import ipr_shapes.collision_checker as module
+
+    view, objects = scene
+    seen = []
+    original = module.uniform_posteriors
+
+    def recording(*args, **kwargs):
+        seen.append(kwargs.get("points"))
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(module, "uniform_posteriors", recording)
+    for weights in ("fit", "candidate"):
+        config = CollisionCheckerConfig(medoid_weights=weights)
+        collision_checker(
+            objects, view.space(), (SUPPORT,), config, np.random.default_rng(0),
+            hypotheses=HYPOTHESES,
+        )  # fmt: skip
+    fit, default = seen
+    assert default is None
+    assert sorted(fit) == [1, 2]
+    assert fit[1] is objects[0].points and fit[2] is objects[1].points

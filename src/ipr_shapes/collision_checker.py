@@ -46,6 +46,16 @@ Constraints(X), and each object's output is read from its marginal over its own 
   candidates' continuation behind the occluders, the families' agreement, the visible
   fraction itself) tells which family to trust there
   (docs/experiments/2026-11-28-per-object-family-trust.md).
+- "fit" (opt-in) weighs each family's share by how well its candidates' surfaces pass
+  through the object's observed points (``fit_weights``): every candidate contains the
+  points (they are built on them), so a point's distance to a candidate's boundary is how far
+  the candidate's surface runs from the seen surface there; the excess of that distance over
+  the closest candidate's, per point, is the candidate's misfit (what all candidates share,
+  the object's concavity and noise, cancels), scored as a Gaussian likelihood whose variance
+  is the voxel quantisation (pitch^2 / 12) plus the shared part's mean square. A sphere whose
+  surface runs through a box's faces loses its family's share; a family that fits the seen
+  surface keeps it. An object whose points are not given (the physics methods' starting
+  answer) counts each candidate once. Opt-in (docs/experiments/2026-11-28-family-choice.md).
 """
 
 from __future__ import annotations
@@ -75,7 +85,7 @@ from ipr_shapes.hypotheses import (
 )
 from ipr_shapes.perception.free_space import SeenSpace, SpaceMap
 from ipr_shapes.perception.types import KnownPlane, PartialObject
-from ipr_shapes.products import ObjectPosterior, PreparedHypotheses
+from ipr_shapes.products import ObjectPosterior, PreparedHypotheses, ShapeHypothesis
 from ipr_shapes.progress import ProgressCallback
 
 logger = logging.getLogger(__name__)
@@ -99,8 +109,9 @@ class CollisionCheckerConfig:
             (opt-in), each generator family with a feasible candidate an equal share, split
             equally among its feasible candidates (``family_weights``), each candidate scored
             against the others only; "outline" (opt-in), per object the mixture of the two by
-            the fraction of its image outline a nearer surface hides (``outline_weights``).
-            The written probabilities are the marginals either way (module doc).
+            the fraction of its image outline a nearer surface hides (``outline_weights``);
+            "fit" (opt-in), each family's share times each candidate's likelihood of the
+            observed points on its surface (``fit_weights``). The written probabilities are the marginals either way (module doc).
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -109,7 +120,7 @@ class CollisionCheckerConfig:
         "gibbs_sweeps": Interval(1, None, integer=True),
         "gibbs_burn_in": Interval(0, None, integer=True),
         "relax_steps": Interval(0, None, integer=True),
-        "medoid_weights": Options("candidate", "family", "outline"),
+        "medoid_weights": Options("candidate", "family", "outline", "fit"),
     }
 
     max_exact_table: int = 2_000_000
@@ -212,6 +223,60 @@ def outline_weights(generators: Sequence[str], feasible: np.ndarray, hidden: flo
     return (1.0 - hidden) * equal + hidden * family_weights(generators, feasible)
 
 
+def surface_distances(hypothesis: ShapeHypothesis, points: np.ndarray) -> np.ndarray:
+    """(N,) distance (m) of each of ``points`` ((N, 3), world, m) from the boundary of the
+    convex ``hypothesis``: inside, the smallest distance to a face's plane (exact for a convex
+    solid); outside, the largest plane distance (a lower bound of the distance)."""
+    v, f = hypothesis.vertices, hypothesis.faces
+    normals = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    lengths = np.linalg.norm(normals, axis=1)
+    keep = lengths > 1e-12
+    normals = normals[keep] / lengths[keep, None]
+    offsets = -np.einsum("ij,ij->i", normals, v[f[keep, 0]])
+    return np.abs((np.asarray(points, float) @ normals.T + offsets).max(axis=1))
+
+
+def surface_cells(points: np.ndarray, pitch_m: float) -> np.ndarray:
+    """The first of ``points`` ((N, 3), m) in each occupied cube of side ``pitch_m``: each cell
+    of observed surface counts once, however many pixels the camera's range and angle gave it."""
+    points = np.asarray(points, float).reshape(-1, 3)
+    if not len(points):
+        return points
+    _, first = np.unique(np.floor(points / pitch_m).astype(np.int64), axis=0, return_index=True)
+    return points[np.sort(first)]
+
+
+def fit_weights(
+    generators: Sequence[str], feasible: np.ndarray, distances: np.ndarray, pitch_m: float
+) -> np.ndarray:
+    """(m,) medoid weights of one object's candidates: ``family_weights`` times each feasible
+    candidate's likelihood of the observed surface on its boundary (sum 1; all 0 when none is
+    feasible).
+
+    ``distances``: (number feasible, N) distance (m) of each observed surface point (one per
+    ``pitch_m`` cell, ``surface_cells``) from each feasible candidate's boundary
+    (``surface_distances``), rows in the order of ``np.flatnonzero(feasible)``. Why: every
+    candidate contains the points, so a point inside shows where the candidate's surface
+    runs away from the seen surface. The smallest distance over the candidates at a point is
+    what none of them can explain (concavity, noise); each candidate's excess over it, its
+    root mean square ``e`` over the points, is its misfit, scored ``exp(-e^2 / (2 s^2))`` with
+    ``s^2 = pitch^2 / 12 + mean(floor^2)``: the candidates are voxelised at the pitch (a
+    boundary within a voxel is not resolved: the quantisation's variance) and the shared part
+    is the object's own scatter about a convex surface. No points: the family weights."""
+    feasible = np.asarray(feasible, dtype=bool)
+    weights = family_weights(generators, feasible)
+    kept = np.flatnonzero(feasible)
+    distances = np.asarray(distances, float).reshape(kept.size, -1)
+    if kept.size == 0 or distances.shape[1] == 0:
+        return weights
+    floor = distances.min(axis=0)
+    excess = np.sqrt(np.mean((distances - floor) ** 2, axis=1))
+    variance = pitch_m**2 / 12.0 + float(np.mean(floor**2))
+    log_likelihood = -(excess**2) / (2.0 * variance)
+    weights[kept] *= np.exp(log_likelihood - log_likelihood.max())
+    return weights / weights.sum()
+
+
 # --------------------------------------------------------------------------------------------
 # Public API
 
@@ -223,6 +288,7 @@ def uniform_posteriors(
     deadline: float = np.inf,
     tables: dict[int, PairwiseIoU] | None = None,
     hidden: Mapping[int, float] | None = None,
+    points: Mapping[int, np.ndarray] | None = None,
 ) -> list[ObjectPosterior]:
     """The Collision Checker's marginals from prepared hypotheses (module doc): uniform over
     jointly feasible joint models; the Gibbs sampler stops at ``deadline``
@@ -230,7 +296,9 @@ def uniform_posteriors(
     pairwise IoU of its hypotheses its medoid computed (``PairwiseIoU``), for a later medoid
     of the same object. ``hidden``: per object id the hidden fraction of its image outline
     (``hidden_outline_fractions``), read by ``medoid_weights = "outline"`` (an object absent:
-    0, each candidate counted once)."""
+    0, each candidate counted once). ``points``: per object id its observed points ((N, 3),
+    world, m), read by ``medoid_weights = "fit"`` (an object absent, as in the physics
+    methods' starting answer: each candidate counted once)."""
     config = config or CollisionCheckerConfig()
     rng = rng if rng is not None else np.random.default_rng(0)
     ids, generated, candidates = prepared.ids, prepared.generated, prepared.candidates
@@ -263,6 +331,13 @@ def uniform_posteriors(
         leave_one_out = config.medoid_weights == "family"
         if config.medoid_weights == "family":
             weights = family_weights([h.generator for h in hyps], feasible)
+        elif config.medoid_weights == "fit" and i in (points or {}):
+            kept = np.flatnonzero(feasible)
+            pitch = hyps[kept[0]].voxel_pitch_m
+            cells = surface_cells(points[i], pitch)
+            distances = np.array([surface_distances(hyps[k], cells) for k in kept])
+            weights = fit_weights([h.generator for h in hyps], feasible, distances, pitch)
+            leave_one_out = True
         elif config.medoid_weights == "outline" and (hidden or {}).get(i, 0.0) > 0.0:
             weights = outline_weights([h.generator for h in hyps], feasible, hidden[i])
             leave_one_out = True
@@ -330,7 +405,12 @@ def collision_checker(
         objects, space, planes, hypotheses, constraints, generation_rng, time_budget_s,
         object_spaces, progress,
     )  # fmt: skip
-    posteriors = uniform_posteriors(prepared, config, sampler_rng, deadline, hidden=hidden)
+    points = None
+    if config.medoid_weights == "fit":
+        points = {o.id: o.points for o in objects}
+    posteriors = uniform_posteriors(
+        prepared, config, sampler_rng, deadline, hidden=hidden, points=points
+    )
     logger.debug(
         "collision checker: %d objects in %.3f s", len(objects), time.perf_counter() - started
     )
