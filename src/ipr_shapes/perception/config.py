@@ -607,14 +607,13 @@ class SeamsConfig:
     (``ipr_shapes.perception.seams``): packed boxes of one height whose coplanar tops the convexity
     graph cannot tell apart.
 
-    Off by default for its time, not its accuracy: with it on, every development, container
-    and tabletop set scores as with it off (bins-real 28.6 -> 55.5 %; a frame it leaves uncut
-    keeps the seams-off labels, numbering included), but the perception costs 1.05-1.6 times
-    as much CPU per tabletop frame (1.5-1.6 on ycb-static and the lab frames) and 2.7-3 times
-    per bin frame (about 290 ms), against a 150 ms budget
-    (docs/experiments/2026-11-27-seams-default.md, 2026-11-27-seam-search-cost.md,
-    2026-11-28-seam-search-structure.md).
-    Turn it on for packed boxes (bin picking).
+    On by default since 2026-11-28: every development, container and tabletop set scores as
+    with it off (a frame it leaves uncut keeps the seams-off labels, numbering included) and
+    the real bins gain (28.6 -> 55.5 % of boxes found). It costs CPU: 1.05-1.6 times the
+    seams-off perception per tabletop frame (within the 150 ms budget) and 2.7-3 times per
+    bin frame (about 290 ms, over it) (docs/experiments/2026-11-27-seams-default.md,
+    2026-11-28-seam-search-structure.md). Turn it off where no packed boxes are expected and
+    every millisecond counts.
 
     Attributes:
         enabled: cut segments along seams (False: labels as the graph gives them).
@@ -691,7 +690,7 @@ class SeamsConfig:
         "max_cuts": _COUNT,
     }
 
-    enabled: bool = False
+    enabled: bool = True
     edge_factor: float = 4.0
     coverage: float = 0.75
     min_length_m: float = 0.04
