@@ -416,26 +416,42 @@ class _FrameFaces:
     """The face sizes (``_face_size``; (k, 2) arrays of (longer, shorter), m) of every piece of
     every segment of the frame (``searched``, as first ``decided``), measured one segment at a
     time when first asked and kept: a strip test stops asking once both strips have a match
-    (``_covered``), so that most of the frame's faces are never measured. The normals are
+    (``_covered``), and skips a segment whose points span less than any face it needs
+    (``reach``), so that most of the frame's faces are never measured. The normals are
     computed only in the segments measured."""
 
     def __init__(self, searched, decided, points, normals, depth_m, config) -> None:
         self._searched, self._decided = searched, decided
         self._points, self._normals, self._depth_m, self._config = points, normals, depth_m, config
         self._sizes: dict[int, np.ndarray] = {}
+        self._reach: dict[int, float] = {}
 
     def __len__(self) -> int:
         return len(self._searched)
+
+    def reach(self, index: int) -> float:
+        """An upper bound (m) on the longer extent of any face of segment ``index``'s pieces:
+        the diagonal of the box around its pieces' points with depth (a face's extents are
+        percentiles of those points' projections on a line, within their range). Cheaper
+        than the faces, and it proves that no face of a small segment matches a long strip."""
+        if index not in self._reach:
+            crop = self._searched[index][0]
+            inside = (self._decided[index] > 0) & (self._depth_m[crop] > 0)
+            span = kernels.point_span(self._points[crop], inside)
+            self._reach[index] = float(np.sqrt(span @ span))
+        return self._reach[index]
 
     def of(self, index: int) -> np.ndarray:
         """The (k, 2) face sizes of segment ``index``'s pieces."""
         if index not in self._sizes:
             crop, mask = self._searched[index][:2]
             pieces = self._decided[index]
-            normals = self._normals.within(crop, mask)
+            normals = np.ascontiguousarray(self._normals.within(crop, mask))
             measured = (self._depth_m[crop] > 0) & _known(normals)
-            sizes = [_face_size(pieces == piece, measured, self._points[crop], normals,
-                                self._config) for piece in range(1, int(pieces.max()) + 1)]  # fmt: skip
+            # Contiguous once: each piece reads it flat (a crop's reshape copies it).
+            points = np.ascontiguousarray(self._points[crop])
+            sizes = [_face_size(pieces == piece, measured, points, normals, self._config)
+                     for piece in range(1, int(pieces.max()) + 1)]  # fmt: skip
             self._sizes[index] = np.array([size for size in sizes if size is not None]).reshape(
                 -1, 2
             )
@@ -444,13 +460,26 @@ class _FrameFaces:
 
 class _FacesElsewhere:
     """The ``faces`` of every segment but ``owner``: an iterable of (k, 2) arrays, segment by
-    segment, measured as they are read."""
+    segment, measured as they are read; or, by ``reaching``, only the segments that may hold
+    a face of a given length."""
 
     def __init__(self, faces: _FrameFaces, owner: int) -> None:
         self._faces, self._owner = faces, owner
 
     def __iter__(self):
         return (self._faces.of(index) for index in range(len(self._faces)) if index != self._owner)
+
+    def reaching(self, least):
+        """The faces of the segments whose ``_FrameFaces.reach`` is at least ``least()`` (m,
+        asked again before each segment: it grows as strips find their match), as
+        ``__iter__``; the others' faces are all shorter, and are not measured."""
+        for index in range(len(self._faces)):
+            if index == self._owner:
+                continue
+            # A relative margin far above the float rounding of the bound and the sizes.
+            if self._faces.reach(index) * (1.0 + 1e-6) + 1e-9 < least():
+                continue
+            yield self._faces.of(index)
 
 
 def _lone_strips(
@@ -513,8 +542,10 @@ def _face_size(
         plane @ np.array([[np.cos(angle), np.sin(angle)], [-np.sin(angle), np.cos(angle)]]).T
         for angle in angles
     ]
-    # Every direction's percentiles in one call (column by column, as one call each).
-    lows, highs = np.percentile(np.concatenate(coords, axis=1), [2, 98], axis=0)
+    # Every direction's percentiles in one call (column by column, as one call each), on the
+    # columns laid out as rows: the same order statistics, read from contiguous memory.
+    columns = np.ascontiguousarray(np.concatenate(coords, axis=1).T)
+    lows, highs = np.percentile(columns, [2, 98], axis=1)
     best = None
     for index in range(len(angles)):
         low, high = lows[2 * index : 2 * index + 2], highs[2 * index : 2 * index + 2]
@@ -858,6 +889,10 @@ def _covered(strips: np.ndarray, faces, tolerance: float) -> bool:
     """Whether each of the (2, 2) ``strips`` sizes (m) is within ``tolerance`` of some face size
     in both extents; ``faces``: an iterable of (k, 2) arrays, read only until both match."""
     matched = np.zeros(len(strips), dtype=bool)
+    if isinstance(faces, _FacesElsewhere):
+        # A face within the tolerance of a strip is at least its longer extent less the
+        # tolerance long: segments that cannot hold one for a strip still unmatched are skipped.
+        faces = faces.reaching(lambda: float(strips[~matched, 0].min()) - tolerance)
     for sizes in faces:
         # (2, k): strip i within the tolerance of face j in both extents.
         on = np.all(np.abs(strips[:, None, :] - sizes[None, :, :]) <= tolerance, axis=2)
