@@ -2517,7 +2517,6 @@ def seam_screen(
     return -1
 
 
-
 @_jit
 def piece_spans(points: np.ndarray, pieces: np.ndarray, measured: np.ndarray, count: int):
     """(count + 1, 3) float64 range (largest less smallest) of the (H, W, 3) ``points`` of
