@@ -1015,3 +1015,22 @@ def test_dense_normalised_laplacian_is_the_numpy_expression():
         duplicated.indptr, duplicated.indices, duplicated.data, scale
     )
     assert np.array_equal(got, expected)
+
+
+def test_piece_spans_are_each_pieces_point_range():
+    """The seams' bound on a piece's face size (``seams._FrameFaces.reach``): per piece id, the
+    range of its points with depth, as numpy's min and max of the gathered points."""
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        height, width = rng.integers(5, 40, size=2)
+        points = rng.normal(size=(height, width, 3)).astype(np.float32)
+        pieces = rng.integers(0, 5, size=(height, width))
+        measured = rng.random((height, width)) < 0.7
+        count = int(pieces.max())
+        spans = kernels.piece_spans(points, pieces, measured, count)
+        assert spans.shape == (count + 1, 3)
+        assert np.all(spans[0] == 0.0)
+        for piece in range(1, count + 1):
+            cloud = points[(pieces == piece) & measured].astype(np.float64)
+            expected = cloud.max(axis=0) - cloud.min(axis=0) if len(cloud) else np.zeros(3)
+            assert np.array_equal(spans[piece], expected)

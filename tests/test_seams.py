@@ -19,13 +19,17 @@ import pytest
 
 from ipr_shapes.perception.config import PerceptionConfig, SeamsConfig
 from ipr_shapes.perception.seams import (
+    Normals,
     _area_m2,
     _covered,
     _cut_by_planes,
     _dilate_square,
     _equally_spaced,
+    _FacesElsewhere,
+    _FrameFaces,
     _has_area,
     _linked_edges,
+    _row_percentiles,
     _Seam,
     _sized_like,
     _Sizes,
@@ -891,3 +895,53 @@ def test_the_compiled_screen_of_candidate_seams_is_the_room_and_side_band_tests(
             continue
         ends = points[r[measured[[0, -1]]], c[measured[[0, -1]]]]
         assert length == pytest.approx(float(np.linalg.norm(ends[0] - ends[1])), rel=1e-6)
+
+
+def test_row_percentiles_are_numpys_bits():
+    """The face sizes' rectangle (``_face_size``): percentiles from sorted rows, the same bits as
+    ``np.percentile`` (linear method; ties, both ends, gamma below and above a half)."""
+    rng = np.random.default_rng(5)
+    for trial in range(300):
+        count = int(rng.integers(2, 3000))
+        rows = rng.normal(size=(int(rng.integers(1, 6)), count)) * 10 ** rng.uniform(-3, 1)
+        if trial % 3 == 0:
+            rows = np.round(rows, 2)  # ties
+        percents = (2.0, 98.0) if trial % 2 else (0.0, 100.0, *rng.uniform(0, 100, 4))
+        assert np.array_equal(
+            _row_percentiles(rows, percents), np.percentile(rows, percents, axis=1)
+        )
+
+
+def test_the_frames_faces_skip_pieces_too_small_for_a_strip():
+    """Strips 19 cm long need faces at least 18 cm long: a 6 cm piece's face is never
+    measured, and the answer is the one from measuring every face."""
+    height, width = 60, 80
+    yy, xx = np.mgrid[0:height, 0:width]
+    points = np.stack([xx * 0.004, yy * 0.004, np.full(xx.shape, 0.5)], axis=-1).astype(np.float32)
+    normals = np.zeros((height, width, 3), dtype=np.float32)
+    normals[..., 2] = 1.0
+    depth = np.full((height, width), 0.5)
+    frame = (slice(0, height), slice(0, width))
+    small = np.zeros((height, width), dtype=bool)
+    small[2:17, 2:17] = True  # 6 x 6 cm
+    large = np.zeros((height, width), dtype=bool)
+    large[10:58, 20:70] = True  # 19 x 20 cm (its face: 19 x 19 cm, 2nd to 98th percentile)
+    searched = [(frame, mask, mask.astype(np.int32), [], np.empty((0, 3)), [])
+                for mask in (small, large, small)]  # fmt: skip
+    decided = [entry[2] for entry in searched]
+    config = PerceptionConfig()
+    faces = _FrameFaces(searched, decided, points, Normals.of(normals), depth, config)
+    measured = []
+    size = faces.size
+    faces.size = lambda index, piece: measured.append(index) or size(index, piece)
+    tolerance = config.seams.size_tolerance_m
+    strips = np.array([[0.19, 0.185], [0.19, 0.185]])
+    assert faces.reach(0)[1] < 0.09 and faces.reach(1)[1] > 0.25
+    assert _covered(strips, _FacesElsewhere(faces, 2), tolerance)
+    assert measured == [1]
+    assert _covered(strips, list(_FacesElsewhere(faces, 2)), tolerance)
+    # A strip the small piece's size: its face is measured.
+    measured.clear()
+    strips = np.array([[0.056, 0.056], [0.056, 0.056]])
+    assert _covered(strips, _FacesElsewhere(faces, 2), tolerance)
+    assert 0 in measured

@@ -2515,3 +2515,32 @@ def seam_screen(
         if np.degrees(np.arccos(cos_angle)) <= max_angle_deg:
             return index
     return -1
+
+
+@_jit
+def piece_spans(points: np.ndarray, pieces: np.ndarray, measured: np.ndarray, count: int):
+    """(count + 1, 3) float64 range (largest less smallest) of the (H, W, 3) ``points`` of
+    each piece id of the (H, W) int ``pieces`` at the (H, W) bool ``measured``, per
+    coordinate; zeros for a piece with no such pixel: for id p,
+    ``cloud = points[(pieces == p) & measured].astype(np.float64);
+    cloud.max(axis=0) - cloud.min(axis=0)`` (minimum and maximum are exact in any order). One
+    pass for all pieces; numpy's reductions along a short last axis of a gathered copy take
+    ten times as long."""
+    low = np.full((count + 1, 3), np.inf)
+    high = np.full((count + 1, 3), -np.inf)
+    for row in range(pieces.shape[0]):
+        for col in range(pieces.shape[1]):
+            piece = pieces[row, col]
+            if piece > 0 and piece <= count and measured[row, col]:
+                for axis in range(3):
+                    value = np.float64(points[row, col, axis])
+                    if value < low[piece, axis]:
+                        low[piece, axis] = value
+                    if value > high[piece, axis]:
+                        high[piece, axis] = value
+    spans = np.zeros((count + 1, 3))
+    for piece in range(count + 1):
+        if high[piece, 0] >= low[piece, 0]:
+            for axis in range(3):
+                spans[piece, axis] = high[piece, axis] - low[piece, axis]
+    return spans

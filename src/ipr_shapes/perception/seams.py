@@ -413,44 +413,81 @@ def _pairs_by_size(
 
 
 class _FrameFaces:
-    """The face sizes (``_face_size``; (k, 2) arrays of (longer, shorter), m) of every piece of
-    every segment of the frame (``searched``, as first ``decided``), measured one segment at a
-    time when first asked and kept: a strip test stops asking once both strips have a match
-    (``_covered``), so that most of the frame's faces are never measured. The normals are
-    computed only in the segments measured."""
+    """The face sizes (``_face_size``; (longer, shorter), m) of every piece of every segment of
+    the frame (``searched``, as first ``decided``), each measured when first asked and kept: a
+    strip test stops asking once both strips have a match (``_covered``), and skips a piece
+    whose points span less than any face it needs (``reach``), so that most of the frame's
+    faces are never measured. The normals are computed only in the segments measured."""
 
     def __init__(self, searched, decided, points, normals, depth_m, config) -> None:
         self._searched, self._decided = searched, decided
         self._points, self._normals, self._depth_m, self._config = points, normals, depth_m, config
-        self._sizes: dict[int, np.ndarray] = {}
+        self._reach: dict[int, np.ndarray] = {}
+        self._inputs: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._sizes: dict[tuple[int, int], tuple[float, float] | None] = {}
 
     def __len__(self) -> int:
         return len(self._searched)
 
+    def reach(self, index: int) -> np.ndarray:
+        """(k + 1,) upper bounds (m) on the longer extent of the face of each piece 1..k of
+        segment ``index`` (entry 0 unused): the diagonal of the box around the piece's points
+        with depth (a face's extents are percentiles of some of those points' projections on
+        a line, within their range). Cheaper than the faces, and it proves that no face of a
+        small piece matches a long strip."""
+        if index not in self._reach:
+            crop = self._searched[index][0]
+            pieces = self._decided[index]
+            spans = kernels.piece_spans(self._points[crop], pieces, self._depth_m[crop] > 0,
+                                        int(pieces.max()))  # fmt: skip
+            self._reach[index] = np.sqrt(np.einsum("ij,ij->i", spans, spans))
+        return self._reach[index]
+
+    def size(self, index: int, piece: int) -> tuple[float, float] | None:
+        """The face size of piece ``piece`` (1..k) of segment ``index``, or None."""
+        if (index, piece) not in self._sizes:
+            if index not in self._inputs:
+                crop, mask = self._searched[index][:2]
+                normals = np.ascontiguousarray(self._normals.within(crop, mask))
+                measured = (self._depth_m[crop] > 0) & _known(normals)
+                # Contiguous once: each piece reads it flat (a crop's reshape copies it).
+                self._inputs[index] = (measured, np.ascontiguousarray(self._points[crop]), normals)
+            measured, points, normals = self._inputs[index]
+            self._sizes[index, piece] = _face_size(self._decided[index] == piece, measured, points,
+                                                   normals, self._config)  # fmt: skip
+        return self._sizes[index, piece]
+
     def of(self, index: int) -> np.ndarray:
         """The (k, 2) face sizes of segment ``index``'s pieces."""
-        if index not in self._sizes:
-            crop, mask = self._searched[index][:2]
-            pieces = self._decided[index]
-            normals = self._normals.within(crop, mask)
-            measured = (self._depth_m[crop] > 0) & _known(normals)
-            sizes = [_face_size(pieces == piece, measured, self._points[crop], normals,
-                                self._config) for piece in range(1, int(pieces.max()) + 1)]  # fmt: skip
-            self._sizes[index] = np.array([size for size in sizes if size is not None]).reshape(
-                -1, 2
-            )
-        return self._sizes[index]
+        sizes = [self.size(index, piece) for piece in range(1, int(self._decided[index].max()) + 1)]
+        return np.array([size for size in sizes if size is not None]).reshape(-1, 2)
 
 
 class _FacesElsewhere:
     """The ``faces`` of every segment but ``owner``: an iterable of (k, 2) arrays, segment by
-    segment, measured as they are read."""
+    segment, measured as they are read; or, by ``reaching``, only the pieces that may have a
+    face of a given length."""
 
     def __init__(self, faces: _FrameFaces, owner: int) -> None:
         self._faces, self._owner = faces, owner
 
     def __iter__(self):
         return (self._faces.of(index) for index in range(len(self._faces)) if index != self._owner)
+
+    def reaching(self, least):
+        """(1, 2) face sizes of the pieces whose ``_FrameFaces.reach`` is at least ``least()``
+        (m, asked again before each piece: it grows as strips find their match), in the
+        order of ``__iter__``; the others' faces are all shorter, and are not measured."""
+        for index in range(len(self._faces)):
+            if index == self._owner:
+                continue
+            for piece, reach in enumerate(self._faces.reach(index)[1:], start=1):
+                # A relative margin far above the float rounding of the bound and the sizes.
+                if reach * (1.0 + 1e-6) + 1e-9 < least():
+                    continue
+                size = self._faces.size(index, piece)
+                if size is not None:
+                    yield np.array([size])
 
 
 def _lone_strips(
@@ -513,8 +550,9 @@ def _face_size(
         plane @ np.array([[np.cos(angle), np.sin(angle)], [-np.sin(angle), np.cos(angle)]]).T
         for angle in angles
     ]
-    # Every direction's percentiles in one call (column by column, as one call each).
-    lows, highs = np.percentile(np.concatenate(coords, axis=1), [2, 98], axis=0)
+    # Every direction's percentiles in one call (column by column, as one call each), on the
+    # columns laid out as rows: the same order statistics, read from contiguous memory.
+    lows, highs = _row_percentiles(np.concatenate(coords, axis=1).T, (2.0, 98.0))
     best = None
     for index in range(len(angles)):
         low, high = lows[2 * index : 2 * index + 2], highs[2 * index : 2 * index + 2]
@@ -536,6 +574,28 @@ def _face_size(
             if span < (1.0 - tolerance) * extent[other]:
                 return None
     return float(extent.max()), float(extent.min())
+
+
+def _row_percentiles(rows: np.ndarray, percents: tuple[float, ...]) -> np.ndarray:
+    """(len(percents), R) percentiles of each of the R rows of ``rows`` ((R, N) float64, N
+    >= 2, finite): ``np.percentile(rows, percents, axis=1)``, the same bits (numpy's linear
+    method and its interpolation, on the rows sorted). numpy partitions a strided copy for
+    several order statistics at once, which takes about four times a sort of the rows."""
+    ordered = np.sort(rows, axis=1)
+    count = ordered.shape[1]
+    virtual = (count - 1) * np.true_divide(np.asarray(percents, dtype=np.float64), 100)
+    previous = np.floor(virtual)
+    at = previous.astype(np.intp)
+    # numpy's bounds: at the last value, both neighbours are the last value.
+    last = virtual >= count - 1
+    at[last] = count - 1
+    following = np.where(last, count - 1, at + 1)
+    gamma = (virtual - previous)[:, None]
+    below, above = ordered[:, at].T, ordered[:, following].T
+    # numpy's _lerp: from the nearer end.
+    step = above - below
+    result = below + step * gamma
+    return np.where(gamma >= 0.5, above - step * (1 - gamma), result)
 
 
 def _gate_sample(
@@ -858,6 +918,10 @@ def _covered(strips: np.ndarray, faces, tolerance: float) -> bool:
     """Whether each of the (2, 2) ``strips`` sizes (m) is within ``tolerance`` of some face size
     in both extents; ``faces``: an iterable of (k, 2) arrays, read only until both match."""
     matched = np.zeros(len(strips), dtype=bool)
+    if isinstance(faces, _FacesElsewhere):
+        # A face within the tolerance of a strip is at least its longer extent less the
+        # tolerance long: segments that cannot hold one for a strip still unmatched are skipped.
+        faces = faces.reaching(lambda: float(strips[~matched, 0].min()) - tolerance)
     for sizes in faces:
         # (2, k): strip i within the tolerance of face j in both extents.
         on = np.all(np.abs(strips[:, None, :] - sizes[None, :, :]) <= tolerance, axis=2)
