@@ -238,7 +238,8 @@ class Sampler:
     def _distances(self, i: int, placed: dict[int, int], deadline: float) -> np.ndarray:
         """(m_i,) how far each candidate of i falls among its neighbours (``_motions``, a
         rise counted as 0)."""
-        return np.maximum(self._motions(i, placed, deadline), 0.0)
+        motions = self._motions(i, placed, deadline)
+        return np.maximum(motions, 0.0) if self._signed else motions  # the cached array when off
 
     def _motions(self, i: int, placed: dict[int, int], deadline: float) -> np.ndarray:
         """(m_i,) each candidate of i's stability-test distance among its neighbours (cached):
