@@ -664,3 +664,43 @@ def test_rest_evidence_tells_a_shape_that_falls_from_the_true_one_where_the_dept
         depth = next(o for o in off.samples if o.choice == s.choice).log_likelihood
         assert s.log_likelihood == pytest.approx(depth - s.drops[0][s.choice[0]] / 0.004)
     assert on.posteriors[0].probabilities[0] > 0.99 and on.posteriors[0].best == 0
+
+
+#: The true box with a hidden part 1.5 cm too deep: sunk into the table (the same seen surface).
+SUNK_BOX = _hypothesis(1, [-0.05, -0.03, -0.015], [0.05, 0.03, 0.04])
+
+
+def test_rest_lift_tells_a_shape_too_large_below_the_support_from_the_true_one():
+    """The true box and one whose hidden part reaches 1.5 cm into the table, the depth made
+    nearly blind: with the rest evidence on falls alone the two weigh about the same (the sunk
+    box is pushed up, it does not fall); with ``rest_lift`` its rise counts against it at the
+    same scale, each sample's stability test keeps the signed motion (< 0 for the rise), and
+    the tree sampler still sees the falls alone (the same draws)."""
+    frame, labels = _frame(0, (0.0, -0.35, 0.3))
+    observed = observed_frames([frame], [labels], 4)
+    blind = InferenceConfig(
+        max_samples=12,
+        stability_alpha_per_m=0.0,
+        likelihood=LikelihoodConfig(alpha_per_m=1e-6),
+        rest_drop_m=0.004,
+    )
+    outcomes = {}
+    for lift in (False, True):
+        outcomes[lift] = infer_shapes(
+            _prepared(TRUE_BOX, SUNK_BOX), (SUPPORT,), observed, method="ipr+uniform",
+            config=dataclasses.replace(blind, rest_lift=lift), workers=1,
+        )  # fmt: skip
+    falls, lifts = outcomes[False], outcomes[True]
+    assert [s.choice for s in falls.samples] == [s.choice for s in lifts.samples]
+    assert {s.choice for s in falls.samples} == {(0,), (1,)}
+    for s in falls.samples:
+        assert s.drops[0][0] < 1e-3 and 0.0 <= s.drops[0][1] < 1e-3
+    assert 0.3 < falls.posteriors[0].probabilities[0] < 0.7
+    for s, f in zip(lifts.samples, falls.samples, strict=True):
+        assert abs(s.drops[0][0]) < 1e-3 and s.drops[0][1] < -0.005  # pushed up out of the table
+        assert s.log_likelihood == pytest.approx(
+            f.log_likelihood
+            - abs(s.drops[0][s.choice[0]]) / 0.004
+            + f.drops[0][s.choice[0]] / 0.004
+        )
+    assert lifts.posteriors[0].probabilities[0] > 0.8 and lifts.posteriors[0].best == 0

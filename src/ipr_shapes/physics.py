@@ -391,6 +391,12 @@ class World:
         frame 0: the potential energy it released per unit mass and g (0 for static shapes;
         inf for flung shapes, and for all when the simulation exploded). Unlike
         ``displacements`` it ignores the sideways shove that resolves a small initial overlap."""
+        return np.maximum(self.vertical_motions(), 0.0)
+
+    def vertical_motions(self) -> np.ndarray:
+        """(n,) how far (m) the centre of mass of each shape moved along gravity since frame
+        0, signed: > 0 fell, < 0 rose (lifted out of an initial overlap); 0 for static
+        shapes, inf for flung shapes, and for all when the simulation exploded."""
         if self.exploded:
             return np.full(len(self.bodies), np.inf)
         gravity = np.asarray(self.model.opt.gravity, float)
@@ -398,7 +404,7 @@ class World:
         result = np.zeros(len(self.bodies))
         dynamic = np.flatnonzero(self.body_ids >= 0)
         moved = self.data.xipos[self.body_ids[dynamic]] - self.initial_com[dynamic]
-        result[dynamic] = np.maximum(moved @ down, 0.0)
+        result[dynamic] = moved @ down
         result[self.flung()] = np.inf
         return result
 
@@ -877,6 +883,7 @@ def resting_drop(
     *,
     gap_m: float,
     margin_m: float,
+    signed: bool = False,
 ) -> float | None:
     """What a stability test would measure of a convex shape that clearly rests on the support
     alone, without simulating it (None when the case is not clear: simulate it).
@@ -887,7 +894,8 @@ def resting_drop(
     Such a shape drops by its gap onto the support and stands: its drop is the gap (0 when it
     starts sunk in). Why: most candidates are extended down to the support they nearly touch
     (``ipr_shapes.hypotheses``), and a simulation of a shape that just stands costs as much as one
-    that falls. ``vertices`` (V, 3) world (m)."""
+    that falls. ``vertices`` (V, 3) world (m). ``signed``: the vertical motion instead
+    (``World.vertical_motions``): a shape sunk in is lifted out by its depth (< 0)."""
     vertices = np.asarray(vertices, float).reshape(-1, 3)
     heights = support.signed_distance(vertices)
     lowest = float(heights.min())
@@ -906,7 +914,7 @@ def resting_drop(
     inside = -float(np.max(outline.equations @ np.append(np.asarray(centroid) @ axes, 1.0)))
     if inside < margin_m:
         return None
-    return max(lowest, 0.0)
+    return lowest if signed else max(lowest, 0.0)
 
 
 def wall_slabs(planes: Sequence[KnownPlane], config: PhysicsConfig) -> list[np.ndarray]:

@@ -115,6 +115,15 @@ class InferenceConfig:
             shapes, right where they were too small and wrong where they were not; and
             each joint model's contexts not already tested cost stability tests
             (docs/experiments/2026-11-28-stability-evidence.md).
+        rest_lift: with the rest evidence, score how far the candidate's centre of mass moved
+            along gravity either way (its fall or its rise) rather than its fall alone, at the same
+            ``rest_drop_m`` (no new scale). Why: seen at rest means neither fallen nor lifted:
+            a hidden part too large to fit where it is drawn (sunk into the support, pressed
+            into a neighbour within the compatibility tolerance) is pushed out upwards in the
+            stability test, which the fall alone ignores. Only with ``stability_measure``
+            "drop" (a displacement counts lifts already); the tree proposal still sees the
+            falls alone (the same samples as off). Off by default: the lifts measured are
+            sub-millimetre (docs/experiments/2026-11-28-rest-evidence-both-ways.md).
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -131,6 +140,7 @@ class InferenceConfig:
         "proposal": Options(*PROPOSALS),
         "evidence": Options(*EVIDENCES),
         "rest_drop_m": OrNone(Interval(0, None, closed="neither")),
+        "rest_lift": Options(False, True),
         "max_factor_table": Interval(1, None),
         "screen_gap_m": Interval(0, None),
         "screen_margin_m": Interval(0, None),
@@ -164,6 +174,7 @@ class InferenceConfig:
     proposal: Proposal = "tree"
     evidence: Evidence = "own"
     rest_drop_m: float | None = None
+    rest_lift: bool = False
 
     def __post_init__(self) -> None:
         check_fields(self)

@@ -44,7 +44,7 @@ def rest_log_likelihoods(result: SampleResult, problem: InferenceProblem) -> np.
     scale = problem.config.rest_drop_m
     if scale is None or result.drops is None:
         return np.zeros(problem.count)
-    drops = np.array([float(d[j]) for d, j in zip(result.drops, result.choice, strict=True)])
+    drops = np.abs([float(d[j]) for d, j in zip(result.drops, result.choice, strict=True)])
     return np.where(np.isfinite(drops), -drops / scale, -np.inf)
 
 
@@ -72,7 +72,7 @@ def rest_evidence(
             for i, j in enumerate(result.choice):
                 if i != k:
                     allowed &= problem.compatibility(k, i)[:, j]
-            drops = np.asarray(result.drops[k], float)
+            drops = np.abs(np.asarray(result.drops[k], float))
             usable[row] = allowed
             terms[row] = np.where(np.isfinite(drops), -drops / scale, -np.inf)
         counts = usable.sum(axis=0)

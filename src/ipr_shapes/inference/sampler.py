@@ -210,6 +210,18 @@ class Sampler:
                 distances[j] = drop
         return distances
 
+    @property
+    def _signed(self) -> bool:
+        """Whether the stability tests keep the signed vertical motion (a rise < 0) rather
+        than the fall: for the rest evidence's lifts (``InferenceConfig.rest_lift``). The
+        tree sampler sees the falls alone either way (``_distances``)."""
+        config = self.problem.config
+        return (
+            config.rest_lift
+            and config.rest_drop_m is not None
+            and config.stability_measure == "drop"
+        )
+
     def _resting_alone(self, i: int, j: int, support) -> float | None:
         """``resting_drop`` of candidate j of object i with no obstacle (cached: the screen's
         footprint and centroid do not depend on the context)."""
@@ -219,12 +231,19 @@ class Sampler:
             config = self.problem.config
             self._alone[key] = None if centroid is None else resting_drop(
                 self.problem.candidates[i][j].vertices, centroid, support, [],
-                gap_m=config.screen_gap_m, margin_m=config.screen_margin_m,
+                gap_m=config.screen_gap_m, margin_m=config.screen_margin_m, signed=self._signed,
             )  # fmt: skip
         return self._alone[key]
 
     def _distances(self, i: int, placed: dict[int, int], deadline: float) -> np.ndarray:
-        """(m_i,) how far each candidate of i falls among its neighbours (cached).
+        """(m_i,) how far each candidate of i falls among its neighbours (``_motions``, a
+        rise counted as 0)."""
+        motions = self._motions(i, placed, deadline)
+        return np.maximum(motions, 0.0) if self._signed else motions  # the cached array when off
+
+    def _motions(self, i: int, placed: dict[int, int], deadline: float) -> np.ndarray:
+        """(m_i,) each candidate of i's stability-test distance among its neighbours (cached):
+        how far it fell, or with the rest lifts (``_signed``) its signed vertical motion.
 
         Candidates that clearly stand on the support are screened (``_screen``), those whose
         result in another context applies here are reused (``_reuse``); the others are
@@ -381,7 +400,7 @@ class Sampler:
     def _measure(self, world) -> np.ndarray:
         """Per body, the stability test's distance (``InferenceConfig.stability_measure``)."""
         if self.problem.config.stability_measure == "drop":
-            return world.drops()
+            return world.vertical_motions() if self._signed else world.drops()
         return world.displacements()
 
     def exploration(self, i: int, placed: dict[int, int], deadline: float = math.inf):
@@ -410,7 +429,7 @@ class Sampler:
         if cached is None:
             return float(allowed.sum())
         with np.errstate(over="ignore"):
-            probabilities = np.exp(-problem.config.stability_alpha_per_m * cached)
+            probabilities = np.exp(-problem.config.stability_alpha_per_m * np.maximum(cached, 0))
         return float(np.where(allowed, probabilities, 0.0).sum())
 
     def tree_sample(
@@ -600,15 +619,16 @@ class Sampler:
         self, choice: Sequence[int], deadline: float = math.inf
     ) -> tuple[np.ndarray, ...]:
         """Per object k, (m_k,) how far (m) each of its candidates falls in its stability test
-        with every other object static at its chosen shape in ``choice``: the evidence that
-        the object is at rest where seen, its neighbours at rest where seen
+        with every other object static at its chosen shape in ``choice`` (with
+        ``InferenceConfig.rest_lift`` its signed vertical motion, a rise < 0): the evidence
+        that the object is at rest where seen, its neighbours at rest where seen
         (``InferenceConfig.rest_drop_m``). The tests are the tree sampler's (``_distances``,
         cached by the neighbours' shapes), in the context of the whole joint model rather
         than of the objects placed before it; every candidate is tested (they share one
         simulation), the chosen one and the others."""
         choice = tuple(choice)
         return tuple(
-            self._distances(k, {i: c for i, c in enumerate(choice) if i != k}, deadline)
+            self._motions(k, {i: c for i, c in enumerate(choice) if i != k}, deadline)
             for k in range(len(choice))
         )
 
@@ -624,7 +644,7 @@ class Sampler:
         ``drops`` is None)."""
         if drops is None:
             return 0.0
-        total = sum(float(d[j]) for d, j in zip(drops, choice, strict=True))
+        total = sum(abs(float(d[j])) for d, j in zip(drops, choice, strict=True))
         return -total / self.problem.config.rest_drop_m
 
     def log_prior(self, choice: Sequence[int]) -> float:
