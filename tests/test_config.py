@@ -118,3 +118,16 @@ def test_infer_help_describes_every_method():
     text = " ".join(completed.stdout.split())
     for method in METHODS.values():
         assert " ".join(method.description.split()) in text
+
+
+def test_the_shipped_bin_picking_config_turns_the_colour_seams_on():
+    """configs/bins.toml is what the README tells bin-picking users to pass: it must load and
+    differ from the defaults exactly by the seams."""
+    path = Path(__file__).resolve().parents[1] / "configs" / "bins.toml"
+    config = read_config(path)
+    assert config.perception.seams.enabled
+    assert not Config().perception.seams.enabled
+    seams_off = dataclasses.replace(
+        config.perception, seams=dataclasses.replace(config.perception.seams, enabled=False)
+    )
+    assert dataclasses.replace(config, perception=seams_off) == Config()

@@ -607,13 +607,15 @@ class SeamsConfig:
     (``ipr_shapes.perception.seams``): packed boxes of one height whose coplanar tops the convexity
     graph cannot tell apart.
 
-    On by default since 2026-11-28: every development, container and tabletop set scores as
-    with it off (a frame it leaves uncut keeps the seams-off labels, numbering included) and
-    the real bins gain (28.6 -> 55.5 % of boxes found). It costs CPU: 1.05-1.6 times the
-    seams-off perception per tabletop frame (within the 150 ms budget) and 2.7-3 times per
-    bin frame (about 290 ms, over it) (docs/experiments/2026-11-27-seams-default.md,
-    2026-11-28-seam-search-structure.md). Turn it off where no packed boxes are expected and
-    every millisecond counts.
+    Off by default for its time, not its accuracy: with it on, every development, container
+    and tabletop set scores as with it off (a frame it leaves uncut keeps the seams-off labels,
+    numbering included) and the real bins gain (28.6 -> 55.5 % of boxes found), but the
+    perception costs 2.7-3 times as much CPU per bin frame (285 ms on the page's run at
+    10052ac) and 1.05-1.6 times per tabletop frame: within the 150 ms budget on the generated
+    and YCB-Video frames, over it on the real lab frames (about 180 ms against 130), which gain
+    nothing (docs/experiments/2026-11-27-seams-default.md, 2026-11-28-seam-search-structure.md,
+    2026-11-28-seams-bins-cost.md). Turn it on for packed boxes (bin picking:
+    ``configs/bins.toml``).
 
     Attributes:
         enabled: cut segments along seams (False: labels as the graph gives them).
@@ -690,7 +692,7 @@ class SeamsConfig:
         "max_cuts": _COUNT,
     }
 
-    enabled: bool = True
+    enabled: bool = False
     edge_factor: float = 4.0
     coverage: float = 0.75
     min_length_m: float = 0.04
