@@ -608,8 +608,8 @@ MUTANTS: tuple[Mutant, ...] = (
         "drop-measures-rise",
         "physics",
         "the stability drop measures how far a shape rose, not fell",
-        "result[dynamic] = np.maximum(moved @ down, 0.0)",
-        "result[dynamic] = np.maximum(-(moved @ down), 0.0)",
+        "return np.maximum(self.vertical_motions(), 0.0)",
+        "return np.maximum(-self.vertical_motions(), 0.0)",
         _t("inference_method", "inference", "physics"),
     ),
     Mutant(
