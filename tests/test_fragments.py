@@ -298,6 +298,9 @@ def test_a_piece_lies_on_its_body_only_within_its_footprint_and_not_below_it():
         assert got == on, name
 
 
+EYE = np.zeros(3)
+
+
 def _specks_config(specks: bool = True) -> PerceptionConfig:
     config = _config(area_m2=16e-4)  # the default: a speck is a fragment too
     return dataclasses.replace(
@@ -322,13 +325,30 @@ def _speck_scene(
     rgb = RGB.copy()
     rgb[labels == 2] = (200, 60, 60)
     points = _points(depth)
+    sv = _speck_supervoxels(labels, points, speck_normal)
+    return labels, depth, np.array([1, 2, 0, 0], dtype=np.int32), rgb, points, sv
+
+
+def _speck_supervoxels(
+    labels: np.ndarray, points: np.ndarray, speck_normal: tuple[float, float, float]
+) -> Supervoxels:
+    """One supervoxel per segment (label - 1): segment 1 facing the camera, the speck (2)
+    with ``speck_normal``."""
     normals = np.tile([0.0, 0.0, -1.0], (4, 1))
     normals[1] = speck_normal
     centres = np.zeros((4, 3))
     for segment in (1, 2):
         centres[segment - 1] = points[labels == segment].mean(axis=0)
-    sv = Supervoxels(labels - 1, centres, normals, np.zeros((4, 3)), np.ones(4), np.zeros((0, 2)))
-    return labels, depth, np.array([1, 2, 0, 0], dtype=np.int32), rgb, points, sv
+    return Supervoxels(labels - 1, centres, normals, np.zeros((4, 3)), np.ones(4), np.zeros((0, 2)))
+
+
+def _segments_after_specks(labels, segments, depth, rgb, sv, config=None, viewpoint=EYE) -> int:
+    """How many segments are left after the fragment and speck joins (camera at the origin)."""
+    joined, _ = join_fragments(
+        labels, segments, _points(depth), depth, K, rgb, sv, config or _specks_config(),
+        viewpoint=viewpoint,
+    )  # fmt: skip
+    return len(np.unique(joined[joined > 0]))
 
 
 def test_a_speck_seen_edge_on_joins_the_segment_it_touches():
@@ -350,12 +370,9 @@ def test_a_speck_seen_edge_on_joins_the_segment_it_touches():
 def test_a_speck_facing_the_camera_is_kept():
     # The same speck facing the camera: a surface (a small object's visible part, as in the
     # generated scenes, where objects peek out between others), not mixed pixels.
-    labels, depth, segments, rgb, points, sv = _speck_scene(speck_normal=(0.0, 0.0, -1.0))
+    labels, depth, segments, rgb, _, sv = _speck_scene(speck_normal=(0.0, 0.0, -1.0))
     # It meets segment 1 with its own normal: the fragment rule's colours refuse it.
-    joined, _ = join_fragments(
-        labels, segments, points, depth, K, rgb, sv, _specks_config(), viewpoint=np.zeros(3)
-    )
-    assert len(np.unique(joined[joined > 0])) == 2
+    assert _segments_after_specks(labels, segments, depth, rgb, sv) == 2
 
 
 def test_a_speck_seen_behind_the_background_is_kept():
@@ -363,18 +380,7 @@ def test_a_speck_seen_behind_the_background_is_kept():
     # front, the speck an object's part seen past it, not mixed pixels in front of it.
     labels, depth, segments, rgb, _, sv = _speck_scene()
     depth[labels == 0] = 0.3
-    joined, _ = join_fragments(
-        labels,
-        segments,
-        _points(depth),
-        depth,
-        K,
-        rgb,
-        sv,
-        _specks_config(),
-        viewpoint=np.zeros(3),
-    )
-    assert len(np.unique(joined[joined > 0])) == 2
+    assert _segments_after_specks(labels, segments, depth, rgb, sv) == 2
 
 
 def test_a_speck_between_two_segments_is_kept():
@@ -383,18 +389,8 @@ def test_a_speck_between_two_segments_is_kept():
     labels, depth, segments, rgb, points, sv = _speck_scene()
     labels[24:30, 40:46] = 3
     depth[24:30, 40:46] = 0.45
-    joined, _ = join_fragments(
-        labels,
-        np.array([1, 2, 3, 0], dtype=np.int32),
-        _points(depth),
-        depth,
-        K,
-        rgb,
-        sv,
-        _specks_config(),
-        viewpoint=np.zeros(3),
-    )
-    assert len(np.unique(joined[joined > 0])) == 3
+    segments = np.array([1, 2, 3, 0], dtype=np.int32)
+    assert _segments_after_specks(labels, segments, depth, rgb, sv) == 3
 
 
 def test_a_segment_of_a_seed_square_is_no_speck():
@@ -406,21 +402,11 @@ def test_a_segment_of_a_seed_square_is_no_speck():
     depth[labels > 0] = 1.2
     depth[labels == 0] = 1.6
     points = _points(depth)
-    normals = np.tile([0.0, 0.0, -1.0], (4, 1))
-    normals[1] = [-1.0, 0.0, 0.0]
-    centres = np.zeros((4, 3))
-    for segment in (1, 2):
-        centres[segment - 1] = points[labels == segment].mean(axis=0)
-    sv = Supervoxels(labels - 1, centres, normals, np.zeros((4, 3)), np.ones(4), np.zeros((0, 2)))
+    sv = _speck_supervoxels(labels, points, (-1.0, 0.0, 0.0))
     config = _specks_config()
-    joined, _ = join_fragments(
-        labels, segments, points, depth, K, rgb, sv, config, viewpoint=np.zeros(3)
-    )
+    joined, _ = join_fragments(labels, segments, points, depth, K, rgb, sv, config, viewpoint=EYE)
     assert np.all(joined[18:24, 40:51] == 1)
     smaller_seed = dataclasses.replace(
         config, supervoxels=dataclasses.replace(config.supervoxels, seed_size_m=0.019)
     )
-    kept, _ = join_fragments(
-        labels, segments, points, depth, K, rgb, sv, smaller_seed, viewpoint=np.zeros(3)
-    )
-    assert len(np.unique(kept[kept > 0])) == 2
+    assert _segments_after_specks(labels, segments, depth, rgb, sv, smaller_seed) == 2
