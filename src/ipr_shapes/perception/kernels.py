@@ -1719,7 +1719,8 @@ def colour_gradient(rgb: np.ndarray, weights: np.ndarray):
     1D pass in scipy's order of operations (``NI_Correlate1D``: the centre tap, then each pair
     of mirrored taps from the outside in, summed in float64 and stored as float32), borders
     reflected. Needs H, W > r. One compiled pass per filter instead of numpy's temporaries
-    (the seams' edges, every frame)."""
+    (the seams' edges, every frame); the borders are reflected by index (a padded copy of one
+    row at most), and the last Sobel passes and the channels' comparison share one pass."""
     height, width = rgb.shape[0], rgb.shape[1]
     radius = weights.shape[0] // 2
     best_x = np.zeros((height, width), dtype=np.float32)
@@ -1727,73 +1728,91 @@ def colour_gradient(rgb: np.ndarray, weights: np.ndarray):
     best = np.zeros((height, width), dtype=np.float32)
     image = np.empty((height, width), dtype=np.float32)
     plane = np.empty((height, width), dtype=np.float32)
-    smooth = np.empty((height, width), dtype=np.float32)
-    first = np.empty((height, width), dtype=np.float32)
-    gx = np.empty((height, width), dtype=np.float32)
+    smooth = np.empty((height + 2, width + 2), dtype=np.float32)
+    first_x = np.empty((height + 2, width), dtype=np.float32)
+    first_y = np.empty((height, width + 2), dtype=np.float32)
+    row = np.empty(width + 2 * radius, dtype=np.float32)
+    gx = np.empty(width, dtype=np.float32)
+    gy = np.empty(width, dtype=np.float32)
     sums = np.empty(width, dtype=np.float64)
+    # Each 8-bit value in [0, 1] as float32 (the same bits as float32(v) / float32(255)).
     scale = np.float32(255.0)
+    level = np.empty(256, dtype=np.float32)
+    for value in range(256):
+        level[value] = np.float32(value) / scale
     for channel in range(3):
         for y in range(height):
             for x in range(width):
-                image[y, x] = np.float32(rgb[y, x, channel]) / scale
-        # Gaussian along the columns (axis 0), then along the rows (axis 1).
+                image[y, x] = level[rgb[y, x, channel]]
+        # Gaussian along the columns (axis 0), rows reflected at the borders.
         # (Each pixel's sum in a row of accumulators: the taps in scipy's order per pixel.)
-        source = _padded(image, radius, 0)
         for y in range(height):
-            c = y + radius
             for x in range(width):
-                sums[x] = np.float64(source[c, x]) * weights[radius]
+                sums[x] = np.float64(image[y, x]) * weights[radius]
             for j in range(radius, 0, -1):
                 weight = weights[radius - j]
+                above = _reflected(y - j, height)
+                below = _reflected(y + j, height)
                 for x in range(width):
-                    sums[x] += (
-                        np.float64(source[c - j, x]) + np.float64(source[c + j, x])
-                    ) * weight
+                    sums[x] += (np.float64(image[above, x]) + np.float64(image[below, x])) * weight
             for x in range(width):
                 plane[y, x] = np.float32(sums[x])
-        source = _padded(plane, 0, radius)
+        # Then along the rows (axis 1), each row padded by reflection.
         for y in range(height):
             for x in range(width):
-                sums[x] = np.float64(source[y, x + radius]) * weights[radius]
+                row[x + radius] = plane[y, x]
+            for x in range(radius):
+                row[x] = plane[y, _reflected(x - radius, width)]
+                row[width + radius + x] = plane[y, _reflected(width + x, width)]
+            for x in range(width):
+                sums[x] = np.float64(row[x + radius]) * weights[radius]
             for j in range(radius, 0, -1):
                 weight = weights[radius - j]
                 for x in range(width):
                     sums[x] += (
-                        np.float64(source[y, x + radius - j])
-                        + np.float64(source[y, x + radius + j])
+                        np.float64(row[x + radius - j]) + np.float64(row[x + radius + j])
                     ) * weight
+            # Padded by one for the Sobel passes.
             for x in range(width):
-                smooth[y, x] = np.float32(sums[x])
-        source = _padded(smooth, 1, 1)
-        # Sobel x: [-1, 0, 1] along the rows, then [1, 2, 1] along the columns.
+                smooth[y + 1, x + 1] = np.float32(sums[x])
+            smooth[y + 1, 0] = smooth[y + 1, 1]
+            smooth[y + 1, width + 1] = smooth[y + 1, width]
+        for x in range(width + 2):
+            smooth[0, x] = smooth[1, x]
+            smooth[height + 1, x] = smooth[height, x]
+        # The Sobel passes' first halves: x: [-1, 0, 1] along the rows; y: along the columns
+        # (each padded by one for its second half).
         for y in range(height):
             for x in range(width):
-                total = np.float64(source[y + 1, x + 1]) * 0.0
-                total += (np.float64(source[y + 1, x]) - np.float64(source[y + 1, x + 2])) * -1.0
-                first[y, x] = np.float32(total)
-        across = _padded(first, 1, 0)
+                total = np.float64(smooth[y + 1, x + 1]) * 0.0
+                total += (np.float64(smooth[y + 1, x]) - np.float64(smooth[y + 1, x + 2])) * -1.0
+                first_x[y + 1, x] = np.float32(total)
+            for x in range(width):
+                total = np.float64(smooth[y + 1, x + 1]) * 0.0
+                total += (np.float64(smooth[y, x + 1]) - np.float64(smooth[y + 2, x + 1])) * -1.0
+                first_y[y, x + 1] = np.float32(total)
+            first_y[y, 0] = first_y[y, 1]
+            first_y[y, width + 1] = first_y[y, width]
+        for x in range(width):
+            first_x[0, x] = first_x[1, x]
+            first_x[height + 1, x] = first_x[height, x]
+        # Their second halves: x: [1, 2, 1] along the columns; y: along the rows. And the
+        # channel with the largest square.
         for y in range(height):
             for x in range(width):
-                total = np.float64(across[y + 1, x]) * 2.0
-                total += (np.float64(across[y, x]) + np.float64(across[y + 2, x])) * 1.0
-                gx[y, x] = np.float32(total)
-        # Sobel y: [-1, 0, 1] along the columns, then [1, 2, 1] along the rows.
-        for y in range(height):
+                total = np.float64(first_x[y + 1, x]) * 2.0
+                total += (np.float64(first_x[y, x]) + np.float64(first_x[y + 2, x])) * 1.0
+                gx[x] = np.float32(total)
             for x in range(width):
-                total = np.float64(source[y + 1, x + 1]) * 0.0
-                total += (np.float64(source[y, x + 1]) - np.float64(source[y + 2, x + 1])) * -1.0
-                first[y, x] = np.float32(total)
-        across = _padded(first, 0, 1)
-        for y in range(height):
+                total = np.float64(first_y[y, x + 1]) * 2.0
+                total += (np.float64(first_y[y, x]) + np.float64(first_y[y, x + 2])) * 1.0
+                gy[x] = np.float32(total)
             for x in range(width):
-                total = np.float64(across[y, x + 1]) * 2.0
-                total += (np.float64(across[y, x]) + np.float64(across[y, x + 2])) * 1.0
-                gy = np.float32(total)
-                square = gx[y, x] * gx[y, x] + gy * gy
+                square = gx[x] * gx[x] + gy[x] * gy[x]
                 if channel == 0 or square > best[y, x]:
                     best[y, x] = square
-                    best_x[y, x] = gx[y, x]
-                    best_y[y, x] = gy
+                    best_x[y, x] = gx[x]
+                    best_y[y, x] = gy[x]
     return best_x, best_y
 
 
@@ -2017,6 +2036,63 @@ def line_sides(
         out[side, 1] = (across[side] + 0.5) * scale[side]
         out[side, 2] = (high[side] - low[side] + 1.0) * scale[side]
     return out
+
+
+@_jit
+def line_sides_fit(
+    rows: np.ndarray,
+    cols: np.ndarray,
+    foot_m2: np.ndarray,
+    size_m: np.ndarray,
+    cos_a: float,
+    sin_a: float,
+    rho: float,
+    min_area: float,
+    min_width: float,
+) -> bool:
+    """Whether ``line_sides`` of these arguments gives each side a summed footprint of at least
+    ``min_area`` and both extents at least ``min_width`` (the seams' room test,
+    ``seams._Room.fits``), from the same per-pixel arithmetic in the same order, but stopping
+    once every test holds: the footprints are >= 0, so each side's running sum (float addition
+    of non-negative terms is monotone), its farthest distance, its range along the line and its
+    largest size only grow pixel by pixel, and a test the first pixels pass all of them pass.
+    A part cut near its middle passes after a fraction of its pixels (the compiled screen of
+    the seams' candidates runs this for each candidate line)."""
+    area = np.zeros(2)
+    across = np.zeros(2)
+    low = np.full(2, np.inf)
+    high = np.full(2, -np.inf)
+    scale = np.zeros(2)
+    n = rows.shape[0]
+    for i in range(n):
+        distance = cols[i] * cos_a + rows[i] * sin_a - rho
+        along = -cols[i] * sin_a + rows[i] * cos_a
+        side = 0 if distance > 0 else 1
+        area[side] += foot_m2[i]
+        distance = abs(distance)
+        if distance > across[side]:
+            across[side] = distance
+        if along < low[side]:
+            low[side] = along
+        if along > high[side]:
+            high[side] = along
+        if size_m[i] > scale[side]:
+            scale[side] = size_m[i]
+        if (i & 127) == 127 or i == n - 1:
+            fits = True
+            for s in range(2):
+                # (A side with no pixel yet: zeros, as ``line_sides`` gives it.)
+                width_across = 0.0
+                width_along = 0.0
+                if high[s] >= low[s]:
+                    width_across = (across[s] + 0.5) * scale[s]
+                    width_along = (high[s] - low[s] + 1.0) * scale[s]
+                if not (area[s] >= min_area and min(width_across, width_along) >= min_width):
+                    fits = False
+                    break
+            if fits:
+                return True
+    return False
 
 
 @_jit
@@ -2471,12 +2547,9 @@ def seam_screen(
         cos_a = line_cos[k]
         sin_a = line_sin[k]
         rho = line_rho[k]
-        sides = line_sides(room_rows, room_cols, room_foot, room_size, cos_a, sin_a, rho)
-        if not (sides[0, 0] >= min_area and sides[1, 0] >= min_area):
-            continue
-        if not (min(sides[0, 1], sides[0, 2]) >= min_width):
-            continue
-        if not (min(sides[1, 1], sides[1, 2]) >= min_width):
+        if not line_sides_fit(
+            room_rows, room_cols, room_foot, room_size, cos_a, sin_a, rho, min_area, min_width
+        ):
             continue
         start, stop = bounds[k], bounds[k + 1]
         low_r = stretch_rows[start]
@@ -2502,11 +2575,24 @@ def seam_screen(
         box[3] = min(high_c + far_px + 1, width)
         along_range[0] = along_low
         along_range[1] = along_high
+        # The part's pixels are row-major: only those in the box's rows can be in a band.
+        first = np.searchsorted(part_rows, box[0])
+        last = np.searchsorted(part_rows, box[1])
         band_a, band_b = seam_side_bands(
-            part_rows, part_cols, box, cos_a, sin_a, rho, along_range, near, far
+            part_rows[first:last],
+            part_cols[first:last],
+            box,
+            cos_a,
+            sin_a,
+            rho,
+            along_range,
+            near,
+            far,
         )
         if band_a.shape[0] < 20 or band_b.shape[0] < 20:
             continue
+        band_a += first
+        band_b += first
         normal_a = mean_at(normals, part_rows[band_a], part_cols[band_a])
         normal_b = mean_at(normals, part_rows[band_b], part_cols[band_b])
         normal_a /= max(np.sqrt(np.sum(normal_a * normal_a)), 1e-12)
