@@ -2039,6 +2039,37 @@ def line_sides(
 
 
 @_jit
+def masked_order_statistic(values: np.ndarray, mask: np.ndarray, k: int) -> np.float32:
+    """The k-th smallest (0-based) of the (N,) float32 ``values`` >= 0 (no NaN) at the (N,) bool
+    ``mask`` (k below its count): ``np.partition(values[mask], k)[k]``, the same value, by a
+    radix selection on the float32 bits (their order as unsigned integers is the values'
+    order for values >= 0): a histogram of the high 16 bits, then of the low 16 bits within
+    the chosen bin. Two passes over the frame instead of a gathered copy and its partition
+    (the seams' noise scale, a median over every pixel with depth)."""
+    bits = values.view(np.uint32)
+    counts = np.zeros(65536, dtype=np.int64)
+    for i in range(bits.shape[0]):
+        if mask[i]:
+            counts[bits[i] >> 16] += 1
+    high = 0
+    below = 0
+    while below + counts[high] <= k:
+        below += counts[high]
+        high += 1
+    counts[:] = 0
+    for i in range(bits.shape[0]):
+        if mask[i] and (bits[i] >> 16) == high:
+            counts[bits[i] & 65535] += 1
+    low = 0
+    while below + counts[low] <= k:
+        below += counts[low]
+        low += 1
+    out = np.empty(1, dtype=np.uint32)
+    out[0] = (np.uint32(high) << np.uint32(16)) | np.uint32(low)
+    return out.view(np.float32)[0]
+
+
+@_jit
 def line_sides_fit(
     rows: np.ndarray,
     cols: np.ndarray,

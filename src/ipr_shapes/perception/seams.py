@@ -241,7 +241,7 @@ def cut_colour_seams(
     # frame's gradient, from a sample of the frame.
     if whole:
         measured = depth_m > 0
-        noise = float(np.median(magnitude[measured if measured.any() else segment_pixels]))
+        noise = _masked_median(magnitude, measured if measured.any() else segment_pixels)
     else:
         noise = _edge_noise(rgb, depth_m, segment_pixels)
     # The edges are read only in the searched segments' crops: found in the box around them
@@ -657,6 +657,17 @@ def _has_flat_face(
         if extent[1] >= max(long_side, short_side) and extent[0] >= min(long_side, short_side):
             return True
     return False
+
+
+def _masked_median(values: np.ndarray, mask: np.ndarray) -> float:
+    """``float(np.median(values[mask]))`` of (H, W) float32 ``values`` >= 0 at (H, W) bool
+    ``mask`` (not empty), the same value: the middle order statistics by a compiled radix
+    selection (``kernels.masked_order_statistic``), their mean by numpy as its median takes it."""
+    flat_values, flat_mask = values.reshape(-1), mask.reshape(-1)
+    count = int(np.count_nonzero(flat_mask))
+    middle = [kernels.masked_order_statistic(flat_values, flat_mask, k)
+              for k in sorted({(count - 1) // 2, count // 2})]  # fmt: skip
+    return float(np.median(np.array(middle, dtype=values.dtype)))
 
 
 def _edge_noise(rgb: np.ndarray, depth_m: np.ndarray, segment_pixels: np.ndarray) -> float:
