@@ -1392,6 +1392,15 @@ def thin_edges(magnitude: np.ndarray, direction: np.ndarray, at: np.ndarray) -> 
     quantised to 45 degrees as ``np.round(direction / (np.pi / 4)) % 4`` in float32
     (half to even), neighbours outside the image 0. The seams' ``_thin`` without its
     temporaries (every frame, strong and faint pixels)."""
+    return thin_edges_in_sectors(magnitude, direction, at, np.full(at.shape[0], -1, np.int8))
+
+
+@_jit
+def thin_edges_in_sectors(
+    magnitude: np.ndarray, direction: np.ndarray, at: np.ndarray, sectors: np.ndarray
+) -> np.ndarray:
+    """``thin_edges`` with each pixel's sector given ((N,) int8, 0-3: ``gradient_sectors``),
+    or -1 where it is read from ``direction`` as ``thin_edges`` does."""
     height, width = magnitude.shape
     edges = np.zeros((height, width), dtype=np.bool_)
     quarter = np.float32(np.pi / 4)
@@ -1399,11 +1408,13 @@ def thin_edges(magnitude: np.ndarray, direction: np.ndarray, at: np.ndarray) -> 
         index = at[k]
         r = index // width
         c = index - r * width
-        q = np.float64(np.float32(direction[r, c]) / quarter)
-        rounded = np.floor(q + 0.5)
-        if q + 0.5 == rounded and rounded % 2.0 != 0.0:
-            rounded -= 1.0  # half to even, as np.round
-        sector = int(rounded % 4.0)
+        sector = np.int64(sectors[k])
+        if sector < 0:
+            q = np.float64(np.float32(direction[r, c]) / quarter)
+            rounded = np.floor(q + 0.5)
+            if q + 0.5 == rounded and rounded % 2.0 != 0.0:
+                rounded -= 1.0  # half to even, as np.round
+            sector = int(rounded % 4.0)
         if sector == 0:
             dy, dx = 0, 1
         elif sector == 1:
@@ -1422,6 +1433,36 @@ def thin_edges(magnitude: np.ndarray, direction: np.ndarray, at: np.ndarray) -> 
         if value >= ahead and value >= behind:
             edges[r, c] = True
     return edges
+
+
+@_jit
+def gradient_sectors(gx: np.ndarray, gy: np.ndarray, at: np.ndarray, tangents: np.ndarray):
+    """(N,) int8: the 45 degree sector of ``thin_edges`` (0: the gradient along x, 1: along
+    x = y, 2: along y, 3: along x = -y) of the gradient (gx, gy) ((H, W) float32, not both 0)
+    at each of the pixels ``at`` ((N,) int64 flat indices), read from the components without
+    an arctangent: sector 0 when |gy| < |gx| tan(22.5 deg - d), 2 when |gy| > |gx| tan(67.5
+    deg + d), 1 or 3 (by the components' signs) between tan(22.5 deg + d) and tan(67.5 deg -
+    d); -1 within d of a boundary (``tangents``: those four tangents, float64), where the
+    float32 arctangent's rounding decides and the caller measures it."""
+    width = gx.shape[1]
+    out = np.empty(at.shape[0], dtype=np.int8)
+    for k in range(at.shape[0]):
+        index = at[k]
+        r = index // width
+        c = index - r * width
+        x = np.float64(gx[r, c])
+        y = np.float64(gy[r, c])
+        a = abs(x)
+        b = abs(y)
+        if b < a * tangents[0]:
+            out[k] = 0
+        elif b > a * tangents[3]:
+            out[k] = 2
+        elif b > a * tangents[1] and b < a * tangents[2]:
+            out[k] = 1 if (x > 0.0) == (y > 0.0) else 3
+        else:
+            out[k] = -1
+    return out
 
 
 @_jit

@@ -92,6 +92,14 @@ _FACE_CANDIDATES = 32
 _NOISE_STEP_PX = 16
 #: How far (px) the colour gradient reads around a pixel: the Gaussian's 4 and Sobel's 1.
 _GRADIENT_REACH_PX = 5
+#: A gradient's 45 degree sector (``_thin``) is read from its components unless its angle lies
+#: within this (rad) of a sector's boundary (22.5 or 67.5 deg from an axis), where the float32
+#: arctangent is measured: far above that arctangent's rounding (about 1e-7 rad) and the
+#: float32 division by 45 degrees, far below the share of gradients it sends to be measured.
+_SECTOR_MARGIN_RAD = 1e-4
+_SECTOR_TANGENTS = np.tan(
+    np.radians([22.5, 22.5, 67.5, 67.5]) + np.array([-1.0, 1.0, -1.0, 1.0]) * _SECTOR_MARGIN_RAD
+)
 #: Row and column offsets of a pixel's 3 x 3 neighbourhood.
 _NEIGHBOURS = np.mgrid[-1:2, -1:2].reshape(2, -1)
 #: The colour gradient's smoothing: scipy's Gaussian of sigma 1 px (truncated at 4 sigma) as
@@ -257,10 +265,11 @@ def cut_colour_seams(
     )  # fmt: skip
     magnitude, gx, gy = (np.ascontiguousarray(array[box]) for array in (magnitude, gx, gy))
     strong = np.flatnonzero(magnitude > seams.edge_factor * max(noise, 1e-6))
-    # The gradient's direction is used at edge pixels only: measured at the strong ones.
+    # The gradient's direction is read at edge pixels only (the search's votes), and its
+    # 45 degree sector for the thinning: that from the components, measured only near a
+    # sector's boundary (``_thin``), the direction once the edges are known.
     direction = np.zeros(magnitude.shape, dtype=magnitude.dtype)
-    direction.flat[strong] = np.arctan2(gy.flat[strong], gx.flat[strong])
-    edges = _thin(magnitude, direction, strong)
+    edges = _thin(magnitude, direction, strong, gx, gy)
     # With the faint stretches that continue a strong edge (Canny's hysteresis): the edge
     # between two boxes of one colour fades along its length.
     if seams.hysteresis:
@@ -272,6 +281,8 @@ def cut_colour_seams(
         near = kernels.dilate_diamond(searched_pixels, 3)  # binary_dilation, iterations=3
         low = 0.5 * seams.edge_factor * max(noise, 1e-6)
         edges = _linked_edges(magnitude, gx, gy, direction, edges, low, near)
+    at = np.flatnonzero(edges)
+    direction.flat[at] = np.arctan2(gy.flat[at], gx.flat[at])
     searched = []
     for crop, mask, search in segments:
         if not search:
@@ -774,20 +785,37 @@ def _linked_edges(
     """(H, W) bool: the thinned pixels (``_thin``) of gradient ``magnitude`` above ``low``
     within ``near`` ((H, W) bool) that are 8-connected through such pixels to a pixel of
     ``edges`` ((H, W) bool, the thinned strong edges): Canny's hysteresis, the faint stretches
-    of an edge that is strong somewhere. ``direction`` ((H, W), rad) is filled in at those
-    pixels from ``gx``, ``gy``."""
+    of an edge that is strong somewhere. The faint pixels are thinned in the sectors of
+    ``gx``, ``gy`` (``_thin``; ``direction`` ((H, W), rad) filled in where it is measured)."""
     weak = np.flatnonzero((magnitude > low) & near)
-    direction.flat[weak] = np.arctan2(gy.flat[weak], gx.flat[weak])
     # The 8-connected components of the thinned faint pixels that hold a strong one (compiled:
     # a flood fill from the strong pixels, not a label image of the frame).
-    return kernels.linked_to(_thin(magnitude, direction, weak), edges) | edges
+    return kernels.linked_to(_thin(magnitude, direction, weak, gx, gy), edges) | edges
 
 
-def _thin(magnitude: np.ndarray, direction: np.ndarray, at: np.ndarray) -> np.ndarray:
+def _thin(
+    magnitude: np.ndarray,
+    direction: np.ndarray,
+    at: np.ndarray,
+    gx: np.ndarray | None = None,
+    gy: np.ndarray | None = None,
+) -> np.ndarray:
     """(H, W) bool: of the pixels ``at`` (flat indices), those whose gradient magnitude is a
     maximum across the edge (Canny's non-maximum suppression, directions quantised to 45
-    degrees). Compiled (``kernels.thin_edges``; ``_thin_numpy`` is its reference)."""
-    return kernels.thin_edges(magnitude, direction, np.asarray(at, dtype=np.int64))
+    degrees). Compiled (``kernels.thin_edges``; ``_thin_numpy`` is its reference).
+
+    With the gradient's components ``gx``, ``gy`` ((H, W) float32), ``direction`` need not
+    be known: each pixel's sector is read from them (``kernels.gradient_sectors``), and only
+    within ``_SECTOR_MARGIN_RAD`` of a sector's boundary is the direction measured
+    (``np.arctan2`` in float32, written into ``direction``): the same sectors, without an
+    arctangent per pixel."""
+    at = np.asarray(at, dtype=np.int64)
+    if gx is None or gy is None:
+        return kernels.thin_edges(magnitude, direction, at)
+    sectors = kernels.gradient_sectors(gx, gy, at, _SECTOR_TANGENTS)
+    unsure = at[sectors < 0]
+    direction.flat[unsure] = np.arctan2(gy.flat[unsure], gx.flat[unsure])
+    return kernels.thin_edges_in_sectors(magnitude, direction, at, sectors)
 
 
 def _thin_numpy(magnitude: np.ndarray, direction: np.ndarray, at: np.ndarray) -> np.ndarray:
