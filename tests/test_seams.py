@@ -784,8 +784,8 @@ def test_the_screens_room_test_that_stops_early_answers_as_the_full_sums():
 
 
 def test_the_noise_median_is_numpys_median():
-    """``_masked_median``: ``np.median`` of the values at the mask, the same float, for odd
-    and even counts, ties, zeros and one value."""
+    """``_masked_median``: ``np.median`` of the values at the mask, the same float, in their
+    float32 and in float64, for odd and even counts, ties, zeros and one value."""
     from ipr_shapes.perception.seams import _masked_median
 
     rng = np.random.default_rng(12)
@@ -798,6 +798,9 @@ def test_the_noise_median_is_numpys_median():
         mask = rng.random(shape) < rng.uniform(0.05, 1.0)
         mask.flat[int(rng.integers(mask.size))] = True
         assert _masked_median(values, mask) == float(np.median(values[mask]))
+        wide = float(np.median(values[mask].astype(np.float64)))
+        assert _masked_median(values, mask, np.float64) == wide
+        assert _masked_median(values[mask]) == float(np.median(values[mask]))
 
 
 def test_the_gradient_in_the_searched_crops_is_the_frames_and_the_noise_its_median():

@@ -2080,34 +2080,49 @@ def line_sides(
 
 
 @_jit
-def masked_order_statistic(values: np.ndarray, mask: np.ndarray, k: int) -> np.float32:
-    """The k-th smallest (0-based) of the (N,) float32 ``values`` >= 0 (no NaN) at the (N,) bool
-    ``mask`` (k below its count): ``np.partition(values[mask], k)[k]``, the same value, by a
-    radix selection on the float32 bits (their order as unsigned integers is the values'
-    order for values >= 0): a histogram of the high 16 bits, then of the low 16 bits within
-    the chosen bin. Two passes over the frame instead of a gathered copy and its partition
-    (the seams' noise scale, a median over every pixel with depth)."""
+def middle_values(values: np.ndarray, mask: np.ndarray):
+    """The middle order statistics (k = (n - 1) // 2 and n // 2, 0-based; equal for odd n) of
+    the (N,) float32 ``values`` >= 0 (no NaN) at the (N,) bool ``mask`` (n of them, n > 0):
+    those of ``np.sort(values[mask])``, the values a median averages. A radix selection on the
+    float32 bits (their order as unsigned integers is the values' order for values >= 0: 11,
+    11 and 10 bits, a small histogram each), then the smallest value above the first: a few
+    passes without a gathered copy or its partition (the seams' noise scale over a frame, the
+    depth a pixel without one takes)."""
     bits = values.view(np.uint32)
-    counts = np.zeros(65536, dtype=np.int64)
+    counts = np.zeros(2048, dtype=np.int64)
+    k = 0
     for i in range(bits.shape[0]):
         if mask[i]:
-            counts[bits[i] >> 16] += 1
-    high = 0
+            k += 1
+    count = k
+    k = (count - 1) // 2
+    prefix = np.uint32(0)
     below = 0
-    while below + counts[high] <= k:
-        below += counts[high]
-        high += 1
-    counts[:] = 0
-    for i in range(bits.shape[0]):
-        if mask[i] and (bits[i] >> 16) == high:
-            counts[bits[i] & 65535] += 1
-    low = 0
-    while below + counts[low] <= k:
-        below += counts[low]
-        low += 1
-    out = np.empty(1, dtype=np.uint32)
-    out[0] = (np.uint32(high) << np.uint32(16)) | np.uint32(low)
-    return out.view(np.float32)[0]
+    for shift, width, known in ((21, 2047, 0), (10, 2047, 11), (0, 1023, 22)):
+        counts[:] = 0
+        for i in range(bits.shape[0]):
+            if mask[i] and (known == 0 or (bits[i] >> np.uint32(32 - known)) == prefix):
+                counts[(bits[i] >> np.uint32(shift)) & np.uint32(width)] += 1
+        digit = 0
+        while below + counts[digit] <= k:
+            below += counts[digit]
+            digit += 1
+        prefix = (prefix << np.uint32(32 - known - shift)) | np.uint32(digit)
+        last = counts[digit]
+    # ``prefix`` holds all 32 bits: the k-th value; ``below`` values lie below it and ``last``
+    # equal it.
+    low_bits = prefix
+    high_bits = prefix
+    if count % 2 == 0 and below + last <= k + 1:
+        high_bits = np.uint32(0xFFFFFFFF)
+        for i in range(bits.shape[0]):
+            if mask[i] and bits[i] > low_bits and bits[i] < high_bits:
+                high_bits = bits[i]
+    out = np.empty(2, dtype=np.uint32)
+    out[0] = low_bits
+    out[1] = high_bits
+    chosen = out.view(np.float32)
+    return chosen[0], chosen[1]
 
 
 @_jit

@@ -670,15 +670,23 @@ def _has_flat_face(
     return False
 
 
-def _masked_median(values: np.ndarray, mask: np.ndarray) -> float:
-    """``float(np.median(values[mask]))`` of (H, W) float32 ``values`` >= 0 at (H, W) bool
-    ``mask`` (not empty), the same value: the middle order statistics by a compiled radix
-    selection (``kernels.masked_order_statistic``), their mean by numpy as its median takes it."""
-    flat_values, flat_mask = values.reshape(-1), mask.reshape(-1)
-    count = int(np.count_nonzero(flat_mask))
-    middle = [kernels.masked_order_statistic(flat_values, flat_mask, k)
-              for k in sorted({(count - 1) // 2, count // 2})]  # fmt: skip
-    return float(np.median(np.array(middle, dtype=values.dtype)))
+def _masked_median(values: np.ndarray, mask: np.ndarray | None = None, dtype=None) -> float:
+    """``float(np.median(values[mask].astype(dtype)))`` of ``values`` >= 0 (any shape, no NaN)
+    at the bool ``mask`` of their shape (None: all; none: NaN, as numpy), ``dtype`` the
+    values' own when None: the same value. For float32 values the middle order statistics
+    are compiled (``kernels.middle_values``; a conversion to float64 keeps their order) and
+    their mean is numpy's, as its median takes it; other dtypes take numpy's median."""
+    if values.dtype != np.float32:  # (the compiled selection reads float32 bits)
+        chosen_values = values if mask is None else values[mask]
+        return float(np.median(chosen_values if dtype is None else chosen_values.astype(dtype)))
+    flat = values.reshape(-1)
+    chosen = np.ones(flat.shape, dtype=bool) if mask is None else mask.reshape(-1)
+    count = np.count_nonzero(chosen)
+    if count == 0:
+        return float("nan")  # numpy's median of nothing
+    low, high = kernels.middle_values(flat, chosen)
+    middle = [low] if count % 2 else [low, high]
+    return float(np.median(np.array(middle, dtype=values.dtype if dtype is None else dtype)))
 
 
 def _edge_noise(rgb: np.ndarray, depth_m: np.ndarray, segment_pixels: np.ndarray) -> float:
@@ -1394,10 +1402,12 @@ class _Room:
     def __init__(self, part: np.ndarray, window: tuple[slice, slice], depth_m: np.ndarray,
                  focal_px: float) -> None:  # fmt: skip
         rows, cols = np.nonzero(part[window])
-        depths = depth_m[window][rows, cols].astype(np.float64)
+        measured = depth_m[window][rows, cols]
+        depths = measured.astype(np.float64)
         known = depths > 0
         if not known.all():
-            depths = np.where(known, depths, np.median(depths[known]) if known.any() else 0.0)
+            fill = _masked_median(measured, known, np.float64) if known.any() else 0.0
+            depths = np.where(known, depths, fill)
         self.rows = rows + window[0].start
         self.cols = cols + window[1].start
         self.size = depths / focal_px
@@ -1558,7 +1568,7 @@ def _split(
         depths = sub_depth[inside]
         depths = depths[depths > 0]
         radius_px = float(np.sqrt(float(squared)))
-        if 2.0 * radius_px * float(np.median(depths)) / focal_px < config.seams.min_width_m:
+        if 2.0 * radius_px * _masked_median(depths) / focal_px < config.seams.min_width_m:
             return None
     two = np.where(masks[0], 1, np.where(masks[1], 2, 0))
     nearest = ndimage.distance_transform_edt(two == 0, return_distances=False, return_indices=True)
@@ -1617,5 +1627,5 @@ def _area_m2(part: np.ndarray, depth_m: np.ndarray, focal_px: float) -> float:
     known = depths[has_depth]
     if known.size == 0:
         return 0.0
-    filled = np.where(has_depth, depths, np.median(known))
+    filled = np.where(has_depth, depths, _masked_median(depths, has_depth))
     return float(np.sum(filled**2)) / focal_px**2
