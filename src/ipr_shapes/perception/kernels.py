@@ -2221,6 +2221,37 @@ def hough_votes(
 
 
 @_jit
+def hough_lines(
+    rows: np.ndarray,
+    cols: np.ndarray,
+    own: np.ndarray,
+    spread: int,
+    cos_a: np.ndarray,
+    sin_a: np.ndarray,
+    reach: int,
+    least: int,
+):
+    """The lines with at least ``least`` of ``hough_votes``' votes: their indices (int64,
+    ascending, as ``np.flatnonzero(votes >= least)``) and their votes, read in one compiled
+    pass over the vote array instead of numpy's comparison, search and gather over it (a
+    part's search; the array has 180 directions by twice the crop's diagonal)."""
+    votes = hough_votes(rows, cols, own, spread, cos_a, sin_a, reach)
+    count = 0
+    for index in range(votes.shape[0]):
+        if votes[index] >= least:
+            count += 1
+    lines = np.empty(count, dtype=np.int64)
+    counts = np.empty(count, dtype=np.int64)
+    count = 0
+    for index in range(votes.shape[0]):
+        if votes[index] >= least:
+            lines[count] = index
+            counts[count] = votes[index]
+            count += 1
+    return lines, counts
+
+
+@_jit
 def fragment_borders(
     labels: np.ndarray,
     points: np.ndarray,

@@ -1309,13 +1309,13 @@ def _best_cut(
     own = np.round((direction[rows, cols] % np.pi) / np.pi * _DIRECTIONS).astype(np.int64)
     spread = int(np.ceil(_VOTE_SPREAD_DEG / 180.0 * _DIRECTIONS))
     # Every pixel's votes for its own direction +- spread.
-    votes = kernels.hough_votes(rows, cols, own, spread, cos_a, sin_a, reach)
+    # (And those lines with at least 20 votes, in the order of (direction, offset).)
+    lines, votes = kernels.hough_lines(rows, cols, own, spread, cos_a, sin_a, reach, 20)
     # Each candidate's densest stretch first (cheap), then the checks from the longest down:
     # the first that passes them all is the best.
     # The _CANDIDATES lines with most votes, at least 20; equal votes in the order of
     # (direction, offset).
-    lines = np.flatnonzero(votes >= 20)
-    lines = lines[np.argsort(-votes[lines], kind="stable")][:_CANDIDATES]
+    lines = lines[np.argsort(-votes, kind="stable")][:_CANDIDATES]
     line_a, line_rho = np.divmod(lines, 2 * reach + 1)
     line_rho -= reach
     # Each line's chord through the part, its densest stretch and whether that reaches the
