@@ -995,6 +995,23 @@ def test_row_percentiles_are_numpys_bits():
         )
 
 
+def test_single_percentiles_are_numpys():
+    """``_percentiles`` (a face's bend, a strip's width, a piece's span): ``np.percentile``'s
+    floats in float64 (from a sorted row) and float32 (numpy's own), one value to thousands."""
+    from ipr_shapes.perception.seams import _percentiles
+
+    rng = np.random.default_rng(13)
+    for trial in range(200):
+        count = int(rng.integers(1, 3000)) if trial % 4 else int(rng.integers(1, 4))
+        dtype = np.float32 if trial % 5 == 0 else np.float64
+        values = (rng.normal(size=count) * 10 ** rng.uniform(-3, 1)).astype(dtype)
+        if trial % 3 == 0:
+            values = np.round(values, 2).astype(dtype)  # ties
+        for percents in ((90.0,), (98.0,), (98.0, 2.0)):
+            expected = [float(value) for value in np.percentile(values, percents)]
+            assert _percentiles(values, percents) == expected
+
+
 def test_the_frames_faces_skip_pieces_too_small_for_a_strip():
     """Strips 19 cm long need faces at least 18 cm long: a 6 cm piece's face is never
     measured, and the answer is the one from measuring every face."""

@@ -547,7 +547,7 @@ def _face_size(
     cloud = points.reshape(-1, 3)[usable][on_face].astype(np.float64)
     centred = cloud - cloud.mean(axis=0)
     # A box's face is flat: a can's side or a bottle's is not.
-    if float(np.percentile(np.abs(centred @ normal), 90)) > config.seams.max_bend_m:
+    if _percentiles(np.abs(centred @ normal), (90.0,))[0] > config.seams.max_bend_m:
         return None
     flat = centred - np.outer(centred @ normal, normal)
     basis = np.linalg.svd(flat, full_matrices=False)[2][:2]
@@ -585,6 +585,15 @@ def _face_size(
             if span < (1.0 - tolerance) * extent[other]:
                 return None
     return float(extent.max()), float(extent.min())
+
+
+def _percentiles(values: np.ndarray, percents: tuple[float, ...]) -> list[float]:
+    """``np.percentile(values, percents)`` of the (N,) ``values`` (N > 0) as floats, the same
+    values: from a sorted row (``_row_percentiles``) for float64 values, N >= 2; numpy's
+    otherwise (its float32 interpolation stays float32)."""
+    if values.dtype == np.float64 and values.ndim == 1 and len(values) >= 2:
+        return [float(value) for value in _row_percentiles(values[None, :], percents)[:, 0]]
+    return [float(value) for value in np.percentile(values, percents)]
 
 
 def _row_percentiles(rows: np.ndarray, percents: tuple[float, ...]) -> np.ndarray:
@@ -1021,7 +1030,7 @@ def _repeated(
     bounds = []
     for sign in (1.0, -1.0):
         side = sign * across[sign * across > 0]
-        widest = float(np.percentile(side, 98)) if side.size else 0.0
+        widest = _percentiles(side, (98.0,))[0] if side.size else 0.0
         nearer = [sign * offset for offset in offsets if sign * offset >= config.seams.min_width_m]
         bounds.append(np.array([widest, *nearer]))
     ratio = np.minimum.outer(*bounds) / np.maximum(np.maximum.outer(*bounds), 1e-9)
@@ -1272,8 +1281,8 @@ def _alike_widths(
     theirs = points[other & measured].astype(np.float64) @ direction
     if len(along) < 2 or len(theirs) < 2:
         return False
-    mine = float(np.subtract(*np.percentile(along, [98, 2])))
-    width = float(np.subtract(*np.percentile(theirs, [98, 2])))
+    mine = float(np.subtract(*_percentiles(along, (98.0, 2.0))))
+    width = float(np.subtract(*_percentiles(theirs, (98.0, 2.0))))
     return min(mine, width) >= (1.0 - tolerance) * max(mine, width, 1e-9)
 
 
@@ -1450,7 +1459,7 @@ def _straight_seam(
     direction = np.linalg.svd(middle - centre, full_matrices=False)[2][0]
     offsets = middle - centre
     bend = np.linalg.norm(offsets - np.outer(offsets @ direction, direction), axis=1)
-    if float(np.percentile(bend, 90)) > config.seams.max_bend_m:
+    if _percentiles(bend, (90.0,))[0] > config.seams.max_bend_m:
         return None
     across = np.cross(normal, direction)
     across_norm = float(np.linalg.norm(across))
