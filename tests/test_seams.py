@@ -754,6 +754,29 @@ def test_a_trial_cut_without_room_for_two_pieces_is_skipped():
             assert sides[side, 2] == pytest.approx(spread * 1e-3)
 
 
+def test_the_compiled_room_is_numpys():
+    """``_Room`` on float32 depths (``kernels.room_pixels``) gives the numbers of its numpy
+    path (the same depths as float64): pixels row-major, sizes with missing depths filled by
+    the median of the others (odd and even counts, ties, none known), footprints."""
+    from ipr_shapes.perception.seams import _Room
+
+    rng = np.random.default_rng(14)
+    for trial in range(300):
+        height, width = (int(n) for n in rng.integers(1, 40, 2))
+        part = rng.random((height, width)) < rng.uniform(0.05, 1.0)
+        depth = rng.uniform(0.3, 1.2, (height, width)).astype(np.float32)
+        if trial % 3 == 0:
+            depth = np.round(depth, 2).astype(np.float32)  # ties
+        depth[rng.random((height, width)) < rng.uniform(0.0, 1.0)] = 0.0
+        if trial % 7 == 0:
+            depth[:] = 0.0
+        window = (slice(0, height), slice(0, width))
+        compiled = _Room(part, window, depth, 500.0)
+        reference = _Room(part, window, depth.astype(np.float64), 500.0)
+        for name in ("rows", "cols", "size", "foot"):
+            assert np.array_equal(getattr(compiled, name), getattr(reference, name))
+
+
 def test_the_screens_room_test_that_stops_early_answers_as_the_full_sums():
     """``kernels.line_sides_fit`` (the candidate screen's room test, which stops once every
     test holds) answers as ``line_sides``' full sums compared as ``_Room.fits`` does, on

@@ -2126,6 +2126,54 @@ def middle_values(values: np.ndarray, mask: np.ndarray):
 
 
 @_jit
+def room_pixels(part: np.ndarray, depth: np.ndarray, top: int, left: int, focal_px: float):
+    """A part's pixels for the seams' room test (``seams._Room``): the (N,) int64 rows and
+    columns (plus ``top``, ``left``) of the (h, w) bool ``part``'s pixels, row-major (as
+    ``np.nonzero``), and each one's size (N,) float64 (m per px: its float32 ``depth``,
+    or the median of the others' where it has none, 0 with none at all, over ``focal_px``)
+    and footprint (its square). The median as numpy's of the float64 depths (the middle
+    values by ``middle_values``, averaged as numpy's mean of two); one compiled pass for
+    numpy's search, gathers and temporaries."""
+    height, width = part.shape
+    count = 0
+    missing = 0
+    for r in range(height):
+        for c in range(width):
+            if part[r, c]:
+                count += 1
+                if not depth[r, c] > 0:
+                    missing += 1
+    rows = np.empty(count, dtype=np.int64)
+    cols = np.empty(count, dtype=np.int64)
+    measured = np.empty(count, dtype=np.float32)
+    k = 0
+    for r in range(height):
+        for c in range(width):
+            if part[r, c]:
+                rows[k] = r + top
+                cols[k] = c + left
+                measured[k] = depth[r, c]
+                k += 1
+    fill = 0.0
+    if missing > 0 and missing < count:
+        known = measured > 0
+        low, high = middle_values(measured, known)
+        if (count - missing) % 2 == 1:
+            fill = np.float64(low)
+        else:
+            fill = (np.float64(low) + np.float64(high)) / 2.0
+    size = np.empty(count)
+    foot = np.empty(count)
+    for i in range(count):
+        value = np.float64(measured[i])
+        if not value > 0:
+            value = fill
+        size[i] = value / focal_px
+        foot[i] = size[i] * size[i]
+    return rows, cols, size, foot
+
+
+@_jit
 def line_sides_fit(
     rows: np.ndarray,
     cols: np.ndarray,

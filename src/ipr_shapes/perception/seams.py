@@ -1410,6 +1410,11 @@ class _Room:
 
     def __init__(self, part: np.ndarray, window: tuple[slice, slice], depth_m: np.ndarray,
                  focal_px: float) -> None:  # fmt: skip
+        if depth_m.dtype == np.float32:  # compiled, the same numbers
+            self.rows, self.cols, self.size, self.foot = kernels.room_pixels(
+                part[window], depth_m[window], window[0].start, window[1].start, float(focal_px)
+            )
+            return
         rows, cols = np.nonzero(part[window])
         measured = depth_m[window][rows, cols]
         depths = measured.astype(np.float64)
