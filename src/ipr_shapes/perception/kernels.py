@@ -2699,8 +2699,9 @@ def seam_screen(
     """The first of the candidate seams ``which[start:]`` (line k: x cos + y sin = rho, its stretch
     ``stretch_rows/cols[bounds[k]:bounds[k + 1]]``), whether it passes the seams' room test
     (``line_sides`` over the part's pixels ``room_*`` against ``min_area`` and ``min_width``:
-    the same numbers as ``seams._Room.fits``) and whether the mean normals (``normals`` (h, w,
-    3)) of its side bands among ``part_rows/cols`` (the part's pixels with a normal; the bands
+    the same answers as ``seams._Room.fits``, by ``line_sides_fit``) and whether the mean normals (``normals`` (h, w,
+    3)) of its side bands among ``part_rows/cols`` (the part's pixels with a normal, row-major:
+    only the rows of the seam's box are read; the bands
     ``near``-``far`` px off the line within the stretch's extent, each of at least 20 pixels,
     as ``seams._coplanar_sides`` chooses them) lie within ``max_angle_deg``: one pass for all
     candidates instead of one numpy call each; its position in ``which``, or -1 if none. The
