@@ -172,6 +172,22 @@ MUTANTS: tuple[Mutant, ...] = (
         _t("inference"),
     ),
     Mutant(
+        "drawn-models-counted-twice",
+        "inference",
+        "a drawn joint model's own weight is added to its factorised weight instead of replacing it",
+        "correction = np.exp(exact - scale) - np.exp(factorised - scale)",
+        "correction = np.exp(exact - scale)",
+        _t("inference"),
+    ),
+    Mutant(
+        "drawn-failed-model-kept",
+        "inference",
+        "a drawn joint model whose simulation failed keeps its factorised weight",
+        "drawn[choice] = own",
+        "drawn.update({choice: own} if result.norms is not None else {})",
+        _t("inference"),
+    ),
+    Mutant(
         "rest-evidence-ignored",
         "inference",
         "with rest_drop_m set, the candidates' rest evidence is not added to their unary factor",
