@@ -180,6 +180,14 @@ MUTANTS: tuple[Mutant, ...] = (
         _t("inference"),
     ),
     Mutant(
+        "undrawn-models-own-terms-only",
+        "inference",
+        "the undrawn joint models are scored by the candidates' own terms alone, not their first-order expansion in the neighbours",
+        'config = dataclasses.replace(problem.config, evidence="neighbours")',
+        "config = problem.config",
+        _t("inference"),
+    ),
+    Mutant(
         "drawn-failed-model-kept",
         "inference",
         "a drawn joint model whose simulation failed keeps its factorised weight",

@@ -467,6 +467,30 @@ def test_drawn_models_scored_by_their_own_likelihood_give_exhaustive_searchs_mar
     assert marginals(results[:2], factorised_problem)[1] == pytest.approx([0.5, 0.5])
 
 
+def test_undrawn_models_take_what_the_drawn_ones_said_of_a_candidate_to_its_neighbour():
+    from ipr_shapes.inference import marginals
+
+    # Object 1's candidate 1 worsens object 0's depth by 2 of norm with either of object 0's
+    # candidates; the model (1, 1) is not drawn. Declared neighbours, its weight is the
+    # first-order expansion: object 0's residual in the drawn (0, 1) counts against object
+    # 1's candidate 1 there too; without neighbours it would count for nothing.
+    norms = {(0, 0): [0.01, 0.02], (0, 1): [2.01, 0.02], (1, 0): [0.02, 0.02]}
+    undrawn = [0.02 + 2.0, 0.02]
+    base = _fabricated_problem(2, {(0, 1): np.ones((2, 2), dtype=bool)}, drawn_models="exact")
+    near = dataclasses.replace(base, neighbours=((1,), (0,)))
+    results = [_scored(near, s, c, n) for s, (c, n) in enumerate(norms.items())]
+    every = [*results, _scored(near, 3, (1, 1), undrawn)]
+    exhaustive = marginals(every, near, joint=True)[1][1]
+    first_order = marginals(results, near)[1][1]
+    own_only = marginals(results, base)[1][1]
+    assert exhaustive < first_order < own_only
+    # The output's own-evidence weights do not take the neighbours' residuals ("own").
+    from ipr_shapes.inference.estimators import medoid_weights
+
+    for a, b in zip(medoid_weights(results, near), medoid_weights(results, base), strict=True):
+        assert a == pytest.approx(b)
+
+
 def test_a_drawn_model_that_failed_takes_its_share_of_the_marginals_away():
     from ipr_shapes.inference import marginals
 

@@ -101,19 +101,22 @@ class InferenceConfig:
         drawn_models: how the joint models drawn enter "hypothesis" weighting's marginals (the
             written probabilities; not the output shape, which the candidates' own evidence
             chooses, ``medoid_weights``): "factorised" (every joint model scored by the
-            product of its candidates' unary factors) or "exact" (the same, except that each
-            distinct joint model drawn and simulated is scored by its own likelihood times
-            prior, as exhaustive search scores it, and an impossible one by 0;
-            ``estimators.drawn_exact_marginals``). Why: the unary factors drop how a
+            product of its candidates' unary factors of ``evidence``) or "exact" (each
+            distinct joint model drawn and simulated scored by its own likelihood times
+            prior, as exhaustive search scores it, and an impossible one by 0; the others by
+            the product of the unary factors of "neighbours" evidence, the joint term's
+            additive expansion to first order in the neighbours;
+            ``estimators.drawn_exact_marginals``). Why: own-term unary factors drop how a
             neighbour's shape changes an object's own term (a candidate that makes the
             object beside it render or settle worse is not blamed for it), a bias that more
             samples do not remove; with the drawn models' own likelihoods the marginals
-            become exhaustive search's as the draws cover the joint models, and stay the
-            factorised ones where they cover few. "exact" is the default since 2026-11-28:
-            emulated on the development exhaustive tables (32 objects with a clear exact
-            favourite, 20 seeds) it agreed with exhaustive on 0.736 / 0.803 / 0.866 of them at
-            0.18 / 0.3 / 0.5 of its compute against 0.702 / 0.745 / 0.727, 0.948 against 0.719
-            at the full compute; the output shapes do not change
+            become exhaustive search's as the draws cover the joint models, and the
+            neighbours' residuals carry what the drawn models say of that to the undrawn
+            ones. "exact" is the default since 2026-11-28: emulated on the development
+            exhaustive tables (32 objects with a clear exact favourite, 20 seeds) it agreed
+            with exhaustive on 0.797 / 0.863 / 0.934 of them at 0.18 / 0.3 / 0.5 of its
+            compute against 0.698 / 0.745 / 0.727 (the drawn models alone: 0.734 / 0.802 /
+            0.866); the output shapes do not change: they are chosen by ``evidence``
             (docs/experiments/2026-11-28-drawn-models-exact.md).
         rest_drop_m: the rest evidence's scale (m; None: off). Each object is seen at rest,
             its neighbours too: P(object k at rest where seen | X) is modelled as

@@ -242,7 +242,8 @@ def drawn_exact_marginals(
     allow scored by its own log likelihood plus log prior instead of the sum of its
     candidates' unary factors (0 for a failed simulation): P(X) proportional to P(O | X) P(X)
     for the models simulated, to prod_k exp(unary_log[k][X_k]) for the others
-    (``InferenceConfig.drawn_models`` "exact"). Every joint model simulated: exhaustive
+    (``InferenceConfig.drawn_models`` "exact", with the unary factors of "neighbours"
+    evidence: the joint term's additive expansion to first order in the neighbours). Every joint model simulated: exhaustive
     search's marginals; none: the factorised ones. The sum over the joint models is exact
     per group of interacting objects (``_factor_marginals``); a model's correction (its own
     weight minus its factorised one) is added to the marginals of its candidates. Falls back
@@ -370,10 +371,14 @@ def _single_friction_marginals(
     if not any(r.norms is not None for r in results):
         return None
     if not joint and problem.config.weighting == "hypothesis":
-        unary = hypothesis_unary(results, problem)
         if problem.config.drawn_models == "exact":
-            return drawn_exact_marginals(results, problem, unary)
-        return factor_marginals(unary, problem)
+            # The undrawn models by the joint term's expansion to first order in the
+            # neighbours (each candidate's own term plus its neighbours' residuals), whatever
+            # ``evidence`` the output shape is chosen by.
+            config = dataclasses.replace(problem.config, evidence="neighbours")
+            first_order = hypothesis_unary(results, dataclasses.replace(problem, config=config))
+            return drawn_exact_marginals(results, problem, first_order)
+        return factor_marginals(hypothesis_unary(results, problem), problem)
     log_weights = sample_log_weights(results, problem, joint=joint)
     estimates = []
     for k, candidates in enumerate(problem.candidates):
