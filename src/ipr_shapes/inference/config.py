@@ -116,7 +116,8 @@ class InferenceConfig:
             exhaustive tables (32 objects with a clear exact favourite, 20 seeds) it agreed
             with exhaustive on 0.797 / 0.863 / 0.934 of them at 0.18 / 0.3 / 0.5 of its
             compute against 0.698 / 0.745 / 0.727 (the drawn models alone: 0.734 / 0.802 /
-            0.866); the output shapes do not change: they are chosen by ``evidence``
+            0.866), 1.000 against 0.719 at the full compute; the output shapes do not change:
+            they are chosen by ``evidence``
             (docs/experiments/2026-11-28-drawn-models-exact.md).
         rest_drop_m: the rest evidence's scale (m; None: off). Each object is seen at rest,
             its neighbours too: P(object k at rest where seen | X) is modelled as
