@@ -243,11 +243,12 @@ def drawn_exact_marginals(
     candidates' unary factors (0 for a failed simulation): P(X) proportional to P(O | X) P(X)
     for the models simulated, to prod_k exp(unary_log[k][X_k]) for the others
     (``InferenceConfig.drawn_models`` "exact", with the unary factors of "neighbours"
-    evidence: the joint term's additive expansion to first order in the neighbours). Every joint model simulated: exhaustive
-    search's marginals; none: the factorised ones. The sum over the joint models is exact
-    per group of interacting objects (``_factor_marginals``); a model's correction (its own
-    weight minus its factorised one) is added to the marginals of its candidates. Falls back
-    to the factorised marginals when the corrected ones would not be a distribution."""
+    evidence: the joint term's additive expansion to first order in the neighbours). Every
+    joint model simulated: exhaustive search's marginals; none: the factorised ones. The sum
+    over the joint models is exact per group of interacting objects (``_factor_marginals``);
+    a model's correction (its own weight minus its factorised one) is added to the marginals
+    of its candidates. Falls back to the factorised marginals when the corrected ones would
+    not be a distribution."""
     estimates, log_z = _factor_marginals(unary_log, problem, partition=True)
     compatible = problem.compatible
     drawn: dict[tuple[int, ...], float] = {}
