@@ -120,6 +120,7 @@ def measure_scene(
         "candidate_iou": candidate_iou,
         "timing": timing,
         "true_frictions": _true_frictions(path),
+        "points": {o.id: o.points for o in perception.objects[0]},
     }
 
 
