@@ -789,3 +789,33 @@ def test_surface_fit_tells_the_true_box_from_a_deeper_one_the_depth_cannot():
     assert [s.choice for s in on.samples] == [s.choice for s in off.samples]
     missing = run(InferenceConfig(max_samples=8, surface_fit=True))
     assert missing.posteriors[0].probabilities == pytest.approx(off.posteriors[0].probabilities)
+
+
+def test_the_pipeline_hands_the_objects_points_to_the_surface_fit(scene_dir, monkeypatch):
+    """With ``surface_fit`` on, ``run_pipeline`` gives the physics methods each frame-0
+    object's observed points (the fused ones with the views); with it off, none."""
+    from ipr_shapes import pipeline
+    from ipr_shapes.config import Config
+    from ipr_shapes.scene import load_scene
+
+    seen = []
+    original = pipeline.infer_shapes
+
+    def recording(*args, **kwargs):
+        seen.append(kwargs.get("points"))
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(pipeline, "infer_shapes", recording)
+    base = Config()
+    for fit in (True, False):
+        config = dataclasses.replace(
+            base, inference=dataclasses.replace(base.inference, surface_fit=fit)
+        )
+        result = pipeline.run_pipeline(
+            load_scene(scene_dir), config, method="ipr+uniform", samples=2, workers=1
+        )
+    on, off = seen
+    assert off is None
+    objects = result.perception.objects[0]
+    assert objects and sorted(on) == sorted(o.id for o in objects)
+    assert all(np.array_equal(on[o.id], o.points) for o in objects)
