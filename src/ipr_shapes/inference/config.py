@@ -134,7 +134,12 @@ class InferenceConfig:
             observation and is sharp (the candidate as placed, no simulated settling or push
             and its sim-to-real mismatch), while the simulated frames' term is weighed at
             ``likelihood.alpha_per_m``, low because of that mismatch. Applies to every
-            weighting (a unary factor like the prior); the samples drawn are the same.
+            weighting (a unary factor like the prior); the samples drawn are the same. Off by
+            default: at equal samples it lost on both development sets with gravity alone
+            (-0.005, -0.004 object IoU) and on ycb-dynamic (-0.002): it fixes the physics'
+            choice on well-seen objects but, on occluded ones, prefers the candidates built on
+            the seen points over the families that extrapolate
+            (docs/experiments/2026-11-28-surface-fit-evidence.md).
     """
 
     CHECKS: ClassVar[Checks] = {
