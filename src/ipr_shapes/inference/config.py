@@ -136,9 +136,9 @@ class InferenceConfig:
             ``likelihood.alpha_per_m``, low because of that mismatch. Applies to every
             weighting (a unary factor like the prior); the samples drawn are the same. Off by
             default: at equal samples it lost on both development sets with gravity alone
-            (-0.005, -0.004 object IoU) and on ycb-dynamic (-0.002): it fixes the physics'
-            choice on well-seen objects but, on occluded ones, prefers the candidates built on
-            the seen points over the families that extrapolate
+            (-0.005, -0.004 object IoU) and on ycb-dynamic (-0.002); it moves choices both
+            ways in every band of visible fraction (on dev 9100 it fixed the well-seen objects
+            and lost occluded ones, on ycb-dynamic the reverse)
             (docs/experiments/2026-11-28-surface-fit-evidence.md).
     """
 
