@@ -18,7 +18,8 @@ inference never does):
 - the Collision Checker's output (posterior medoid);
 - the IPR estimate per weighting (``InferenceConfig.weighting``) and alpha, with every frame
   (the full method) and with frame 0 only (the gravity-only variants), from the same samples
-  (alpha and the weighting only weigh them);
+  (alpha and the weighting only weigh them); at alpha 0.2 also with the seen-surface factor
+  (``InferenceConfig.surface_fit``; each scene's frame-0 points are kept in the cache);
 - the best of each object's candidates (oracle) and of the candidates the sampler visited;
 - with ``--frictions`` (off by default, as ``InferenceConfig.frictions``; include
   ``physics.friction``, 1.0) the friction search: the same samples scored under
@@ -120,6 +121,7 @@ def measure_scene(
         "candidate_iou": candidate_iou,
         "timing": timing,
         "true_frictions": _true_frictions(path),
+        "points": {o.id: o.points for o in perception.objects[0]},
     }
 
 
@@ -202,20 +204,34 @@ def estimate_iou(
     prior: str = "uniform",
     friction: float | str | None = None,
     count: int | None = None,
+    surface: bool = False,
 ) -> dict[int, float]:
     """IoU of the IPR output per matched object with ``alpha``, the first ``frames``,
     ``weighting`` (``InferenceConfig.weighting``), ``prior`` ("uniform" or "size"), the
     samples scored under ``friction`` alone (None: marginalised over the searched frictions;
     "sampled S": each sample under one friction drawn uniformly with seed S, as if friction
     were sampled with the shapes at the cost of one; "averaged": each candidate's likelihood
-    averaged over the frictions, without a posterior over them) and the first ``count``
-    samples (None: all)."""
+    averaged over the frictions, without a posterior over them), the first ``count``
+    samples (None: all) and, with ``surface``, each candidate's seen-surface factor
+    (``InferenceConfig.surface_fit``) from the scene's frame-0 points."""
     import dataclasses
 
     from ipr_shapes.factor_graph import posterior_medoid
-    from ipr_shapes.inference import at_friction, medoid_weights, size_log_prior
+    from ipr_shapes.inference import (
+        at_friction,
+        medoid_weights,
+        size_log_prior,
+        surface_log_likelihoods,
+    )
 
     problem = scene["problem"]
+    if surface:
+        points = scene["points"]
+        terms = tuple(
+            surface_log_likelihoods(c, points[i]) if i in points else np.zeros(len(c))
+            for c, i in zip(problem.candidates, problem.ids, strict=True)
+        )
+        problem = dataclasses.replace(problem, surface_log_likelihood=terms)
     if prior == "size":
         log_prior = tuple(
             size_log_prior(c, problem.config.size_prior_exponent) for c in problem.candidates
@@ -328,6 +344,15 @@ def main(argv: list[str] | None = None) -> int:
                 rows.append(
                     (f"IPR {weighting}, {label}, alpha {alpha:g}", mean_over_truths(scenes, values))
                 )
+    if all("points" in s for s in scenes):  # caches written before the points have none
+        for frames, label in ((None, "every frame"), (1, "frame 0 only")):
+            values = [estimate_iou(s, 0.2, frames, surface=True) for s in scenes]
+            rows.append(
+                (
+                    f"IPR hypothesis, {label}, alpha 0.2, seen-surface fit",
+                    mean_over_truths(scenes, values),
+                )
+            )
     default = InferenceConfig().physics.friction
     if all(default in s["problem"].friction_values for s in scenes) and any(
         len(s["problem"].friction_values) > 1 for s in scenes

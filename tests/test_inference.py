@@ -862,3 +862,118 @@ def test_rest_lift_tells_a_shape_too_large_below_the_support_from_the_true_one()
             + f.drops[0][s.choice[0]] / 0.004
         )
     assert lifts.posteriors[0].probabilities[0] > 0.8 and lifts.posteriors[0].best == 0
+
+
+def _box_face_points() -> np.ndarray:
+    """(N, 3) points on the true box's front (y = -3 cm) and back (y = +3 cm) faces, as if
+    seen from both sides (m, world), one per 5 mm cell (at the cells' centres in x and z)."""
+    xs = np.arange(-0.0475, 0.048, 0.005)
+    zs = np.arange(0.0025, 0.038, 0.005)
+    face = np.array([[x, 0.0, z] for x in xs for z in zs])
+    return np.concatenate([face + [0.0, y, 0.0] for y in (-0.03, 0.03)])
+
+
+def test_surface_fit_scores_a_candidate_by_its_misfit_to_the_seen_surface():
+    """``surface_log_likelihoods``: the true box passes through every point (misfit 0); the
+    deep box shares the front face, and the back face's points lie inside it, each as far from
+    its boundary as its nearest plane: -e^2 / (2 s^2) with e the root mean square of those
+    distances over the points (one per 5 mm cell) and s^2 = pitch^2 / 12 (the floor, the
+    closest candidate's distance, is 0 at every point). Fewer than two candidates or no point:
+    zeros."""
+    from ipr_shapes.inference import surface_log_likelihoods
+
+    points = _box_face_points()
+    pitch = TRUE_BOX.voxel_pitch_m
+    low, high = np.array([-0.05, -0.03, 0.0]), np.array([0.05, 0.09, 0.04])
+    inside = np.minimum(points - low, high - points).min(axis=1)
+    e2 = np.mean(inside**2)  # the front face's points are on the deep box's boundary: 0
+    assert e2 > 0
+    scores = surface_log_likelihoods((TRUE_BOX, DEEP_BOX), points)
+    assert scores[0] == 0.0
+    assert scores[1] == pytest.approx(-e2 / (2 * pitch**2 / 12))
+    # Reversed order, the same scores; one candidate or no point: nothing to compare.
+    assert surface_log_likelihoods((DEEP_BOX, TRUE_BOX), points) == pytest.approx(scores[::-1])
+    assert surface_log_likelihoods((TRUE_BOX,), points).tolist() == [0.0]
+    assert surface_log_likelihoods((TRUE_BOX, DEEP_BOX), np.zeros((0, 3))).tolist() == [0.0, 0.0]
+
+
+def test_surface_fit_multiplies_every_candidates_evidence_in_every_weighting():
+    """With ``surface_log_likelihood`` each candidate's weight is its physics evidence times
+    its surface likelihood: drawn or not, under "hypothesis" weighting (marginals and medoid
+    weights), "object" and "joint"; without it (the default) the weights are main's."""
+    from ipr_shapes.inference import marginals, medoid_weights
+
+    surface = (np.array([0.0, -1.5]),)
+    plain = _fabricated_problem(1)
+    fitted = dataclasses.replace(plain, surface_log_likelihood=surface)
+    scale = plain.config.likelihood.alpha_per_m * plain.observed.decimation
+    # Candidate 1 fits the depth better by 0.01 of error norm; its surface worse by 1.5.
+    results = [_result(0, (0,), [0.05], (np.log(0.5),)), _result(1, (1,), [0.04], (np.log(0.5),))]
+    for estimate in (marginals, medoid_weights):
+        before, after = estimate(results, plain)[0], estimate(results, fitted)[0]
+        assert before[1] / before[0] == pytest.approx(np.exp(scale * 0.01))
+        assert after[1] / after[0] == pytest.approx(np.exp(scale * 0.01 - 1.5))
+    for weighting in ("object", "joint"):
+        config = dataclasses.replace(plain.config, weighting=weighting)
+        before = marginals(results, dataclasses.replace(plain, config=config))[0]
+        after = marginals(results, dataclasses.replace(fitted, config=config))[0]
+        assert after[1] / after[0] == pytest.approx(before[1] / before[0] * np.exp(-1.5))
+    # Only candidate 0 drawn: candidate 1 has no evidence of its own, but its surface term.
+    assert marginals(results[:1], plain)[0] == pytest.approx([0.5, 0.5])
+    only = marginals(results[:1], fitted)[0]
+    assert only[1] / only[0] == pytest.approx(np.exp(-1.5))
+
+
+def test_surface_fit_tells_the_true_box_from_a_deeper_one_the_depth_cannot():
+    """From the low camera the true box and the deep one (the same front and top, 6 cm deeper
+    behind) render alike: gravity alone leaves them both probable. With the box's back face
+    among its observed points (as a view from behind would give) and ``surface_fit`` on, the
+    deep box, whose surface runs 6 cm behind that face, is ruled out; with it off (the
+    default) or no points given the result is the same as before."""
+    observed = _push_scene().only(1)
+    points = {1: _box_face_points()}
+
+    def run(config, points=None):
+        return infer_shapes(
+            _prepared(TRUE_BOX, DEEP_BOX), (SUPPORT,), observed,
+            method="ipr+uniform", config=config, workers=1, points=points,
+        )  # fmt: skip
+
+    assert InferenceConfig().surface_fit is False
+    off = run(InferenceConfig(max_samples=8), points)
+    assert 0.2 < off.posteriors[0].probabilities[0] < 0.8
+    on = run(InferenceConfig(max_samples=8, surface_fit=True), points)
+    assert on.posteriors[0].probabilities[0] > 0.999 and on.posteriors[0].best == 0
+    assert [s.choice for s in on.samples] == [s.choice for s in off.samples]
+    missing = run(InferenceConfig(max_samples=8, surface_fit=True))
+    assert missing.posteriors[0].probabilities == pytest.approx(off.posteriors[0].probabilities)
+
+
+def test_the_pipeline_hands_the_objects_points_to_the_surface_fit(scene_dir, monkeypatch):
+    """With ``surface_fit`` on, ``run_pipeline`` gives the physics methods each frame-0
+    object's observed points (the fused ones with the views); with it off, none."""
+    from ipr_shapes import pipeline
+    from ipr_shapes.config import Config
+    from ipr_shapes.scene import load_scene
+
+    seen = []
+    original = pipeline.infer_shapes
+
+    def recording(*args, **kwargs):
+        seen.append(kwargs.get("points"))
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(pipeline, "infer_shapes", recording)
+    base = Config()
+    for fit in (True, False):
+        config = dataclasses.replace(
+            base, inference=dataclasses.replace(base.inference, surface_fit=fit)
+        )
+        result = pipeline.run_pipeline(
+            load_scene(scene_dir), config, method="ipr+uniform", samples=2, workers=1
+        )
+    on, off = seen
+    assert off is None
+    objects = result.perception.objects[0]
+    assert objects and sorted(on) == sorted(o.id for o in objects)
+    assert all(np.array_equal(on[o.id], o.points) for o in objects)

@@ -336,6 +336,9 @@ def infer_with_physics(
             deadline=deadline,
             workers=workers,
             progress=progress,
+            points={o.id: o.points for o in fused.objects}
+            if config.inference.surface_fit
+            else None,
         )
     except IprError as error:  # say which scene the method refused
         raise IprError(f"{scene.path}: {error}") from None

@@ -127,6 +127,7 @@ from ipr_shapes.inference.problem import (
     SampleResult,
     build_problem,
     size_log_prior,
+    surface_log_likelihoods,
 )
 from ipr_shapes.inference.sampler import Sampler
 
@@ -160,4 +161,5 @@ __all__ = [
     "run_samples",
     "sample_log_weights",
     "size_log_prior",
+    "surface_log_likelihoods",
 ]

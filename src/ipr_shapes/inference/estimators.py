@@ -126,7 +126,10 @@ def object_log_weights(results: Sequence[SampleResult], problem: InferenceProble
         own = _log_mean_exp(own)
         for k, j in enumerate(result.choice):
             weights[row, k] = (
-                own[k] + float(problem.log_prior[k][j]) - float(result.object_log_proposal[k])
+                own[k]
+                + float(problem.log_prior[k][j])
+                + float(problem.surface_term(k)[j])
+                - float(result.object_log_proposal[k])
             )
     return weights
 
@@ -303,7 +306,9 @@ def friction_posterior(
         if not any(r.norms is not None for r in results_f):
             evidence[f] = -np.inf
         elif weighting == "joint":
-            evidence[f] = np.logaddexp.reduce([r.log_weight for r in results_f])
+            evidence[f] = np.logaddexp.reduce(
+                [r.log_weight + problem.surface_of(r.choice) for r in results_f]
+            )
         elif weighting == "object":
             weights = object_log_weights(results_f, problem)
             evidence[f] = float(np.logaddexp.reduce(weights, axis=0).sum())
@@ -313,6 +318,7 @@ def friction_posterior(
                 keep = sampled[k]
                 prior = problem.log_prior[k][keep]
                 mean = np.nan_to_num(means[keep], nan=-np.inf)  # no success under f: 0
+                mean = mean + problem.surface_term(k)[keep]
                 total += float(np.logaddexp.reduce(mean + prior - np.logaddexp.reduce(prior)))
             evidence[f] = total
     if not np.isfinite(evidence).any():
@@ -361,7 +367,7 @@ def hypothesis_unary(
                 evidence = np.where(chosen, means, mean)
         if rest is not None:
             evidence = evidence + rest[k]
-        unary.append(evidence + problem.log_prior[k])
+        unary.append(evidence + problem.surface_term(k) + problem.log_prior[k])
     return unary
 
 
@@ -468,7 +474,9 @@ def sample_log_weights(
     ``InferenceConfig.weighting`` is "joint". With "hypothesis" weighting these per-object
     weights only serve as the effective-sample-size diagnostic of the summary."""
     if joint or problem.config.weighting == "joint":
-        joint_weights = np.array([r.log_weight for r in results], dtype=float)
+        joint_weights = np.array(
+            [r.log_weight + problem.surface_of(r.choice) for r in results], dtype=float
+        )
         return np.repeat(joint_weights[:, None], problem.count, axis=1)
     return object_log_weights(results, problem)
 

@@ -6,7 +6,7 @@ import itertools
 import logging
 import math
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -67,6 +67,7 @@ def infer_shapes(
     deadline: float | None = None,
     workers: int | None = None,
     progress: ProgressCallback | None = None,
+    points: Mapping[int, np.ndarray] | None = None,
 ) -> InferenceOutcome:
     """Marginal shape posteriors by IPR (module doc).
 
@@ -84,6 +85,9 @@ def infer_shapes(
         workers: overrides ``config.workers``.
         progress: observer of the samples drawn and the time left (``ipr_shapes.progress``, stage
             ``sampling``).
+        points: per object id its observed points ((N, 3), world, m), which
+            ``config.surface_fit`` scores each candidate's surface against (None: no surface
+            factor).
     """
     variant = get_method(method)
     if not variant.physics:
@@ -121,7 +125,7 @@ def infer_shapes(
             frames = observed.only(max(1, before))
     problem, indices = build_problem(
         prepared, uniform, planes, frames,
-        variant=variant, pusher=pusher, pushes=pushes, config=config, seed=seed,
+        variant=variant, pusher=pusher, pushes=pushes, config=config, seed=seed, points=points,
     )  # fmt: skip
     workers = workers or config.workers or default_workers()
     if variant.exhaustive:

@@ -4,11 +4,12 @@ the observations (picklable, sent once to each worker), and one evaluated joint 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
+from ipr_shapes.collision_checker import fit_weights, surface_cells, surface_distances
 from ipr_shapes.inference.config import InferenceConfig
 from ipr_shapes.likelihood import ObservedFrames
 from ipr_shapes.methods import Method
@@ -39,6 +40,10 @@ class InferenceProblem:
         seed: samples draw from ``default_rng([seed, index])``.
         frictions: the sliding frictions the pushes are replayed under (uniform prior; empty:
             ``config.physics.friction`` alone, as without pushes).
+        surface_log_likelihood: per object, (m_k,) log likelihood of its observed surface
+            points given each candidate (``surface_log_likelihoods``; up to a constant per
+            object), a factor of every candidate's evidence; empty: no such factor
+            (``InferenceConfig.surface_fit`` off).
     """
 
     ids: tuple[int, ...]
@@ -54,6 +59,20 @@ class InferenceProblem:
     config: InferenceConfig
     seed: int
     frictions: tuple[float, ...] = ()
+    surface_log_likelihood: tuple[np.ndarray, ...] = ()
+
+    def surface_term(self, k: int) -> np.ndarray:
+        """(m_k,) object k's ``surface_log_likelihood`` (zeros when there is none)."""
+        if self.surface_log_likelihood:
+            return self.surface_log_likelihood[k]
+        return np.zeros(len(self.candidates[k]))
+
+    def surface_of(self, choice: Sequence[int]) -> float:
+        """The joint model ``choice``'s surface term: the sum over the objects of their
+        chosen candidates' ``surface_log_likelihood`` (0 when there is none)."""
+        if not self.surface_log_likelihood:
+            return 0.0
+        return float(sum(self.surface_log_likelihood[k][j] for k, j in enumerate(choice)))
 
     @property
     def count(self) -> int:
@@ -126,6 +145,33 @@ def size_log_prior(shapes: Sequence[ShapeHypothesis], exponent: float) -> np.nda
     return log_prior - np.logaddexp.reduce(log_prior)
 
 
+def surface_log_likelihoods(
+    candidates: Sequence[ShapeHypothesis], points: np.ndarray
+) -> np.ndarray:
+    """(m,) log likelihood of an object's observed surface given each of its ``candidates``
+    (convex, world frame, at the perceived pose), up to a constant shared by them (its
+    largest is 0; -inf only if the likelihood underflows).
+
+    ``points``: (N, 3) the object's observed points (world, m). The Collision Checker's "fit"
+    likelihood (``ipr_shapes.collision_checker.fit_weights`` with every candidate in one
+    family, so no family share): one point per cell of the candidates' voxel pitch
+    (``surface_cells``), each point's distance from each candidate's boundary
+    (``surface_distances``), the candidate's root mean square excess ``e`` over the closest
+    candidate's at each point, exp(-e^2 / (2 s^2)) with s^2 the pitch's quantisation variance
+    plus the shared part's mean square. Zeros for fewer than two candidates or no point."""
+    count = len(candidates)
+    points = np.asarray(points, float).reshape(-1, 3)
+    if count < 2 or not len(points):
+        return np.zeros(count)
+    pitch = candidates[0].voxel_pitch_m
+    cells = surface_cells(points, pitch)
+    distances = np.array([surface_distances(h, cells) for h in candidates])
+    weights = fit_weights(("",) * count, np.ones(count, dtype=bool), distances, pitch)
+    with np.errstate(divide="ignore"):
+        log_weights = np.log(weights)
+    return log_weights - log_weights.max()
+
+
 def build_problem(
     prepared: PreparedHypotheses,
     uniform: Sequence[ObjectPosterior],
@@ -137,9 +183,12 @@ def build_problem(
     pushes: Sequence[Push],
     config: InferenceConfig,
     seed: int,
+    points: Mapping[int, np.ndarray] | None = None,
 ) -> tuple[InferenceProblem, list[np.ndarray]]:
     """The sampler's problem and, per object, the indices into its generated hypotheses of its
-    candidates (those with non-zero Collision Checker probability)."""
+    candidates (those with non-zero Collision Checker probability). ``points``: per object id
+    its observed points ((N, 3), world, m) for ``config.surface_fit`` (an object absent: no
+    surface factor for it; None: none at all)."""
     ids = tuple(prepared.ids)
     indices, candidates = [], []
     for i, posterior in zip(ids, uniform, strict=True):
@@ -175,6 +224,12 @@ def build_problem(
         log_prior = tuple(size_log_prior(c, config.size_prior_exponent) for c in candidates)
     else:
         log_prior = tuple(np.full(len(c), -math.log(len(c))) for c in candidates)
+    surface: tuple[np.ndarray, ...] = ()
+    if config.surface_fit and points is not None:
+        surface = tuple(
+            surface_log_likelihoods(c, points[i]) if i in points else np.zeros(len(c))
+            for c, i in zip(candidates, ids, strict=True)
+        )
     # Friction only changes what the pushes do: without them, one value scores the same.
     frictions = tuple(config.frictions) if variant.actions and pushes else ()
     problem = InferenceProblem(
@@ -191,5 +246,6 @@ def build_problem(
         config,
         seed,
         frictions,
+        surface,
     )
     return problem, indices
