@@ -247,7 +247,6 @@ def test_one_familys_many_near_copies_do_not_outvote_the_other_families():
     prepared = _nested_cubes([*sizes, (0.070, "sphere"), (0.072, "superquadric")])
     (family,) = uniform_posteriors(prepared, CollisionCheckerConfig(medoid_weights="family"))
     (candidate,) = uniform_posteriors(prepared, CollisionCheckerConfig(medoid_weights="candidate"))
-    assert CollisionCheckerConfig().medoid_weights == "candidate"  # opt-in
     assert family.hypotheses[family.best].generator in ("sphere", "superquadric")
     assert candidate.hypotheses[candidate.best].generator == "algorithm1"
     # The written probabilities are the marginals either way (uniform here).
@@ -304,7 +303,7 @@ def test_outline_medoid_trusts_the_families_only_as_far_as_the_outline_is_hidden
     sizes = [(0.040 + 2e-4 * k, "algorithm1") for k in range(6)]
     prepared = _nested_cubes([*sizes, (0.070, "sphere"), (0.072, "superquadric")])
     config = CollisionCheckerConfig(medoid_weights="outline")
-    (candidate,) = uniform_posteriors(prepared, CollisionCheckerConfig())
+    (candidate,) = uniform_posteriors(prepared, CollisionCheckerConfig(medoid_weights="candidate"))
     (seen,) = uniform_posteriors(prepared, config, hidden={1: 0.0})
     (unmeasured,) = uniform_posteriors(prepared, config)
     (hidden,) = uniform_posteriors(prepared, config, hidden={1: 0.9})
@@ -407,7 +406,7 @@ def test_fit_medoid_keeps_the_families_whose_surface_runs_through_the_seen_point
     assert family.hypotheses[family.best].generator in ("sphere", "superquadric")
     assert small.hypotheses[small.best].generator == "algorithm1"
     assert large.hypotheses[large.best].generator in ("sphere", "superquadric")
-    (candidate,) = uniform_posteriors(prepared, CollisionCheckerConfig())
+    (candidate,) = uniform_posteriors(prepared, CollisionCheckerConfig(medoid_weights="candidate"))
     (empty,) = uniform_posteriors(prepared, config, points={1: np.zeros((0, 3))})
     assert unseen.best == candidate.best  # points not given: each candidate once
     assert empty.best == family.best  # no point seen: the family weights
@@ -492,6 +491,12 @@ def test_fit_medoid_does_not_credit_a_candidate_face_behind_the_seen_points():
     assert choice(None) == "algorithm1"  # every face: the far face counts
 
 
+def test_the_default_medoid_is_outline_fit():
+    """The fit for the hidden share of the outline is the default (docs/experiments/
+    2026-11-28-fit-outline.md); the others are opt-in."""
+    assert CollisionCheckerConfig().medoid_weights == "outline-fit"
+
+
 def test_outline_fit_medoid_weighs_the_families_by_their_fit_for_the_hidden_share():
     """The six 4 cm near-copies from Algorithm 1 and a 7 and a 7.2 cm cube from two other
     families. Outline all seen (0, or not measured): each candidate once (a small cube), the
@@ -513,7 +518,7 @@ def test_outline_fit_medoid_weighs_the_families_by_their_fit_for_the_hidden_shar
         )
         return posterior
 
-    (candidate,) = uniform_posteriors(prepared, CollisionCheckerConfig())
+    (candidate,) = uniform_posteriors(prepared, CollisionCheckerConfig(medoid_weights="candidate"))
     (outline,) = uniform_posteriors(
         prepared, CollisionCheckerConfig(medoid_weights="outline"), hidden={1: 0.9}
     )

@@ -22,7 +22,7 @@ Constraints(X), and each object's output is read from its marginal over its own 
   fit with more and the marginals fall with volume (median correlation of marginal and log
   volume -0.57 on 75 development objects), so their medoid leaned small (docs/experiments/
   2026-11-27-thin-candidates-overlap.md). The marginals are still the written probabilities.
-- Medoid weights (``CollisionCheckerConfig.medoid_weights``): "candidate" (default) weights
+- Medoid weights (``CollisionCheckerConfig.medoid_weights``): "candidate" weights
   each feasible candidate equally. "family" (opt-in) gives each generator family
   (``ShapeHypothesis.generator``: Algorithm 1, symmetry, box, sphere, ...) with a jointly
   feasible candidate an equal share, split equally among its feasible candidates: a uniform
@@ -48,14 +48,25 @@ Constraints(X), and each object's output is read from its marginal over its own 
   (docs/experiments/2026-11-28-per-object-family-trust.md).
 - "fit" (opt-in) weighs each family's share by how well its candidates' surfaces pass
   through the object's observed points (``fit_weights``): every candidate contains the
-  points (they are built on them), so a point's distance to a candidate's boundary is how far
-  the candidate's surface runs from the seen surface there; the excess of that distance over
+  points (they are built on them), so a point's distance to a candidate's boundary (to the
+  faces turned towards the camera that saw the point: a face behind it, a thin candidate's far
+  side, explains nothing) is how far the candidate's surface runs from the seen surface there; the excess of that distance over
   the closest candidate's, per point, is the candidate's misfit (what all candidates share,
   the object's concavity and noise, cancels), scored as a Gaussian likelihood whose variance
   is the voxel quantisation (pitch^2 / 12) plus the shared part's mean square. A sphere whose
   surface runs through a box's faces loses its family's share; a family that fits the seen
   surface keeps it. An object whose points are not given (the physics methods' starting
-  answer) counts each candidate once. Opt-in (docs/experiments/2026-11-28-family-choice.md).
+  answer) counts each candidate once. Opt-in (docs/experiments/2026-11-28-family-choice.md): on
+  bins-real the seen box tops lie on every family's candidate within the real sensor's scatter,
+  the fit hardly moves the families' shares and their equal prior loses there
+  (docs/experiments/2026-11-28-fit-outline.md).
+- "outline-fit" (the default since 2026-11-28): ``1 - h`` each candidate once (as "outline")
+  and ``h`` the fit weights: where the outline is the object's own, Algorithm 1's mirrored
+  copies are evidence of its extent; where it is hidden, the families share it as far as
+  their surfaces pass through what was seen. ``h = 0``, or no measure (the physics methods'
+  starting answer), is "candidate"'s choice bit for bit, and the points are not measured. It
+  gains or holds on every set measured, where "fit" and "family" lose on bins-real
+  (docs/experiments/2026-11-28-fit-outline.md).
 """
 
 from __future__ import annotations
@@ -105,13 +116,16 @@ class CollisionCheckerConfig:
         relax_steps: doublings of the pairwise tolerance before dropping a component's
             pairwise constraints when nothing is jointly feasible.
         medoid_weights: the weights of the jointly feasible candidates in the output medoid:
-            "candidate" (default), each feasible candidate the same weight; "family"
+            "candidate", each feasible candidate the same weight; "family"
             (opt-in), each generator family with a feasible candidate an equal share, split
             equally among its feasible candidates (``family_weights``), each candidate scored
             against the others only; "outline" (opt-in), per object the mixture of the two by
             the fraction of its image outline a nearer surface hides (``outline_weights``);
             "fit" (opt-in), each family's share times each candidate's likelihood of the
-            observed points on its surface (``fit_weights``). The written probabilities are the marginals either way (module doc).
+            observed points on its surface (``fit_weights``); "outline-fit" (default), ``1 - h``
+            each candidate once and ``h`` the fit weights, ``h`` the hidden outline fraction
+            (an object without it, as in the physics methods' start, "candidate"). The
+            written probabilities are the marginals either way (module doc).
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -128,7 +142,7 @@ class CollisionCheckerConfig:
     gibbs_sweeps: int = 300
     gibbs_burn_in: int = 30
     relax_steps: int = 3
-    medoid_weights: str = "candidate"
+    medoid_weights: str = "outline-fit"
 
     def __post_init__(self) -> None:
         check_fields(self)
