@@ -82,7 +82,7 @@ def measure_scene(path: Path, config=None, cache: Path | None = None) -> dict:
 
     from ipr_shapes import voxels
     from ipr_shapes.carving import carve_posteriors, surface_views
-    from ipr_shapes.collision_checker import uniform_posteriors
+    from ipr_shapes.collision_checker import object_viewpoints, uniform_posteriors
     from ipr_shapes.config import Config
     from ipr_shapes.ground_truth import frame0_ground_truth, visible_pixel_counts
     from ipr_shapes.hypotheses import prepare_hypotheses
@@ -98,16 +98,19 @@ def measure_scene(path: Path, config=None, cache: Path | None = None) -> dict:
     )
     cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
     hidden = None
-    if config.collision_checker.medoid_weights == "outline":
+    if config.collision_checker.medoid_weights in ("outline", "outline-fit"):
         hidden = hidden_outline_fractions(
             scene.frames[0].depth_m, objects, config.perception.segmentation.contour_gap_m
         )
-    points = None
-    if config.collision_checker.medoid_weights == "fit":
+    points = viewpoints = None
+    if config.collision_checker.medoid_weights in ("fit", "outline-fit"):
         points = {o.id: o.points for o in objects}
+        camera = scene.frames[0].world_from_camera[:3, 3]
+        viewpoints = {o.id: object_viewpoints(o, camera) for o in objects}
     posteriors = uniform_posteriors(
-        prepared, config.collision_checker, rng=sampler_rng, hidden=hidden, points=points
-    )
+        prepared, config.collision_checker, rng=sampler_rng, hidden=hidden, points=points,
+        viewpoints=viewpoints,
+    )  # fmt: skip
     views = surface_views(scene.frames, objects_per_frame, None, config.carving)
     carved = carve_posteriors(posteriors, views) if config.carving.enabled else posteriors
 
@@ -290,12 +293,13 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument(
         "--medoid-weights",
-        choices=("candidate", "family", "outline", "fit"),
+        choices=("candidate", "family", "outline", "fit", "outline-fit"),
         default=None,
         help="the Collision Checker's medoid weights (default: the config's; family: each "
         "generator family an equal share; outline: the two mixed by the object's hidden "
         "outline fraction; fit: each family's share times its candidates' likelihood of the "
-        "observed points on their surface; all opt-in)",
+        "observed points on the surface their camera sees; outline-fit: each candidate once "
+        "for the seen share of the outline, fit for the hidden share; all opt-in)",
     )
     args = parser.parse_args(argv)
     from ipr_shapes.config import Config

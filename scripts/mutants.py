@@ -536,6 +536,41 @@ MUTANTS: tuple[Mutant, ...] = (
         _t("collision_checker"),
     ),
     Mutant(
+        "fit-distance-counts-faces-behind-the-point",
+        "collision_checker",
+        "a seen point's distance from a candidate is measured to every face, so a thin "
+        "candidate's far face behind the point explains it",
+        "front = np.where(facing, signed, -np.inf).max(axis=1)",
+        "front = signed.max(axis=1)",
+        _t("collision_checker"),
+    ),
+    Mutant(
+        "outline-fit-ignores-the-fit",
+        "collision_checker",
+        "the default medoid gives the families equal shares for the hidden share of the outline, "
+        'whatever their surfaces\' fit (the "outline" rule)',
+        "judged = _object_fit_weights(hyps, feasible, points[i], (viewpoints or {}).get(i))",
+        "judged = family_weights([h.generator for h in hyps], feasible)",
+        _t("collision_checker"),
+    ),
+    Mutant(
+        "outline-fit-ignores-the-outline",
+        "collision_checker",
+        "the default medoid gives the fit weights to every object with a hidden outline, however "
+        "little of it is hidden",
+        "weights = (1.0 - hidden[i]) * feasible / feasible.sum() + hidden[i] * judged",
+        "weights = judged",
+        _t("collision_checker"),
+    ),
+    Mutant(
+        "collision-checker-ignores-the-camera",
+        "collision_checker",
+        "the Collision Checker run hands no viewpoint to the fit, which then measures every face",
+        "viewpoints = {o.id: object_viewpoints(o, camera_m) for o in objects}",
+        "viewpoints = None",
+        _t("collision_checker"),
+    ),
+    Mutant(
         "fit-medoid-not-given-the-points",
         "collision_checker",
         "the Collision Checker run does not hand the objects' observed points to the fit-weighted "

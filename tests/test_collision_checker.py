@@ -247,7 +247,6 @@ def test_one_familys_many_near_copies_do_not_outvote_the_other_families():
     prepared = _nested_cubes([*sizes, (0.070, "sphere"), (0.072, "superquadric")])
     (family,) = uniform_posteriors(prepared, CollisionCheckerConfig(medoid_weights="family"))
     (candidate,) = uniform_posteriors(prepared, CollisionCheckerConfig(medoid_weights="candidate"))
-    assert CollisionCheckerConfig().medoid_weights == "candidate"  # opt-in
     assert family.hypotheses[family.best].generator in ("sphere", "superquadric")
     assert candidate.hypotheses[candidate.best].generator == "algorithm1"
     # The written probabilities are the marginals either way (uniform here).
@@ -304,7 +303,7 @@ def test_outline_medoid_trusts_the_families_only_as_far_as_the_outline_is_hidden
     sizes = [(0.040 + 2e-4 * k, "algorithm1") for k in range(6)]
     prepared = _nested_cubes([*sizes, (0.070, "sphere"), (0.072, "superquadric")])
     config = CollisionCheckerConfig(medoid_weights="outline")
-    (candidate,) = uniform_posteriors(prepared, CollisionCheckerConfig())
+    (candidate,) = uniform_posteriors(prepared, CollisionCheckerConfig(medoid_weights="candidate"))
     (seen,) = uniform_posteriors(prepared, config, hidden={1: 0.0})
     (unmeasured,) = uniform_posteriors(prepared, config)
     (hidden,) = uniform_posteriors(prepared, config, hidden={1: 0.9})
@@ -407,7 +406,7 @@ def test_fit_medoid_keeps_the_families_whose_surface_runs_through_the_seen_point
     assert family.hypotheses[family.best].generator in ("sphere", "superquadric")
     assert small.hypotheses[small.best].generator == "algorithm1"
     assert large.hypotheses[large.best].generator in ("sphere", "superquadric")
-    (candidate,) = uniform_posteriors(prepared, CollisionCheckerConfig())
+    (candidate,) = uniform_posteriors(prepared, CollisionCheckerConfig(medoid_weights="candidate"))
     (empty,) = uniform_posteriors(prepared, config, points={1: np.zeros((0, 3))})
     assert unseen.best == candidate.best  # points not given: each candidate once
     assert empty.best == family.best  # no point seen: the family weights
@@ -439,3 +438,131 @@ def test_the_collision_checker_hands_the_objects_points_to_the_fit_medoid(scene,
     assert default is None
     assert sorted(fit) == [1, 2]
     assert fit[1] is objects[0].points and fit[2] is objects[1].points
+
+
+def test_surface_distances_seen_from_a_camera_count_only_the_faces_it_sees():
+    """A 10 cm cube, a point 1 cm above its floor. Every face: 1 cm (the floor). Seen from a
+    camera above, the floor is turned away and the point is 9 cm below the top the camera
+    sees; from a camera beside it (+x), 5 cm from the x = 10 cm face. A point with no viewpoint
+    (NaN, a fused point) is measured to every face; per-point viewpoints are read row by row."""
+    from ipr_shapes.collision_checker import surface_distances
+
+    (cube,) = _nested_cubes([(0.10, "box")]).generated[1]
+    point = np.array([[0.05, 0.05, 0.01]])
+    assert surface_distances(cube, point) == pytest.approx([0.01])
+    assert surface_distances(cube, point, np.array([0.05, 0.05, 1.0])) == pytest.approx([0.09])
+    assert surface_distances(cube, point, np.array([1.0, 0.05, 0.05])) == pytest.approx([0.05])
+    assert surface_distances(cube, point, np.full(3, np.nan)) == pytest.approx([0.01])
+    points = np.repeat(point, 3, axis=0)
+    views = np.array([[0.05, 0.05, 1.0], [np.nan] * 3, [1.0, 0.05, 0.05]])
+    assert surface_distances(cube, points, views) == pytest.approx([0.09, 0.01, 0.05])
+
+
+def test_object_viewpoints_are_the_camera_for_its_own_pixels_and_unknown_for_fused_points():
+    from ipr_shapes.collision_checker import object_viewpoints
+
+    points = np.zeros((3, 3))
+    obj = PartialObject(1, 0, np.array([4, 7, -1]), points, np.zeros((3, 3), np.uint8))
+    views = object_viewpoints(obj, np.array([0.0, -0.5, 0.3]))
+    assert views[:2] == pytest.approx(np.array([[0.0, -0.5, 0.3]] * 2))
+    assert np.isnan(views[2]).all()
+
+
+def test_fit_medoid_does_not_credit_a_candidate_face_behind_the_seen_points():
+    """The six 4 cm near-copies from Algorithm 1 and a 7 and a 7.2 cm cube from two other
+    families; seen points 1 mm inside the small cubes' far face (x = 3.9 cm). Seen from a
+    camera at +x, that face is the surface they lie on: the large cubes' run 3 cm past it and
+    a small cube is the choice. Seen from -x, the small cubes' x = 4 cm face is behind the
+    points and explains nothing: no candidate's seen faces pass near them, and the families'
+    shares give a large cube (measured to every face, the small cubes would win)."""
+    sizes = [(0.040 + 2e-4 * k, "algorithm1") for k in range(6)]
+    prepared = _nested_cubes([*sizes, (0.070, "sphere"), (0.072, "superquadric")])
+    grid = np.stack(np.meshgrid(np.linspace(0.015, 0.025, 5), np.linspace(0.015, 0.025, 5)), -1)
+    face = np.column_stack([np.full(25, 0.039), grid.reshape(-1, 2)])
+    config = CollisionCheckerConfig(medoid_weights="fit")
+
+    def choice(viewpoint):
+        views = None if viewpoint is None else {1: np.asarray(viewpoint, float)}
+        (posterior,) = uniform_posteriors(prepared, config, points={1: face}, viewpoints=views)
+        return posterior.hypotheses[posterior.best].generator
+
+    assert choice([1.0, 0.02, 0.02]) == "algorithm1"
+    assert choice([-1.0, 0.02, 0.02]) in ("sphere", "superquadric")
+    assert choice(None) == "algorithm1"  # every face: the far face counts
+
+
+def test_the_default_medoid_is_outline_fit():
+    """The fit for the hidden share of the outline is the default (docs/experiments/
+    2026-11-28-fit-outline.md); the others are opt-in."""
+    assert CollisionCheckerConfig().medoid_weights == "outline-fit"
+
+
+def test_outline_fit_medoid_weighs_the_families_by_their_fit_for_the_hidden_share():
+    """The six 4 cm near-copies from Algorithm 1 and a 7 and a 7.2 cm cube from two other
+    families. Outline all seen (0, or not measured): each candidate once (a small cube), the
+    points not read. Outline hidden (0.9): with the seen points on the large cubes' far face,
+    the families keep their shares (a large cube); on the small cubes' far face, the large
+    cubes' surfaces run away from them and a small cube stays; no points: the families'
+    equal shares ("outline")."""
+    sizes = [(0.040 + 2e-4 * k, "algorithm1") for k in range(6)]
+    prepared = _nested_cubes([*sizes, (0.070, "sphere"), (0.072, "superquadric")])
+    grid = np.stack(np.meshgrid(np.linspace(0.015, 0.025, 5), np.linspace(0.015, 0.025, 5)), -1)
+    grid = grid.reshape(-1, 2)
+    small_face = np.column_stack([np.full(len(grid), 0.0405), grid])
+    large_face = np.column_stack([np.full(len(grid), 0.070), grid])
+    config = CollisionCheckerConfig(medoid_weights="outline-fit")
+
+    def choice(hidden, points):
+        (posterior,) = uniform_posteriors(
+            prepared, config, hidden=hidden, points=None if points is None else {1: points}
+        )
+        return posterior
+
+    (candidate,) = uniform_posteriors(prepared, CollisionCheckerConfig(medoid_weights="candidate"))
+    (outline,) = uniform_posteriors(
+        prepared, CollisionCheckerConfig(medoid_weights="outline"), hidden={1: 0.9}
+    )
+    assert choice({1: 0.0}, large_face).best == candidate.best
+    assert choice(None, large_face).best == candidate.best
+    generator = lambda p: p.hypotheses[p.best].generator  # noqa: E731
+    assert generator(choice({1: 0.9}, large_face)) in ("sphere", "superquadric")
+    assert generator(choice({1: 0.9}, small_face)) == "algorithm1"
+    assert choice({1: 0.9}, None).best == outline.best
+    assert generator(outline) in ("sphere", "superquadric")
+    # Half hidden: the large cubes' fit takes the small ones' hidden share (the families'
+    # equal shares alone keep a small cube); a fifth hidden: mostly each candidate once.
+    assert generator(choice({1: 0.5}, large_face)) in ("sphere", "superquadric")
+    (half,) = uniform_posteriors(
+        prepared, CollisionCheckerConfig(medoid_weights="outline"), hidden={1: 0.5}
+    )
+    assert generator(half) == "algorithm1"
+    assert generator(choice({1: 0.2}, large_face)) == "algorithm1"
+
+
+def test_the_collision_checker_hands_the_camera_as_the_points_viewpoint(scene, monkeypatch):
+    """Given frame 0's camera centre, the fit medoids ("fit", "outline-fit") read each object's
+    points with that camera as every own pixel's viewpoint; without it, no viewpoint (every
+    face counts)."""
+    import ipr_shapes.collision_checker as module
+
+    view, objects = scene
+    seen = []
+    original = module.uniform_posteriors
+
+    def recording(*args, **kwargs):
+        seen.append((kwargs.get("points"), kwargs.get("viewpoints")))
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(module, "uniform_posteriors", recording)
+    camera = np.array([0.0, -0.5, 0.03])
+    for weights, camera_m in (("outline-fit", camera), ("fit", camera), ("fit", None)):
+        config = CollisionCheckerConfig(medoid_weights=weights)
+        collision_checker(
+            objects, view.space(), (SUPPORT,), config, np.random.default_rng(0),
+            hypotheses=HYPOTHESES, hidden={1: 0.5, 2: 0.5}, camera_m=camera_m,
+        )  # fmt: skip
+    (ofit_points, ofit_views), (_, fit_views), (_, none) = seen
+    assert ofit_points[1] is objects[0].points
+    for views in (ofit_views, fit_views):
+        assert views[1] == pytest.approx(np.broadcast_to(camera, objects[0].points.shape))
+    assert none is None

@@ -22,7 +22,7 @@ Constraints(X), and each object's output is read from its marginal over its own 
   fit with more and the marginals fall with volume (median correlation of marginal and log
   volume -0.57 on 75 development objects), so their medoid leaned small (docs/experiments/
   2026-11-27-thin-candidates-overlap.md). The marginals are still the written probabilities.
-- Medoid weights (``CollisionCheckerConfig.medoid_weights``): "candidate" (default) weights
+- Medoid weights (``CollisionCheckerConfig.medoid_weights``): "candidate" weights
   each feasible candidate equally. "family" (opt-in) gives each generator family
   (``ShapeHypothesis.generator``: Algorithm 1, symmetry, box, sphere, ...) with a jointly
   feasible candidate an equal share, split equally among its feasible candidates: a uniform
@@ -48,14 +48,25 @@ Constraints(X), and each object's output is read from its marginal over its own 
   (docs/experiments/2026-11-28-per-object-family-trust.md).
 - "fit" (opt-in) weighs each family's share by how well its candidates' surfaces pass
   through the object's observed points (``fit_weights``): every candidate contains the
-  points (they are built on them), so a point's distance to a candidate's boundary is how far
-  the candidate's surface runs from the seen surface there; the excess of that distance over
+  points (they are built on them), so a point's distance to a candidate's boundary (to the
+  faces turned towards the camera that saw the point: a face behind it, a thin candidate's far
+  side, explains nothing) is how far the candidate's surface runs from the seen surface there; the excess of that distance over
   the closest candidate's, per point, is the candidate's misfit (what all candidates share,
   the object's concavity and noise, cancels), scored as a Gaussian likelihood whose variance
   is the voxel quantisation (pitch^2 / 12) plus the shared part's mean square. A sphere whose
   surface runs through a box's faces loses its family's share; a family that fits the seen
   surface keeps it. An object whose points are not given (the physics methods' starting
-  answer) counts each candidate once. Opt-in (docs/experiments/2026-11-28-family-choice.md).
+  answer) counts each candidate once. Opt-in (docs/experiments/2026-11-28-family-choice.md): on
+  bins-real the seen box tops lie on every family's candidate within the real sensor's scatter,
+  the fit hardly moves the families' shares and their equal prior loses there
+  (docs/experiments/2026-11-28-fit-outline.md).
+- "outline-fit" (the default since 2026-11-28): ``1 - h`` each candidate once (as "outline")
+  and ``h`` the fit weights: where the outline is the object's own, Algorithm 1's mirrored
+  copies are evidence of its extent; where it is hidden, the families share it as far as
+  their surfaces pass through what was seen. ``h = 0``, or no measure (the physics methods'
+  starting answer), is "candidate"'s choice bit for bit, and the points are not measured. It
+  gains or holds on every set measured, where "fit" and "family" lose on bins-real
+  (docs/experiments/2026-11-28-fit-outline.md).
 """
 
 from __future__ import annotations
@@ -105,13 +116,16 @@ class CollisionCheckerConfig:
         relax_steps: doublings of the pairwise tolerance before dropping a component's
             pairwise constraints when nothing is jointly feasible.
         medoid_weights: the weights of the jointly feasible candidates in the output medoid:
-            "candidate" (default), each feasible candidate the same weight; "family"
+            "candidate", each feasible candidate the same weight; "family"
             (opt-in), each generator family with a feasible candidate an equal share, split
             equally among its feasible candidates (``family_weights``), each candidate scored
             against the others only; "outline" (opt-in), per object the mixture of the two by
             the fraction of its image outline a nearer surface hides (``outline_weights``);
             "fit" (opt-in), each family's share times each candidate's likelihood of the
-            observed points on its surface (``fit_weights``). The written probabilities are the marginals either way (module doc).
+            observed points on its surface (``fit_weights``); "outline-fit" (default), ``1 - h``
+            each candidate once and ``h`` the fit weights, ``h`` the hidden outline fraction
+            (an object without it, as in the physics methods' start, "candidate"). The
+            written probabilities are the marginals either way (module doc).
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -120,7 +134,7 @@ class CollisionCheckerConfig:
         "gibbs_sweeps": Interval(1, None, integer=True),
         "gibbs_burn_in": Interval(0, None, integer=True),
         "relax_steps": Interval(0, None, integer=True),
-        "medoid_weights": Options("candidate", "family", "outline", "fit"),
+        "medoid_weights": Options("candidate", "family", "outline", "fit", "outline-fit"),
     }
 
     max_exact_table: int = 2_000_000
@@ -128,7 +142,7 @@ class CollisionCheckerConfig:
     gibbs_sweeps: int = 300
     gibbs_burn_in: int = 30
     relax_steps: int = 3
-    medoid_weights: str = "candidate"
+    medoid_weights: str = "outline-fit"
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -223,27 +237,60 @@ def outline_weights(generators: Sequence[str], feasible: np.ndarray, hidden: flo
     return (1.0 - hidden) * equal + hidden * family_weights(generators, feasible)
 
 
-def surface_distances(hypothesis: ShapeHypothesis, points: np.ndarray) -> np.ndarray:
+def surface_distances(
+    hypothesis: ShapeHypothesis, points: np.ndarray, viewpoints: np.ndarray | None = None
+) -> np.ndarray:
     """(N,) distance (m) of each of ``points`` ((N, 3), world, m) from the boundary of the
     convex ``hypothesis``: inside, the smallest distance to a face's plane (exact for a convex
-    solid); outside, the largest plane distance (a lower bound of the distance)."""
+    solid); outside, the largest plane distance (a lower bound of the distance).
+
+    ``viewpoints``: the camera centre each point was seen from ((3,) for all, or (N, 3),
+    world, m; a row of NaN: not known, as for points fused from a later view). Given, a
+    point is measured to the faces turned towards its camera only (the plane's outward normal
+    has a positive component towards the camera): a seen point lies on the surface the camera
+    sees, so a face behind it (the far side of a thin candidate) does not explain it. A point
+    with no such face, or no viewpoint, is measured to every face."""
     v, f = hypothesis.vertices, hypothesis.faces
     normals = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
     lengths = np.linalg.norm(normals, axis=1)
     keep = lengths > 1e-12
     normals = normals[keep] / lengths[keep, None]
     offsets = -np.einsum("ij,ij->i", normals, v[f[keep, 0]])
-    return np.abs((np.asarray(points, float) @ normals.T + offsets).max(axis=1))
+    points = np.asarray(points, float).reshape(-1, 3)
+    signed = points @ normals.T + offsets
+    every = np.abs(signed.max(axis=1))
+    if viewpoints is None:
+        return every
+    towards = np.broadcast_to(np.asarray(viewpoints, float), points.shape) - points
+    with np.errstate(invalid="ignore"):
+        facing = towards @ normals.T > 0.0  # NaN rows: no face
+    front = np.where(facing, signed, -np.inf).max(axis=1)
+    return np.where(np.isfinite(front), np.abs(front), every)
+
+
+def surface_cell_indices(points: np.ndarray, pitch_m: float) -> np.ndarray:
+    """Indices (ascending) of the first of ``points`` ((N, 3), m) in each occupied cube of side
+    ``pitch_m`` (``surface_cells``)."""
+    points = np.asarray(points, float).reshape(-1, 3)
+    if not len(points):
+        return np.zeros(0, dtype=np.int64)
+    _, first = np.unique(np.floor(points / pitch_m).astype(np.int64), axis=0, return_index=True)
+    return np.sort(first)
 
 
 def surface_cells(points: np.ndarray, pitch_m: float) -> np.ndarray:
     """The first of ``points`` ((N, 3), m) in each occupied cube of side ``pitch_m``: each cell
     of observed surface counts once, however many pixels the camera's range and angle gave it."""
     points = np.asarray(points, float).reshape(-1, 3)
-    if not len(points):
-        return points
-    _, first = np.unique(np.floor(points / pitch_m).astype(np.int64), axis=0, return_index=True)
-    return points[np.sort(first)]
+    return points[surface_cell_indices(points, pitch_m)]
+
+
+def object_viewpoints(obj: PartialObject, camera_m: np.ndarray) -> np.ndarray:
+    """(N, 3) the camera centre each of ``obj``'s points was seen from: ``camera_m`` ((3,),
+    world, m) for its own frame's pixels, NaN for points fused from a later view (pixel -1:
+    seen from a viewpoint that moved with the object)."""
+    own = np.asarray(obj.pixels).reshape(-1)[: len(obj.points)] >= 0
+    return np.where(own[:, None], np.asarray(camera_m, float)[None, :], np.nan)
 
 
 def fit_weights(
@@ -277,6 +324,24 @@ def fit_weights(
     return weights / weights.sum()
 
 
+def _object_fit_weights(
+    hyps: Sequence[ShapeHypothesis],
+    feasible: np.ndarray,
+    points: np.ndarray,
+    viewpoints: np.ndarray | None,
+) -> np.ndarray:
+    """``fit_weights`` of one object's candidates from its observed points ((N, 3), world, m)
+    and their viewpoints ((3,) or (N, 3), or None: every face; ``surface_distances``)."""
+    kept = np.flatnonzero(feasible)
+    pitch = hyps[kept[0]].voxel_pitch_m
+    points = np.asarray(points, float).reshape(-1, 3)
+    cells = surface_cell_indices(points, pitch)
+    if viewpoints is not None:
+        viewpoints = np.broadcast_to(np.asarray(viewpoints, float), points.shape)[cells]
+    distances = np.array([surface_distances(hyps[k], points[cells], viewpoints) for k in kept])
+    return fit_weights([h.generator for h in hyps], feasible, distances, pitch)
+
+
 # --------------------------------------------------------------------------------------------
 # Public API
 
@@ -289,6 +354,7 @@ def uniform_posteriors(
     tables: dict[int, PairwiseIoU] | None = None,
     hidden: Mapping[int, float] | None = None,
     points: Mapping[int, np.ndarray] | None = None,
+    viewpoints: Mapping[int, np.ndarray] | None = None,
 ) -> list[ObjectPosterior]:
     """The Collision Checker's marginals from prepared hypotheses (module doc): uniform over
     jointly feasible joint models; the Gibbs sampler stops at ``deadline``
@@ -298,7 +364,11 @@ def uniform_posteriors(
     (``hidden_outline_fractions``), read by ``medoid_weights = "outline"`` (an object absent:
     0, each candidate counted once). ``points``: per object id its observed points ((N, 3),
     world, m), read by ``medoid_weights = "fit"`` (an object absent, as in the physics
-    methods' starting answer: each candidate counted once)."""
+    methods' starting answer: each candidate counted once) and "outline-fit" (absent: the
+    families' equal shares for the hidden share). ``viewpoints``: per object id the camera
+    centre each of its points was seen from ((3,) or (N, 3) rows of ``points``, world, m; NaN:
+    not known), so that a point is measured to the candidate faces its camera sees
+    (``surface_distances``); absent: every face."""
     config = config or CollisionCheckerConfig()
     rng = rng if rng is not None else np.random.default_rng(0)
     ids, generated, candidates = prepared.ids, prepared.generated, prepared.candidates
@@ -332,14 +402,19 @@ def uniform_posteriors(
         if config.medoid_weights == "family":
             weights = family_weights([h.generator for h in hyps], feasible)
         elif config.medoid_weights == "fit" and i in (points or {}):
-            kept = np.flatnonzero(feasible)
-            pitch = hyps[kept[0]].voxel_pitch_m
-            cells = surface_cells(points[i], pitch)
-            distances = np.array([surface_distances(hyps[k], cells) for k in kept])
-            weights = fit_weights([h.generator for h in hyps], feasible, distances, pitch)
+            weights = _object_fit_weights(hyps, feasible, points[i], (viewpoints or {}).get(i))
             leave_one_out = True
         elif config.medoid_weights == "outline" and (hidden or {}).get(i, 0.0) > 0.0:
             weights = outline_weights([h.generator for h in hyps], feasible, hidden[i])
+            leave_one_out = True
+        elif config.medoid_weights == "outline-fit" and (hidden or {}).get(i, 0.0) > 0.0:
+            # Each candidate once for the seen share of the outline, the families weighed by
+            # their fit for the hidden share (module doc); no points: the families' shares.
+            if i in (points or {}):
+                judged = _object_fit_weights(hyps, feasible, points[i], (viewpoints or {}).get(i))
+            else:
+                judged = family_weights([h.generator for h in hyps], feasible)
+            weights = (1.0 - hidden[i]) * feasible / feasible.sum() + hidden[i] * judged
             leave_one_out = True
         else:
             weights = feasible / feasible.sum()
@@ -373,6 +448,7 @@ def collision_checker(
     constraints: ConstraintConfig | None = None,
     progress: ProgressCallback | None = None,
     hidden: Mapping[int, float] | None = None,
+    camera_m: np.ndarray | None = None,
 ) -> list[ObjectPosterior]:
     """Marginal shape posteriors of the objects of one frame (frame 0) under a uniform prior
     restricted to jointly feasible models (module doc).
@@ -390,7 +466,11 @@ def collision_checker(
         hypotheses, constraints: settings of generation and of the constraints (defaults).
         progress: observer of the hypotheses' progress (``ipr_shapes.progress``).
         hidden: per object id the hidden fraction of its image outline in frame 0
-            (``hidden_outline_fractions``), for ``config.medoid_weights = "outline"``.
+            (``hidden_outline_fractions``), for ``config.medoid_weights = "outline"`` and
+            "outline-fit".
+        camera_m: (3,) frame 0's camera centre (world, m), from which the objects' own points
+            (pixel index >= 0; fused points from later views have -1) were seen, for the fit
+            weights (``surface_distances``); None: every face.
 
     Returns:
         One ObjectPosterior per object, in the order of ``objects``.
@@ -405,12 +485,15 @@ def collision_checker(
         objects, space, planes, hypotheses, constraints, generation_rng, time_budget_s,
         object_spaces, progress,
     )  # fmt: skip
-    points = None
-    if config.medoid_weights == "fit":
+    points = viewpoints = None
+    if config.medoid_weights in ("fit", "outline-fit"):
         points = {o.id: o.points for o in objects}
+        if camera_m is not None:
+            viewpoints = {o.id: object_viewpoints(o, camera_m) for o in objects}
     posteriors = uniform_posteriors(
-        prepared, config, sampler_rng, deadline, hidden=hidden, points=points
-    )
+        prepared, config, sampler_rng, deadline, hidden=hidden, points=points,
+        viewpoints=viewpoints,
+    )  # fmt: skip
     logger.debug(
         "collision checker: %d objects in %.3f s", len(objects), time.perf_counter() - started
     )

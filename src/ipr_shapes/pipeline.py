@@ -411,7 +411,7 @@ def run_pipeline(
         )
     elif not chosen.physics:
         hidden = None
-        if config.collision_checker.medoid_weights == "outline":
+        if config.collision_checker.medoid_weights in ("outline", "outline-fit"):
             hidden = hidden_outline_fractions(
                 scene.frames[0].depth_m,
                 perception.objects[0],
@@ -429,6 +429,7 @@ def run_pipeline(
             constraints=config.constraints,
             progress=progress,
             hidden=hidden,
+            camera_m=np.asarray(scene.frames[0].world_from_camera, float)[:3, 3],
         )
         generation = float(sum(p.generation_s for p in posteriors))
         timing = StageTimings(
