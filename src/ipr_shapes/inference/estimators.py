@@ -262,7 +262,8 @@ def drawn_exact_marginals(
         ):
             continue
         own = result.log_likelihood + result.log_prior if result.norms is not None else -math.inf
-        drawn[choice] = own
+        # The seen surfaces' fit (``surface_fit``) is a factor of the joint model as well.
+        drawn[choice] = own + problem.surface_of(choice)
     if not drawn or not math.isfinite(log_z):
         return estimates
     choices = list(drawn)
