@@ -28,6 +28,7 @@ from ipr_shapes.perception.seams import (
     _FacesElsewhere,
     _FrameFaces,
     _has_area,
+    _is_shadow,
     _linked_edges,
     _row_percentiles,
     _Seam,
@@ -45,16 +46,20 @@ from tests.test_segmentation import box, camera, render, segment_of_point
 ON = replace(PerceptionConfig(), seams=SeamsConfig(enabled=True))
 #: Seams on, a lone seam midway across a segment kept too (two boxes side by side).
 PAIRS = replace(ON, seams=replace(ON.seams, pair_needs_grid=False))
+#: Seams on without the shadow lines: a painted dark gap is then a line like any printed one
+#: (the tests of the strip tests' own rules).
+NO_SHADOWS = replace(ON, seams=replace(ON.seams, shadow_lines=False))
 TOP = 0.06  # the boxes' height (m)
 
 
-def painted(frame: Frame, dark) -> Frame:
+def painted(frame: Frame, dark, ink=(40, 40, 40)) -> Frame:
     """``frame`` with a light, slightly noisy image and the pixels whose world point satisfies
-    ``dark(points)`` (an (N, 3) -> (N,) bool) painted dark."""
+    ``dark(points)`` (an (N, 3) -> (N,) bool) painted dark (``ink``, RGB; by default grey: a
+    shadow, less light in every channel alike)."""
     points = frame.points_world().reshape(-1, 3)
     rng = np.random.default_rng(1)
     rgb = (200 + rng.integers(-3, 4, (points.shape[0], 3))).astype(np.uint8)
-    rgb[(frame.depth_m.reshape(-1) > 0) & dark(points)] = (40, 40, 40)
+    rgb[(frame.depth_m.reshape(-1) > 0) & dark(points)] = ink
     return Frame(frame.index, rgb.reshape(*frame.depth_m.shape, 3), frame.depth_m, frame.K,
                  frame.world_from_camera)  # fmt: skip
 
@@ -123,8 +128,64 @@ def test_a_lone_seam_midway_is_kept_only_in_a_grid():
     # One seam midway across a segment is two boxes or one box with a printed line through its
     # middle: by default it stays whole (the line on one box is the likelier on a tabletop).
     frame = two_boxes(gap_between)
+    a, b = centres(segment_frame(frame, config=NO_SHADOWS).labels, frame)
+    assert a > 0 and a == b
+
+
+def test_a_lone_shadow_line_midway_is_a_gap_between_two_boxes():
+    # The same pair, its gap a shadow (grey: every channel darker alike): two boxes, with no
+    # grid and no box of its strips' size in the frame.
+    frame = two_boxes(gap_between)
+    result = segment_frame(frame, config=ON)
+    a, b = centres(result.labels, frame)
+    assert a > 0 and b > 0 and a != b
+    assert segment_of_point(frame, result.labels, [0.04, -0.09, TOP]) == a
+    assert segment_of_point(frame, result.labels, [-0.04, 0.09, TOP]) == b
+
+
+def _line_across(side_a, side_b, line) -> tuple[_Seam, np.ndarray]:
+    """A vertical seam down column 20 of a 40 x 41 crop: colour ``side_a`` left of it,
+    ``side_b`` right of it, ``line`` on it (2 px wide), each (R, G, B)."""
+    rgb = np.empty((40, 41, 3), dtype=np.uint8)
+    rgb[:, :20] = side_a
+    rgb[:, 21:] = side_b
+    rgb[:, 19:22] = line
+    rows = np.arange(40)
+    return _seam_at_column(20, rows), rgb
+
+
+@pytest.mark.parametrize(
+    "side_a, side_b, line, shadow",
+    [
+        ((200, 200, 200), (200, 200, 200), (120, 120, 120), True),  # a gap's shadow
+        ((180, 40, 40), (176, 42, 38), (108, 24, 24), True),  # on red boxes: 0.6 of each
+        ((200, 200, 200), (120, 120, 120), (100, 100, 100), False),  # a step: a border
+        ((200, 200, 200), (200, 200, 200), (200, 40, 40), False),  # red ink: red not darker
+        ((200, 200, 200), (200, 200, 200), (180, 60, 60), False),  # channels darken unalike
+        ((200, 200, 200), (200, 200, 200), (200, 200, 200), False),  # no line
+    ],
+)
+def test_a_shadow_line_is_darker_than_both_sides_in_every_channel_alike(
+    side_a, side_b, line, shadow
+):
+    seam, rgb = _line_across(side_a, side_b, line)
+    assert _is_shadow(seam, rgb) is shadow
+
+
+def test_a_coloured_printed_line_midway_is_not_a_shadow():
+    # A red line (ink absorbing green and blue only) where the gap was: a printed line through
+    # one box's middle as far as one view tells; it stays whole as without the shadow lines.
+    frame = painted(
+        render(camera(), [box(0.0, -0.05, (0.1, 0.1, TOP)), box(0.0, 0.05, (0.1, 0.1, TOP))],
+               noise_m=0.0005),
+        gap_between,
+        ink=(190, 40, 40),
+    )  # fmt: skip
     a, b = centres(segment_frame(frame, config=ON).labels, frame)
     assert a > 0 and a == b
+    # It is a seam all the same: cut when a lone seam is allowed.
+    a, b = centres(segment_frame(frame, config=PAIRS).labels, frame)
+    assert a > 0 and b > 0 and a != b
 
 
 def test_a_lone_seam_is_kept_when_a_box_of_its_strips_size_is_seen_elsewhere():
@@ -136,15 +197,15 @@ def test_a_lone_seam_is_kept_when_a_box_of_its_strips_size_is_seen_elsewhere():
         return painted(render(camera(), boxes, noise_m=0.0005), gap_between)
 
     frame = scene((0.1, 0.1))
-    result = segment_frame(frame, config=ON)
+    result = segment_frame(frame, config=NO_SHADOWS)
     a, b = centres(result.labels, frame)
     assert a > 0 and b > 0 and a != b
     assert segment_of_point(frame, result.labels, [-0.2, 0.0, TOP]) not in (0, a, b)
     frame = scene((0.06, 0.14))
-    a, b = centres(segment_frame(frame, config=ON).labels, frame)
+    a, b = centres(segment_frame(frame, config=NO_SHADOWS).labels, frame)
     assert a > 0 and a == b
     # And only with the sizes' test on.
-    no_sizes = replace(ON, seams=replace(ON.seams, pair_sizes=False))
+    no_sizes = replace(NO_SHADOWS, seams=replace(NO_SHADOWS.seams, pair_sizes=False))
     frame = scene((0.1, 0.1))
     a, b = centres(segment_frame(frame, config=no_sizes).labels, frame)
     assert a > 0 and a == b
@@ -164,8 +225,8 @@ def test_two_pairs_of_one_size_are_four_boxes():
         assert min(ids) > 0
         return len(set(ids))
 
-    assert boxes_seen(ON) == 4
-    assert boxes_seen(replace(ON, seams=replace(ON.seams, pair_sizes=False))) == 2
+    assert boxes_seen(NO_SHADOWS) == 4
+    assert boxes_seen(replace(NO_SHADOWS, seams=replace(NO_SHADOWS.seams, pair_sizes=False))) == 2
 
 
 def test_a_short_seam_is_not_a_seam():

@@ -26,6 +26,10 @@ object's own lines whole:
   seams beside it (``seams.rows_of_three``: a row's end strips to the outline are off by side
   faces and occluders): packed boxes of one size repeat at one spacing, a printed border (a
   box's end panel) lies where the print puts it. Cuts that fail are undone;
+- **or a shadow line**: a flat seam that is a dark line darker than both sides in every
+  channel alike (the gap between two touching boxes, which the light does not reach) is kept
+  whatever its strips measure: a printed border is a step between two colours, ink darkens
+  some channels more than others (``seams.shadow_lines``);
 - **supported when alone**: a seam midway between the outline on both sides (two boxes, or
   one box with a printed line through its middle) is kept only where it meets a seam that
   lies between seams (a grid of boxes) or its strips have the size of a flat rectangular
@@ -50,7 +54,7 @@ seen alone (docs/experiments/2026-11-26-colour-seams.md, 2026-11-26-packed-boxes
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import ndimage
@@ -114,6 +118,7 @@ class _Seam:
     across: np.ndarray
     normal: np.ndarray
     half_length_m: float
+    shadow: bool = False
 
 
 class Normals:
@@ -282,6 +287,8 @@ def cut_colour_seams(
                                      direction[_within(crop, box)], points[crop],
                                      normals.within(crop, mask), depth_m[crop], focal_px,
                                      config)  # fmt: skip
+        if seams.shadow_lines and found:
+            found = _with_shadows(found, rgb[crop])
         # The segment's points with depth, and which seams have flat strips: measured once,
         # asked by every strip test below.
         cloud = np.empty((0, 3))
@@ -771,6 +778,43 @@ def _linked_edges(
     return kernels.linked_to(_thin(magnitude, direction, weak), edges) | edges
 
 
+def _with_shadows(found: list[_Seam], rgb: np.ndarray) -> list[_Seam]:
+    """The seams ``found`` (pixels in the crop of ``rgb``, (h, w, 3) uint8), each marked
+    ``shadow`` when it is a shadow line (``_is_shadow``)."""
+    return [replace(seam, shadow=_is_shadow(seam, rgb)) for seam in found]
+
+
+def _is_shadow(seam: _Seam, rgb: np.ndarray) -> bool:
+    """Whether ``seam`` is a shadow line: across it, in every channel of ``rgb`` ((h, w, 3)
+    uint8, the crop's), each offset's median along the seam is darker within a pixel of the seam
+    than both side bands (``_SIDE_BAND_PX``, their mean) by more than the two bands differ,
+    and the channels darken alike: the ratios of the line's channels to the darker band's
+    differ by less than the light lost (one minus their mean).
+
+    Why: two touching boxes leave a gap that the light does not reach, a line darker than
+    both tops in every channel (less light, whatever the colour); one box with a printed
+    border through its middle shows a step between two colours, and ink or a coloured side
+    face darkens the channels it absorbs more than the others."""
+    height, width = rgb.shape[:2]
+    near, far = _SIDE_BAND_PX
+    offsets = np.arange(-far, far + 1)
+    rows = np.rint(seam.rows[:, None] + offsets[None, :] * seam.sin_a).astype(np.int64)
+    cols = np.rint(seam.cols[:, None] + offsets[None, :] * seam.cos_a).astype(np.int64)
+    np.clip(rows, 0, height - 1, out=rows)
+    np.clip(cols, 0, width - 1, out=cols)
+    profile = np.median(rgb[rows, cols].astype(np.float64), axis=0)  # (offsets, 3)
+    middle = profile[far - 1 : far + 2].min(axis=0)
+    before = profile[: far - near + 1].mean(axis=0)
+    after = profile[far + near :].mean(axis=0)
+    darker = np.minimum(before, after)
+    if not np.all(darker - middle > np.abs(before - after)):
+        return False
+    # Less light scales every channel by one factor; their ratios differ by less than the
+    # light lost.
+    ratios = middle / np.maximum(darker, 1.0)
+    return float(np.ptp(ratios)) < 1.0 - float(ratios.mean())
+
+
 def _thin(magnitude: np.ndarray, direction: np.ndarray, at: np.ndarray) -> np.ndarray:
     """(H, W) bool: of the pixels ``at`` (flat indices), those whose gradient magnitude is a
     maximum across the edge (Canny's non-maximum suppression, directions quantised to 45
@@ -865,7 +909,9 @@ def _unrepeated(
     two boxes, or one box with a printed line through its middle) is kept only when it meets
     a seam that repeats between seams (a grid of packed boxes), or when both its strips have
     one of the (longer, shorter) face sizes ``sizes`` ((M, 2), m) of boxes seen elsewhere in
-    the frame, within ``seams.size_tolerance_m``. ``cloud`` (N, 3): the segment's points with
+    the frame, within ``seams.size_tolerance_m``. A shadow line (``_Seam.shadow``,
+    ``seams.shadow_lines``) with flat strips is kept whatever it repeats: a gap between two
+    objects. ``cloud`` (N, 3): the segment's points with
     depth (world, m); ``flat``: whether each seam's strips are flat (``_flat_strips``)."""
     kept = [seam for seam, is_flat in zip(found, flat, strict=True) if is_flat]
     while True:
@@ -875,6 +921,7 @@ def _unrepeated(
             seam
             for seam, (by, widths) in zip(kept, bound, strict=True)
             if by == _BY_SEAM
+            or seam.shadow
             or (
                 by == _BY_OUTLINE
                 and (
