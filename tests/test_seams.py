@@ -132,15 +132,39 @@ def test_a_lone_seam_midway_is_kept_only_in_a_grid():
     assert a > 0 and a == b
 
 
-def test_a_lone_shadow_line_midway_is_a_gap_between_two_boxes():
-    # The same pair, its gap a shadow (grey: every channel darker alike): two boxes, with no
-    # grid and no box of its strips' size in the frame.
+def pair_beside_a_row(ink=(40, 40, 40)) -> tuple[Frame, list, list]:
+    """A pair of 10 x 7 cm boxes touching along y = 0 (x < 0) beside a row of three 10 cm
+    boxes (x = 0.12), every gap painted ``ink``; the pair's two top centres, the row's three."""
+    pair = [box(-0.1, y, (0.1, 0.07, TOP)) for y in (-0.035, 0.035)]
+    row = [box(0.12, y, (0.1, 0.1, TOP)) for y in (-0.1, 0.0, 0.1)]
+
+    def gaps(points):
+        return (gap_between(points) & (points[:, 0] < 0.0)) | (
+            row_gaps(points) & (points[:, 0] > 0.0)
+        )
+
+    frame = painted(render(camera(), pair + row, noise_m=0.0005), gaps, ink=ink)
+    return frame, [[-0.1, y, TOP] for y in (-0.05, 0.05)], [[0.12, y, TOP] for y in (-0.1, 0, 0.1)]
+
+
+def test_a_lone_shadow_line_midway_is_a_gap_where_packed_boxes_are_seen():
+    # The pair's gap is a shadow (grey: every channel darker alike) and its halves match no
+    # box in the frame; the row beside it is cut by the strip tests (boxes of one size), so
+    # the frame holds packed boxes: the pair is cut too. Without the shadow lines it is not.
+    frame, pair, row = pair_beside_a_row()
+    for config, cut in ((ON, True), (NO_SHADOWS, False)):
+        labels = segment_frame(frame, config=config).labels
+        assert len({segment_of_point(frame, labels, point) for point in row}) == 3
+        a, b = (segment_of_point(frame, labels, point) for point in pair)
+        assert a > 0 and b > 0 and (a != b) is cut
+
+
+def test_a_lone_shadow_line_is_not_cut_where_no_packed_boxes_are_seen():
+    # The pair alone: a grey line through one box's middle (black ink) looks the same, and no
+    # cut kept elsewhere in the frame says that it holds packed boxes.
     frame = two_boxes(gap_between)
-    result = segment_frame(frame, config=ON)
-    a, b = centres(result.labels, frame)
-    assert a > 0 and b > 0 and a != b
-    assert segment_of_point(frame, result.labels, [0.04, -0.09, TOP]) == a
-    assert segment_of_point(frame, result.labels, [-0.04, 0.09, TOP]) == b
+    a, b = centres(segment_frame(frame, config=ON).labels, frame)
+    assert a > 0 and a == b
 
 
 def _line_across(side_a, side_b, line) -> tuple[_Seam, np.ndarray]:
@@ -173,19 +197,13 @@ def test_a_shadow_line_is_darker_than_both_sides_in_every_channel_alike(
 
 
 def test_a_coloured_printed_line_midway_is_not_a_shadow():
-    # A red line (ink absorbing green and blue only) where the gap was: a printed line through
-    # one box's middle as far as one view tells; it stays whole as without the shadow lines.
-    frame = painted(
-        render(camera(), [box(0.0, -0.05, (0.1, 0.1, TOP)), box(0.0, 0.05, (0.1, 0.1, TOP))],
-               noise_m=0.0005),
-        gap_between,
-        ink=(190, 40, 40),
-    )  # fmt: skip
-    a, b = centres(segment_frame(frame, config=ON).labels, frame)
+    # Red lines (ink absorbing green and blue only) where the gaps were: the pair's is a
+    # printed line through one box's middle as far as one view tells, even beside the row.
+    frame, pair, row = pair_beside_a_row(ink=(190, 40, 40))
+    labels = segment_frame(frame, config=ON).labels
+    assert len({segment_of_point(frame, labels, point) for point in row}) == 3
+    a, b = (segment_of_point(frame, labels, point) for point in pair)
     assert a > 0 and a == b
-    # It is a seam all the same: cut when a lone seam is allowed.
-    a, b = centres(segment_frame(frame, config=PAIRS).labels, frame)
-    assert a > 0 and b > 0 and a != b
 
 
 def test_a_lone_seam_is_kept_when_a_box_of_its_strips_size_is_seen_elsewhere():

@@ -676,14 +676,17 @@ class SeamsConfig:
             ``max_normal_deg`` of one) at least ``min_length_m`` by twice ``min_width_m``
             across: room for a seam and a strip each side (``seams._has_flat_face``). Cans,
             bottles, bowls and small objects are then kept whole before any edge work.
-        shadow_lines: a seam with flat strips is also kept, whatever its strips measure to a
-            parallel seam or the outline, when it is a shadow line: across it, every colour
-            channel is darker within a pixel of it than on both sides (2-10 px) by more than
-            the two sides differ, and the channels darken alike (their ratios to the darker
-            side differ by less than the light lost). Two touching boxes leave a gap the light
-            does not reach, dark in every channel whatever their print; a printed border is a
-            step, and ink darkens the channels it absorbs. Without it a pair of boxes with no
-            twin in the frame, or a row whose other seams were not found, stays one segment.
+        shadow_lines: in a frame where the strip tests kept a cut (packed boxes seen), a
+            seam with flat strips is also kept, whatever its strips measure to a parallel seam
+            or the outline, when it is a shadow line: across it, every colour channel is darker
+            within a pixel of it than on both sides (2-10 px) by more than the two sides
+            differ, and the channels darken alike (their ratios to the darker side differ by
+            less than the light lost). Two touching boxes leave a gap the light does not reach,
+            dark in every channel whatever their print; a printed border is a step, and
+            coloured ink darkens the channels it absorbs; black or grey ink darkens all alike,
+            hence the frame's kept cut (a tabletop box's printed lines stay whole). Without it
+            a pair of boxes with no twin in the frame, or a row whose other seams were not
+            found, stays one segment.
     """
 
     CHECKS: ClassVar[Checks] = {

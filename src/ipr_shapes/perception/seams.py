@@ -26,10 +26,11 @@ object's own lines whole:
   seams beside it (``seams.rows_of_three``: a row's end strips to the outline are off by side
   faces and occluders): packed boxes of one size repeat at one spacing, a printed border (a
   box's end panel) lies where the print puts it. Cuts that fail are undone;
-- **or a shadow line**: a flat seam that is a dark line darker than both sides in every
-  channel alike (the gap between two touching boxes, which the light does not reach) is kept
-  whatever its strips measure: a printed border is a step between two colours, ink darkens
-  some channels more than others (``seams.shadow_lines``);
+- **or a shadow line where packed boxes are seen**: in a frame where the strip tests kept a
+  cut, a flat seam that is a dark line darker than both sides in every channel alike (the gap
+  between two touching boxes, which the light does not reach) is kept whatever its strips
+  measure: a printed border is a step between two colours, coloured ink darkens some channels
+  more than others; black or grey ink is told apart only by the frame (``seams.shadow_lines``);
 - **supported when alone**: a seam midway between the outline on both sides (two boxes, or
   one box with a printed line through its middle) is kept only where it meets a seam that
   lies between seams (a grid of boxes) or its strips have the size of a flat rectangular
@@ -287,8 +288,6 @@ def cut_colour_seams(
                                      direction[_within(crop, box)], points[crop],
                                      normals.within(crop, mask), depth_m[crop], focal_px,
                                      config)  # fmt: skip
-        if seams.shadow_lines and found:
-            found = _with_shadows(found, rgb[crop])
         # The segment's points with depth, and which seams have flat strips: measured once,
         # asked by every strip test below.
         cloud = np.empty((0, 3))
@@ -307,6 +306,8 @@ def cut_colour_seams(
     if seams.pair_needs_grid and seams.pair_sizes:
         decided = _pairs_by_size(searched, decided, asked, points, normals, depth_m,
                                  config)  # fmt: skip
+    if seams.shadow_lines:
+        decided = _with_shadow_lines(searched, decided, rgb, points, normals, depth_m, config)
     next_id = int(labels.max()) + 1
     for (crop, *_), pieces in zip(searched, decided, strict=True):
         view = out[crop]  # writes go to out
@@ -778,6 +779,53 @@ def _linked_edges(
     return kernels.linked_to(_thin(magnitude, direction, weak), edges) | edges
 
 
+def _with_shadow_lines(
+    searched: list,
+    decided: list[np.ndarray],
+    rgb: np.ndarray,
+    points: np.ndarray,
+    normals: Normals,
+    depth_m: np.ndarray,
+    config: PerceptionConfig,
+) -> list[np.ndarray]:
+    """``decided`` (each searched segment's pieces, ``searched`` as in ``cut_colour_seams``)
+    decided again with the shadow lines among the seams found (``_is_shadow``) kept whatever
+    their strips measure, when the strip tests kept a cut somewhere in the frame; else as it
+    is.
+
+    Why the frame's kept cut: a shadow line is the gap between two touching boxes, but black
+    or grey ink darkens every channel alike too (a printed line on a white box). A cut that
+    the strip tests kept (a row or grid of boxes of one size, or a pair with a twin) says that
+    the frame holds packed boxes, where a dark line between flat strips is a gap; a tabletop
+    frame with no such cut keeps its printed lines whole."""
+    if not any(int(pieces.max()) > 1 for pieces in decided):
+        return decided
+    marked = [(crop, mask, cut, _with_shadows(found, rgb[crop]), cloud, flat)
+              for crop, mask, cut, found, cloud, flat in searched]  # fmt: skip
+    if not any(seam.shadow for *_, found, _, _ in marked for seam in found):
+        return decided
+    return _decide_frame(marked, points, normals, depth_m, config)
+
+
+def _decide_frame(
+    searched: list,
+    points: np.ndarray,
+    normals: Normals,
+    depth_m: np.ndarray,
+    config: PerceptionConfig,
+) -> list[np.ndarray]:
+    """Each searched segment's pieces after the strip tests (``_decide``, then
+    ``_pairs_by_size``), as ``cut_colour_seams`` decides them."""
+    asked = [_Sizes() for _ in searched]
+    with_depth = depth_m > 0
+    decided = [_decide(cut, found, cloud, flat, config, sizes, points[crop], with_depth[crop])
+               for (crop, _, cut, found, cloud, flat), sizes
+               in zip(searched, asked, strict=True)]  # fmt: skip
+    if config.seams.pair_needs_grid and config.seams.pair_sizes:
+        decided = _pairs_by_size(searched, decided, asked, points, normals, depth_m, config)
+    return decided
+
+
 def _with_shadows(found: list[_Seam], rgb: np.ndarray) -> list[_Seam]:
     """The seams ``found`` (pixels in the crop of ``rgb``, (h, w, 3) uint8), each marked
     ``shadow`` when it is a shadow line (``_is_shadow``)."""
@@ -909,9 +957,9 @@ def _unrepeated(
     two boxes, or one box with a printed line through its middle) is kept only when it meets
     a seam that repeats between seams (a grid of packed boxes), or when both its strips have
     one of the (longer, shorter) face sizes ``sizes`` ((M, 2), m) of boxes seen elsewhere in
-    the frame, within ``seams.size_tolerance_m``. A shadow line (``_Seam.shadow``,
-    ``seams.shadow_lines``) with flat strips is kept whatever it repeats: a gap between two
-    objects. ``cloud`` (N, 3): the segment's points with
+    the frame, within ``seams.size_tolerance_m``. A seam marked a shadow line
+    (``_Seam.shadow``; ``_with_shadow_lines``) with flat strips is kept whatever it repeats: a
+    gap between two boxes. ``cloud`` (N, 3): the segment's points with
     depth (world, m); ``flat``: whether each seam's strips are flat (``_flat_strips``)."""
     kept = [seam for seam, is_flat in zip(found, flat, strict=True) if is_flat]
     while True:
