@@ -609,7 +609,7 @@ class SeamsConfig:
 
     Off by default for its time, not its accuracy: with it on, every development, container
     and tabletop set scores as with it off (a frame it leaves uncut keeps the seams-off labels,
-    numbering included) and the real bins gain (28.6 -> 55.5 % of boxes found), but the
+    numbering included) and the real bins gain (28.6 -> 63.4 % of boxes found), but the
     perception costs 2.7-3 times as much CPU per bin frame (285 ms on the page's run at
     10052ac) and 1.05-1.6 times per tabletop frame: within the 150 ms budget on the generated
     and YCB-Video frames, over it on the real lab frames (about 180 ms against 130), which gain

@@ -789,9 +789,10 @@ def _with_shadow_lines(
     config: PerceptionConfig,
 ) -> list[np.ndarray]:
     """``decided`` (each searched segment's pieces, ``searched`` as in ``cut_colour_seams``)
-    decided again with the shadow lines among the seams found (``_is_shadow``) kept whatever
-    their strips measure, when the strip tests kept a cut somewhere in the frame; else as it
-    is.
+    with the segments whose seams found hold a shadow line (``_is_shadow``) decided again,
+    those seams kept whatever their strips measure, when the strip tests kept a cut somewhere
+    in the frame; else as it is. The other segments keep their pieces (the faces that the
+    segments decided again compare their strips with).
 
     Why the frame's kept cut: a shadow line is the gap between two touching boxes, but black
     or grey ink darkens every channel alike too (a printed line on a white box). A cut that
@@ -802,27 +803,20 @@ def _with_shadow_lines(
         return decided
     marked = [(crop, mask, cut, _with_shadows(found, rgb[crop]), cloud, flat)
               for crop, mask, cut, found, cloud, flat in searched]  # fmt: skip
-    if not any(seam.shadow for *_, found, _, _ in marked for seam in found):
+    again = [any(seam.shadow for seam in entry[3]) for entry in marked]
+    if not any(again):
         return decided
-    return _decide_frame(marked, points, normals, depth_m, config)
-
-
-def _decide_frame(
-    searched: list,
-    points: np.ndarray,
-    normals: Normals,
-    depth_m: np.ndarray,
-    config: PerceptionConfig,
-) -> list[np.ndarray]:
-    """Each searched segment's pieces after the strip tests (``_decide``, then
-    ``_pairs_by_size``), as ``cut_colour_seams`` decides them."""
-    asked = [_Sizes() for _ in searched]
+    # Only those segments ask for sizes (``_pairs_by_size`` decides again the ones that asked).
+    asked = [_Sizes() for _ in marked]
     with_depth = depth_m > 0
-    decided = [_decide(cut, found, cloud, flat, config, sizes, points[crop], with_depth[crop])
-               for (crop, _, cut, found, cloud, flat), sizes
-               in zip(searched, asked, strict=True)]  # fmt: skip
+    decided = [
+        _decide(cut, found, cloud, flat, config, sizes, points[crop], with_depth[crop])
+        if redo else pieces
+        for (crop, _, cut, found, cloud, flat), sizes, redo, pieces
+        in zip(marked, asked, again, decided, strict=True)
+    ]  # fmt: skip
     if config.seams.pair_needs_grid and config.seams.pair_sizes:
-        decided = _pairs_by_size(searched, decided, asked, points, normals, depth_m, config)
+        decided = _pairs_by_size(marked, decided, asked, points, normals, depth_m, config)
     return decided
 
 
