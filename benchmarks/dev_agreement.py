@@ -18,7 +18,8 @@ Usage: ``python -m benchmarks.dev_agreement [--sets 9100:10 9400:10] [--scenes D
    until ``--share`` of exhaustive's CPU (the sum over its models) is spent; a run with no sample returns the Collision Checker's
    answer, as the pipeline does (the marginals of the feasibility counts). Each of
    ``--seeds`` runs draws its own samples, so agreement is a distribution, not one draw.
-3. Estimators on the same samples (``InferenceConfig.weighting`` "hypothesis", "object",
+3. Estimators on the same samples (``InferenceConfig.weighting`` "hypothesis" with
+   ``drawn_models`` "factorised" and, as "drawn-exact", "exact" (the default), "object",
    "joint"; "models": the exact posterior restricted to the distinct joint models evaluated,
    which becomes exhaustive's as they cover the table).
 
@@ -136,18 +137,19 @@ def models_marginals(results, problem) -> list[np.ndarray] | None:
     return marginals(list(distinct.values()), problem, joint=True)
 
 
-def _weighted(weighting: str) -> Callable:
+def _weighted(weighting: str, drawn_models: str = "factorised") -> Callable:
     from ipr_shapes.inference.estimators import marginals
 
     def estimate(results, problem):
-        config = dataclasses.replace(problem.config, weighting=weighting)
+        config = dataclasses.replace(problem.config, weighting=weighting, drawn_models=drawn_models)
         return marginals(results, dataclasses.replace(problem, config=config))
 
     return estimate
 
 
 ESTIMATORS: dict[str, Callable] = {
-    "hypothesis": _weighted("hypothesis"),
+    "hypothesis": _weighted("hypothesis", "factorised"),
+    "drawn-exact": _weighted("hypothesis", "exact"),
     "object": _weighted("object"),
     "joint": _weighted("joint"),
     "models": models_marginals,

@@ -152,6 +152,32 @@ def test_samples_are_the_same_with_one_or_two_workers():
     assert np.array_equal(runs[0].posteriors[0].probabilities, runs[1].posteriors[0].probabilities)
 
 
+def test_a_larger_budget_keeps_the_smaller_budgets_samples():
+    # Common random numbers: sample i is drawn from its own generator (seed, i), so a run that
+    # stops later (a larger budget) scores the same joint models first and only adds others;
+    # the budget table's differences are then the added samples' alone.
+    observed = _push_scene()
+    runs = [
+        infer_shapes(
+            _prepared(TRUE_BOX, DEEP_BOX, TOP_SLAB),
+            (SUPPORT,),
+            observed,
+            pusher=Pusher(),
+            pushes=(BEHIND,),
+            config=InferenceConfig(max_samples=count),
+            workers=2,
+            seed=5,
+        )  # fmt: skip
+        for count in (3, 8)
+    ]
+    small, large = (
+        [(s.index, s.choice, s.log_proposal, s.log_likelihood) for s in run.samples] for run in runs
+    )
+    assert len(small) == 3 and len(large) == 8
+    assert large[:3] == small
+    assert len({s[1] for s in large}) > 1  # the added samples are draws of their own
+
+
 def test_exhaustive_agrees_with_the_sampler():
     observed = _push_scene()
     kwargs = dict(pusher=Pusher(), pushes=(BEHIND,), workers=1)
@@ -274,8 +300,13 @@ def test_completion_shading_around_the_drawn_pixels_is_the_whole_images():
     assert drawn[:, 0].any() or drawn[:, -1].any() or drawn[0].any() or drawn[-1].any()
 
 
-def _fabricated_problem(count: int, compatible: dict | None = None, weighting="hypothesis"):
-    """A problem of ``count`` objects with two candidates each, for estimators alone."""
+def _fabricated_problem(
+    count: int, compatible: dict | None = None, weighting="hypothesis", drawn_models="factorised"
+):
+    """A problem of ``count`` objects with two candidates each, for estimators alone. The
+    factorised marginals by default: the tests of the unary factors build samples whose joint
+    log likelihood is a placeholder (``_result``); the drawn models' own weights (the default
+    ``drawn_models``) are tested with samples scored as the sampler scores them (``_scored``)."""
     from ipr_shapes.inference import InferenceProblem
 
     return InferenceProblem(
@@ -289,7 +320,7 @@ def _fabricated_problem(count: int, compatible: dict | None = None, weighting="h
         pusher=None,
         pushes=(),
         observed=_push_scene(),
-        config=InferenceConfig(weighting=weighting),
+        config=InferenceConfig(weighting=weighting, drawn_models=drawn_models),
         seed=0,
     )
 
@@ -372,6 +403,133 @@ def test_hypothesis_weighting_respects_the_pairwise_constraints():
     feasible = compatible[(0, 1)] * np.outer(u0, u1)
     assert estimate[0] == pytest.approx(feasible.sum(1) / feasible.sum())
     assert estimate[1] == pytest.approx(feasible.sum(0) / feasible.sum())
+
+
+def _scored(problem, index: int, choice, norms):
+    """A sample of ``problem`` whose likelihood and prior are its norms' and candidates' (None
+    norms: a failed simulation)."""
+    from ipr_shapes.inference import SampleResult
+    from ipr_shapes.likelihood import log_likelihood
+
+    log_prior = float(sum(problem.log_prior[k][j] for k, j in enumerate(choice)))
+    if norms is None:
+        return SampleResult(index, tuple(choice), 0.0, -np.inf, log_prior, 0.0, 0, None)
+    norms = np.asarray(norms, float)[None, None, :]
+    log_l = log_likelihood(norms[0], problem.observed.decimation, problem.config.likelihood)
+    return SampleResult(
+        index, tuple(choice), 0.0, log_l, log_prior, 0.0, 0, norms, (0.0,) * len(choice)
+    )
+
+
+def _interacting(drawn_models: str):
+    """Two objects of two candidates each, all four pairs feasible, whose own terms interact:
+    object 1's candidate 1 makes object 0's rendered depth worse by 2 of norm, which object
+    0's candidates share alike; exhaustive's answer is then object 1's candidate 0, the
+    factorised one a tie."""
+    problem = _fabricated_problem(
+        2, {(0, 1): np.ones((2, 2), dtype=bool)}, drawn_models=drawn_models
+    )
+    norms = {
+        (0, 0): [0.01, 0.02], (0, 1): [2.01, 0.02],
+        (1, 0): [0.02, 0.02], (1, 1): [0.02, 0.02],
+    }  # fmt: skip
+    return problem, norms
+
+
+def test_drawn_models_scored_by_their_own_likelihood_give_exhaustive_searchs_marginals():
+    from ipr_shapes.inference import marginals
+
+    assert InferenceConfig().drawn_models == "exact"  # the default
+    exact_problem, norms = _interacting("exact")
+    results = [_scored(exact_problem, s, c, n) for s, (c, n) in enumerate(norms.items())]
+    # Exhaustive search's marginals: the joint posterior summed.
+    log_w = np.array([r.log_likelihood + r.log_prior for r in results])
+    weights = np.exp(log_w - log_w.max()).reshape(2, 2)
+    exhaustive = marginals(results, exact_problem, joint=True)
+    assert exhaustive[1] == pytest.approx(weights.sum(0) / weights.sum())
+    # Every model drawn (some twice: a model counts once): the drawn models' own likelihoods.
+    estimate = marginals([*results, results[1], results[1]], exact_problem)
+    for got, want in zip(estimate, exhaustive, strict=True):
+        assert got == pytest.approx(want)
+    assert estimate[1][0] > 0.6
+    # The factorised estimate (the default) cannot see that object 1's candidate 1 costs
+    # object 0 its fit: the per-candidate means of its own term tie.
+    factorised_problem, _ = _interacting("factorised")
+    assert factorised_problem.config == dataclasses.replace(
+        exact_problem.config, drawn_models="factorised"
+    )
+    factorised = marginals(results, factorised_problem)
+    assert factorised[1] == pytest.approx([0.5, 0.5])
+    # Two models drawn, both with object 0's candidate 0: they tell object 1's candidates
+    # apart, the two undrawn models keep their factorised weight.
+    partial = marginals(results[:2], exact_problem)
+    assert partial[1][0] > 0.55 and factorised_problem.config.drawn_models == "factorised"
+    assert marginals(results[:2], factorised_problem)[1] == pytest.approx([0.5, 0.5])
+
+
+def test_undrawn_models_take_what_the_drawn_ones_said_of_a_candidate_to_its_neighbour():
+    from ipr_shapes.inference import marginals
+
+    # Object 1's candidate 1 worsens object 0's depth by 2 of norm with either of object 0's
+    # candidates; the model (1, 1) is not drawn. Declared neighbours, its weight is the
+    # first-order expansion: object 0's residual in the drawn (0, 1) counts against object
+    # 1's candidate 1 there too; without neighbours it would count for nothing.
+    norms = {(0, 0): [0.01, 0.02], (0, 1): [2.01, 0.02], (1, 0): [0.02, 0.02]}
+    undrawn = [0.02 + 2.0, 0.02]
+    base = _fabricated_problem(2, {(0, 1): np.ones((2, 2), dtype=bool)}, drawn_models="exact")
+    near = dataclasses.replace(base, neighbours=((1,), (0,)))
+    results = [_scored(near, s, c, n) for s, (c, n) in enumerate(norms.items())]
+    every = [*results, _scored(near, 3, (1, 1), undrawn)]
+    exhaustive = marginals(every, near, joint=True)[1][1]
+    first_order = marginals(results, near)[1][1]
+    own_only = marginals(results, base)[1][1]
+    assert exhaustive < first_order < own_only
+    # The output's own-evidence weights do not take the neighbours' residuals ("own").
+    from ipr_shapes.inference.estimators import medoid_weights
+
+    for a, b in zip(medoid_weights(results, near), medoid_weights(results, base), strict=True):
+        assert a == pytest.approx(b)
+
+
+def test_a_drawn_model_that_failed_takes_its_share_of_the_marginals_away():
+    from ipr_shapes.inference import marginals
+
+    problem, norms = _interacting("exact")
+    problem = dataclasses.replace(
+        problem, compatible={(0, 1): np.array([[True, True], [True, False]])}
+    )
+    # Object 1's candidate 1 fits only with object 0's candidate 0, and that model failed:
+    # candidate 1 is impossible, whatever its factorised evidence says.
+    results = [
+        _scored(problem, 0, (0, 0), norms[(0, 0)]),
+        _scored(problem, 1, (0, 1), None),
+        _scored(problem, 2, (1, 0), norms[(1, 0)]),
+    ]
+    estimate = marginals(results, problem)
+    assert estimate[1] == pytest.approx([1.0, 0.0])
+    factorised = marginals(
+        results,
+        dataclasses.replace(
+            problem, config=dataclasses.replace(problem.config, drawn_models="factorised")
+        ),
+    )
+    assert factorised[1][1] > 0.2
+
+
+def test_the_log_partition_is_the_sum_over_the_feasible_assignments():
+    from ipr_shapes.factor_graph import log_partition
+
+    rng = np.random.default_rng(4)
+    sizes = {0: 3, 1: 2, 2: 4}
+    edges = {(0, 1): rng.random((3, 2)) > 0.3, (1, 2): rng.random((2, 4)) > 0.3}
+    unary = {k: rng.random(m) * 5 for k, m in sizes.items()}
+    total = sum(
+        unary[0][a] * unary[1][b] * unary[2][c] * edges[(0, 1)][a, b] * edges[(1, 2)][b, c]
+        for a in range(3) for b in range(2) for c in range(4)
+    )  # fmt: skip
+    assert log_partition([0, 1, 2], edges, sizes, unary=unary) == pytest.approx(np.log(total))
+    none = {(0, 1): np.zeros((3, 2), dtype=bool)}
+    assert log_partition([0, 1], none, {0: 3, 1: 2}) == -np.inf
 
 
 def test_a_joint_model_drawn_again_is_not_simulated_again():

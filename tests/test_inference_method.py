@@ -260,16 +260,41 @@ def test_gravity_decides_the_hidden_depth_of_the_object_holding_another(
     strict=True,
     reason="per-object weightings score each candidate by its own Eq. 2 term only: the top "
     "object's fall is not evidence about the bottom object's shape (reported; the opt-in "
-    '"neighbours" evidence gives it, the next test)',
+    '"neighbours" evidence gives it, and the drawn models\' own weights (the default) give '
+    "it to the marginals: the next tests)",
 )
 @pytest.mark.parametrize("weighting", ["hypothesis", "object"])
 def test_per_object_weightings_miss_evidence_that_another_object_gives(stack_observed, weighting):
     prepared = _prepared({1: [TOP_THICK], 2: [BOTTOM_MID, BOTTOM_DEEP]}, STACK_MINIMA)
-    config = dataclasses.replace(STEEP, max_samples=12, weighting=weighting)
+    config = dataclasses.replace(
+        STEEP, max_samples=12, weighting=weighting, drawn_models="factorised"
+    )
     outcome = infer_shapes(
         prepared, (SUPPORT,), stack_observed, method="ipr+uniform", config=config, workers=1
     )
     assert outcome.posteriors[1].probabilities[1] > 0.9
+
+
+def test_drawn_models_own_weights_give_the_top_objects_fall_to_the_bottoms_marginal(
+    stack_observed,
+):
+    """The case above with the default ``drawn_models`` "exact": both joint models are drawn
+    and each counts with its own likelihood, the top tipping off the middle bottom, as
+    exhaustive search counts them; the output shape is still chosen by each candidate's own
+    evidence (``medoid_weights``), unchanged."""
+    prepared = _prepared({1: [TOP_THICK], 2: [BOTTOM_MID, BOTTOM_DEEP]}, STACK_MINIMA)
+    config = dataclasses.replace(STEEP, max_samples=12)
+    assert config.drawn_models == "exact"
+    outcome = infer_shapes(
+        prepared, (SUPPORT,), stack_observed, method="ipr+uniform", config=config, workers=1
+    )
+    assert {s.choice for s in outcome.samples} == {(0, 0), (0, 1)}
+    assert outcome.posteriors[1].probabilities[1] > 0.9
+    factorised = infer_shapes(
+        prepared, (SUPPORT,), stack_observed, method="ipr+uniform",
+        config=dataclasses.replace(config, drawn_models="factorised"), workers=1,
+    )  # fmt: skip
+    assert outcome.posteriors[1].best == factorised.posteriors[1].best
 
 
 def test_neighbour_evidence_gives_the_top_objects_fall_to_the_bottom_objects_shape(stack_observed):
@@ -448,16 +473,21 @@ def test_pixels_under_the_robot_mask_are_no_evidence(push_scene):
 # From samples to marginals: the three weightings on constructed samples
 
 
-def _constructed_problem(weighting: str) -> InferenceProblem:
+def _constructed_problem(weighting: str, drawn_models: str = "factorised") -> InferenceProblem:
     """Two objects with two candidates each, uniform priors, Eq. 2 with alpha x decimation =
-    1/m (so an object's log-likelihood term is minus its depth error norm)."""
+    1/m (so an object's log-likelihood term is minus its depth error norm); the factorised
+    marginals unless ``drawn_models`` says otherwise."""
     from ipr_shapes.likelihood import ObservedFrames
 
     observed = ObservedFrames(
         (0,), (), np.zeros((1, 1, 1), np.float32), np.zeros((1, 1, 1), np.int32),
         np.zeros((1, 1, 1), bool), 1,
     )  # fmt: skip
-    config = InferenceConfig(weighting=weighting, likelihood=LikelihoodConfig(alpha_per_m=1.0))
+    config = InferenceConfig(
+        weighting=weighting,
+        likelihood=LikelihoodConfig(alpha_per_m=1.0),
+        drawn_models=drawn_models,
+    )
     return InferenceProblem(
         ids=(1, 2),
         candidates=(tuple(FRONT), tuple(BACK)),

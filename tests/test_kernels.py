@@ -882,6 +882,11 @@ def test_hough_votes_are_the_numpy_bincount():
     )
     votes = kernels.hough_votes(rows, cols, own, spread, cos_a, sin_a, reach)
     assert np.array_equal(votes, expected)
+    # The lines with at least k votes, in index order, and their votes.
+    for least in (1, 3, 20):
+        lines, counts = kernels.hough_lines(rows, cols, own, spread, cos_a, sin_a, reach, least)
+        assert np.array_equal(lines, np.flatnonzero(expected >= least))
+        assert np.array_equal(counts, expected[lines])
 
 
 def _robust_circle_numpy(points: np.ndarray, floor_m: float, rounds: int) -> tuple:

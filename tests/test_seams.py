@@ -686,6 +686,40 @@ def test_the_compiled_thinning_is_the_numpy_one():
         )
 
 
+def test_thinning_in_the_gradients_sectors_is_the_thinning_of_its_directions():
+    """``_thin`` given the gradient's components (sectors read from them, the arctangent only
+    near a boundary) is ``_thin_numpy`` of the float32 ``np.arctan2`` directions, at random
+    gradients, on the axes and the diagonals, and at angles within 1e-7 to 1e-3 rad of the
+    sectors' boundaries (odd multiples of 22.5 deg); the directions it measured are numpy's."""
+    from ipr_shapes.perception.seams import _thin, _thin_numpy
+
+    rng = np.random.default_rng(8)
+    for trial in range(200):
+        height, width = rng.integers(1, 30, 2)
+        magnitude = rng.random((height, width)).astype(np.float32)
+        if trial % 3 == 0:
+            magnitude = np.round(magnitude * 4).astype(np.float32) / 4  # equal neighbours
+        angle = rng.uniform(-np.pi, np.pi, (height, width))
+        if trial % 2 == 0:  # near a boundary, on it, or on an axis or a diagonal
+            near = np.pi / 8 * rng.integers(-8, 9, (height, width))
+            offset = rng.choice([0.0, 1e-7, 3e-6, 1e-4, 1e-3], (height, width))
+            angle = near + offset * rng.choice([-1.0, 1.0], (height, width))
+        length = rng.uniform(0.01, 3.0, (height, width))
+        gx = (length * np.cos(angle)).astype(np.float32)
+        gy = (length * np.sin(angle)).astype(np.float32)
+        if trial % 5 == 0:  # exact zeros of one component, signed
+            gx[rng.random((height, width)) < 0.2] = -0.0
+            gy[rng.random((height, width)) < 0.2] = 0.0
+            gy[(gx == 0) & (gy == 0)] = 1.0
+        direction = np.arctan2(gy, gx)
+        at = np.flatnonzero(rng.random(height * width) < 0.6)
+        measured = np.zeros_like(magnitude)
+        thinned = _thin(magnitude, measured, at, gx, gy)
+        assert np.array_equal(thinned, _thin_numpy(magnitude, direction, at))
+        written = measured != 0
+        assert np.array_equal(measured[written], direction[written])
+
+
 def test_linked_pixels_are_the_components_that_hold_a_seed():
     """Exact: scipy's 8-connected components of ``pixels`` that hold a seed pixel."""
     from scipy import ndimage
@@ -797,6 +831,78 @@ def test_a_trial_cut_without_room_for_two_pieces_is_skipped():
             assert sides[side, 1] == pytest.approx((np.abs(distance[chosen]).max() + 0.5) * 1e-3)
             spread = np.ptp(along[chosen]) + 1.0
             assert sides[side, 2] == pytest.approx(spread * 1e-3)
+
+
+def test_the_compiled_room_is_numpys():
+    """``_Room`` on float32 depths (``kernels.room_pixels``) gives the numbers of its numpy
+    path (the same depths as float64): pixels row-major, sizes with missing depths filled by
+    the median of the others (odd and even counts, ties, none known), footprints."""
+    from ipr_shapes.perception.seams import _Room
+
+    rng = np.random.default_rng(14)
+    for trial in range(300):
+        height, width = (int(n) for n in rng.integers(1, 40, 2))
+        part = rng.random((height, width)) < rng.uniform(0.05, 1.0)
+        depth = rng.uniform(0.3, 1.2, (height, width)).astype(np.float32)
+        if trial % 3 == 0:
+            depth = np.round(depth, 2).astype(np.float32)  # ties
+        depth[rng.random((height, width)) < rng.uniform(0.0, 1.0)] = 0.0
+        if trial % 7 == 0:
+            depth[:] = 0.0
+        window = (slice(0, height), slice(0, width))
+        compiled = _Room(part, window, depth, 500.0)
+        reference = _Room(part, window, depth.astype(np.float64), 500.0)
+        for name in ("rows", "cols", "size", "foot"):
+            assert np.array_equal(getattr(compiled, name), getattr(reference, name))
+
+
+def test_the_screens_room_test_that_stops_early_answers_as_the_full_sums():
+    """``kernels.line_sides_fit`` (the candidate screen's room test, which stops once every
+    test holds) answers as ``line_sides``' full sums compared as ``_Room.fits`` does, on
+    random parts, lines and thresholds, empty sides and zero thresholds included."""
+    from ipr_shapes.perception import kernels
+
+    rng = np.random.default_rng(11)
+    answers = set()
+    for trial in range(400):
+        count = int(rng.integers(1, 2000))
+        rows = np.sort(rng.integers(0, 200, count)).astype(np.int64)
+        cols = rng.integers(0, 200, count).astype(np.int64)
+        size = rng.uniform(0.5e-3, 2e-3, count)
+        foot = size**2
+        angle, rho = rng.uniform(0, np.pi), rng.uniform(-50, 280)
+        min_area = 0.0 if trial % 7 == 0 else float(rng.uniform(0, 2 * foot.sum()))
+        min_width = 0.0 if trial % 5 == 0 else float(rng.uniform(0, 0.3))
+        sides = kernels.line_sides(rows, cols, foot, size, np.cos(angle), np.sin(angle), rho)
+        expected = bool(
+            np.all(sides[:, 0] >= min_area)
+            and np.all(np.minimum(sides[:, 1], sides[:, 2]) >= min_width)
+        )
+        fit = kernels.line_sides_fit(rows, cols, foot, size, np.cos(angle), np.sin(angle), rho,
+                                     min_area, min_width)  # fmt: skip
+        assert fit == expected
+        answers.add(expected)
+    assert answers == {True, False}
+
+
+def test_the_noise_median_is_numpys_median():
+    """``_masked_median``: ``np.median`` of the values at the mask, the same float, in their
+    float32 and in float64, for odd and even counts, ties, zeros and one value."""
+    from ipr_shapes.perception.seams import _masked_median
+
+    rng = np.random.default_rng(12)
+    for trial in range(300):
+        shape = tuple(int(n) for n in rng.integers(1, 40, 2))
+        values = (rng.random(shape) * 10 ** rng.uniform(-3, 2)).astype(np.float32)
+        if trial % 3 == 0:
+            values = np.round(values, 1).astype(np.float32)  # ties
+        values[rng.random(shape) < 0.2] = 0.0
+        mask = rng.random(shape) < rng.uniform(0.05, 1.0)
+        mask.flat[int(rng.integers(mask.size))] = True
+        assert _masked_median(values, mask) == float(np.median(values[mask]))
+        wide = float(np.median(values[mask].astype(np.float64)))
+        assert _masked_median(values, mask, np.float64) == wide
+        assert _masked_median(values[mask]) == float(np.median(values[mask]))
 
 
 def test_the_gradient_in_the_searched_crops_is_the_frames_and_the_noise_its_median():
@@ -989,6 +1095,23 @@ def test_row_percentiles_are_numpys_bits():
         assert np.array_equal(
             _row_percentiles(rows, percents), np.percentile(rows, percents, axis=1)
         )
+
+
+def test_single_percentiles_are_numpys():
+    """``_percentiles`` (a face's bend, a strip's width, a piece's span): ``np.percentile``'s
+    floats in float64 (from a sorted row) and float32 (numpy's own), one value to thousands."""
+    from ipr_shapes.perception.seams import _percentiles
+
+    rng = np.random.default_rng(13)
+    for trial in range(200):
+        count = int(rng.integers(1, 3000)) if trial % 4 else int(rng.integers(1, 4))
+        dtype = np.float32 if trial % 5 == 0 else np.float64
+        values = (rng.normal(size=count) * 10 ** rng.uniform(-3, 1)).astype(dtype)
+        if trial % 3 == 0:
+            values = np.round(values, 2).astype(dtype)  # ties
+        for percents in ((90.0,), (98.0,), (98.0, 2.0)):
+            expected = [float(value) for value in np.percentile(values, percents)]
+            assert _percentiles(values, percents) == expected
 
 
 def test_the_frames_faces_skip_pieces_too_small_for_a_strip():

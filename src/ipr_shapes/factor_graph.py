@@ -115,6 +115,54 @@ def exact_marginals(
     return marginals
 
 
+def log_partition(
+    nodes: list[int],
+    edges: Mapping[tuple[int, int], np.ndarray],
+    sizes: Mapping[int, int],
+    max_table: float = np.inf,
+    unary: Mapping[int, np.ndarray] | None = None,
+) -> float:
+    """log of the sum over every assignment of the product of the factors (the normaliser of
+    ``exact_marginals``' distribution, same arguments): every node eliminated in the same
+    min-degree order, each table's rescaling kept in log. -inf when no assignment is feasible;
+    raises ``TableTooLarge`` as ``exact_marginals``."""
+    position = {node: number for number, node in enumerate(nodes)}
+    unary = unary or {}
+    factors = [
+        ((position[i],), np.asarray(unary.get(i, np.ones(sizes[i])), dtype=np.float64))
+        for i in nodes
+    ]
+    factors += [
+        ((position[a], position[b]), matrix.astype(np.float64)) for (a, b), matrix in edges.items()
+    ]
+    size_of = [sizes[i] for i in nodes]
+    log_scale = 0.0
+    remaining = set(range(len(nodes)))
+    while remaining:
+
+        def scope(v: int, factors=factors) -> set[int]:
+            return set().union(*(set(f[0]) for f in factors if v in f[0]))
+
+        variable = min(remaining, key=lambda v: (np.prod([size_of[u] for u in scope(v)]), v))
+        union = sorted(scope(variable))
+        if float(np.prod([size_of[u] for u in union], dtype=float)) > max_table:
+            raise TableTooLarge
+        involved = [f for f in factors if variable in f[0]]
+        out = [u for u in union if u != variable]
+        operands: list = []
+        for variables, table in involved:
+            operands += [table, list(variables)]
+        table = np.einsum(*operands, out)
+        peak = float(table.max()) if table.size else 0.0
+        if peak <= 0:
+            return -np.inf
+        log_scale += float(np.log(peak))
+        factors = [f for f in factors if variable not in f[0]] + [(tuple(out), table / peak)]
+        remaining.discard(variable)
+    total = float(np.prod([float(table) for _, table in factors]))
+    return log_scale + float(np.log(total)) if total > 0 else -np.inf
+
+
 class TableTooLarge(Exception):
     """Variable elimination would need a table above the configured size."""
 

@@ -50,7 +50,12 @@ of some jointly feasible model) are candidates. Then, repeated until the time bu
    the evidence there is of it), so that a few samples tilt the Collision Checker's
    marginals instead of replacing them with the handful of candidates drawn, and a
    candidate that falls is still unlikely. The exploration probabilities decide what is visited,
-   not how much it weighs, so rare draws do not carry huge weights. ``"object"``: Algorithm
+   not how much it weighs, so rare draws do not carry huge weights. The per-candidate means
+   drop how a neighbour's shape changes an object's own term, so (``drawn_models`` "exact",
+   the default) each distinct joint model drawn and simulated is scored in the elimination's
+   sum by its own P(O | X) P(X) instead of the product of its candidates' factors (0 if it
+   failed): exhaustive search's marginals once the draws cover the joint models
+   (docs/experiments/2026-11-28-drawn-models-exact.md). ``"object"``: Algorithm
    2's per-object update, w_i = P(O_i | X, mu) P(X_i) / q_i with q_i the exploration
    probability with which X_i was drawn; the estimate of P(X_i^j | O, mu) is the
    self-normalised sum of w_i over the samples that chose j. ``"joint"``: the full
@@ -78,7 +83,9 @@ ones fit with more), as the Collision Checker's marginals do and its medoid leav
 The written probabilities stay the marginals. Anytime: before the first sample finishes the
 answer is the Collision Checker's; a budget too small for one sample returns it and says so. Samples are independent
 given their index (each draws from ``default_rng([seed, index])``), so a run with ``max_samples``
-and no deadline gives the same result with any number of workers.
+and no deadline gives the same result with any number of workers, and a run that stops later
+(a larger budget) has the same samples first and only adds others (common random numbers: a
+budget curve's differences are the added samples').
 
 ``exhaustive`` scores every jointly feasible joint model with the same likelihood (for scenes of
 at most ``max_exhaustive_objects`` objects and ``max_exhaustive_models`` models): the exact

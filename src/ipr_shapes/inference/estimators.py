@@ -11,7 +11,12 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from ipr_shapes.factor_graph import TableTooLarge, exact_marginals, interaction_components
+from ipr_shapes.factor_graph import (
+    TableTooLarge,
+    exact_marginals,
+    interaction_components,
+    log_partition,
+)
 from ipr_shapes.inference.problem import InferenceProblem, SampleResult
 
 
@@ -188,10 +193,22 @@ def factor_marginals(
     constraints (``problem.compatible``), exact by variable elimination per connected group of
     interacting objects; a group whose tables would exceed ``max_factor_table`` (or that has
     no feasible assignment) combines its unary factors alone."""
+    return _factor_marginals(unary_log, problem)[0]
+
+
+def _factor_marginals(
+    unary_log: Sequence[np.ndarray], problem: InferenceProblem, *, partition: bool = False
+) -> tuple[list[np.ndarray], float]:
+    """``factor_marginals`` and (``partition``) the log of the sum over the joint models of
+    the product of exp(unary_log) and the constraints of the groups the marginals were exact
+    in (a group that combines its unary factors alone is summed without them, as its
+    marginals are); NaN when not asked."""
     nodes = list(range(problem.count))
-    unary = {k: np.exp(u - np.max(u)) for k, u in enumerate(unary_log)}
+    peaks = {k: float(np.max(u)) for k, u in enumerate(unary_log)}
+    unary = {k: np.exp(u - peaks[k]) for k, u in enumerate(unary_log)}
     sizes = {k: len(c) for k, c in enumerate(problem.candidates)}
     estimates: dict[int, np.ndarray] = {}
+    log_z = 0.0 if partition else math.nan
     for component in interaction_components(nodes, problem.compatible):
         edges = {
             pair: matrix
@@ -204,11 +221,63 @@ def factor_marginals(
                 result = exact_marginals(
                     component, edges, sizes, problem.config.max_factor_table, unary
                 )
+                if result and partition:
+                    log_z += log_partition(
+                        component, edges, sizes, problem.config.max_factor_table, unary
+                    )
             except TableTooLarge:
                 result = None
         for k in component:
             estimates[k] = result[k] if result else unary[k] / unary[k].sum()
-    return [estimates[k] for k in nodes]
+            if partition:
+                log_z += peaks[k] + (0.0 if result else float(np.log(unary[k].sum())))
+    return [estimates[k] for k in nodes], log_z
+
+
+def drawn_exact_marginals(
+    results: Sequence[SampleResult], problem: InferenceProblem, unary_log: Sequence[np.ndarray]
+) -> list[np.ndarray]:
+    """``factor_marginals`` of ``unary_log`` (log evidence plus log prior per candidate) with
+    each distinct joint model of ``results`` (scored under one friction) that the constraints
+    allow scored by its own log likelihood plus log prior instead of the sum of its
+    candidates' unary factors (0 for a failed simulation): P(X) proportional to P(O | X) P(X)
+    for the models simulated, to prod_k exp(unary_log[k][X_k]) for the others
+    (``InferenceConfig.drawn_models`` "exact", with the unary factors of "neighbours"
+    evidence: the joint term's additive expansion to first order in the neighbours). Every
+    joint model simulated: exhaustive search's marginals; none: the factorised ones. The sum
+    over the joint models is exact per group of interacting objects (``_factor_marginals``);
+    a model's correction (its own weight minus its factorised one) is added to the marginals
+    of its candidates. Falls back to the factorised marginals when the corrected ones would
+    not be a distribution."""
+    estimates, log_z = _factor_marginals(unary_log, problem, partition=True)
+    compatible = problem.compatible
+    drawn: dict[tuple[int, ...], float] = {}
+    for result in results:
+        choice = tuple(int(j) for j in result.choice)
+        if choice in drawn or not all(
+            matrix[choice[a], choice[b]] for (a, b), matrix in compatible.items()
+        ):
+            continue
+        own = result.log_likelihood + result.log_prior if result.norms is not None else -math.inf
+        drawn[choice] = own
+    if not drawn or not math.isfinite(log_z):
+        return estimates
+    choices = list(drawn)
+    exact = np.array([drawn[c] for c in choices])
+    factorised = np.array([sum(float(unary_log[k][j]) for k, j in enumerate(c)) for c in choices])
+    scale = max(log_z, float(np.max(np.concatenate([exact, factorised]))))
+    with np.errstate(under="ignore"):
+        correction = np.exp(exact - scale) - np.exp(factorised - scale)
+        base = math.exp(log_z - scale)
+    out = []
+    for k, estimate in enumerate(estimates):
+        mass = estimate * base
+        np.add.at(mass, [c[k] for c in choices], correction)
+        mass = np.maximum(mass, 0.0)  # rounding: a model's own share of the sum, removed
+        if not mass.sum() > 0:
+            return estimates
+        out.append(mass / mass.sum())
+    return out
 
 
 def friction_posterior(
@@ -303,6 +372,13 @@ def _single_friction_marginals(
     if not any(r.norms is not None for r in results):
         return None
     if not joint and problem.config.weighting == "hypothesis":
+        if problem.config.drawn_models == "exact":
+            # The undrawn models by the joint term's expansion to first order in the
+            # neighbours (each candidate's own term plus its neighbours' residuals), whatever
+            # ``evidence`` the output shape is chosen by.
+            config = dataclasses.replace(problem.config, evidence="neighbours")
+            first_order = hypothesis_unary(results, dataclasses.replace(problem, config=config))
+            return drawn_exact_marginals(results, problem, first_order)
         return factor_marginals(hypothesis_unary(results, problem), problem)
     log_weights = sample_log_weights(results, problem, joint=joint)
     estimates = []

@@ -1392,6 +1392,15 @@ def thin_edges(magnitude: np.ndarray, direction: np.ndarray, at: np.ndarray) -> 
     quantised to 45 degrees as ``np.round(direction / (np.pi / 4)) % 4`` in float32
     (half to even), neighbours outside the image 0. The seams' ``_thin`` without its
     temporaries (every frame, strong and faint pixels)."""
+    return thin_edges_in_sectors(magnitude, direction, at, np.full(at.shape[0], -1, np.int8))
+
+
+@_jit
+def thin_edges_in_sectors(
+    magnitude: np.ndarray, direction: np.ndarray, at: np.ndarray, sectors: np.ndarray
+) -> np.ndarray:
+    """``thin_edges`` with each pixel's sector given ((N,) int8, 0-3: ``gradient_sectors``),
+    or -1 where it is read from ``direction`` as ``thin_edges`` does."""
     height, width = magnitude.shape
     edges = np.zeros((height, width), dtype=np.bool_)
     quarter = np.float32(np.pi / 4)
@@ -1399,11 +1408,13 @@ def thin_edges(magnitude: np.ndarray, direction: np.ndarray, at: np.ndarray) -> 
         index = at[k]
         r = index // width
         c = index - r * width
-        q = np.float64(np.float32(direction[r, c]) / quarter)
-        rounded = np.floor(q + 0.5)
-        if q + 0.5 == rounded and rounded % 2.0 != 0.0:
-            rounded -= 1.0  # half to even, as np.round
-        sector = int(rounded % 4.0)
+        sector = np.int64(sectors[k])
+        if sector < 0:
+            q = np.float64(np.float32(direction[r, c]) / quarter)
+            rounded = np.floor(q + 0.5)
+            if q + 0.5 == rounded and rounded % 2.0 != 0.0:
+                rounded -= 1.0  # half to even, as np.round
+            sector = int(rounded % 4.0)
         if sector == 0:
             dy, dx = 0, 1
         elif sector == 1:
@@ -1422,6 +1433,36 @@ def thin_edges(magnitude: np.ndarray, direction: np.ndarray, at: np.ndarray) -> 
         if value >= ahead and value >= behind:
             edges[r, c] = True
     return edges
+
+
+@_jit
+def gradient_sectors(gx: np.ndarray, gy: np.ndarray, at: np.ndarray, tangents: np.ndarray):
+    """(N,) int8: the 45 degree sector of ``thin_edges`` (0: the gradient along x, 1: along
+    x = y, 2: along y, 3: along x = -y) of the gradient (gx, gy) ((H, W) float32, not both 0)
+    at each of the pixels ``at`` ((N,) int64 flat indices), read from the components without
+    an arctangent: sector 0 when |gy| < |gx| tan(22.5 deg - d), 2 when |gy| > |gx| tan(67.5
+    deg + d), 1 or 3 (by the components' signs) between tan(22.5 deg + d) and tan(67.5 deg -
+    d); -1 within d of a boundary (``tangents``: those four tangents, float64), where the
+    float32 arctangent's rounding decides and the caller measures it."""
+    width = gx.shape[1]
+    out = np.empty(at.shape[0], dtype=np.int8)
+    for k in range(at.shape[0]):
+        index = at[k]
+        r = index // width
+        c = index - r * width
+        x = np.float64(gx[r, c])
+        y = np.float64(gy[r, c])
+        a = abs(x)
+        b = abs(y)
+        if b < a * tangents[0]:
+            out[k] = 0
+        elif b > a * tangents[3]:
+            out[k] = 2
+        elif b > a * tangents[1] and b < a * tangents[2]:
+            out[k] = 1 if (x > 0.0) == (y > 0.0) else 3
+        else:
+            out[k] = -1
+    return out
 
 
 @_jit
@@ -1719,7 +1760,8 @@ def colour_gradient(rgb: np.ndarray, weights: np.ndarray):
     1D pass in scipy's order of operations (``NI_Correlate1D``: the centre tap, then each pair
     of mirrored taps from the outside in, summed in float64 and stored as float32), borders
     reflected. Needs H, W > r. One compiled pass per filter instead of numpy's temporaries
-    (the seams' edges, every frame)."""
+    (the seams' edges, every frame); the borders are reflected by index (a padded copy of one
+    row at most), and the last Sobel passes and the channels' comparison share one pass."""
     height, width = rgb.shape[0], rgb.shape[1]
     radius = weights.shape[0] // 2
     best_x = np.zeros((height, width), dtype=np.float32)
@@ -1727,73 +1769,91 @@ def colour_gradient(rgb: np.ndarray, weights: np.ndarray):
     best = np.zeros((height, width), dtype=np.float32)
     image = np.empty((height, width), dtype=np.float32)
     plane = np.empty((height, width), dtype=np.float32)
-    smooth = np.empty((height, width), dtype=np.float32)
-    first = np.empty((height, width), dtype=np.float32)
-    gx = np.empty((height, width), dtype=np.float32)
+    smooth = np.empty((height + 2, width + 2), dtype=np.float32)
+    first_x = np.empty((height + 2, width), dtype=np.float32)
+    first_y = np.empty((height, width + 2), dtype=np.float32)
+    row = np.empty(width + 2 * radius, dtype=np.float32)
+    gx = np.empty(width, dtype=np.float32)
+    gy = np.empty(width, dtype=np.float32)
     sums = np.empty(width, dtype=np.float64)
+    # Each 8-bit value in [0, 1] as float32 (the same bits as float32(v) / float32(255)).
     scale = np.float32(255.0)
+    level = np.empty(256, dtype=np.float32)
+    for value in range(256):
+        level[value] = np.float32(value) / scale
     for channel in range(3):
         for y in range(height):
             for x in range(width):
-                image[y, x] = np.float32(rgb[y, x, channel]) / scale
-        # Gaussian along the columns (axis 0), then along the rows (axis 1).
+                image[y, x] = level[rgb[y, x, channel]]
+        # Gaussian along the columns (axis 0), rows reflected at the borders.
         # (Each pixel's sum in a row of accumulators: the taps in scipy's order per pixel.)
-        source = _padded(image, radius, 0)
         for y in range(height):
-            c = y + radius
             for x in range(width):
-                sums[x] = np.float64(source[c, x]) * weights[radius]
+                sums[x] = np.float64(image[y, x]) * weights[radius]
             for j in range(radius, 0, -1):
                 weight = weights[radius - j]
+                above = _reflected(y - j, height)
+                below = _reflected(y + j, height)
                 for x in range(width):
-                    sums[x] += (
-                        np.float64(source[c - j, x]) + np.float64(source[c + j, x])
-                    ) * weight
+                    sums[x] += (np.float64(image[above, x]) + np.float64(image[below, x])) * weight
             for x in range(width):
                 plane[y, x] = np.float32(sums[x])
-        source = _padded(plane, 0, radius)
+        # Then along the rows (axis 1), each row padded by reflection.
         for y in range(height):
             for x in range(width):
-                sums[x] = np.float64(source[y, x + radius]) * weights[radius]
+                row[x + radius] = plane[y, x]
+            for x in range(radius):
+                row[x] = plane[y, _reflected(x - radius, width)]
+                row[width + radius + x] = plane[y, _reflected(width + x, width)]
+            for x in range(width):
+                sums[x] = np.float64(row[x + radius]) * weights[radius]
             for j in range(radius, 0, -1):
                 weight = weights[radius - j]
                 for x in range(width):
                     sums[x] += (
-                        np.float64(source[y, x + radius - j])
-                        + np.float64(source[y, x + radius + j])
+                        np.float64(row[x + radius - j]) + np.float64(row[x + radius + j])
                     ) * weight
+            # Padded by one for the Sobel passes.
             for x in range(width):
-                smooth[y, x] = np.float32(sums[x])
-        source = _padded(smooth, 1, 1)
-        # Sobel x: [-1, 0, 1] along the rows, then [1, 2, 1] along the columns.
+                smooth[y + 1, x + 1] = np.float32(sums[x])
+            smooth[y + 1, 0] = smooth[y + 1, 1]
+            smooth[y + 1, width + 1] = smooth[y + 1, width]
+        for x in range(width + 2):
+            smooth[0, x] = smooth[1, x]
+            smooth[height + 1, x] = smooth[height, x]
+        # The Sobel passes' first halves: x: [-1, 0, 1] along the rows; y: along the columns
+        # (each padded by one for its second half).
         for y in range(height):
             for x in range(width):
-                total = np.float64(source[y + 1, x + 1]) * 0.0
-                total += (np.float64(source[y + 1, x]) - np.float64(source[y + 1, x + 2])) * -1.0
-                first[y, x] = np.float32(total)
-        across = _padded(first, 1, 0)
+                total = np.float64(smooth[y + 1, x + 1]) * 0.0
+                total += (np.float64(smooth[y + 1, x]) - np.float64(smooth[y + 1, x + 2])) * -1.0
+                first_x[y + 1, x] = np.float32(total)
+            for x in range(width):
+                total = np.float64(smooth[y + 1, x + 1]) * 0.0
+                total += (np.float64(smooth[y, x + 1]) - np.float64(smooth[y + 2, x + 1])) * -1.0
+                first_y[y, x + 1] = np.float32(total)
+            first_y[y, 0] = first_y[y, 1]
+            first_y[y, width + 1] = first_y[y, width]
+        for x in range(width):
+            first_x[0, x] = first_x[1, x]
+            first_x[height + 1, x] = first_x[height, x]
+        # Their second halves: x: [1, 2, 1] along the columns; y: along the rows. And the
+        # channel with the largest square.
         for y in range(height):
             for x in range(width):
-                total = np.float64(across[y + 1, x]) * 2.0
-                total += (np.float64(across[y, x]) + np.float64(across[y + 2, x])) * 1.0
-                gx[y, x] = np.float32(total)
-        # Sobel y: [-1, 0, 1] along the columns, then [1, 2, 1] along the rows.
-        for y in range(height):
+                total = np.float64(first_x[y + 1, x]) * 2.0
+                total += (np.float64(first_x[y, x]) + np.float64(first_x[y + 2, x])) * 1.0
+                gx[x] = np.float32(total)
             for x in range(width):
-                total = np.float64(source[y + 1, x + 1]) * 0.0
-                total += (np.float64(source[y, x + 1]) - np.float64(source[y + 2, x + 1])) * -1.0
-                first[y, x] = np.float32(total)
-        across = _padded(first, 0, 1)
-        for y in range(height):
+                total = np.float64(first_y[y, x + 1]) * 2.0
+                total += (np.float64(first_y[y, x]) + np.float64(first_y[y, x + 2])) * 1.0
+                gy[x] = np.float32(total)
             for x in range(width):
-                total = np.float64(across[y, x + 1]) * 2.0
-                total += (np.float64(across[y, x]) + np.float64(across[y, x + 2])) * 1.0
-                gy = np.float32(total)
-                square = gx[y, x] * gx[y, x] + gy * gy
+                square = gx[x] * gx[x] + gy[x] * gy[x]
                 if channel == 0 or square > best[y, x]:
                     best[y, x] = square
-                    best_x[y, x] = gx[y, x]
-                    best_y[y, x] = gy
+                    best_x[y, x] = gx[x]
+                    best_y[y, x] = gy[x]
     return best_x, best_y
 
 
@@ -2020,6 +2080,157 @@ def line_sides(
 
 
 @_jit
+def middle_values(values: np.ndarray, mask: np.ndarray):
+    """The middle order statistics (k = (n - 1) // 2 and n // 2, 0-based; equal for odd n) of
+    the (N,) float32 ``values`` >= 0 (no NaN) at the (N,) bool ``mask`` (n of them, n > 0):
+    those of ``np.sort(values[mask])``, the values a median averages. A radix selection on the
+    float32 bits (their order as unsigned integers is the values' order for values >= 0: 11,
+    11 and 10 bits, a small histogram each), then the smallest value above the first: a few
+    passes without a gathered copy or its partition (the seams' noise scale over a frame, the
+    depth a pixel without one takes)."""
+    bits = values.view(np.uint32)
+    counts = np.zeros(2048, dtype=np.int64)
+    k = 0
+    for i in range(bits.shape[0]):
+        if mask[i]:
+            k += 1
+    count = k
+    k = (count - 1) // 2
+    prefix = np.uint32(0)
+    below = 0
+    for shift, width, known in ((21, 2047, 0), (10, 2047, 11), (0, 1023, 22)):
+        counts[:] = 0
+        for i in range(bits.shape[0]):
+            if mask[i] and (known == 0 or (bits[i] >> np.uint32(32 - known)) == prefix):
+                counts[(bits[i] >> np.uint32(shift)) & np.uint32(width)] += 1
+        digit = 0
+        while below + counts[digit] <= k:
+            below += counts[digit]
+            digit += 1
+        prefix = (prefix << np.uint32(32 - known - shift)) | np.uint32(digit)
+        last = counts[digit]
+    # ``prefix`` holds all 32 bits: the k-th value; ``below`` values lie below it and ``last``
+    # equal it.
+    low_bits = prefix
+    high_bits = prefix
+    if count % 2 == 0 and below + last <= k + 1:
+        high_bits = np.uint32(0xFFFFFFFF)
+        for i in range(bits.shape[0]):
+            if mask[i] and bits[i] > low_bits and bits[i] < high_bits:
+                high_bits = bits[i]
+    out = np.empty(2, dtype=np.uint32)
+    out[0] = low_bits
+    out[1] = high_bits
+    chosen = out.view(np.float32)
+    return chosen[0], chosen[1]
+
+
+@_jit
+def room_pixels(part: np.ndarray, depth: np.ndarray, top: int, left: int, focal_px: float):
+    """A part's pixels for the seams' room test (``seams._Room``): the (N,) int64 rows and
+    columns (plus ``top``, ``left``) of the (h, w) bool ``part``'s pixels, row-major (as
+    ``np.nonzero``), and each one's size (N,) float64 (m per px: its float32 ``depth``,
+    or the median of the others' where it has none, 0 with none at all, over ``focal_px``)
+    and footprint (its square). The median as numpy's of the float64 depths (the middle
+    values by ``middle_values``, averaged as numpy's mean of two); one compiled pass for
+    numpy's search, gathers and temporaries."""
+    height, width = part.shape
+    count = 0
+    missing = 0
+    for r in range(height):
+        for c in range(width):
+            if part[r, c]:
+                count += 1
+                if not depth[r, c] > 0:
+                    missing += 1
+    rows = np.empty(count, dtype=np.int64)
+    cols = np.empty(count, dtype=np.int64)
+    measured = np.empty(count, dtype=np.float32)
+    k = 0
+    for r in range(height):
+        for c in range(width):
+            if part[r, c]:
+                rows[k] = r + top
+                cols[k] = c + left
+                measured[k] = depth[r, c]
+                k += 1
+    fill = 0.0
+    if missing > 0 and missing < count:
+        known = measured > 0
+        low, high = middle_values(measured, known)
+        if (count - missing) % 2 == 1:
+            fill = np.float64(low)
+        else:
+            fill = (np.float64(low) + np.float64(high)) / 2.0
+    size = np.empty(count)
+    foot = np.empty(count)
+    for i in range(count):
+        value = np.float64(measured[i])
+        if not value > 0:
+            value = fill
+        size[i] = value / focal_px
+        foot[i] = size[i] * size[i]
+    return rows, cols, size, foot
+
+
+@_jit
+def line_sides_fit(
+    rows: np.ndarray,
+    cols: np.ndarray,
+    foot_m2: np.ndarray,
+    size_m: np.ndarray,
+    cos_a: float,
+    sin_a: float,
+    rho: float,
+    min_area: float,
+    min_width: float,
+) -> bool:
+    """Whether ``line_sides`` of these arguments gives each side a summed footprint of at least
+    ``min_area`` and both extents at least ``min_width`` (the seams' room test,
+    ``seams._Room.fits``), from the same per-pixel arithmetic in the same order, but stopping
+    once every test holds: the footprints are >= 0, so each side's running sum (float addition
+    of non-negative terms is monotone), its farthest distance, its range along the line and its
+    largest size only grow pixel by pixel, and a test the first pixels pass all of them pass.
+    A part cut near its middle passes after a fraction of its pixels (the compiled screen of
+    the seams' candidates runs this for each candidate line)."""
+    area = np.zeros(2)
+    across = np.zeros(2)
+    low = np.full(2, np.inf)
+    high = np.full(2, -np.inf)
+    scale = np.zeros(2)
+    n = rows.shape[0]
+    for i in range(n):
+        distance = cols[i] * cos_a + rows[i] * sin_a - rho
+        along = -cols[i] * sin_a + rows[i] * cos_a
+        side = 0 if distance > 0 else 1
+        area[side] += foot_m2[i]
+        distance = abs(distance)
+        if distance > across[side]:
+            across[side] = distance
+        if along < low[side]:
+            low[side] = along
+        if along > high[side]:
+            high[side] = along
+        if size_m[i] > scale[side]:
+            scale[side] = size_m[i]
+        if (i & 127) == 127 or i == n - 1:
+            fits = True
+            for s in range(2):
+                # (A side with no pixel yet: zeros, as ``line_sides`` gives it.)
+                width_across = 0.0
+                width_along = 0.0
+                if high[s] >= low[s]:
+                    width_across = (across[s] + 0.5) * scale[s]
+                    width_along = (high[s] - low[s] + 1.0) * scale[s]
+                if not (area[s] >= min_area and min(width_across, width_along) >= min_width):
+                    fits = False
+                    break
+            if fits:
+                return True
+    return False
+
+
+@_jit
 def mean_at(values: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
     """(3,) float64 mean of the (H, W, 3) ``values`` at the pixels (rows, cols) ((N,) int64,
     N > 0): ``values[rows, cols].astype(np.float64).mean(axis=0)`` without the gathered copy
@@ -2055,6 +2266,37 @@ def hough_votes(
             rho = np.int64(np.rint(cols[i] * cos_a[a] + rows[i] * sin_a[a])) + reach
             votes[a * width + rho] += 1
     return votes
+
+
+@_jit
+def hough_lines(
+    rows: np.ndarray,
+    cols: np.ndarray,
+    own: np.ndarray,
+    spread: int,
+    cos_a: np.ndarray,
+    sin_a: np.ndarray,
+    reach: int,
+    least: int,
+):
+    """The lines with at least ``least`` of ``hough_votes``' votes: their indices (int64,
+    ascending, as ``np.flatnonzero(votes >= least)``) and their votes, read in one compiled
+    pass over the vote array instead of numpy's comparison, search and gather over it (a
+    part's search; the array has 180 directions by twice the crop's diagonal)."""
+    votes = hough_votes(rows, cols, own, spread, cos_a, sin_a, reach)
+    count = 0
+    for index in range(votes.shape[0]):
+        if votes[index] >= least:
+            count += 1
+    lines = np.empty(count, dtype=np.int64)
+    counts = np.empty(count, dtype=np.int64)
+    count = 0
+    for index in range(votes.shape[0]):
+        if votes[index] >= least:
+            lines[count] = index
+            counts[count] = votes[index]
+            count += 1
+    return lines, counts
 
 
 @_jit
@@ -2457,8 +2699,9 @@ def seam_screen(
     """The first of the candidate seams ``which[start:]`` (line k: x cos + y sin = rho, its stretch
     ``stretch_rows/cols[bounds[k]:bounds[k + 1]]``), whether it passes the seams' room test
     (``line_sides`` over the part's pixels ``room_*`` against ``min_area`` and ``min_width``:
-    the same numbers as ``seams._Room.fits``) and whether the mean normals (``normals`` (h, w,
-    3)) of its side bands among ``part_rows/cols`` (the part's pixels with a normal; the bands
+    the same answers as ``seams._Room.fits``, by ``line_sides_fit``) and whether the mean normals (``normals`` (h, w,
+    3)) of its side bands among ``part_rows/cols`` (the part's pixels with a normal, row-major:
+    only the rows of the seam's box are read; the bands
     ``near``-``far`` px off the line within the stretch's extent, each of at least 20 pixels,
     as ``seams._coplanar_sides`` chooses them) lie within ``max_angle_deg``: one pass for all
     candidates instead of one numpy call each; its position in ``which``, or -1 if none. The
@@ -2471,12 +2714,9 @@ def seam_screen(
         cos_a = line_cos[k]
         sin_a = line_sin[k]
         rho = line_rho[k]
-        sides = line_sides(room_rows, room_cols, room_foot, room_size, cos_a, sin_a, rho)
-        if not (sides[0, 0] >= min_area and sides[1, 0] >= min_area):
-            continue
-        if not (min(sides[0, 1], sides[0, 2]) >= min_width):
-            continue
-        if not (min(sides[1, 1], sides[1, 2]) >= min_width):
+        if not line_sides_fit(
+            room_rows, room_cols, room_foot, room_size, cos_a, sin_a, rho, min_area, min_width
+        ):
             continue
         start, stop = bounds[k], bounds[k + 1]
         low_r = stretch_rows[start]
@@ -2502,11 +2742,24 @@ def seam_screen(
         box[3] = min(high_c + far_px + 1, width)
         along_range[0] = along_low
         along_range[1] = along_high
+        # The part's pixels are row-major: only those in the box's rows can be in a band.
+        first = np.searchsorted(part_rows, box[0])
+        last = np.searchsorted(part_rows, box[1])
         band_a, band_b = seam_side_bands(
-            part_rows, part_cols, box, cos_a, sin_a, rho, along_range, near, far
+            part_rows[first:last],
+            part_cols[first:last],
+            box,
+            cos_a,
+            sin_a,
+            rho,
+            along_range,
+            near,
+            far,
         )
         if band_a.shape[0] < 20 or band_b.shape[0] < 20:
             continue
+        band_a += first
+        band_b += first
         normal_a = mean_at(normals, part_rows[band_a], part_cols[band_a])
         normal_b = mean_at(normals, part_rows[band_b], part_cols[band_b])
         normal_a /= max(np.sqrt(np.sum(normal_a * normal_a)), 1e-12)

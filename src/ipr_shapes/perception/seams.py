@@ -97,6 +97,14 @@ _FACE_CANDIDATES = 32
 _NOISE_STEP_PX = 16
 #: How far (px) the colour gradient reads around a pixel: the Gaussian's 4 and Sobel's 1.
 _GRADIENT_REACH_PX = 5
+#: A gradient's 45 degree sector (``_thin``) is read from its components unless its angle lies
+#: within this (rad) of a sector's boundary (22.5 or 67.5 deg from an axis), where the float32
+#: arctangent is measured: far above that arctangent's rounding (about 1e-7 rad) and the
+#: float32 division by 45 degrees, far below the share of gradients it sends to be measured.
+_SECTOR_MARGIN_RAD = 1e-4
+_SECTOR_TANGENTS = np.tan(
+    np.radians([22.5, 22.5, 67.5, 67.5]) + np.array([-1.0, 1.0, -1.0, 1.0]) * _SECTOR_MARGIN_RAD
+)
 #: Row and column offsets of a pixel's 3 x 3 neighbourhood.
 _NEIGHBOURS = np.mgrid[-1:2, -1:2].reshape(2, -1)
 #: The colour gradient's smoothing: scipy's Gaussian of sigma 1 px (truncated at 4 sigma) as
@@ -247,7 +255,7 @@ def cut_colour_seams(
     # frame's gradient, from a sample of the frame.
     if whole:
         measured = depth_m > 0
-        noise = float(np.median(magnitude[measured if measured.any() else segment_pixels]))
+        noise = _masked_median(magnitude, measured if measured.any() else segment_pixels)
     else:
         noise = _edge_noise(rgb, depth_m, segment_pixels)
     # The edges are read only in the searched segments' crops: found in the box around them
@@ -263,10 +271,11 @@ def cut_colour_seams(
     )  # fmt: skip
     magnitude, gx, gy = (np.ascontiguousarray(array[box]) for array in (magnitude, gx, gy))
     strong = np.flatnonzero(magnitude > seams.edge_factor * max(noise, 1e-6))
-    # The gradient's direction is used at edge pixels only: measured at the strong ones.
+    # The gradient's direction is read at edge pixels only (the search's votes), and its
+    # 45 degree sector for the thinning: that from the components, measured only near a
+    # sector's boundary (``_thin``), the direction once the edges are known.
     direction = np.zeros(magnitude.shape, dtype=magnitude.dtype)
-    direction.flat[strong] = np.arctan2(gy.flat[strong], gx.flat[strong])
-    edges = _thin(magnitude, direction, strong)
+    edges = _thin(magnitude, direction, strong, gx, gy)
     # With the faint stretches that continue a strong edge (Canny's hysteresis): the edge
     # between two boxes of one colour fades along its length.
     if seams.hysteresis:
@@ -278,6 +287,8 @@ def cut_colour_seams(
         near = kernels.dilate_diamond(searched_pixels, 3)  # binary_dilation, iterations=3
         low = 0.5 * seams.edge_factor * max(noise, 1e-6)
         edges = _linked_edges(magnitude, gx, gy, direction, edges, low, near)
+    at = np.flatnonzero(edges)
+    direction.flat[at] = np.arctan2(gy.flat[at], gx.flat[at])
     searched = []
     for crop, mask, search in segments:
         if not search:
@@ -544,7 +555,7 @@ def _face_size(
     cloud = points.reshape(-1, 3)[usable][on_face].astype(np.float64)
     centred = cloud - cloud.mean(axis=0)
     # A box's face is flat: a can's side or a bottle's is not.
-    if float(np.percentile(np.abs(centred @ normal), 90)) > config.seams.max_bend_m:
+    if _percentiles(np.abs(centred @ normal), (90.0,))[0] > config.seams.max_bend_m:
         return None
     flat = centred - np.outer(centred @ normal, normal)
     basis = np.linalg.svd(flat, full_matrices=False)[2][:2]
@@ -582,6 +593,15 @@ def _face_size(
             if span < (1.0 - tolerance) * extent[other]:
                 return None
     return float(extent.max()), float(extent.min())
+
+
+def _percentiles(values: np.ndarray, percents: tuple[float, ...]) -> list[float]:
+    """``np.percentile(values, percents)`` of the (N,) ``values`` (N > 0) as floats, the same
+    values: from a sorted row (``_row_percentiles``) for float64 values, N >= 2; numpy's
+    otherwise (its float32 interpolation stays float32)."""
+    if values.dtype == np.float64 and values.ndim == 1 and len(values) >= 2:
+        return [float(value) for value in _row_percentiles(values[None, :], percents)[:, 0]]
+    return [float(value) for value in np.percentile(values, percents)]
 
 
 def _row_percentiles(rows: np.ndarray, percents: tuple[float, ...]) -> np.ndarray:
@@ -659,11 +679,31 @@ def _has_flat_face(
         centred = face - face.mean(axis=0)
         flat = centred - np.outer(centred @ normal, normal)
         axes = np.linalg.svd(flat, full_matrices=False)[2][:2]
-        low, high = np.percentile(flat @ axes.T, [2, 98], axis=0)
+        # ``np.percentile(flat @ axes.T, [2, 98], axis=0)``, the same bits, from sorted rows.
+        low, high = _row_percentiles(np.ascontiguousarray((flat @ axes.T).T), (2.0, 98.0))
         extent = np.sort(high - low)
         if extent[1] >= max(long_side, short_side) and extent[0] >= min(long_side, short_side):
             return True
     return False
+
+
+def _masked_median(values: np.ndarray, mask: np.ndarray | None = None, dtype=None) -> float:
+    """``float(np.median(values[mask].astype(dtype)))`` of ``values`` >= 0 (any shape, no NaN)
+    at the bool ``mask`` of their shape (None: all; none: NaN, as numpy), ``dtype`` the
+    values' own when None: the same value. For float32 values the middle order statistics
+    are compiled (``kernels.middle_values``; a conversion to float64 keeps their order) and
+    their mean is numpy's, as its median takes it; other dtypes take numpy's median."""
+    if values.dtype != np.float32:  # (the compiled selection reads float32 bits)
+        chosen_values = values if mask is None else values[mask]
+        return float(np.median(chosen_values if dtype is None else chosen_values.astype(dtype)))
+    flat = values.reshape(-1)
+    chosen = np.ones(flat.shape, dtype=bool) if mask is None else mask.reshape(-1)
+    count = np.count_nonzero(chosen)
+    if count == 0:
+        return float("nan")  # numpy's median of nothing
+    low, high = kernels.middle_values(flat, chosen)
+    middle = [low] if count % 2 else [low, high]
+    return float(np.median(np.array(middle, dtype=values.dtype if dtype is None else dtype)))
 
 
 def _edge_noise(rgb: np.ndarray, depth_m: np.ndarray, segment_pixels: np.ndarray) -> float:
@@ -770,13 +810,12 @@ def _linked_edges(
     """(H, W) bool: the thinned pixels (``_thin``) of gradient ``magnitude`` above ``low``
     within ``near`` ((H, W) bool) that are 8-connected through such pixels to a pixel of
     ``edges`` ((H, W) bool, the thinned strong edges): Canny's hysteresis, the faint stretches
-    of an edge that is strong somewhere. ``direction`` ((H, W), rad) is filled in at those
-    pixels from ``gx``, ``gy``."""
+    of an edge that is strong somewhere. The faint pixels are thinned in the sectors of
+    ``gx``, ``gy`` (``_thin``; ``direction`` ((H, W), rad) filled in where it is measured)."""
     weak = np.flatnonzero((magnitude > low) & near)
-    direction.flat[weak] = np.arctan2(gy.flat[weak], gx.flat[weak])
     # The 8-connected components of the thinned faint pixels that hold a strong one (compiled:
     # a flood fill from the strong pixels, not a label image of the frame).
-    return kernels.linked_to(_thin(magnitude, direction, weak), edges) | edges
+    return kernels.linked_to(_thin(magnitude, direction, weak, gx, gy), edges) | edges
 
 
 def _with_shadow_lines(
@@ -857,11 +896,29 @@ def _is_shadow(seam: _Seam, rgb: np.ndarray) -> bool:
     return float(np.ptp(ratios)) < 1.0 - float(ratios.mean())
 
 
-def _thin(magnitude: np.ndarray, direction: np.ndarray, at: np.ndarray) -> np.ndarray:
+def _thin(
+    magnitude: np.ndarray,
+    direction: np.ndarray,
+    at: np.ndarray,
+    gx: np.ndarray | None = None,
+    gy: np.ndarray | None = None,
+) -> np.ndarray:
     """(H, W) bool: of the pixels ``at`` (flat indices), those whose gradient magnitude is a
     maximum across the edge (Canny's non-maximum suppression, directions quantised to 45
-    degrees). Compiled (``kernels.thin_edges``; ``_thin_numpy`` is its reference)."""
-    return kernels.thin_edges(magnitude, direction, np.asarray(at, dtype=np.int64))
+    degrees). Compiled (``kernels.thin_edges``; ``_thin_numpy`` is its reference).
+
+    With the gradient's components ``gx``, ``gy`` ((H, W) float32), ``direction`` need not
+    be known: each pixel's sector is read from them (``kernels.gradient_sectors``), and only
+    within ``_SECTOR_MARGIN_RAD`` of a sector's boundary is the direction measured
+    (``np.arctan2`` in float32, written into ``direction``): the same sectors, without an
+    arctangent per pixel."""
+    at = np.asarray(at, dtype=np.int64)
+    if gx is None or gy is None:
+        return kernels.thin_edges(magnitude, direction, at)
+    sectors = kernels.gradient_sectors(gx, gy, at, _SECTOR_TANGENTS)
+    unsure = at[sectors < 0]
+    direction.flat[unsure] = np.arctan2(gy.flat[unsure], gx.flat[unsure])
+    return kernels.thin_edges_in_sectors(magnitude, direction, at, sectors)
 
 
 def _thin_numpy(magnitude: np.ndarray, direction: np.ndarray, at: np.ndarray) -> np.ndarray:
@@ -1062,7 +1119,7 @@ def _repeated(
     bounds = []
     for sign in (1.0, -1.0):
         side = sign * across[sign * across > 0]
-        widest = float(np.percentile(side, 98)) if side.size else 0.0
+        widest = _percentiles(side, (98.0,))[0] if side.size else 0.0
         nearer = [sign * offset for offset in offsets if sign * offset >= config.seams.min_width_m]
         bounds.append(np.array([widest, *nearer]))
     ratio = np.minimum.outer(*bounds) / np.maximum(np.maximum.outer(*bounds), 1e-9)
@@ -1313,8 +1370,8 @@ def _alike_widths(
     theirs = points[other & measured].astype(np.float64) @ direction
     if len(along) < 2 or len(theirs) < 2:
         return False
-    mine = float(np.subtract(*np.percentile(along, [98, 2])))
-    width = float(np.subtract(*np.percentile(theirs, [98, 2])))
+    mine = float(np.subtract(*_percentiles(along, (98.0, 2.0))))
+    width = float(np.subtract(*_percentiles(theirs, (98.0, 2.0))))
     return min(mine, width) >= (1.0 - tolerance) * max(mine, width, 1e-9)
 
 
@@ -1350,13 +1407,13 @@ def _best_cut(
     own = np.round((direction[rows, cols] % np.pi) / np.pi * _DIRECTIONS).astype(np.int64)
     spread = int(np.ceil(_VOTE_SPREAD_DEG / 180.0 * _DIRECTIONS))
     # Every pixel's votes for its own direction +- spread.
-    votes = kernels.hough_votes(rows, cols, own, spread, cos_a, sin_a, reach)
+    # (And those lines with at least 20 votes, in the order of (direction, offset).)
+    lines, votes = kernels.hough_lines(rows, cols, own, spread, cos_a, sin_a, reach, 20)
     # Each candidate's densest stretch first (cheap), then the checks from the longest down:
     # the first that passes them all is the best.
     # The _CANDIDATES lines with most votes, at least 20; equal votes in the order of
     # (direction, offset).
-    lines = np.flatnonzero(votes >= 20)
-    lines = lines[np.argsort(-votes[lines], kind="stable")][:_CANDIDATES]
+    lines = lines[np.argsort(-votes, kind="stable")][:_CANDIDATES]
     line_a, line_rho = np.divmod(lines, 2 * reach + 1)
     line_rho -= reach
     # Each line's chord through the part, its densest stretch and whether that reaches the
@@ -1442,11 +1499,18 @@ class _Room:
 
     def __init__(self, part: np.ndarray, window: tuple[slice, slice], depth_m: np.ndarray,
                  focal_px: float) -> None:  # fmt: skip
+        if depth_m.dtype == np.float32:  # compiled, the same numbers
+            self.rows, self.cols, self.size, self.foot = kernels.room_pixels(
+                part[window], depth_m[window], window[0].start, window[1].start, float(focal_px)
+            )
+            return
         rows, cols = np.nonzero(part[window])
-        depths = depth_m[window][rows, cols].astype(np.float64)
+        measured = depth_m[window][rows, cols]
+        depths = measured.astype(np.float64)
         known = depths > 0
         if not known.all():
-            depths = np.where(known, depths, np.median(depths[known]) if known.any() else 0.0)
+            fill = _masked_median(measured, known, np.float64) if known.any() else 0.0
+            depths = np.where(known, depths, fill)
         self.rows = rows + window[0].start
         self.cols = cols + window[1].start
         self.size = depths / focal_px
@@ -1489,7 +1553,7 @@ def _straight_seam(
     direction = np.linalg.svd(middle - centre, full_matrices=False)[2][0]
     offsets = middle - centre
     bend = np.linalg.norm(offsets - np.outer(offsets @ direction, direction), axis=1)
-    if float(np.percentile(bend, 90)) > config.seams.max_bend_m:
+    if _percentiles(bend, (90.0,))[0] > config.seams.max_bend_m:
         return None
     across = np.cross(normal, direction)
     across_norm = float(np.linalg.norm(across))
@@ -1607,7 +1671,7 @@ def _split(
         depths = sub_depth[inside]
         depths = depths[depths > 0]
         radius_px = float(np.sqrt(float(squared)))
-        if 2.0 * radius_px * float(np.median(depths)) / focal_px < config.seams.min_width_m:
+        if 2.0 * radius_px * _masked_median(depths) / focal_px < config.seams.min_width_m:
             return None
     two = np.where(masks[0], 1, np.where(masks[1], 2, 0))
     nearest = ndimage.distance_transform_edt(two == 0, return_distances=False, return_indices=True)
@@ -1666,5 +1730,5 @@ def _area_m2(part: np.ndarray, depth_m: np.ndarray, focal_px: float) -> float:
     known = depths[has_depth]
     if known.size == 0:
         return 0.0
-    filled = np.where(has_depth, depths, np.median(known))
+    filled = np.where(has_depth, depths, _masked_median(depths, has_depth))
     return float(np.sum(filled**2)) / focal_px**2
