@@ -28,6 +28,7 @@ from ipr_shapes.perception.seams import (
     _FacesElsewhere,
     _FrameFaces,
     _has_area,
+    _is_shadow,
     _linked_edges,
     _row_percentiles,
     _Seam,
@@ -45,16 +46,20 @@ from tests.test_segmentation import box, camera, render, segment_of_point
 ON = replace(PerceptionConfig(), seams=SeamsConfig(enabled=True))
 #: Seams on, a lone seam midway across a segment kept too (two boxes side by side).
 PAIRS = replace(ON, seams=replace(ON.seams, pair_needs_grid=False))
+#: Seams on without the shadow lines: a painted dark gap is then a line like any printed one
+#: (the tests of the strip tests' own rules).
+NO_SHADOWS = replace(ON, seams=replace(ON.seams, shadow_lines=False))
 TOP = 0.06  # the boxes' height (m)
 
 
-def painted(frame: Frame, dark) -> Frame:
+def painted(frame: Frame, dark, ink=(40, 40, 40)) -> Frame:
     """``frame`` with a light, slightly noisy image and the pixels whose world point satisfies
-    ``dark(points)`` (an (N, 3) -> (N,) bool) painted dark."""
+    ``dark(points)`` (an (N, 3) -> (N,) bool) painted dark (``ink``, RGB; by default grey: a
+    shadow, less light in every channel alike)."""
     points = frame.points_world().reshape(-1, 3)
     rng = np.random.default_rng(1)
     rgb = (200 + rng.integers(-3, 4, (points.shape[0], 3))).astype(np.uint8)
-    rgb[(frame.depth_m.reshape(-1) > 0) & dark(points)] = (40, 40, 40)
+    rgb[(frame.depth_m.reshape(-1) > 0) & dark(points)] = ink
     return Frame(frame.index, rgb.reshape(*frame.depth_m.shape, 3), frame.depth_m, frame.K,
                  frame.world_from_camera)  # fmt: skip
 
@@ -123,7 +128,81 @@ def test_a_lone_seam_midway_is_kept_only_in_a_grid():
     # One seam midway across a segment is two boxes or one box with a printed line through its
     # middle: by default it stays whole (the line on one box is the likelier on a tabletop).
     frame = two_boxes(gap_between)
+    a, b = centres(segment_frame(frame, config=NO_SHADOWS).labels, frame)
+    assert a > 0 and a == b
+
+
+def pair_beside_a_row(ink=(40, 40, 40)) -> tuple[Frame, list, list]:
+    """A pair of 10 x 7 cm boxes touching along y = 0 (x < 0) beside a row of three 10 cm
+    boxes (x = 0.12), every gap painted ``ink``; the pair's two top centres, the row's three."""
+    pair = [box(-0.1, y, (0.1, 0.07, TOP)) for y in (-0.035, 0.035)]
+    row = [box(0.12, y, (0.1, 0.1, TOP)) for y in (-0.1, 0.0, 0.1)]
+
+    def gaps(points):
+        return (gap_between(points) & (points[:, 0] < 0.0)) | (
+            row_gaps(points) & (points[:, 0] > 0.0)
+        )
+
+    frame = painted(render(camera(), pair + row, noise_m=0.0005), gaps, ink=ink)
+    return frame, [[-0.1, y, TOP] for y in (-0.05, 0.05)], [[0.12, y, TOP] for y in (-0.1, 0, 0.1)]
+
+
+def test_a_lone_shadow_line_midway_is_a_gap_where_packed_boxes_are_seen():
+    # The pair's gap is a shadow (grey: every channel darker alike) and its halves match no
+    # box in the frame; the row beside it is cut by the strip tests (boxes of one size), so
+    # the frame holds packed boxes: the pair is cut too. Without the shadow lines it is not.
+    frame, pair, row = pair_beside_a_row()
+    for config, cut in ((ON, True), (NO_SHADOWS, False)):
+        labels = segment_frame(frame, config=config).labels
+        assert len({segment_of_point(frame, labels, point) for point in row}) == 3
+        a, b = (segment_of_point(frame, labels, point) for point in pair)
+        assert a > 0 and b > 0 and (a != b) is cut
+
+
+def test_a_lone_shadow_line_is_not_cut_where_no_packed_boxes_are_seen():
+    # The pair alone: a grey line through one box's middle (black ink) looks the same, and no
+    # cut kept elsewhere in the frame says that it holds packed boxes.
+    frame = two_boxes(gap_between)
     a, b = centres(segment_frame(frame, config=ON).labels, frame)
+    assert a > 0 and a == b
+
+
+def _line_across(side_a, side_b, line) -> tuple[_Seam, np.ndarray]:
+    """A vertical seam down column 20 of a 40 x 41 crop: colour ``side_a`` left of it,
+    ``side_b`` right of it, ``line`` on it (2 px wide), each (R, G, B)."""
+    rgb = np.empty((40, 41, 3), dtype=np.uint8)
+    rgb[:, :20] = side_a
+    rgb[:, 21:] = side_b
+    rgb[:, 19:22] = line
+    rows = np.arange(40)
+    return _seam_at_column(20, rows), rgb
+
+
+@pytest.mark.parametrize(
+    "side_a, side_b, line, shadow",
+    [
+        ((200, 200, 200), (200, 200, 200), (120, 120, 120), True),  # a gap's shadow
+        ((180, 40, 40), (176, 42, 38), (108, 24, 24), True),  # on red boxes: 0.6 of each
+        ((200, 200, 200), (120, 120, 120), (100, 100, 100), False),  # a step: a border
+        ((200, 200, 200), (200, 200, 200), (200, 40, 40), False),  # red ink: red not darker
+        ((200, 200, 200), (200, 200, 200), (180, 60, 60), False),  # channels darken unalike
+        ((200, 200, 200), (200, 200, 200), (200, 200, 200), False),  # no line
+    ],
+)
+def test_a_shadow_line_is_darker_than_both_sides_in_every_channel_alike(
+    side_a, side_b, line, shadow
+):
+    seam, rgb = _line_across(side_a, side_b, line)
+    assert _is_shadow(seam, rgb) is shadow
+
+
+def test_a_coloured_printed_line_midway_is_not_a_shadow():
+    # Red lines (ink absorbing green and blue only) where the gaps were: the pair's is a
+    # printed line through one box's middle as far as one view tells, even beside the row.
+    frame, pair, row = pair_beside_a_row(ink=(190, 40, 40))
+    labels = segment_frame(frame, config=ON).labels
+    assert len({segment_of_point(frame, labels, point) for point in row}) == 3
+    a, b = (segment_of_point(frame, labels, point) for point in pair)
     assert a > 0 and a == b
 
 
@@ -136,15 +215,15 @@ def test_a_lone_seam_is_kept_when_a_box_of_its_strips_size_is_seen_elsewhere():
         return painted(render(camera(), boxes, noise_m=0.0005), gap_between)
 
     frame = scene((0.1, 0.1))
-    result = segment_frame(frame, config=ON)
+    result = segment_frame(frame, config=NO_SHADOWS)
     a, b = centres(result.labels, frame)
     assert a > 0 and b > 0 and a != b
     assert segment_of_point(frame, result.labels, [-0.2, 0.0, TOP]) not in (0, a, b)
     frame = scene((0.06, 0.14))
-    a, b = centres(segment_frame(frame, config=ON).labels, frame)
+    a, b = centres(segment_frame(frame, config=NO_SHADOWS).labels, frame)
     assert a > 0 and a == b
     # And only with the sizes' test on.
-    no_sizes = replace(ON, seams=replace(ON.seams, pair_sizes=False))
+    no_sizes = replace(NO_SHADOWS, seams=replace(NO_SHADOWS.seams, pair_sizes=False))
     frame = scene((0.1, 0.1))
     a, b = centres(segment_frame(frame, config=no_sizes).labels, frame)
     assert a > 0 and a == b
@@ -164,8 +243,8 @@ def test_two_pairs_of_one_size_are_four_boxes():
         assert min(ids) > 0
         return len(set(ids))
 
-    assert boxes_seen(ON) == 4
-    assert boxes_seen(replace(ON, seams=replace(ON.seams, pair_sizes=False))) == 2
+    assert boxes_seen(NO_SHADOWS) == 4
+    assert boxes_seen(replace(NO_SHADOWS, seams=replace(NO_SHADOWS.seams, pair_sizes=False))) == 2
 
 
 def test_a_short_seam_is_not_a_seam():

@@ -609,7 +609,7 @@ class SeamsConfig:
 
     Off by default for its time, not its accuracy: with it on, every development, container
     and tabletop set scores as with it off (a frame it leaves uncut keeps the seams-off labels,
-    numbering included) and the real bins gain (28.6 -> 55.5 % of boxes found), but the
+    numbering included) and the real bins gain (28.6 -> 63.4 % of boxes found), but the
     perception costs 2.7-3 times as much CPU per bin frame (285 ms on the page's run at
     10052ac) and 1.05-1.6 times per tabletop frame: within the 150 ms budget on the generated
     and YCB-Video frames, over it on the real lab frames (about 180 ms against 130), which gain
@@ -676,6 +676,17 @@ class SeamsConfig:
             ``max_normal_deg`` of one) at least ``min_length_m`` by twice ``min_width_m``
             across: room for a seam and a strip each side (``seams._has_flat_face``). Cans,
             bottles, bowls and small objects are then kept whole before any edge work.
+        shadow_lines: in a frame where the strip tests kept a cut (packed boxes seen), a
+            seam with flat strips is also kept, whatever its strips measure to a parallel seam
+            or the outline, when it is a shadow line: across it, every colour channel is darker
+            within a pixel of it than on both sides (2-10 px) by more than the two sides
+            differ, and the channels darken alike (their ratios to the darker side differ by
+            less than the light lost). Two touching boxes leave a gap the light does not reach,
+            dark in every channel whatever their print; a printed border is a step, and
+            coloured ink darkens the channels it absorbs; black or grey ink darkens all alike,
+            hence the frame's kept cut (a tabletop box's printed lines stay whole). Without it
+            a pair of boxes with no twin in the frame, or a row whose other seams were not
+            found, stays one segment.
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -711,6 +722,7 @@ class SeamsConfig:
     extend_planes: bool = True
     settled: bool = True
     flat_face_gate: bool = True
+    shadow_lines: bool = True
 
     def __post_init__(self) -> None:
         check_fields(self)

@@ -26,6 +26,11 @@ object's own lines whole:
   seams beside it (``seams.rows_of_three``: a row's end strips to the outline are off by side
   faces and occluders): packed boxes of one size repeat at one spacing, a printed border (a
   box's end panel) lies where the print puts it. Cuts that fail are undone;
+- **or a shadow line where packed boxes are seen**: in a frame where the strip tests kept a
+  cut, a flat seam that is a dark line darker than both sides in every channel alike (the gap
+  between two touching boxes, which the light does not reach) is kept whatever its strips
+  measure: a printed border is a step between two colours, coloured ink darkens some channels
+  more than others; black or grey ink is told apart only by the frame (``seams.shadow_lines``);
 - **supported when alone**: a seam midway between the outline on both sides (two boxes, or
   one box with a printed line through its middle) is kept only where it meets a seam that
   lies between seams (a grid of boxes) or its strips have the size of a flat rectangular
@@ -50,7 +55,7 @@ seen alone (docs/experiments/2026-11-26-colour-seams.md, 2026-11-26-packed-boxes
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import ndimage
@@ -122,6 +127,7 @@ class _Seam:
     across: np.ndarray
     normal: np.ndarray
     half_length_m: float
+    shadow: bool = False
 
 
 class Normals:
@@ -311,6 +317,8 @@ def cut_colour_seams(
     if seams.pair_needs_grid and seams.pair_sizes:
         decided = _pairs_by_size(searched, decided, asked, points, normals, depth_m,
                                  config)  # fmt: skip
+    if seams.shadow_lines:
+        decided = _with_shadow_lines(searched, decided, rgb, points, normals, depth_m, config)
     next_id = int(labels.max()) + 1
     for (crop, *_), pieces in zip(searched, decided, strict=True):
         view = out[crop]  # writes go to out
@@ -810,6 +818,84 @@ def _linked_edges(
     return kernels.linked_to(_thin(magnitude, direction, weak, gx, gy), edges) | edges
 
 
+def _with_shadow_lines(
+    searched: list,
+    decided: list[np.ndarray],
+    rgb: np.ndarray,
+    points: np.ndarray,
+    normals: Normals,
+    depth_m: np.ndarray,
+    config: PerceptionConfig,
+) -> list[np.ndarray]:
+    """``decided`` (each searched segment's pieces, ``searched`` as in ``cut_colour_seams``)
+    with the segments whose seams found hold a shadow line (``_is_shadow``) decided again,
+    those seams kept whatever their strips measure, when the strip tests kept a cut somewhere
+    in the frame; else as it is. The other segments keep their pieces (the faces that the
+    segments decided again compare their strips with).
+
+    Why the frame's kept cut: a shadow line is the gap between two touching boxes, but black
+    or grey ink darkens every channel alike too (a printed line on a white box). A cut that
+    the strip tests kept (a row or grid of boxes of one size, or a pair with a twin) says that
+    the frame holds packed boxes, where a dark line between flat strips is a gap; a tabletop
+    frame with no such cut keeps its printed lines whole."""
+    if not any(int(pieces.max()) > 1 for pieces in decided):
+        return decided
+    marked = [(crop, mask, cut, _with_shadows(found, rgb[crop]), cloud, flat)
+              for crop, mask, cut, found, cloud, flat in searched]  # fmt: skip
+    again = [any(seam.shadow for seam in entry[3]) for entry in marked]
+    if not any(again):
+        return decided
+    # Only those segments ask for sizes (``_pairs_by_size`` decides again the ones that asked).
+    asked = [_Sizes() for _ in marked]
+    with_depth = depth_m > 0
+    decided = [
+        _decide(cut, found, cloud, flat, config, sizes, points[crop], with_depth[crop])
+        if redo else pieces
+        for (crop, _, cut, found, cloud, flat), sizes, redo, pieces
+        in zip(marked, asked, again, decided, strict=True)
+    ]  # fmt: skip
+    if config.seams.pair_needs_grid and config.seams.pair_sizes:
+        decided = _pairs_by_size(marked, decided, asked, points, normals, depth_m, config)
+    return decided
+
+
+def _with_shadows(found: list[_Seam], rgb: np.ndarray) -> list[_Seam]:
+    """The seams ``found`` (pixels in the crop of ``rgb``, (h, w, 3) uint8), each marked
+    ``shadow`` when it is a shadow line (``_is_shadow``)."""
+    return [replace(seam, shadow=_is_shadow(seam, rgb)) for seam in found]
+
+
+def _is_shadow(seam: _Seam, rgb: np.ndarray) -> bool:
+    """Whether ``seam`` is a shadow line: across it, in every channel of ``rgb`` ((h, w, 3)
+    uint8, the crop's), each offset's median along the seam is darker within a pixel of the seam
+    than both side bands (``_SIDE_BAND_PX``, their mean) by more than the two bands differ,
+    and the channels darken alike: the ratios of the line's channels to the darker band's
+    differ by less than the light lost (one minus their mean).
+
+    Why: two touching boxes leave a gap that the light does not reach, a line darker than
+    both tops in every channel (less light, whatever the colour); one box with a printed
+    border through its middle shows a step between two colours, and ink or a coloured side
+    face darkens the channels it absorbs more than the others."""
+    height, width = rgb.shape[:2]
+    near, far = _SIDE_BAND_PX
+    offsets = np.arange(-far, far + 1)
+    rows = np.rint(seam.rows[:, None] + offsets[None, :] * seam.sin_a).astype(np.int64)
+    cols = np.rint(seam.cols[:, None] + offsets[None, :] * seam.cos_a).astype(np.int64)
+    np.clip(rows, 0, height - 1, out=rows)
+    np.clip(cols, 0, width - 1, out=cols)
+    profile = np.median(rgb[rows, cols].astype(np.float64), axis=0)  # (offsets, 3)
+    middle = profile[far - 1 : far + 2].min(axis=0)
+    before = profile[: far - near + 1].mean(axis=0)
+    after = profile[far + near :].mean(axis=0)
+    darker = np.minimum(before, after)
+    if not np.all(darker - middle > np.abs(before - after)):
+        return False
+    # Less light scales every channel by one factor; their ratios differ by less than the
+    # light lost.
+    ratios = middle / np.maximum(darker, 1.0)
+    return float(np.ptp(ratios)) < 1.0 - float(ratios.mean())
+
+
 def _thin(
     magnitude: np.ndarray,
     direction: np.ndarray,
@@ -922,7 +1008,9 @@ def _unrepeated(
     two boxes, or one box with a printed line through its middle) is kept only when it meets
     a seam that repeats between seams (a grid of packed boxes), or when both its strips have
     one of the (longer, shorter) face sizes ``sizes`` ((M, 2), m) of boxes seen elsewhere in
-    the frame, within ``seams.size_tolerance_m``. ``cloud`` (N, 3): the segment's points with
+    the frame, within ``seams.size_tolerance_m``. A seam marked a shadow line
+    (``_Seam.shadow``; ``_with_shadow_lines``) with flat strips is kept whatever it repeats: a
+    gap between two boxes. ``cloud`` (N, 3): the segment's points with
     depth (world, m); ``flat``: whether each seam's strips are flat (``_flat_strips``)."""
     kept = [seam for seam, is_flat in zip(found, flat, strict=True) if is_flat]
     while True:
@@ -932,6 +1020,7 @@ def _unrepeated(
             seam
             for seam, (by, widths) in zip(kept, bound, strict=True)
             if by == _BY_SEAM
+            or seam.shadow
             or (
                 by == _BY_OUTLINE
                 and (
