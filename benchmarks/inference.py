@@ -17,7 +17,7 @@ its process or hangs past ``inference_run.SCENE_TIMEOUT_S`` is listed and scores
 For a quick look at a few runs without the page (the same cache)::
 
     python -m benchmarks.inference --scene DIR [--scene DIR ...] [--method M ...]
-        [--budget S] [--compare]
+        [--budget S] [--compare [--seeds N ...]]
     python -m benchmarks.inference --suite ycb-dynamic --limit 2 --method collision-checker
     python -m benchmarks.inference --prune    # delete the runs of other code versions
 """
@@ -31,8 +31,9 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from benchmarks import inference_render as render
-from benchmarks.inference_run import run_comparison, run_scene
+from benchmarks.inference_run import run_scene
 from benchmarks.inference_score import score_comparison, score_run
+from benchmarks.inference_seeds import COMPARISON_SEEDS, seeded_records
 from ipr_shapes.methods import get_method
 
 
@@ -100,26 +101,34 @@ class Runs:
         return rows
 
 
-def compare_scenes(scenes: Sequence[Path], *, suite: str = "ycb-dynamic") -> list[dict]:
-    """The sampler against exhaustive search on every scene (run or reused, then scored), with
-    progress lines."""
+def compare_scenes(
+    scenes: Sequence[Path], *, suite: str = "ycb-dynamic", seeds: Sequence[int] = COMPARISON_SEEDS
+) -> list[dict]:
+    """The sampler against exhaustive search on every scene at each of the sampler's
+    ``seeds`` (``inference_seeds``: run or reused, then scored; one row per scene and seed,
+    one for a scene exhaustive search refused), with progress lines."""
     rows = []
     for number, scene in enumerate(scenes, 1):
         scene = Path(scene)
         started = time.perf_counter()
-        record = run_comparison(suite, scene)
-        row = score_comparison(record)
-        rows.append(row)
+        records = seeded_records(suite, scene, seeds)
+        scene_rows = [score_comparison(record) for record in records]
+        rows += scene_rows
+        ok = [row for row in scene_rows if row["status"] == "ok"]
         detail = (
-            f"{row['same']}/{row['objects']} same, {row['sampler_s']:.1f} s vs "
-            f"{row['exhaustive_s']:.1f} s"
-            if row["status"] == "ok"
-            else f"{row['status']}: {row['reason']}"
+            "same per seed "
+            + " ".join(f"{row['same']}/{row['objects']}" for row in ok)
+            + ", sampler s "
+            + " ".join(f"{row['sampler_s']:.1f}" for row in ok)
+            + f" vs {ok[0]['exhaustive_s']:.1f} s"
+            if ok
+            else "; ".join(f"{row['status']}: {row['reason']}" for row in scene_rows)
         )
+        kept = sum(bool(record.get("cached")) for record in records)
         print(
             f"bench: inference sampler-vs-exhaustive {number}/{len(scenes)} "
             f"{scene.name} {time.perf_counter() - started:.1f} s; {detail}"
-            + (" (kept run)" if record.get("cached") else ""),
+            + (f" ({kept} of {len(records)} kept runs)" if kept else ""),
             flush=True,
         )
     return rows
@@ -154,6 +163,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--budget", type=float, help="inference seconds per object")
     parser.add_argument("--compare", action="store_true", help="sampler against exhaustive")
     parser.add_argument(
+        "--seeds",
+        type=int,
+        nargs="+",
+        default=list(COMPARISON_SEEDS),
+        help="the sampler's seeds in --compare (exhaustive search runs once)",
+    )
+    parser.add_argument(
         "--prune",
         action="store_true",
         help="only delete the kept runs of other code versions than this checkout's",
@@ -182,7 +198,8 @@ def main(argv: list[str] | None = None) -> int:
     rows = {m: runs.rows(args.suite, m, args.budget) for m in methods}
     print(render.method_table(rows, args.suite))
     if args.compare:
-        print(render.comparison_section(compare_scenes(scenes, suite=args.suite), args.suite))
+        rows = compare_scenes(scenes, suite=args.suite, seeds=args.seeds)
+        print(render.comparison_section(rows, args.suite))
     return 0
 
 

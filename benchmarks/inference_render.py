@@ -35,6 +35,7 @@ from benchmarks.inference_score import (
     mean,
     ok_rows,
     pooled_margins,
+    seeded_agreement,
 )
 from ipr_shapes.methods import DEFAULT_METHOD, METHODS
 
@@ -317,9 +318,11 @@ def _fraction(value: float) -> str:
 
 
 def _margin_summary(rows: Sequence[dict]) -> str:
-    """One sentence on how flat the exact posteriors are and how good the sampler's choices
-    are under them (pooled over objects)."""
-    margins, shares = pooled_margins(rows)
+    """One sentence on how flat the exact posteriors are (each scene's once: exhaustive runs
+    once) and how good the sampler's choices are under them (pooled over objects and
+    seeds)."""
+    margins, _ = pooled_margins(list({r["scene"]: r for r in rows}.values()))
+    _, shares = pooled_margins(rows)
     if not margins:
         return ""
     return (
@@ -330,53 +333,94 @@ def _margin_summary(rows: Sequence[dict]) -> str:
     )
 
 
+def _per_seed(rows: Sequence[dict], key: str) -> str:
+    """A scene's per-seed counts of ``key`` ("same" of every object, or "clear_same"), in
+    seed order, e.g. "2 1 2"."""
+    return " ".join(str(r[key]) for r in sorted(rows, key=lambda r: r.get("seed", 0)))
+
+
 def comparison_section(rows: Sequence[dict], suite: str = "ycb-dynamic") -> str:
     """Agreement of the sampler's most probable hypotheses with exhaustive search's, from
-    the scored comparison rows (``inference_score.score_comparison``)."""
+    the scored comparison rows (``inference_score.score_comparison``), one per scene and
+    sampler seed ("seed"; exhaustive search is the same in a scene's rows): the judged
+    figure is pooled over the seeds and objects, each seed's beside it."""
     ok = [r for r in rows if r["status"] == "ok"]
-    skipped = [r for r in rows if r["status"] == "skipped"]
+    skipped = {r["scene"] for r in rows if r["status"] == "skipped"}
     failed = [r for r in rows if r["status"] == "failed"]
+    scenes = {r["scene"] for r in rows}
+    seeds = sorted({r.get("seed", 0) for r in ok})
     totals = comparison_totals(ok)
-    objects, same, share, ratio = (totals[k] for k in ("objects", "same", "share", "ratio"))
-    clear = clear_agreement(ok)
-    table = [
+    objects, same, share = (totals[k] for k in ("objects", "same", "share"))
+    agreement = seeded_agreement(ok)
+    clear, ratio = agreement["pooled"], agreement["ratio"]
+    by_scene: dict[str, list[dict]] = {}
+    for r in ok:
+        by_scene.setdefault(r["scene"], []).append(
+            {**r, "clear_same": clear_agreement([r])["same"]}
+        )
+    table = []
+    for name, runs in by_scene.items():
+        first, count = runs[0], len(runs)
+        clear_scene = clear_agreement(runs)
+        exhaustive_s = first["exhaustive_s"]
+        sampler_s = float(np.mean([r["sampler_s"] for r in runs]))
+        samples = [r["samples"] for r in runs if r["samples"] is not None]
+        table.append(
+            [
+                name,
+                first["objects"],
+                first["models"] if first["models"] is not None else "-",
+                f"{min(samples)}-{max(samples)}" if samples else "-",
+                f"{sum(r['same'] for r in runs)}/{first['objects'] * count}",
+                _per_seed(runs, "same"),
+                f"{clear_scene['same']}/{clear_scene['objects']}",
+                _per_seed(runs, "clear_same") if clear_scene["objects"] else "-",
+                _fraction(median(first.get("margins") or [math.nan])),
+                _fraction(min(s for r in runs for s in r.get("exact_shares") or [math.nan])),
+                f"{exhaustive_s:.1f}",
+                f"{sampler_s:.1f}",
+                f"{sampler_s / exhaustive_s:.0%}" if exhaustive_s > 0 else "-",
+                "yes" if any(r["fallback"] for r in runs) else "no",
+            ]
+        )
+    seed_table = [
         [
-            r["scene"],
-            r["objects"],
-            r["models"] if r["models"] is not None else "-",
-            r["samples"] if r["samples"] is not None else "-",
-            f"{r['same']}/{r['objects']}",
-            "{same}/{objects}".format(**clear_agreement([r])),
-            _fraction(median(r.get("margins") or [math.nan])),
-            _fraction(min(r.get("exact_shares") or [math.nan])),
-            f"{r['exhaustive_s']:.1f}",
-            f"{r['sampler_s']:.1f}",
-            f"{r['sampler_s'] / r['exhaustive_s']:.0%}" if r["exhaustive_s"] > 0 else "-",
-            "yes" if r["fallback"] else "no",
+            seed,
+            f"{c['share']:.1%} ({c['same']}/{c['objects']})" if c["objects"] else "-",
+            "{same}/{objects}".format(**comparison_totals(of_seed)),
+            f"{comparison_totals(of_seed)['ratio']:.1%}",
         ]
-        for r in ok
+        for seed, c in agreement["seeds"].items()
+        for of_seed in [[r for r in ok if r.get("seed", 0) == seed]]
     ]
+    seed_list = ", ".join(str(s) for s in seeds) or "-"
     lines = [
         "## Tree sampler against exhaustive search",
         "",
         f"On the {suite} scenes the exhaustive search accepts (at most "
         f"{COMPARISON_MAX_OBJECTS} objects; {COMPARISON_HYPOTHESES} hypotheses per object), "
         "`exhaustive` scores every jointly feasible joint model (gravity and pushes, uniform "
-        f"prior), then `{COMPARISON_SAMPLER}` runs with "
-        f"{COMPARISON_COMPUTE_SHARE:.0%} of exhaustive's sampling time as its budget. Both "
-        "seed 0, one worker, the same hypotheses. `same`: objects whose most probable "
-        "hypothesis is the same in both (`same, margin > ...`: among the objects whose exact "
-        "posterior has a clear favourite); seconds: the sampling stage (wall). Target: at least "
-        f"{TARGET_SAME_BEST:.0%} the same on the objects whose exact posterior has a clear "
-        f"favourite (exact margin over the runner-up > {CLEAR_MARGIN:g}; below it the "
-        "favourite differs from its neighbours by noise and agreement is not measurable), at "
-        f"most {TARGET_COMPUTE_SHARE:.0%} of the "
+        f"prior) once (seed 0: it is deterministic), then `{COMPARISON_SAMPLER}` runs with "
+        f"{COMPARISON_COMPUTE_SHARE:.0%} of exhaustive's sampling time as its budget at each "
+        f"sampler seed ({seed_list}), on seed 0's hypotheses (the same as exhaustive's), one "
+        "worker. One seed's run is one draw of the sampler's randomness on a few objects, so "
+        "the judged figures are pooled over the seeds and objects (each object counted once "
+        "per seed), with each seed's own in the second table. `same`: objects whose most "
+        "probable hypothesis is the same in both, summed over the seeds (`per seed`: each "
+        "seed's count, in seed order; `same, margin > ...`: among the objects whose exact "
+        "posterior has a clear favourite); seconds: the sampling stage (wall; the sampler's "
+        "the mean over the seeds); `samples`: the sampler's, lowest-highest over the seeds. "
+        f"Target: at least {TARGET_SAME_BEST:.0%} the same on the objects whose exact "
+        f"posterior has a clear favourite (exact margin over the runner-up > {CLEAR_MARGIN:g}; "
+        "below it the favourite differs from its neighbours by noise and agreement is not "
+        f"measurable), at most {TARGET_COMPUTE_SHARE:.0%} of the "
         "compute (the paper: 13%); the sampler stops at its deadline, so its measured share "
         "can exceed its budget by the few milliseconds a sample needs to notice it. "
         "`exact margin`: the median over the scene's objects of how much more exact posterior "
         "probability the most probable hypothesis has than the runner-up (how clear-cut the "
-        "answer to agree on is); `worst exact share`: the lowest, over the objects, exact "
-        "probability of the sampler's choice as a share of the most probable hypothesis's.",
+        "answer to agree on is); `worst exact share`: the lowest, over the objects and seeds, "
+        "exact probability of the sampler's choice as a share of the most probable "
+        "hypothesis's.",
         "",
     ]
     if table:
@@ -388,7 +432,9 @@ def comparison_section(rows: Sequence[dict], suite: str = "ycb-dynamic") -> str:
                     "joint models",
                     "samples",
                     "same",
+                    "per seed",
                     f"same, margin > {CLEAR_MARGIN:g}",
+                    "per seed",
                     "exact margin",
                     "worst exact share",
                     "exhaustive s",
@@ -399,6 +445,11 @@ def comparison_section(rows: Sequence[dict], suite: str = "ycb-dynamic") -> str:
                 table,
             ),
             "",
+            markdown_table(
+                ["sampler seed", f"same, margin > {CLEAR_MARGIN:g}", "same", "compute"],
+                seed_table,
+            ),
+            "",
         ]
     lines += [
         markdown_table(
@@ -406,16 +457,17 @@ def comparison_section(rows: Sequence[dict], suite: str = "ycb-dynamic") -> str:
             [
                 [
                     f"same most probable hypothesis, exact margin > {CLEAR_MARGIN:g}, "
-                    f">= {TARGET_SAME_BEST:.0%}",
-                    f"{clear['share']:.1%} ({clear['same']}/{clear['objects']} objects, "
-                    f"{_count(clear['scenes'], 'scene')})"
+                    f">= {TARGET_SAME_BEST:.0%} (pooled over seeds)",
+                    f"{clear['share']:.1%} ({clear['same']}/{clear['objects']} object-seeds: "
+                    f"{clear['distinct']} objects in "
+                    f"{_count(clear['scenes'], 'scene')}, {_count(len(seeds), 'seed')})"
                     if clear["objects"]
                     else "- (no object)",
                     _met(clear["objects"] > 0 and clear["share"] >= TARGET_SAME_BEST),
                 ],
                 [
                     "same most probable hypothesis, every object (no target)",
-                    f"{share:.1%} ({same}/{objects} objects, {_count(len(ok), 'scene')})"
+                    f"{share:.1%} ({same}/{objects} object-seeds, {_count(len(by_scene), 'scene')})"
                     if objects
                     else "- (no scene)",
                     "-",
@@ -429,9 +481,12 @@ def comparison_section(rows: Sequence[dict], suite: str = "ycb-dynamic") -> str:
         ),
         "",
         _margin_summary(ok),
-        f"Skipped {len(skipped)} of {len(rows)} scenes (more than {COMPARISON_MAX_OBJECTS} "
+        f"Skipped {len(skipped)} of {len(scenes)} scenes (more than {COMPARISON_MAX_OBJECTS} "
         "objects or too many joint models); failed: "
-        + (", ".join(f"{r['scene']} (`{r['reason']}`)" for r in failed) or "none")
+        + (
+            ", ".join(f"{r['scene']} seed {r.get('seed', 0)} (`{r['reason']}`)" for r in failed)
+            or "none"
+        )
         + ".",
         "",
     ]

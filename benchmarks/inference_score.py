@@ -135,7 +135,8 @@ def score_run(record: dict) -> dict:
 
 def score_comparison(record: dict) -> dict:
     """The sampler against exhaustive search on one scene (``inference_run.run_comparison``):
-    {"scene", "status", "reason", "objects"} and, when both ran ("ok"), "same" (objects whose
+    {"scene", "seed" (the sampler's; 0 when the record does not say), "status", "reason",
+    "objects"} and, when both ran ("ok"), "same" (objects whose
     most probable hypothesis is the same), "margins" (per object, the exact posterior's
     favourite over the runner-up), "agreements" (per object, in the order of "margins":
     whether the sampler's most probable hypothesis is the exact favourite), "exact_shares"
@@ -143,6 +144,7 @@ def score_comparison(record: dict) -> dict:
     "models" (joint models exhaustive scored), "samples" and "fallback" (the sampler's)."""
     row = {
         "scene": Path(record["scene"]).name,
+        "seed": record.get("seed", 0),
         "status": record["status"],
         "reason": record.get("reason"),
         "objects": 0,
@@ -248,6 +250,29 @@ def clear_agreement(rows: Sequence[dict], min_margin: float = CLEAR_MARGIN) -> d
         "same": same,
         "share": same / objects if objects else math.nan,
         "scenes": scenes,
+    }
+
+
+def seeded_agreement(rows: Sequence[dict], min_margin: float = CLEAR_MARGIN) -> dict:
+    """``clear_agreement`` of the "ok" comparison rows of several sampler seeds (one row per
+    scene and seed, "seed" in each): {"pooled": over every seed and object (objects counted
+    once per seed; "scenes" and "distinct": the scenes and objects with a clear exact
+    favourite, each once), "seeds": {seed: the seed's own}, "ratio": summed sampler seconds
+    over summed exhaustive seconds over the rows (exhaustive's counted once per seed: the
+    share of its compute each sampler run took)}. The pooled share is the judged figure: one seed's is one draw of the
+    sampler's randomness on a few objects."""
+    ok = [r for r in rows if r["status"] == "ok"]
+    seeds = sorted({r.get("seed", 0) for r in ok})
+    pooled = clear_agreement(ok, min_margin)
+    once = clear_agreement(list({r["scene"]: r for r in ok}.values()), min_margin)
+    pooled.update(scenes=once["scenes"], distinct=once["objects"])
+    exhaustive_s = sum(r["exhaustive_s"] for r in ok)
+    return {
+        "pooled": pooled,
+        "seeds": {
+            s: clear_agreement([r for r in ok if r.get("seed", 0) == s], min_margin) for s in seeds
+        },
+        "ratio": sum(r["sampler_s"] for r in ok) / exhaustive_s if exhaustive_s > 0 else math.nan,
     }
 
 

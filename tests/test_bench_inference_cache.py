@@ -103,7 +103,9 @@ def test_the_comparison_counts_agreement_margins_and_exact_shares():
     assert row["exact_shares"] == pytest.approx([0.6, 1.0])
     assert (row["exhaustive_s"], row["sampler_s"], row["samples"]) == (10.0, 1.8, 40)
     skipped = score_comparison({"scene": "/x/s", "status": "skipped", "reason": "5 objects"})
-    assert skipped == {"scene": "s", "status": "skipped", "reason": "5 objects", "objects": 0}
+    assert skipped == {
+        "scene": "s", "seed": 0, "status": "skipped", "reason": "5 objects", "objects": 0
+    }  # fmt: skip
 
 
 def test_agreement_is_counted_only_on_objects_whose_exact_posterior_has_a_clear_favourite():
@@ -133,3 +135,88 @@ def test_agreement_is_counted_only_on_objects_whose_exact_posterior_has_a_clear_
     assert clear_agreement([a, b], min_margin=0.0)["same"] == 2
     empty = clear_agreement([b])
     assert empty["objects"] == 0 and empty["share"] != empty["share"]  # nan: nothing to agree on
+
+
+def _seeded(scene, seed, exact, chosen, status="ok"):
+    """A scored comparison row of ``scene`` at sampler seed ``seed``: the sampler puts all
+    its probability on ``chosen`` (a hypothesis index per object)."""
+    sampler = [[float(i == c) for i in range(len(p))] for p, c in zip(exact, chosen, strict=True)]
+    record = {
+        "scene": f"/x/{scene}",
+        "seed": seed,
+        "status": status,
+        "exhaustive": _posteriors(exact, None),
+        "sampler": _posteriors(sampler, 40) if status == "ok" else None,
+    }
+    return score_comparison(record)
+
+
+#: Exact posteriors: scene a has two objects with a clear favourite (hypothesis 0, then 1),
+#: scene b one (hypothesis 0).
+SEEDED_EXACT = {"a": [[0.8, 0.1, 0.1], [0.2, 0.5, 0.3]], "b": [[0.6, 0.4]]}
+
+
+def seeded_rows():
+    """Seed 0: 2 of 3 clear objects agree; seed 1: 3 of 3; seed 2: 1 of 2 (scene b's
+    sampler run failed)."""
+    a, b = SEEDED_EXACT["a"], SEEDED_EXACT["b"]
+    return [
+        _seeded("a", 0, a, [0, 1]),
+        _seeded("b", 0, b, [1]),
+        _seeded("a", 1, a, [0, 1]),
+        _seeded("b", 1, b, [0]),
+        _seeded("a", 2, a, [0, 2]),
+        _seeded("b", 2, b, [0], status="failed"),
+    ]
+
+
+def test_the_agreement_over_seeds_pools_every_seed_and_object():
+    """Issue 29's judged agreement is pooled over the sampler's seeds and the objects (6 of
+    8 object-seeds), not seed 0's (2 of 3) nor the mean of the seeds' shares (0.722), and a
+    scene's objects are counted once per seed but once as objects."""
+    from benchmarks.inference_score import seeded_agreement
+
+    rows = seeded_rows()
+    assert rows[0]["seed"] == 0 and rows[-1]["seed"] == 2
+    agreement = seeded_agreement(rows)
+    pooled = agreement["pooled"]
+    assert (pooled["same"], pooled["objects"]) == (6, 8)
+    assert pooled["share"] == pytest.approx(0.75)
+    assert (pooled["scenes"], pooled["distinct"]) == (2, 3)
+    per_seed = {s: (c["same"], c["objects"]) for s, c in agreement["seeds"].items()}
+    assert per_seed == {0: (2, 3), 1: (3, 3), 2: (1, 2)}
+    assert agreement["ratio"] == pytest.approx(0.18)
+    # A record without a seed is seed 0's (the comparison's own run).
+    assert score_comparison({"scene": "/x/s", "status": "skipped"})["seed"] == 0
+
+
+def test_the_seeded_sampler_gets_the_budget_seed_0s_comparison_gave_it():
+    from benchmarks.inference_run import COMPARISON_COMPUTE_SHARE
+    from benchmarks.inference_seeds import sampler_budget
+
+    record = {"status": "ok", "exhaustive": _posteriors(SEEDED_EXACT["a"], None)}
+    assert sampler_budget(record) == pytest.approx(COMPARISON_COMPUTE_SHARE * 10.0 / 2)
+    assert sampler_budget({**record, "status": "skipped"}) is None
+    assert sampler_budget({"status": "failed"}) is None
+
+
+def test_the_comparison_section_judges_the_agreement_pooled_over_the_sampler_seeds():
+    """The target row reads the pooled share (6 of 8 object-seeds: no), each seed's is in
+    its own table, and the per-scene counts add the seeds up."""
+    from benchmarks.inference_render import comparison_section
+
+    page = comparison_section(seeded_rows())
+    cells = {line.split("|")[1].strip(): line.split("|")[2:-1] for line in page.splitlines()
+             if line.startswith("| ")}  # fmt: skip
+    target = next(k for k in cells if k.startswith("same most probable hypothesis, exact"))
+    assert cells[target][0].strip().startswith("75.0% (6/8 object-seeds: 3 objects in 2 scenes")
+    assert cells[target][1].strip() == "**no**"
+    assert [cells[str(s)][0].strip() for s in (0, 1, 2)] == [
+        "66.7% (2/3)", "100.0% (3/3)", "50.0% (1/2)",
+    ]  # fmt: skip
+    assert [c.strip() for c in cells["a"][3:7]] == ["5/6", "2 2 1", "5/6", "2 2 1"]
+    assert "b seed 2" in page  # the failed run is listed
+    right = [_seeded(s, seed, e, [int(max(p) == p[1]) for p in e])
+             for seed in (0, 1) for s, e in SEEDED_EXACT.items()]  # fmt: skip
+    page = comparison_section(right)
+    assert "100.0% (6/6 object-seeds" in page and "| **no** |" not in page.split("target")[1]
