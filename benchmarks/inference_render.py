@@ -459,7 +459,7 @@ def comparison_section(rows: Sequence[dict], suite: str = "ycb-dynamic") -> str:
                     f"same most probable hypothesis, exact margin > {CLEAR_MARGIN:g}, "
                     f">= {TARGET_SAME_BEST:.0%} (pooled over seeds)",
                     f"{clear['share']:.1%} ({clear['same']}/{clear['objects']} object-seeds: "
-                    f"{clear['distinct']} objects in "
+                    f"{_count(clear['distinct'], 'object')} in "
                     f"{_count(clear['scenes'], 'scene')}, {_count(len(seeds), 'seed')})"
                     if clear["objects"]
                     else "- (no object)",
