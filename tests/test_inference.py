@@ -828,7 +828,8 @@ def test_rest_evidence_tells_a_shape_that_falls_from_the_true_one_where_the_dept
 SUNK_BOX = _hypothesis(1, [-0.05, -0.03, -0.015], [0.05, 0.03, 0.04])
 
 
-def test_rest_lift_tells_a_shape_too_large_below_the_support_from_the_true_one():
+@pytest.mark.parametrize("drawn_models", ["exact", "factorised"])
+def test_rest_lift_tells_a_shape_too_large_below_the_support_from_the_true_one(drawn_models):
     """The true box and one whose hidden part reaches 1.5 cm into the table, the depth made
     nearly blind: with the rest evidence on falls alone the two weigh about the same (the sunk
     box is pushed up, it does not fall); with ``rest_lift`` its rise counts against it at the
@@ -841,6 +842,7 @@ def test_rest_lift_tells_a_shape_too_large_below_the_support_from_the_true_one()
         stability_alpha_per_m=0.0,
         likelihood=LikelihoodConfig(alpha_per_m=1e-6),
         rest_drop_m=0.004,
+        drawn_models=drawn_models,  # the drawn models' own weights, or the unary factors alone
     )
     outcomes = {}
     for lift in (False, True):
