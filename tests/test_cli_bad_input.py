@@ -193,21 +193,32 @@ def test_stale_staging_of_a_killed_run_is_cleaned_and_a_live_ones_kept(tmp_path:
 
 @pytest.mark.slow
 def test_a_killed_runs_staging_folder_is_cleaned_by_the_next_run(scene_dir: Path, tmp_path):
+    """A run killed while writing leaves its staging folder; the next run into the same
+    target removes it. The killed run is a process that stages the target the way every
+    command writes its output (``staged_directory``) and is killed (SIGKILL) mid-write: racing
+    a real ``segment`` run's kill against its short write stage was flaky (a small scene's
+    write can start and finish between two polls)."""
     out = tmp_path / "seg"
-    process = subprocess.Popen(
-        [sys.executable, "-m", "ipr_shapes", "segment", str(scene_dir), "-o", str(out)],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
+    killed = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            "import os, signal, sys; from pathlib import Path; "
+            "from ipr_shapes.atomic import staged_directory\n"
+            "with staged_directory(Path(sys.argv[1])) as staging:\n"
+            "    (staging / 'labels_000000.png').write_bytes(b'half')\n"
+            "    os.kill(os.getpid(), signal.SIGKILL)",
+            str(out),
+        ],
+        capture_output=True,
+        timeout=120,
     )
-    deadline = time.monotonic() + 120
-    while not [p for p in tmp_path.iterdir() if "ipr-staging" in p.name]:
-        assert time.monotonic() < deadline and process.poll() is None
-        time.sleep(0.02)
-    process.send_signal(signal.SIGKILL)
-    process.wait()
+    assert killed.returncode == -signal.SIGKILL, killed.stderr
     assert [p for p in tmp_path.iterdir() if "ipr-staging" in p.name]
+    assert not out.exists()
     assert main(["segment", str(scene_dir), "-o", str(out)]) == 0
     assert not [p for p in tmp_path.iterdir() if "ipr-staging" in p.name]
+    assert out.is_dir()
 
 
 @pytest.mark.slow
