@@ -70,43 +70,14 @@ def exact_marginals(
     maximum of 1, since only normalised marginals are needed. Returns None when no assignment
     is feasible, and raises ``TableTooLarge`` when a table would exceed ``max_table`` entries.
     """
-    position = {node: number for number, node in enumerate(nodes)}
-    unary = unary or {}
-    base = [
-        ((position[i],), np.asarray(unary.get(i, np.ones(sizes[i])), dtype=np.float64))
-        for i in nodes
-    ]
-    base += [
-        ((position[a], position[b]), matrix.astype(np.float64)) for (a, b), matrix in edges.items()
-    ]
-    size_of = [sizes[i] for i in nodes]
+    base = _factors(nodes, edges, sizes, unary)
     marginals = {}
-    for node in nodes:
-        keep = position[node]
-        factors = list(base)
-        remaining = set(range(len(nodes))) - {keep}
-        while remaining:
-
-            def scope(v: int, factors=factors) -> set[int]:
-                return set().union(*(set(f[0]) for f in factors if v in f[0]))
-
-            variable = min(remaining, key=lambda v: (np.prod([size_of[u] for u in scope(v)]), v))
-            union = sorted(scope(variable))
-            if float(np.prod([size_of[u] for u in union], dtype=float)) > max_table:
-                raise TableTooLarge
-            involved = [f for f in factors if variable in f[0]]
-            out = [u for u in union if u != variable]
-            operands: list = []
-            for variables, table in involved:
-                operands += [table, list(variables)]
-            table = np.einsum(*operands, out)
-            peak = float(table.max()) if table.size else 0.0
-            if peak <= 0:
-                return None
-            factors = [f for f in factors if variable not in f[0]] + [(tuple(out), table / peak)]
-            remaining.discard(variable)
+    for number, node in enumerate(nodes):
+        eliminated = _eliminate(base, [sizes[i] for i in nodes], max_table, keep=number)
+        if eliminated is None:
+            return None
         counts = np.ones(sizes[node])
-        for variables, table in factors:  # the kept object's own unary factor is among them
+        for variables, table in eliminated[0]:  # the kept object's own unary factor is among them
             counts = counts * (table if variables else float(table))
         total = float(counts.sum())
         if total <= 0:
@@ -126,6 +97,28 @@ def log_partition(
     ``exact_marginals``' distribution, same arguments): every node eliminated in the same
     min-degree order, each table's rescaling kept in log. -inf when no assignment is feasible;
     raises ``TableTooLarge`` as ``exact_marginals``."""
+    eliminated = _eliminate(
+        _factors(nodes, edges, sizes, unary), [sizes[i] for i in nodes], max_table, keep=None
+    )
+    if eliminated is None:
+        return -np.inf
+    factors, log_scale = eliminated
+    total = float(np.prod([float(table) for _, table in factors]))
+    return log_scale + float(np.log(total)) if total > 0 else -np.inf
+
+
+#: A factor: the node positions it holds and its non-negative table over their values.
+Factor = tuple[tuple[int, ...], np.ndarray]
+
+
+def _factors(
+    nodes: list[int],
+    edges: Mapping[tuple[int, int], np.ndarray],
+    sizes: Mapping[int, int],
+    unary: Mapping[int, np.ndarray] | None,
+) -> list[Factor]:
+    """The graph's factors over node positions: each node's unary (ones when not given), then
+    each edge's compatibility matrix, as float64 tables."""
     position = {node: number for number, node in enumerate(nodes)}
     unary = unary or {}
     factors = [
@@ -135,9 +128,20 @@ def log_partition(
     factors += [
         ((position[a], position[b]), matrix.astype(np.float64)) for (a, b), matrix in edges.items()
     ]
-    size_of = [sizes[i] for i in nodes]
+    return factors
+
+
+def _eliminate(
+    factors: list[Factor], size_of: list[int], max_table: float, keep: int | None
+) -> tuple[list[Factor], float] | None:
+    """Sum every position but ``keep`` out of ``factors`` in min-degree order (the smallest
+    table first, ties to the lower position), one ``numpy.einsum`` per step, each new table
+    rescaled to a maximum of 1: the factors left (over ``keep`` alone, or scalars) and the log
+    of the rescalings' product. None when a table is all zero (no feasible assignment);
+    raises ``TableTooLarge`` when a table would exceed ``max_table`` entries."""
+    factors = list(factors)
     log_scale = 0.0
-    remaining = set(range(len(nodes)))
+    remaining = set(range(len(size_of))) - ({keep} if keep is not None else set())
     while remaining:
 
         def scope(v: int, factors=factors) -> set[int]:
@@ -155,12 +159,11 @@ def log_partition(
         table = np.einsum(*operands, out)
         peak = float(table.max()) if table.size else 0.0
         if peak <= 0:
-            return -np.inf
+            return None
         log_scale += float(np.log(peak))
         factors = [f for f in factors if variable not in f[0]] + [(tuple(out), table / peak)]
         remaining.discard(variable)
-    total = float(np.prod([float(table) for _, table in factors]))
-    return log_scale + float(np.log(total)) if total > 0 else -np.inf
+    return factors, log_scale
 
 
 class TableTooLarge(Exception):
