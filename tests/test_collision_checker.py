@@ -385,6 +385,19 @@ def test_fit_weights_are_the_family_shares_times_a_gaussian_of_the_excess_misfit
     assert fit_weights(generators, feasible, shared, 0.005) == pytest.approx([0.5, 0.5, 0.0])
 
 
+def _three_families_of_cubes():
+    """Six 4 cm near-copies of a cube from Algorithm 1 and a 7 and a 7.2 cm cube from two
+    other families (``_nested_cubes``), with 25 seen points (m) on the small cubes' far face
+    (x = 4.05 cm) and 25 on the large cubes' (x = 7 cm)."""
+    sizes = [(0.040 + 2e-4 * k, "algorithm1") for k in range(6)]
+    prepared = _nested_cubes([*sizes, (0.070, "sphere"), (0.072, "superquadric")])
+    grid = np.stack(np.meshgrid(np.linspace(0.015, 0.025, 5), np.linspace(0.015, 0.025, 5)), -1)
+    grid = grid.reshape(-1, 2)
+    small_face = np.column_stack([np.full(len(grid), 0.0405), grid])
+    large_face = np.column_stack([np.full(len(grid), 0.070), grid])
+    return prepared, small_face, large_face
+
+
 def test_fit_medoid_keeps_the_families_whose_surface_runs_through_the_seen_points():
     """The six 4 cm near-copies from Algorithm 1 and a 7 and a 7.2 cm cube from two other
     families. Seen points on the small cubes' far face (x = 4.05 cm): the large cubes' surfaces
@@ -392,12 +405,7 @@ def test_fit_medoid_keeps_the_families_whose_surface_runs_through_the_seen_point
     choice, where each family's equal share gives a large one. Seen points on the large
     cubes' far face (x = 7 cm): the small cubes leave them outside, and a large cube stays.
     Points not given: each candidate once; none seen: each family an equal share."""
-    sizes = [(0.040 + 2e-4 * k, "algorithm1") for k in range(6)]
-    prepared = _nested_cubes([*sizes, (0.070, "sphere"), (0.072, "superquadric")])
-    grid = np.stack(np.meshgrid(np.linspace(0.015, 0.025, 5), np.linspace(0.015, 0.025, 5)), -1)
-    grid = grid.reshape(-1, 2)
-    small_face = np.column_stack([np.full(len(grid), 0.0405), grid])
-    large_face = np.column_stack([np.full(len(grid), 0.070), grid])
+    prepared, small_face, large_face = _three_families_of_cubes()
     config = CollisionCheckerConfig(medoid_weights="fit")
     (family,) = uniform_posteriors(prepared, CollisionCheckerConfig(medoid_weights="family"))
     (small,) = uniform_posteriors(prepared, config, points={1: small_face})
@@ -504,12 +512,7 @@ def test_outline_fit_medoid_weighs_the_families_by_their_fit_for_the_hidden_shar
     the families keep their shares (a large cube); on the small cubes' far face, the large
     cubes' surfaces run away from them and a small cube stays; no points: the families'
     equal shares ("outline")."""
-    sizes = [(0.040 + 2e-4 * k, "algorithm1") for k in range(6)]
-    prepared = _nested_cubes([*sizes, (0.070, "sphere"), (0.072, "superquadric")])
-    grid = np.stack(np.meshgrid(np.linspace(0.015, 0.025, 5), np.linspace(0.015, 0.025, 5)), -1)
-    grid = grid.reshape(-1, 2)
-    small_face = np.column_stack([np.full(len(grid), 0.0405), grid])
-    large_face = np.column_stack([np.full(len(grid), 0.070), grid])
+    prepared, small_face, large_face = _three_families_of_cubes()
     config = CollisionCheckerConfig(medoid_weights="outline-fit")
 
     def choice(hidden, points):
