@@ -73,7 +73,9 @@ def sampler_samples(record: dict) -> int | None:
     models = exhaustive.get("samples") or 0
     if not exhaustive["posteriors"] or models < 1:
         return None
-    return max(1, math.ceil(COMPARISON_COMPUTE_SHARE * models - 1e-9))
+    # The product rounded to 9 decimals first: 0.18 x 50 is 9 in decimal, and a float
+    # product one ulp above it must not round up to 10.
+    return max(1, math.ceil(round(COMPARISON_COMPUTE_SHARE * models, 9)))
 
 
 def sampler_at_seed(scene_path: Path, seed: int, samples: int, hypotheses: int) -> dict:
