@@ -141,7 +141,9 @@ def score_comparison(record: dict) -> dict:
     favourite over the runner-up), "agreements" (per object, in the order of "margins":
     whether the sampler's most probable hypothesis is the exact favourite), "exact_shares"
     (the exact probability of the sampler's choice over the favourite's), "exhaustive_s" / "sampler_s" (sampling wall time),
-    "models" (joint models exhaustive scored), "samples" and "fallback" (the sampler's)."""
+    "models" (joint models exhaustive scored), "samples", "stability_tests" and "fallback" (the
+    sampler's), "budget_samples" (its count budget, ``inference_seeds.sampler_samples``; None
+    for a run with a time budget)."""
     row = {
         "scene": Path(record["scene"]).name,
         "seed": record.get("seed", 0),
@@ -182,6 +184,8 @@ def score_comparison(record: dict) -> dict:
         "exact_shares": shares,
         "sampler_s": sampler["timing_s"].get("inference_sampling", math.nan),
         "samples": sampler["samples"],
+        "budget_samples": record.get("budget_samples"),
+        "stability_tests": sampler.get("stability_tests"),
         "fallback": sampler["fallback"],
     }
 

@@ -190,19 +190,80 @@ def test_the_agreement_over_seeds_pools_every_seed_and_object():
     assert score_comparison({"scene": "/x/s", "status": "skipped"})["seed"] == 0
 
 
-def test_the_seeded_sampler_gets_the_budget_seed_0s_comparison_gave_it():
+def test_the_seeded_sampler_gets_a_count_budget_from_exhaustives_joint_models():
+    """The budget is a count (18 % of exhaustive's joint models, rounded up), not a share of
+    its seconds: the same record gives the same budget however long exhaustive took."""
     from benchmarks.inference_run import COMPARISON_COMPUTE_SHARE
-    from benchmarks.inference_seeds import sampler_budget
+    from benchmarks.inference_seeds import sampler_samples
 
-    record = {"status": "ok", "exhaustive": _posteriors(SEEDED_EXACT["a"], None)}
-    assert sampler_budget(record) == pytest.approx(COMPARISON_COMPUTE_SHARE * 10.0 / 2)
-    assert sampler_budget({**record, "status": "skipped"}) is None
-    assert sampler_budget({"status": "failed"}) is None
+    record = {
+        "status": "ok",
+        "exhaustive": {**_posteriors(SEEDED_EXACT["a"], None), "samples": 324},
+    }
+    assert COMPARISON_COMPUTE_SHARE == 0.18
+    assert sampler_samples(record) == 59  # 58.32 rounded up
+    slower = {**record["exhaustive"], "timing_s": {"inference_sampling": 99.0}}
+    assert sampler_samples({**record, "exhaustive": slower}) == 59
+    assert sampler_samples({**record, "exhaustive": {**record["exhaustive"], "samples": 100}}) == 18
+    assert sampler_samples({**record, "exhaustive": {**record["exhaustive"], "samples": 2}}) == 1
+    assert sampler_samples({**record, "status": "skipped"}) is None
+    assert sampler_samples({"status": "failed"}) is None
+
+
+def test_every_seed_runs_the_sampler_with_the_count_budget_and_no_deadline(
+    runs_root, tmp_path, monkeypatch
+):
+    """Seed 0 included (its comparison record's wall-budget sampler is not read), each seed's
+    sampler is a run of its own with ``samples`` set, kept and reused; the pipeline is asked
+    for exactly that many samples, one worker, seed 0's hypotheses and no time budget."""
+    from benchmarks import inference_seeds
+
+    base = {
+        "scene": str(tmp_path / "scene-022"),
+        "status": "ok",
+        "exhaustive": {**_posteriors(SEEDED_EXACT["a"], None), "samples": 100},
+        "sampler": _posteriors([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], 7),  # a wall-budget run
+    }
+    monkeypatch.setattr(inference_seeds, "run_comparison", lambda *a, **k: dict(base))
+    calls = []
+
+    def isolated(function, partial, settings, seed, samples, hypotheses, *, timeout_s):
+        calls.append((seed, samples, settings["samples"], settings["budget_per_object_s"]))
+        inference_run._write_record(
+            partial, {**settings, "status": "ok", "sampler": _posteriors([[0.0, 1.0, 0.0],
+                      [1.0, 0.0, 0.0]], samples)},
+        )  # fmt: skip
+
+    monkeypatch.setattr(inference_seeds, "isolated", isolated)
+    records = inference_seeds.seeded_records("suite", tmp_path / "scene-022", seeds=(0, 1))
+    assert calls == [(0, 18, 18, None), (1, 18, 18, None)]
+    assert [r["seed"] for r in records] == [0, 1]
+    assert all(r["sampler"]["samples"] == 18 and r["budget_samples"] == 18 for r in records)
+    again = inference_seeds.seeded_records("suite", tmp_path / "scene-022", seeds=(0, 1))
+    assert len(calls) == 2 and all(r["cached"] for r in again)
+    assert score_comparison(again[0])["budget_samples"] == 18
+
+    asked = {}
+
+    def run_pipeline(scene, config, **kwargs):
+        asked.update(kwargs, hypotheses=config.hypotheses.count,
+                     budget=config.inference.budget_per_object_s)  # fmt: skip
+        raise RuntimeError("stop here")
+
+    import ipr_shapes.pipeline as pipeline
+    import ipr_shapes.scene as scene_module
+
+    monkeypatch.setattr(pipeline, "run_pipeline", run_pipeline)
+    monkeypatch.setattr(scene_module, "load_scene", lambda path: path)
+    with pytest.raises(RuntimeError, match="stop here"):
+        inference_seeds.sampler_at_seed(tmp_path, 3, 18, 6)
+    assert asked["samples"] == 18 and asked["workers"] == 1 and asked["seed"] == 0
+    assert asked.get("time_budget_s") is None and asked["hypotheses"] == 6
 
 
 def test_the_comparison_section_judges_the_agreement_pooled_over_the_sampler_seeds():
     """The target row reads the pooled share (6 of 8 object-seeds: no), each seed's is in
-    its own table, and the per-scene counts add the seeds up."""
+    its own table, the per-scene counts add the seeds up, and the count budget is stated."""
     from benchmarks.inference_render import comparison_section
 
     page = comparison_section(seeded_rows())
@@ -214,7 +275,10 @@ def test_the_comparison_section_judges_the_agreement_pooled_over_the_sampler_see
     assert [cells[str(s)][0].strip() for s in (0, 1, 2)] == [
         "66.7% (2/3)", "100.0% (3/3)", "50.0% (1/2)",
     ]  # fmt: skip
-    assert [c.strip() for c in cells["a"][3:7]] == ["5/6", "2 2 1", "5/6", "2 2 1"]
+    assert [c.strip() for c in cells["a"][4:8]] == ["5/6", "2 2 1", "5/6", "2 2 1"]
+    # The budget is stated: a count of samples, the same at every seed.
+    assert cells["a"][2].strip() == "40"
+    assert "18% of the joint models exhaustive scores, rounded up, as its samples" in page
     assert "b seed 2" in page  # the failed run is listed
     right = [_seeded(s, seed, e, [int(max(p) == p[1]) for p in e])
              for seed in (0, 1) for s, e in SEEDED_EXACT.items()]  # fmt: skip
