@@ -292,6 +292,14 @@ def main(argv: list[str] | None = None) -> int:
         help="no bound on the hidden extent beyond the support's seen outline (before 2026-11-27)",
     )
     parser.add_argument(
+        "--silhouette-cut",
+        choices=("always", "fallback", "off"),
+        default=None,
+        help="hypotheses cut to the object's own silhouette (default: the config's, fallback: "
+        "only an object with no feasible hypothesis; always: every object; off: never, before "
+        "2026-11-28)",
+    )
+    parser.add_argument(
         "--medoid-weights",
         choices=("candidate", "family", "outline", "fit", "outline-fit"),
         default=None,
@@ -333,6 +341,11 @@ def main(argv: list[str] | None = None) -> int:
         config = dataclasses.replace(
             config,
             hypotheses=dataclasses.replace(config.hypotheses, outside_support_ratio=None),
+        )
+    if args.silhouette_cut is not None:
+        config = dataclasses.replace(
+            config,
+            hypotheses=dataclasses.replace(config.hypotheses, silhouette_cut=args.silhouette_cut),
         )
     if args.medoid_weights is not None:
         config = dataclasses.replace(

@@ -48,12 +48,13 @@ def iou(a: np.ndarray, b: np.ndarray) -> float:
     return common / (a.size + b.size - common)
 
 
-def assert_valid(h: ShapeHypothesis, points: np.ndarray, convex_tolerance: float = 1e-9) -> None:
+def assert_valid(h: ShapeHypothesis, points: np.ndarray, convex_tolerance: float = 1e-8) -> None:
     """Closed, convex with outward faces, the right volume, containing every observed point.
 
     ``convex_tolerance``: how far (relative to the size) a vertex may be outside a face's
     plane; qhull's triangles of a face with exactly coplanar points (a rendered cylinder's
-    lid) tilt by about 1e-9."""
+    lid) tilt by about 1e-9, and a cut by a plane through the seen outline (the silhouette's
+    sides pass through the observed points' extreme edges) leaves corners a few 1e-9 apart."""
     merged, faces = voxels.merge_vertices(h.vertices, h.faces)
     assert voxels.is_closed(merged, faces)
     planes = h.face_planes()
@@ -430,3 +431,88 @@ def test_a_curved_facet_is_mirrored_about_its_tangent_plane():
         (d,) = h.distances_m
         assert h.vertices[:, 1].max() == pytest.approx(2 * mean_y + d, abs=1e-3)
         assert h.vertices[:, 1].min() == pytest.approx(0.0, abs=1e-6)
+
+
+def _silhouette(obj, space):
+    from ipr_shapes.hypotheses.generate import _silhouette_bounds
+    from ipr_shapes.perception.occupancy import plane_regions
+
+    return _silhouette_bounds(
+        obj.points, space, CONFIG.ray_quantile, GRID.voxel_size_m, plane_regions((SUPPORT,), 0.01)
+    )
+
+
+def test_the_silhouette_sides_hold_the_points_and_pass_by_the_camera(oblique):
+    from ipr_shapes.hypotheses.generate import _camera_centre
+
+    obj, space = oblique
+    camera = _camera_centre(space.view)
+    pose = render_view((0.0, -0.45, 0.40)).world_from_camera
+    assert np.allclose(camera, pose[:3, 3], atol=1e-9)
+    sides = _silhouette(obj, space)
+    assert len(sides) >= 4  # the box stands free before the backdrop: its outline is its own
+    inside = obj.points @ sides[:, :3].T + sides[:, 3]
+    assert inside.min() >= -1e-9
+    assert np.allclose(inside.min(axis=0), 0.0, atol=1e-6)  # at the points' own extent
+    assert np.abs(sides[:, :3] @ camera + sides[:, 3]).max() < 0.003  # planes by the camera
+    # The true box lies within every side (its outline is what was seen)...
+    corners = box_mesh()[0]
+    assert (corners @ sides[:, :3].T + sides[:, 3]).min() > -GRID.voxel_size_m
+    # ... and so does every hypothesis, cut to the sides (the observed facets' tolerance).
+    always = dataclasses.replace(CONFIG, silhouette_cut="always")
+    for h in generate_hypotheses(obj, space, (SUPPORT,), always, np.random.default_rng(0)):
+        reach = h.vertices @ sides[:, :3].T + sides[:, 3]
+        assert reach.min() >= -CONFIG.facet_tolerance_m - 1e-6, h.generator
+
+
+def test_a_side_a_nearer_surface_hides_does_not_cut():
+    """A slab in front of the box's right half hides it: the seen left half's right side is
+    not the box's outline, so nothing may cut there; the true box stays within every side."""
+    from ipr_shapes.camera import look_at
+    from ipr_shapes.rendering import render_depth_and_ids
+
+    from .box_scene import BACKDROP, TABLE, K, View, box_mesh, partial_box
+
+    occluder = box_mesh(np.array([0.05, 0.005, 0.08]), np.array([0.05, -0.12, 0.08]))
+    pose = look_at(np.array([0.0, -0.45, 0.40]), np.array([0.0, 0.0, 0.02]))
+    meshes = [box_mesh(), TABLE, BACKDROP, occluder]
+    depth, index = render_depth_and_ids(meshes, [None] * 4, K, 320, 240, pose)
+    view = View(depth, index, pose)
+    obj, space = partial_box(view), view.space()
+    assert obj.points[:, 0].max() < 0.02  # the right part is hidden
+    sides = _silhouette(obj, space)
+    assert len(sides) >= 2  # the left, top and back outlines are the box's own
+    corners = box_mesh()[0]
+    assert (corners @ sides[:, :3].T + sides[:, 3]).min() > -GRID.voxel_size_m
+
+
+def test_the_silhouette_cut_by_default_only_for_an_object_with_no_feasible_hypothesis(
+    oblique, monkeypatch
+):
+    """The default ("fallback") keeps the hypotheses made without the cut when one passes the
+    checks, and makes the same draws again cut ("always") when none does."""
+    from ipr_shapes.hypotheses import generate
+
+    obj, space = oblique
+
+    def made(mode):
+        config = dataclasses.replace(CONFIG, silhouette_cut=mode)
+        return generate_hypotheses(obj, space, (SUPPORT,), config, np.random.default_rng(0))
+
+    off, fallback, always = made("off"), made("fallback"), made("always")
+    assert any(h.feasible for h in off)
+    for a, b in zip(fallback, off, strict=True):
+        assert np.array_equal(a.vertices, b.vertices)
+    assert any(not np.array_equal(a.vertices, b.vertices) for a, b in zip(always, off, strict=True))
+    # Every uncut hypothesis made infeasible: the fallback's are the cut ones, same draws.
+    uncut = generate._generate
+
+    def infeasible_uncut(*args):
+        hypotheses = uncut(*args)
+        if args[-1]:
+            return hypotheses
+        return tuple(dataclasses.replace(h, feasible=False) for h in hypotheses)
+
+    monkeypatch.setattr(generate, "_generate", infeasible_uncut)
+    for a, b in zip(made("fallback"), always, strict=True):
+        assert np.array_equal(a.vertices, b.vertices)

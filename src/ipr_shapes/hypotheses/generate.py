@@ -88,6 +88,21 @@ Choices made here (the paper leaves them open):
   object's observed points reach inside it, and never less far than they do. Where the
   camera saw that space, the seen-free voxels bound it first; an object well inside the
   outline is unchanged.
+- Within the object's own silhouette (``silhouette_cut``; by default only for an object none
+  of whose hypotheses passes the seen-free check, made again from the same draws): the rays
+  through the pixels just beyond the object's outline saw the background behind it, so no
+  part of the object lies on them in front of it; where the outline is the object's own, its
+  hidden part projects inside the outline. Each side of the convex hull of the observed
+  points as seen from the camera centre (a plane through the centre) is such a bound when the
+  voxels just beyond its line, at the depth of the points on that side, are seen-free (all but
+  ``ray_quantile`` of the probes along it, the rays' own share), over the silhouette's width
+  and as far again beyond each end (the plane cuts beyond the side's segment too, where a
+  neighbouring side may be hidden): the hypotheses are cut to it at the observed points'
+  extent plus ``facet_tolerance_m`` (like an observed facet's outer plane); the hidden
+  extent's rays do not stop at it (beyond it they meet the seen-free space anyway). A side a
+  nearer surface, a missing reading or the image border hides bounds nothing. Without the cut
+  a fitted box or superquadric whose corners leave the silhouette is only rejected (a bottle
+  whose foot a box hides had no feasible candidate at all).
 - Structure-aware candidates (``ipr_shapes.hypotheses.structure``; docs/DESIGN_NOTES.md,
   "Structure-aware candidates beside Algorithm 1"): ``structure_share`` of the m hypotheses
   (rounded) are made by the structure-aware generators that apply to the object, taking turns
@@ -109,6 +124,7 @@ Choices made here (the paper leaves them open):
 from __future__ import annotations
 
 import bisect
+import copy
 import dataclasses
 import functools
 import logging
@@ -138,7 +154,7 @@ from ipr_shapes.hypotheses.kernels import (
     hull_parts,
     outside_shares,
 )
-from ipr_shapes.perception.free_space import FREE, SeenSpace, SpaceMap
+from ipr_shapes.perception.free_space import FREE, UNKNOWN, SeenSpace, SpaceMap
 from ipr_shapes.perception.occupancy import PlaneRegion, allowed_voxels, plane_regions, unary_report
 from ipr_shapes.perception.types import KnownPlane, PartialObject
 from ipr_shapes.products import ShapeHypothesis, volume_spread
@@ -273,6 +289,16 @@ class HypothesisConfig:
             what it did not see there (behind the object, behind a bin's rim) bounded nothing
             (docs/experiments/2026-11-27-support-extent.md). None: unbounded (before
             2026-11-27); also unbounded for a support with fewer than three seen points.
+        silhouette_cut: cut hypotheses to the object's own silhouette cone: each side of the
+            convex hull of its observed points seen from the camera (a plane through the
+            camera centre) beyond which the camera saw free space at the object's depth
+            (``_silhouette_bounds``; module doc); sides where a nearer surface, no reading or
+            the image border hides what lies beyond are not cut. "fallback" (default): only
+            for an object none of whose hypotheses passes the seen-free check (after the
+            surface allowance), which are then made again, cut; "always": every object's;
+            "off": never (before 2026-11-28). "always" raised the oracle on every set but the
+            Collision Checker's choice among the larger feasible sets lost on two
+            development sets and bins-real (docs/experiments/2026-11-28-silhouette-cut.md).
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -308,6 +334,7 @@ class HypothesisConfig:
         "fitted_revolution_axis": Options(True, False),
         "outside_view_ratio": OrNone(Interval(0, None)),
         "outside_support_ratio": OrNone(Interval(0, None)),
+        "silhouette_cut": Options("always", "fallback", "off"),
     }
 
     count: int = 32
@@ -340,6 +367,7 @@ class HypothesisConfig:
     fitted_revolution_axis: bool = False
     outside_view_ratio: float | None = 1.0
     outside_support_ratio: float | None = 1.0
+    silhouette_cut: str = "fallback"
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -719,9 +747,11 @@ def _prepare(
     planes: tuple[KnownPlane, ...],
     config: HypothesisConfig,
     bounds: SeenSpace | None = None,
+    silhouette: bool = False,
 ) -> _Context:
     """Per-object set-up: observed facets to mirror with their D_max, clip levels, baselines;
-    rays stop in ``bounds`` (default: ``space``)."""
+    rays stop in ``bounds`` (default: ``space``); with ``silhouette`` the clip levels include
+    the object's own silhouette sides (``_silhouette_bounds``)."""
     points = np.asarray(obj.points, float).reshape(-1, 3)
     points = points[np.all(np.isfinite(points), axis=1)]
     if len(points) == 0:
@@ -813,6 +843,12 @@ def _prepare(
             reach = float((points @ facet.normal).max()) + config.facet_tolerance_m
             cuts.append(np.append(-facet.normal, reach))
     cuts.extend(stops)
+    if silhouette:
+        # Cuts only: a ray leaving the silhouette meets seen-free space beyond it anyway (the
+        # unknown band next to the outline is the free-space map's footprint, not room).
+        sides = _silhouette_bounds(points, space, config.ray_quantile, pitch, regions)
+        sides[:, 3] += config.facet_tolerance_m
+        cuts.extend(sides)
     forced_free = forced_wall = 0
     base = _observed_extremes(points)
     observed_hull = _observed_hull(base)
@@ -856,6 +892,132 @@ def _view_bounds(points: np.ndarray, space: SeenSpace | None, ratio: float | Non
     if view is None or len(points) == 0:
         return np.zeros((0, 4))
     return _mirror_levels(points, np.asarray(view, float).reshape(-1, 4), ratio)
+
+
+def _camera_centre(view: np.ndarray) -> np.ndarray | None:
+    """The point (3,) all of a view's side planes (S, 4) pass through (m, world; least squares),
+    None when they do not meet in one point (fewer than three independent sides)."""
+    normals, offsets = view[:, :3], view[:, 3]
+    if np.linalg.matrix_rank(normals) < 3:
+        return None
+    centre, *_ = np.linalg.lstsq(normals, -offsets, rcond=None)
+    return centre
+
+
+#: The voxels beyond a silhouette side each probe looks at (one after another outwards: the
+#: min-filter windows of the free-space map span up to about two footprints,
+#: ``ipr_shapes.perception.free_space``).
+_PROBE_STEPS = 4
+
+
+def _silhouette_bounds(
+    points: np.ndarray,
+    space: SeenSpace | None,
+    tolerance: float,
+    pitch: float,
+    regions: tuple[PlaneRegion, ...] = (),
+) -> np.ndarray:
+    """Half-spaces (S, 4) n . x + b >= 0 (unit n inwards, m) through the camera centre along the
+    sides of the object's silhouette cone that are its own outline (module doc): the convex hull
+    of the observed points (N, 3) in the central projection about their mean viewing direction.
+    A side cuts the whole plane through it, not only its segment, so it is checked along its
+    line over the silhouette's width along it and as far again beyond each end (the mirror
+    rule's reach, as beyond the image border): a probe every ``pitch`` (at the depth of the
+    side's nearer end), each looking outwards 1-4 voxels beyond the line to the first voxel
+    that is not unknown; the side bounds when at most a ``tolerance`` share of the probes see
+    no seen-free voxel and lie above the support planes of ``regions`` (below the support no
+    object can be either; a nearer surface, no reading or the image border hide the rest).
+    Sides finer than a voxel are dropped (``_fewer_sides``); b places each side at the points'
+    own extent. Empty without a view (no camera centre) or a hull."""
+    view = getattr(space, "view", None)
+    if view is None or len(points) < 3:
+        return np.zeros((0, 4))
+    centre = _camera_centre(np.asarray(view, float).reshape(-1, 4))
+    if centre is None:
+        return np.zeros((0, 4))
+    rays = points - centre
+    lengths = row_norms(rays)
+    if not (lengths > 0).all():
+        return np.zeros((0, 4))
+    axis = (rays / lengths[:, None]).mean(axis=0)
+    axis /= np.linalg.norm(axis)
+    u = np.cross(axis, [1.0, 0.0, 0.0] if abs(axis[0]) < 0.9 else [0.0, 1.0, 0.0])
+    u /= np.linalg.norm(u)
+    v = np.cross(axis, u)
+    depth = rays @ axis
+    if not (depth > 0).all():
+        return np.zeros((0, 4))
+    flat = np.column_stack([rays @ u, rays @ v]) / depth[:, None]
+    try:
+        hull = ConvexHull(flat)
+    except (QhullError, ValueError):
+        return np.zeros((0, 4))
+    sides = []
+    for (i, j), (a, b, c) in zip(hull.simplices, hull.equations, strict=True):
+        # a s + b t + c <= 0 inside, (a, b) unit: outward in the projection; e along the side.
+        e = np.array([-b, a])
+        along = flat @ e
+        low, high = float(along.min()), float(along.max())
+        z = float(min(depth[i], depth[j]))
+        step = pitch / z
+        width = high - low
+        offsets = np.arange(low - width, high + width + step, step)
+        foot = flat[i] + (offsets - float(flat[i] @ e))[:, None] * e
+        # A voxel is seen-free only when its whole footprint (a min-filter window about its
+        # centre pixel) saw past it, so the voxels next to the outline are unknown: a probe
+        # is free when the first of the voxels 1-4 pitches beyond the line that is not unknown
+        # is seen-free or below the support (a seen surface there, as the object's own foot
+        # the support band took, is not).
+        free = np.zeros(len(offsets), dtype=bool)
+        open_ = np.ones(len(offsets), dtype=bool)
+        for steps in range(1, _PROBE_STEPS + 1):
+            beyond = foot + steps * step * np.array([a, b])
+            probes = centre + z * (axis + beyond[:, :1] * u + beyond[:, 1:] * v)
+            state = space.state_at(probes)
+            below = np.zeros(len(offsets), dtype=bool)
+            for region in regions:
+                if region.is_support:
+                    below |= region.plane.signed_distance(probes) < 0
+            free |= open_ & ((state == FREE) | below)
+            open_ &= (state == UNKNOWN) & ~below
+        if (~free).mean() > tolerance:
+            continue
+        sides.append((a, b, c, step))
+    lines = _fewer_sides(np.array(sides).reshape(-1, 4))
+    bounds = []
+    for a, b, c in lines[:, :3]:
+        # (x - centre) . (a u + b v + c axis) <= 0 inside (multiplied by the depth > 0).
+        normal = -(a * u + b * v + c * axis)
+        normal /= np.linalg.norm(normal)
+        offset = -float(normal @ centre)
+        offset -= min(float((points @ normal).min() + offset), 0.0)
+        bounds.append(np.append(normal, offset))
+    return np.array(bounds).reshape(-1, 4)
+
+
+def _fewer_sides(lines: np.ndarray) -> np.ndarray:
+    """The silhouette's kept sides (S, 4) rows (a, b, c, step): a s + b t + c <= 0 inside in the
+    central projection, (a, b) unit, ``step`` one voxel there; without the sides whose removal
+    lets the polygon of the others grow by at most one voxel beyond all of them (their two
+    neighbours meet within it), fewest growth first. Every side is one more plane every
+    hypothesis is cut by; a cut finer than the voxel grid changes no voxel the checks count."""
+    lines = lines[np.argsort(np.arctan2(lines[:, 1], lines[:, 0]), kind="stable")]
+    original = lines
+    while len(lines) > 3:
+        best, best_growth = -1, np.inf
+        for k in range(len(lines)):
+            p, q = lines[k - 1], lines[(k + 1) % len(lines)]
+            det = p[0] * q[1] - p[1] * q[0]
+            if det <= 1e-12:  # the neighbours do not close a corner beyond this side
+                continue
+            apex = np.linalg.solve(np.array([p[:2], q[:2]]), -np.array([p[2], q[2]]))
+            growth = float((original[:, :2] @ apex + original[:, 2]).max())
+            if growth <= lines[k, 3] and growth < best_growth:
+                best, best_growth = k, growth
+        if best < 0:
+            break
+        lines = np.delete(lines, best, axis=0)
+    return lines
 
 
 def _mirror_levels(points: np.ndarray, sides: np.ndarray, ratio: float) -> np.ndarray:
@@ -1470,8 +1632,29 @@ def generate_hypotheses(
     config = config or HypothesisConfig()
     if rng is None:
         rng = np.random.default_rng([config.seed, int(obj.id)])
+    if config.silhouette_cut != "fallback":
+        return _generate(obj, space, planes, config, rng, bounds, config.silhouette_cut == "always")
+    # The same draws again, cut, for an object none of whose hypotheses is feasible.
+    again = copy.deepcopy(rng)
+    hypotheses = _generate(obj, space, planes, config, rng, bounds, False)
+    if any(h.feasible for h in hypotheses):
+        return hypotheses
+    logger.info("object %d: no feasible hypothesis; made again within its silhouette", obj.id)
+    return _generate(obj, space, planes, config, again, bounds, True)
+
+
+def _generate(
+    obj: PartialObject,
+    space: SeenSpace | None,
+    planes: tuple[KnownPlane, ...],
+    config: HypothesisConfig,
+    rng: np.random.Generator,
+    bounds: SeenSpace | None,
+    silhouette: bool,
+) -> tuple[ShapeHypothesis, ...]:
+    """``generate_hypotheses`` with the silhouette cut on or off (its doc)."""
     started = time.perf_counter()
-    ctx = _prepare(obj, space, planes, config, bounds)
+    ctx = _prepare(obj, space, planes, config, bounds, silhouette)
     m = config.count
     makers, fits = _structure_makers(obj, ctx) if config.structure_share > 0 else ({}, {})
     structured = int(round(config.structure_share * m)) if makers else 0
