@@ -6,6 +6,7 @@ hypotheses``), or on its own for a subset::
     python -m benchmarks.hypothesis_ceiling --suite ycb-dynamic --limit 4 [--scene DIR ...]
         [--perception-cache DIR] [--algorithm1-only] [--neighbour-surfaces] [--superquadric N]
         [--fitted-axis] [--unbounded-view] [--unbounded-support] [--medoid-weights W]
+        [--shrink-by-scatter]
 
 Per scene: frame 0 is perceived, the hypotheses are prepared (``prepare_hypotheses``, the
 default configuration, seed 0, as the Collision Checker's run draws them) and the Collision
@@ -300,6 +301,12 @@ def main(argv: list[str] | None = None) -> int:
         "2026-11-28)",
     )
     parser.add_argument(
+        "--shrink-by-scatter",
+        action="store_true",
+        help="every candidate shrunk by its object's scatter, the median depth of the points "
+        "inside their hull (opt-in)",
+    )
+    parser.add_argument(
         "--medoid-weights",
         choices=("candidate", "family", "outline", "fit", "outline-fit"),
         default=None,
@@ -346,6 +353,11 @@ def main(argv: list[str] | None = None) -> int:
         config = dataclasses.replace(
             config,
             hypotheses=dataclasses.replace(config.hypotheses, silhouette_cut=args.silhouette_cut),
+        )
+    if args.shrink_by_scatter:
+        config = dataclasses.replace(
+            config,
+            hypotheses=dataclasses.replace(config.hypotheses, shrink_by_scatter=True),
         )
     if args.medoid_weights is not None:
         config = dataclasses.replace(

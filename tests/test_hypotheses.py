@@ -516,3 +516,74 @@ def test_the_silhouette_cut_by_default_only_for_an_object_with_no_feasible_hypot
     monkeypatch.setattr(generate, "_generate", infeasible_uncut)
     for a, b in zip(made("fallback"), always, strict=True):
         assert np.array_equal(a.vertices, b.vertices)
+
+
+NOISE_M = 0.0015  # the noisy views' depth noise, standard deviation (m)
+
+
+@pytest.fixture(scope="module")
+def noisy():
+    """The oblique view with white depth noise: the points scatter about the box's faces (the
+    free space from the exact depth, so that only the points differ)."""
+    view = render_view((0.0, -0.45, 0.40))
+    noise = np.random.default_rng(7).normal(0.0, NOISE_M, view.depth.shape)
+    depth = np.where(view.depth > 0, view.depth + noise, 0.0)
+    return partial_box(dataclasses.replace(view, depth=depth)), view.space()
+
+
+def _median_depth_inside(h: ShapeHypothesis, points: np.ndarray) -> float:
+    """Median over ``points`` of their depth inside ``h`` (m; negative outside)."""
+    planes = h.face_planes()
+    return float(np.median(-(points @ planes[:, :3].T + planes[:, 3]).max(axis=1)))
+
+
+def test_scatter_is_the_points_median_depth_inside_their_hull(oblique, noisy):
+    from ipr_shapes.hypotheses.generate import _observed_extremes, _observed_hull, _scatter
+
+    exact, noisy_obj = oblique[0], noisy[0]
+    for obj, low, high in ((exact, 0.0, 0.0), (noisy_obj, NOISE_M, 4 * NOISE_M)):
+        points = np.asarray(obj.points, float)
+        base = _observed_extremes(points)
+        assert low <= _scatter(points, base, _observed_hull(base)) <= high
+
+
+def test_hypotheses_of_noisy_points_stand_on_their_middle(noisy):
+    """A hull passes through the outermost of the noisy points; shrunk by the scatter, the
+    hypotheses' faces pass through the points' middle: the median point lies on the boundary
+    (of most: a superquadric's seen side is its fitted surface, not the points' hull), the
+    seen top comes down by the scatter, and the best candidate is closer to the box."""
+    from ipr_shapes.hypotheses.generate import _observed_extremes, _observed_hull, _scatter
+
+    obj, space = noisy
+    points = np.asarray(obj.points, float)
+    base = _observed_extremes(points)
+    scatter = _scatter(points, base, _observed_hull(base))
+    truth = true_box_keys()
+    found = {}
+    for shrink in (False, True):
+        config = dataclasses.replace(CONFIG, shrink_by_scatter=shrink)
+        hyps = generate_hypotheses(obj, space, (SUPPORT,), config, np.random.default_rng(0))
+        hyps += (minimum_shape(obj, (SUPPORT,), config),)
+        for h in hyps:
+            assert_valid(h, points[:0])  # closed and convex (not every point inside)
+        found[shrink] = hyps
+    bulged = [_median_depth_inside(h, points) for h in found[False]]
+    shrunk = [_median_depth_inside(h, points) for h in found[True]]
+    assert np.median(bulged) > NOISE_M
+    assert abs(np.median(shrunk)) < 0.2 * NOISE_M
+    # The top is seen: the bulged hulls stand above it, the shrunk ones the scatter lower.
+    tops = {s: np.array([h.vertices[:, 2].max() for h in found[s]]) for s in found}
+    assert np.median(tops[False]) > TOP + 2 * NOISE_M
+    assert np.median(tops[False] - tops[True]) == pytest.approx(scatter, abs=1e-4)
+    best = {s: max(iou(h.keys(), truth) for h in found[s]) for s in found}
+    assert best[True] > best[False]
+
+
+def test_exact_points_are_not_shrunk(oblique):
+    obj, space = oblique
+    shapes = []
+    for shrink in (False, True):
+        config = dataclasses.replace(CONFIG, shrink_by_scatter=shrink)
+        hyps = generate_hypotheses(obj, space, (SUPPORT,), config, np.random.default_rng(0))
+        shapes.append([h.vertices for h in hyps])
+    assert all(np.array_equal(a, b) for a, b in zip(*shapes, strict=True))

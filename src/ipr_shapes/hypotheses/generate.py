@@ -6,9 +6,9 @@ the mirror image is pushed back by a distance d ~ U(D_min, D_max) against N; it 
 hypothesised hidden facet (the far side of the object). The convex hull of all the facets then
 shows new facets (the sides joining front and back); those whose normal is not already present
 are mirrored and pushed in their turn, and so on until no new normal appears or time runs out.
-A hypothesis is the convex hull of everything: a closed convex mesh that contains every observed
+A hypothesis is the convex hull of everything: a closed convex mesh built on every observed
 point of the object (all observed points take part in every hull, even those of facets that are
-too small to be mirrored).
+too small to be mirrored); optionally shrunk by the points' scatter (below).
 
 Choices made here (the paper leaves them open):
 
@@ -42,6 +42,20 @@ Choices made here (the paper leaves them open):
   ``min_facet_area_m2`` are ignored like small observed facets. "Shares a normal" means within
   ``normal_merge_deg`` of an observed facet's normal, or of the normal (or its opposite) of a
   facet already mirrored: the mirror of a facet is the opposite face, so both directions are done.
+- Scatter (``shrink_by_scatter``, opt-in): a hull takes the outermost of the points, and a
+  sensor's points scatter about the surface (white noise per pixel on generated frames, which
+  the perception's plane fit mostly removes; a smooth error over centimetres on real ones,
+  which it cannot), so every face of a hull over them stands in front of the surface they
+  scatter about, by about the depth of the median point inside it. The object's *scatter* is
+  that depth, measured on its own points against their own convex hull; with the option every
+  hypothesis (the minimum shape too) is shrunk by it, each face plane moved that far inwards,
+  before it is set on the support and cut, so that its faces pass through the points' middle
+  rather than their extremes (about half the observed points then lie outside it). The
+  median is the central estimate of where the surface lies, not a tuned share; but on a
+  concave or many-sided object the points' depth inside their hull is also its shape, and
+  the shrink then takes real volume: off by default, it raised the best candidate on the real
+  sets and lost the Collision Checker on generated ones and on the bins
+  (docs/experiments/2026-11-28-hull-scatter.md).
 - Resting on the support: a hull whose lowest point is within ``support_snap_m`` (2 cm) above
   the support is extended down to it (its bottom vertices projected onto the plane). The
   support's band removes an object's lowest centimetre of points with the table, so without
@@ -299,6 +313,15 @@ class HypothesisConfig:
             "off": never (before 2026-11-28). "always" raised the oracle on every set but the
             Collision Checker's choice among the larger feasible sets lost on two
             development sets and bins-real (docs/experiments/2026-11-28-silhouette-cut.md).
+        shrink_by_scatter: every hypothesis (the minimum shape too) is shrunk by the object's
+            *scatter*, the median depth of its observed points inside their own convex hull
+            (``_scatter``), before it is set on the support and cut: a hull takes the outermost
+            of the noisy points, so each of its faces stands about that far in front of the
+            surface the points scatter about (module doc, "Scatter"). Off by default (opt-in):
+            the depth also measures a concave object's shape, and the shrink lost the
+            Collision Checker on generated scenes and the bins while raising the best
+            candidate on the real sets (docs/DESIGN_NOTES.md, "Hulls shrunk by the points'
+            scatter: opt-in").
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -335,6 +358,7 @@ class HypothesisConfig:
         "outside_view_ratio": OrNone(Interval(0, None)),
         "outside_support_ratio": OrNone(Interval(0, None)),
         "silhouette_cut": Options("always", "fallback", "off"),
+        "shrink_by_scatter": Options(True, False),
     }
 
     count: int = 32
@@ -368,6 +392,7 @@ class HypothesisConfig:
     outside_view_ratio: float | None = 1.0
     outside_support_ratio: float | None = 1.0
     silhouette_cut: str = "fallback"
+    shrink_by_scatter: bool = False
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -528,6 +553,7 @@ class _Context:
     config: HypothesisConfig
     rays: SeenSpace | None = None  # the space hidden-extent rays stop in (``bounds``)
     stops: np.ndarray | None = None  # half-spaces (S, 4) rays stop at leaving (``_view_bounds``)
+    shrink_m: float = 0.0  # every hull is shrunk by this before the snap and cuts (``_scatter``)
 
 
 def dominant_normal(obj: PartialObject, planes: tuple[KnownPlane, ...]) -> np.ndarray:
@@ -879,7 +905,84 @@ def _prepare(
         config,
         rays,
         stops,
+        _scatter(points, base, observed_hull) if config.shrink_by_scatter else 0.0,
     )
+
+
+#: Scatter below this (m) is rounding (points exactly on planes), far below any depth sensor's
+#: resolution; shrinking by it would only make sliver faces.
+MIN_SCATTER_M = 1e-6
+
+#: The last object's points and hull vertices (as a key) and their median depth (``_scatter``):
+#: the set-up and the minimum shape ask for it in turn. Safe across threads (read and replaced
+#: whole).
+_LAST_SCATTER: list[tuple[tuple, float]] = [((), 0.0)]
+
+
+def _scatter(
+    points: np.ndarray,
+    base: np.ndarray,
+    hull: tuple[np.ndarray, np.ndarray, float] | None,
+) -> float:
+    """The object's scatter (m, >= 0): the median depth of its observed points (N, 3) inside
+    their convex hull (``base``, its vertices; ``hull``, its mesh or None when flat). A convex
+    object's points all lie on the boundary of their hull when measured exactly; with noise the
+    hull's faces pass through the outermost points and the median point lies this far inside
+    every face (module doc, "Scatter"). 0 for a flat hull."""
+    if hull is None:
+        return 0.0
+    key = (points.shape, points.tobytes(), base.tobytes())
+    entry = _LAST_SCATTER[0]
+    if entry[0] != key:
+        entry = (key, allowance.surface_allowance(points, 0.5, base))
+        _LAST_SCATTER[0] = entry
+    depth = entry[1]
+    # Below a micrometre the depth is the hull's rounding, not a measurement's scatter.
+    return depth if depth >= MIN_SCATTER_M else 0.0
+
+
+def _shrunk(
+    mesh: tuple[np.ndarray, np.ndarray, float], shrink_m: float, interior: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """The convex mesh with every face plane moved ``shrink_m`` (m) inwards (qhull's half-space
+    intersection about ``interior``, a point that must stay strictly inside); None when the
+    shrunk shape would not hold ``interior`` or qhull fails (the caller keeps the mesh)."""
+    vertices, faces, _ = mesh
+    tri = vertices[faces]
+    normals = triangle_cross(tri)
+    lengths = row_norms(normals)
+    keep = lengths > 1e-12
+    normals = normals[keep] / lengths[keep, None]
+    offsets = -np.einsum("ij,ij->i", normals, tri[keep, 0]) + shrink_m
+    halfspaces = unique_rows(np.round(np.column_stack([normals, offsets]), 9))
+    if float((halfspaces[:, :3] @ interior + halfspaces[:, 3]).max()) >= -1e-7:
+        return None
+    try:
+        corners = HalfspaceIntersection(halfspaces, interior).intersections
+    except (QhullError, ValueError):
+        return None
+    # A noisy hull's many near-coplanar planes meet in clusters of corners a few micrometres
+    # to nanometres apart, which would multiply the mesh's vertices for every later step:
+    # merged on a 0.1 mm grid (far below a voxel and the sensors' depth steps), else finer,
+    # whichever first leaves no sliver face that other vertices cross by more than rounding.
+    for decimals in (4, 6, 8):
+        result = convex_mesh(unique_rows(np.round(corners, decimals)))
+        if result is not None and _is_convex(result):
+            return result
+    return None
+
+
+def _is_convex(mesh: tuple[np.ndarray, np.ndarray, float]) -> bool:
+    """Whether no vertex of a mesh lies beyond one of its face planes by more than rounding
+    (1e-9 of its extent)."""
+    vertices, faces, _ = mesh
+    tri = vertices[faces]
+    normals = triangle_cross(tri)
+    lengths = row_norms(normals)
+    keep = lengths > 1e-15
+    normals = normals[keep] / lengths[keep, None]
+    excess = vertices @ normals.T - np.einsum("ij,ij->i", normals, tri[keep, 0])
+    return float(excess.max()) <= 1e-9 * float(np.ptp(vertices, axis=0).max())
 
 
 def _view_bounds(points: np.ndarray, space: SeenSpace | None, ratio: float | None) -> np.ndarray:
@@ -1312,6 +1415,9 @@ def _finish(
         mesh = convex_mesh(_thicken(points, ctx.fallback_normal, ctx.config.min_thickness_m))
         if mesh is None:  # pragma: no cover - _thicken always spans a volume
             raise RuntimeError(f"object {ctx.object_id}: cannot build a hull")
+    if ctx.shrink_m > 0:
+        shrunk = _shrunk(mesh, ctx.shrink_m, mesh[0].mean(axis=0))
+        mesh = shrunk if shrunk is not None else mesh
     if ctx.config.support_snap_m > 0:
         footprint = rest_on_support(
             mesh[0], ctx.regions, ctx.config.support_snap_m, ctx.config.support_band_m
@@ -1625,7 +1731,8 @@ def generate_hypotheses(
             (``ipr_shapes.hypotheses.neighbours``); the unary checks use ``space``.
 
     Returns:
-        m closed convex hypotheses, each containing every observed point, none below the
+        m closed convex hypotheses, each containing every observed point (but for the points'
+        scatter with ``shrink_by_scatter``), none below the
         support, each labelled with its generator; see the module doc for D_max, the no-room
         rule, resampling and the timeout.
     """
@@ -1829,6 +1936,7 @@ def minimum_shape(
         raise ValueError(f"object {obj.id} has no finite observed point")
     normal = dominant_normal(obj, planes)
     base = _observed_extremes(points)
+    shrink = _scatter(points, base, _observed_hull(base)) if config.shrink_by_scatter else 0.0
     extent = float(np.ptp(base @ normal))
     thickness = 0.0
     if extent < config.min_thickness_m:
@@ -1843,7 +1951,7 @@ def minimum_shape(
     cuts = np.array(_support_cuts(regions, points)).reshape(-1, 4)
     ctx = _Context(
         obj.id, base, base, (), None, regions, cuts, config.max_depth_m, normal, 0, 0,
-        voxels.DEFAULT_PITCH_M, config,
+        voxels.DEFAULT_PITCH_M, config, shrink_m=shrink,
     )  # fmt: skip
     vertices, faces, volume = _finish(ctx, base, mesh)
     return ShapeHypothesis(
