@@ -1058,20 +1058,3 @@ def test_the_pipeline_hands_the_outline_and_points_to_the_collision_checker_base
     for o in objects:
         assert np.array_equal(on["points"][o.id], o.points)
         assert on["viewpoints"][o.id][0] == pytest.approx(camera)
-
-
-def test_a_physics_method_without_views_draws_the_collision_checkers_candidates(scene_dir):
-    """``ipr+uniform`` (no views fused) generates its hypotheses from the Collision Checker's
-    stream (``collision_checker.run_streams``): on the same objects the same candidates, so the
-    two methods differ by the physics alone, not by their candidates' luck."""
-    from ipr_shapes import pipeline
-    from ipr_shapes.scene import load_scene
-
-    scene = load_scene(scene_dir)
-    checker = pipeline.run_pipeline(scene, method="collision-checker", workers=1)
-    physics = pipeline.run_pipeline(scene, method="ipr+uniform", samples=2, workers=1)
-    assert checker.posteriors and len(physics.posteriors) == len(checker.posteriors)
-    for a, b in zip(checker.posteriors, physics.posteriors, strict=True):
-        assert len(a.hypotheses) == len(b.hypotheses)
-        for x, y in zip(a.hypotheses, b.hypotheses, strict=True):
-            assert np.array_equal(x.vertices, y.vertices)

@@ -454,17 +454,6 @@ def uniform_posteriors(
     return posteriors
 
 
-def run_streams(rng: np.random.Generator) -> tuple[np.random.Generator, np.random.Generator]:
-    """The (hypothesis generation, Gibbs sampler) random streams of a run seeded by ``rng``
-    (its first two children, ``rng.spawn(2)``). The physics-based methods generate their
-    hypotheses from the same first child (``ipr_shapes.pipeline``), so that on the same objects
-    their candidates are the Collision Checker's and the two differ by the physics alone
-    (docs/experiments/2026-11-28-medoid-base.md: from different streams the candidate sets'
-    luck moved ycb-static's object IoU by 0.008)."""
-    generation, sampler = rng.spawn(2)
-    return generation, sampler
-
-
 def collision_checker(
     objects: tuple[PartialObject, ...],
     space: SpaceMap | None,
@@ -510,7 +499,7 @@ def collision_checker(
     rng = rng if rng is not None else np.random.default_rng(hypotheses.seed)
     started = time.perf_counter()
     deadline = np.inf if time_budget_s is None else started + time_budget_s
-    generation_rng, sampler_rng = run_streams(rng)
+    generation_rng, sampler_rng = rng.spawn(2)
     prepared = prepare_hypotheses(
         objects, space, planes, hypotheses, constraints, generation_rng, time_budget_s,
         object_spaces, progress,

@@ -41,7 +41,7 @@ import numpy as np
 from ipr_shapes.atomic import check_output_location
 from ipr_shapes.baselines import zheng2013
 from ipr_shapes.carving import carve_posteriors, surface_views
-from ipr_shapes.collision_checker import collision_checker, object_viewpoints, run_streams
+from ipr_shapes.collision_checker import collision_checker, object_viewpoints
 from ipr_shapes.config import Config, config_digest, config_to_toml
 from ipr_shapes.errors import IprError
 from ipr_shapes.fusion import fuse_views, tracked_free_spaces
@@ -307,15 +307,13 @@ def infer_with_physics(
     share); ``deadline``: ``time.perf_counter()`` time inference stops at (None: its default
     budget)."""
     started = time.perf_counter()
-    # The Collision Checker's generation stream: on the same objects, its candidates.
-    generation, _ = run_streams(rng)
     prepared = prepare_hypotheses(
         fused.objects,
         perception.free_space[0],
         perception.planes[0],
         config.hypotheses,
         config.constraints,
-        generation,
+        rng,
         remaining_s,
         fused.object_spaces,
         progress,
