@@ -177,9 +177,10 @@ class InferenceConfig:
             weights are a judgement of the candidates made before any physics (which families
             to trust where the outline is hidden), which the physics' evidence, nearly flat on
             a hidden extent, should refine rather than replace: prior times likelihood. The
-            marginals (written probabilities) are not changed. Measured at 30 samples:
-            ycb-static ipr+uniform +0.003, development sets +0.006 to +0.015
-            (docs/experiments/2026-11-28-medoid-base.md).
+            marginals (written probabilities) are not changed. Measured on the same 30
+            samples per scene: ycb-static +0.003, ycb-dynamic +0.010 (gravity) / +0.005
+            (pushes), bins-real +0.001, ycbv-real 0, development sets +0.002 to +0.015
+            object IoU (docs/experiments/2026-11-28-medoid-base.md).
     """
 
     CHECKS: ClassVar[Checks] = {
