@@ -66,13 +66,15 @@ def measure_scene(
     from scipy.optimize import linear_sum_assignment
 
     from ipr_shapes import voxels
-    from ipr_shapes.collision_checker import uniform_posteriors
+    from ipr_shapes.collision_checker import object_viewpoints, uniform_posteriors
     from ipr_shapes.ground_truth import frame0_ground_truth, visible_pixel_counts
     from ipr_shapes.hypotheses import prepare_hypotheses
     from ipr_shapes.inference import InferenceConfig, build_problem, run_samples
     from ipr_shapes.likelihood import observed_frames
     from ipr_shapes.methods import METHODS
     from ipr_shapes.perception import perceive_scene
+    from ipr_shapes.perception.config import SegmentationConfig
+    from ipr_shapes.perception.outline import hidden_outline_fractions
     from ipr_shapes.scene import load_scene
 
     scene = load_scene(path)
@@ -85,6 +87,14 @@ def measure_scene(
         rng=np.random.default_rng(0),
     )  # fmt: skip
     uniform = uniform_posteriors(prepared)
+    # The Collision Checker's default medoid weights read the frame-0 outline and points.
+    hidden = hidden_outline_fractions(
+        scene.frames[0].depth_m,
+        perception.objects[0],
+        SegmentationConfig().contour_gap_m,
+    )
+    camera = np.asarray(scene.frames[0].world_from_camera, float)[:3, 3]
+    viewpoints = {o.id: object_viewpoints(o, camera) for o in perception.objects[0]}
     observed = observed_frames(scene.frames, perception.labels, config.likelihood.decimation)
     problem, _ = build_problem(
         prepared, uniform, perception.planes[0], observed,
@@ -122,6 +132,8 @@ def measure_scene(
         "timing": timing,
         "true_frictions": _true_frictions(path),
         "points": {o.id: o.points for o in perception.objects[0]},
+        "hidden": hidden,
+        "viewpoints": viewpoints,
     }
 
 
@@ -205,6 +217,7 @@ def estimate_iou(
     friction: float | str | None = None,
     count: int | None = None,
     surface: bool = False,
+    base: bool = False,
 ) -> dict[int, float]:
     """IoU of the IPR output per matched object with ``alpha``, the first ``frames``,
     ``weighting`` (``InferenceConfig.weighting``), ``prior`` ("uniform" or "size"), the
@@ -212,8 +225,10 @@ def estimate_iou(
     "sampled S": each sample under one friction drawn uniformly with seed S, as if friction
     were sampled with the shapes at the cost of one; "averaged": each candidate's likelihood
     averaged over the frictions, without a posterior over them), the first ``count``
-    samples (None: all) and, with ``surface``, each candidate's seen-surface factor
-    (``InferenceConfig.surface_fit``) from the scene's frame-0 points."""
+    samples (None: all), with ``surface``, each candidate's seen-surface factor
+    (``InferenceConfig.surface_fit``) from the scene's frame-0 points, and with ``base`` the
+    Collision Checker's default medoid weights as the medoid's base measure
+    (``InferenceConfig.medoid_base = "collision-checker"``, ``physics_medoid``)."""
     import dataclasses
 
     from ipr_shapes.factor_graph import posterior_medoid
@@ -269,8 +284,41 @@ def estimate_iou(
     estimate = medoid_weights(results, problem)
     output = {}
     for k, ious in scene["candidate_iou"].items():
-        best = posterior_medoid(problem.candidates[k], estimate[k]) if estimate else 0
+        weights = estimate[k] if estimate else None
+        if base and estimate:
+            start, _ = _checker_weights(scene, k)
+            weights = weights * start
+            weights = weights / weights.sum()
+        best = posterior_medoid(problem.candidates[k], weights) if estimate else 0
         output[k] = float(ious[best])
+    return output
+
+
+def _checker_weights(scene: dict, k: int) -> tuple[np.ndarray, bool]:
+    """The Collision Checker's default medoid weights of object ``k``'s candidates (the
+    problem's order) and whether its medoid leaves each candidate out (``medoid_base_weights``)."""
+    from ipr_shapes.collision_checker import CollisionCheckerConfig, medoid_base_weights
+
+    problem = scene["problem"]
+    i = problem.ids[k]
+    candidates = problem.candidates[k]
+    return medoid_base_weights(
+        candidates, np.ones(len(candidates), dtype=bool), CollisionCheckerConfig(),
+        scene["hidden"].get(i, 0.0), scene["points"].get(i), scene["viewpoints"].get(i),
+    )  # fmt: skip
+
+
+def checker_iou(scene: dict) -> dict[int, float]:
+    """IoU per matched object of the Collision Checker's default medoid (its medoid weights
+    over the same candidates, ``_checker_weights``), the physics medoid's flat-evidence answer
+    with ``base``."""
+    from ipr_shapes.factor_graph import posterior_medoid
+
+    output = {}
+    for k, ious in scene["candidate_iou"].items():
+        weights, leave_one_out = _checker_weights(scene, k)
+        candidates = scene["problem"].candidates[k]
+        output[k] = float(ious[posterior_medoid(candidates, weights, leave_one_out=leave_one_out)])
     return output
 
 
@@ -350,6 +398,21 @@ def main(argv: list[str] | None = None) -> int:
             rows.append(
                 (
                     f"IPR hypothesis, {label}, alpha 0.2, seen-surface fit",
+                    mean_over_truths(scenes, values),
+                )
+            )
+    if all("hidden" in s for s in scenes):  # caches written before the outline have none
+        rows.append(
+            (
+                "Collision Checker, default medoid weights",
+                mean_over_truths(scenes, [checker_iou(s) for s in scenes]),
+            )
+        )
+        for frames, label in ((None, "every frame"), (1, "frame 0 only")):
+            values = [estimate_iou(s, 0.2, frames, base=True) for s in scenes]
+            rows.append(
+                (
+                    f"IPR hypothesis, {label}, alpha 0.2, Collision Checker base",
                     mean_over_truths(scenes, values),
                 )
             )

@@ -953,7 +953,8 @@ def test_surface_fit_tells_the_true_box_from_a_deeper_one_the_depth_cannot():
 
 def test_the_pipeline_hands_the_objects_points_to_the_surface_fit(scene_dir, monkeypatch):
     """With ``surface_fit`` on, ``run_pipeline`` gives the physics methods each frame-0
-    object's observed points (the fused ones with the views); with it off, none."""
+    object's observed points (the fused ones with the views); with it off, none (on the
+    "uniform" medoid base, which reads no points)."""
     from ipr_shapes import pipeline
     from ipr_shapes.config import Config
     from ipr_shapes.scene import load_scene
@@ -969,7 +970,8 @@ def test_the_pipeline_hands_the_objects_points_to_the_surface_fit(scene_dir, mon
     base = Config()
     for fit in (True, False):
         config = dataclasses.replace(
-            base, inference=dataclasses.replace(base.inference, surface_fit=fit)
+            base,
+            inference=dataclasses.replace(base.inference, surface_fit=fit, medoid_base="uniform"),
         )
         result = pipeline.run_pipeline(
             load_scene(scene_dir), config, method="ipr+uniform", samples=2, workers=1
@@ -979,3 +981,80 @@ def test_the_pipeline_hands_the_objects_points_to_the_surface_fit(scene_dir, mon
     objects = result.perception.objects[0]
     assert objects and sorted(on) == sorted(o.id for o in objects)
     assert all(np.array_equal(on[o.id], o.points) for o in objects)
+
+
+def test_the_collision_checkers_medoid_weights_are_the_physics_medoids_base():
+    """The six 4 cm near-copies from Algorithm 1 and a 7 and a 7.2 cm cube from two other
+    families, 90 % of the outline hidden, seen points on the large cubes' far face: the
+    Collision Checker's default (outline-fit) medoid is a large cube, each candidate once gives
+    a small one. With evidence that says nothing, the physics medoid on the
+    "collision-checker" base (the default) is a large cube, on the "uniform" base each
+    candidate once's; an outline all seen leaves the two bases the same; evidence still
+    moves the choice: with a small cube the evidence favours 100:1, a small cube on either
+    base."""
+    from ipr_shapes.collision_checker import CollisionCheckerConfig, uniform_posteriors
+    from ipr_shapes.inference import physics_medoid
+    from tests.test_collision_checker import _three_families_of_cubes
+
+    prepared, _, large_face = _three_families_of_cubes()
+    checker = CollisionCheckerConfig(medoid_weights="outline-fit")
+    (answer,) = uniform_posteriors(prepared, checker, hidden={1: 0.9}, points={1: large_face})
+    (start,) = uniform_posteriors(prepared)  # the physics methods' starting answer
+    generator = lambda best: start.hypotheses[best].generator  # noqa: E731
+    large = ("sphere", "superquadric")
+    assert generator(answer.best) in large
+    assert generator(start.best) == "algorithm1"
+    candidates = np.flatnonzero(start.probabilities > 0)
+    flat = np.full(candidates.size, 1.0 / candidates.size)
+
+    def medoid(weights, base, hidden=0.9):
+        return physics_medoid(
+            start, candidates, weights, None, base, checker, hidden, large_face
+        )  # fmt: skip
+
+    assert InferenceConfig().medoid_base == "collision-checker"
+    assert generator(medoid(flat, "collision-checker")) in large
+    assert medoid(flat, "uniform") == start.best
+    assert medoid(flat, "collision-checker", hidden=0.0) == start.best
+    favoured = flat.copy()
+    favoured[2] *= 100.0
+    favoured /= favoured.sum()
+    assert generator(medoid(favoured, "collision-checker")) == "algorithm1"
+    assert generator(medoid(favoured, "uniform")) == "algorithm1"
+
+
+def test_the_pipeline_hands_the_outline_and_points_to_the_collision_checker_base(
+    scene_dir, monkeypatch
+):
+    """With ``medoid_base = "collision-checker"`` ``run_pipeline`` gives the physics methods
+    each frame-0 object's hidden outline fraction, observed points and their viewpoints (the
+    camera centre for its own pixels); with "uniform", none of them."""
+    from ipr_shapes import pipeline
+    from ipr_shapes.config import Config
+    from ipr_shapes.scene import load_scene
+
+    seen = []
+    original = pipeline.infer_shapes
+
+    def recording(*args, **kwargs):
+        seen.append({k: kwargs.get(k) for k in ("hidden", "points", "viewpoints")})
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(pipeline, "infer_shapes", recording)
+    base = Config()
+    scene = load_scene(scene_dir)
+    for medoid_base in ("collision-checker", "uniform"):
+        config = dataclasses.replace(
+            base, inference=dataclasses.replace(base.inference, medoid_base=medoid_base)
+        )
+        result = pipeline.run_pipeline(scene, config, method="ipr+uniform", samples=2, workers=1)
+    on, off = seen
+    assert off == {"hidden": None, "points": None, "viewpoints": None}
+    objects = result.perception.objects[0]
+    ids = sorted(o.id for o in objects)
+    assert objects and sorted(on["hidden"]) == ids and sorted(on["points"]) == ids
+    assert all(0.0 <= h <= 1.0 for h in on["hidden"].values())
+    camera = np.asarray(scene.frames[0].world_from_camera, float)[:3, 3]
+    for o in objects:
+        assert np.array_equal(on["points"][o.id], o.points)
+        assert on["viewpoints"][o.id][0] == pytest.approx(camera)

@@ -342,6 +342,42 @@ def _object_fit_weights(
     return fit_weights([h.generator for h in hyps], feasible, distances, pitch)
 
 
+def medoid_base_weights(
+    hyps: Sequence[ShapeHypothesis],
+    feasible: np.ndarray,
+    config: CollisionCheckerConfig,
+    hidden: float = 0.0,
+    points: np.ndarray | None = None,
+    viewpoints: np.ndarray | None = None,
+) -> tuple[np.ndarray, bool]:
+    """(m,) the Collision Checker's medoid weights of one object's hypotheses ``hyps`` (0 off
+    ``feasible``, (m,) bool; sum 1) under ``config.medoid_weights``, and whether its medoid
+    scores each candidate against the others only (``posterior_medoid``'s ``leave_one_out``).
+
+    ``hidden``: the object's hidden outline fraction (``hidden_outline_fractions``; 0: none
+    hidden or not measured); ``points``: its observed points ((N, 3), world, m; None: not
+    measured) and ``viewpoints`` the camera centre each was seen from ((3,) or (N, 3); None:
+    every face). They are the weights before any evidence: the physics-based methods' medoid
+    takes them as its base measure (``InferenceConfig.medoid_base``)."""
+    feasible = np.asarray(feasible, dtype=bool)
+    generators = [h.generator for h in hyps]
+    if config.medoid_weights == "family":
+        return family_weights(generators, feasible), True
+    if config.medoid_weights == "fit" and points is not None:
+        return _object_fit_weights(hyps, feasible, points, viewpoints), True
+    if config.medoid_weights == "outline" and hidden > 0.0:
+        return outline_weights(generators, feasible, hidden), True
+    if config.medoid_weights == "outline-fit" and hidden > 0.0:
+        # Each candidate once for the seen share of the outline, the families weighed by
+        # their fit for the hidden share (module doc); no points: the families' shares.
+        if points is not None:
+            judged = _object_fit_weights(hyps, feasible, points, viewpoints)
+        else:
+            judged = family_weights(generators, feasible)
+        return (1.0 - hidden) * feasible / feasible.sum() + hidden * judged, True
+    return feasible / max(int(feasible.sum()), 1), False
+
+
 # --------------------------------------------------------------------------------------------
 # Public API
 
@@ -397,27 +433,10 @@ def uniform_posteriors(
         # The medoid of the jointly feasible candidates, not under the marginals (module
         # doc): a marginal also counts how many of the neighbours' candidates a candidate fits
         # with. Each family an equal share, or each candidate counted once.
-        feasible = probabilities > 0
-        leave_one_out = config.medoid_weights == "family"
-        if config.medoid_weights == "family":
-            weights = family_weights([h.generator for h in hyps], feasible)
-        elif config.medoid_weights == "fit" and i in (points or {}):
-            weights = _object_fit_weights(hyps, feasible, points[i], (viewpoints or {}).get(i))
-            leave_one_out = True
-        elif config.medoid_weights == "outline" and (hidden or {}).get(i, 0.0) > 0.0:
-            weights = outline_weights([h.generator for h in hyps], feasible, hidden[i])
-            leave_one_out = True
-        elif config.medoid_weights == "outline-fit" and (hidden or {}).get(i, 0.0) > 0.0:
-            # Each candidate once for the seen share of the outline, the families weighed by
-            # their fit for the hidden share (module doc); no points: the families' shares.
-            if i in (points or {}):
-                judged = _object_fit_weights(hyps, feasible, points[i], (viewpoints or {}).get(i))
-            else:
-                judged = family_weights([h.generator for h in hyps], feasible)
-            weights = (1.0 - hidden[i]) * feasible / feasible.sum() + hidden[i] * judged
-            leave_one_out = True
-        else:
-            weights = feasible / feasible.sum()
+        weights, leave_one_out = medoid_base_weights(
+            hyps, probabilities > 0, config, (hidden or {}).get(i, 0.0), (points or {}).get(i),
+            (viewpoints or {}).get(i),
+        )  # fmt: skip
         table = PairwiseIoU(hyps)
         if tables is not None:
             tables[i] = table

@@ -41,7 +41,7 @@ import numpy as np
 from ipr_shapes.atomic import check_output_location
 from ipr_shapes.baselines import zheng2013
 from ipr_shapes.carving import carve_posteriors, surface_views
-from ipr_shapes.collision_checker import collision_checker
+from ipr_shapes.collision_checker import collision_checker, object_viewpoints
 from ipr_shapes.config import Config, config_digest, config_to_toml
 from ipr_shapes.errors import IprError
 from ipr_shapes.fusion import fuse_views, tracked_free_spaces
@@ -322,6 +322,17 @@ def infer_with_physics(
     observed = observed_frames(
         scene.frames, perception.labels, config.inference.likelihood.decimation
     )
+    # The Collision Checker's medoid weights as the physics medoid's base measure
+    # (``InferenceConfig.medoid_base``) read the frame-0 outline and the objects' points.
+    judged = config.inference.medoid_base == "collision-checker"
+    hidden = None
+    if judged and config.collision_checker.medoid_weights in ("outline", "outline-fit"):
+        hidden = hidden_outline_fractions(
+            scene.frames[0].depth_m,
+            perception.objects[0],
+            config.perception.segmentation.contour_gap_m,
+        )
+    camera = np.asarray(scene.frames[0].world_from_camera, float)[:3, 3]
     try:
         outcome = infer_shapes(
             prepared,
@@ -337,7 +348,11 @@ def infer_with_physics(
             workers=workers,
             progress=progress,
             points={o.id: o.points for o in fused.objects}
-            if config.inference.surface_fit
+            if config.inference.surface_fit or judged
+            else None,
+            hidden=hidden,
+            viewpoints={o.id: object_viewpoints(o, camera) for o in fused.objects}
+            if judged
             else None,
         )
     except IprError as error:  # say which scene the method refused

@@ -120,7 +120,7 @@ from ipr_shapes.inference.estimators import (
     sample_log_weights,
 )
 from ipr_shapes.inference.exhaustive import exhaustive_models
-from ipr_shapes.inference.infer import InferenceOutcome, infer_shapes
+from ipr_shapes.inference.infer import InferenceOutcome, infer_shapes, physics_medoid
 from ipr_shapes.inference.pool import default_workers, run_samples
 from ipr_shapes.inference.problem import (
     InferenceProblem,
@@ -156,6 +156,7 @@ __all__ = [
     "neighbour_residuals",
     "object_log_weights",
     "own_log_likelihoods",
+    "physics_medoid",
     "rest_evidence",
     "rest_log_likelihoods",
     "run_samples",

@@ -11,7 +11,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ipr_shapes.collision_checker import CollisionCheckerConfig, uniform_posteriors
+from ipr_shapes.collision_checker import (
+    CollisionCheckerConfig,
+    medoid_base_weights,
+    uniform_posteriors,
+)
 from ipr_shapes.errors import IprError
 from ipr_shapes.factor_graph import PairwiseIoU, posterior_medoid
 from ipr_shapes.inference.config import InferenceConfig
@@ -53,6 +57,41 @@ class InferenceOutcome:
     summary: SamplingSummary | None
 
 
+def physics_medoid(
+    base: ObjectPosterior,
+    candidates: np.ndarray,
+    weights: np.ndarray,
+    table: PairwiseIoU | None,
+    medoid_base: str = "uniform",
+    checker: CollisionCheckerConfig | None = None,
+    hidden: float = 0.0,
+    points: np.ndarray | None = None,
+    viewpoints: np.ndarray | None = None,
+) -> int:
+    """Index into ``base.hypotheses`` (the Collision Checker's posterior of one object) of a
+    physics-based method's output shape: the medoid of its ``candidates`` (indices into
+    ``base.hypotheses``) under ``weights`` ((len(candidates),), ``medoid_weights``: each
+    candidate's evidence times its prior) times, with ``medoid_base = "collision-checker"``,
+    the Collision Checker's medoid weights (``medoid_base_weights`` under ``checker``, from the
+    object's ``hidden`` outline fraction, its observed ``points`` and their ``viewpoints``):
+    prior times likelihood, the Bayes choice under IoU loss (each candidate scored against
+    every weight, its own included, as the physics medoid always was; the Collision
+    Checker's leave-one-out is for its own flat weights). Why: evidence that says little
+    then leaves the Collision Checker's judgement of the candidates, not each candidate
+    counted once (``InferenceConfig.medoid_base``). ``table``: the pairwise IoU of
+    ``base.hypotheses`` already computed (None: computed here)."""
+    weight = np.zeros(len(base.hypotheses))
+    weight[candidates] = weights
+    if medoid_base == "collision-checker":
+        start, _ = medoid_base_weights(
+            base.hypotheses, base.probabilities > 0, checker or CollisionCheckerConfig(),
+            hidden, points, viewpoints,
+        )  # fmt: skip
+        weight *= start
+        weight /= weight.sum()
+    return posterior_medoid(base.hypotheses, weight, table)
+
+
 def infer_shapes(
     prepared: PreparedHypotheses,
     planes: tuple[KnownPlane, ...],
@@ -68,6 +107,8 @@ def infer_shapes(
     workers: int | None = None,
     progress: ProgressCallback | None = None,
     points: Mapping[int, np.ndarray] | None = None,
+    hidden: Mapping[int, float] | None = None,
+    viewpoints: Mapping[int, np.ndarray] | None = None,
 ) -> InferenceOutcome:
     """Marginal shape posteriors by IPR (module doc).
 
@@ -87,7 +128,13 @@ def infer_shapes(
             ``sampling``).
         points: per object id its observed points ((N, 3), world, m), which
             ``config.surface_fit`` scores each candidate's surface against (None: no surface
-            factor).
+            factor), and from which ``config.medoid_base = "collision-checker"`` computes the
+            Collision Checker's fit weights (None: the families' equal shares).
+        hidden: per object id the hidden fraction of its frame-0 image outline
+            (``hidden_outline_fractions``), for ``config.medoid_base = "collision-checker"``
+            (None or absent: 0).
+        viewpoints: per object id the camera centre each of its ``points`` was seen from
+            ((3,) or (N, 3), world, m; NaN: not known; ``object_viewpoints``), for the same.
     """
     variant = get_method(method)
     if not variant.physics:
@@ -166,14 +213,18 @@ def infer_shapes(
         for k, base in enumerate(uniform):
             probabilities = np.zeros(len(base.hypotheses))
             probabilities[indices[k]] = estimate[k]
-            medoid_weight = np.zeros(len(base.hypotheses))
-            medoid_weight[indices[k]] = weights[k]
+            i = base.object_id
+            best = physics_medoid(
+                base, indices[k], weights[k], tables.get(i), config.medoid_base,
+                collision_checker_config or CollisionCheckerConfig(),
+                (hidden or {}).get(i, 0.0), (points or {}).get(i), (viewpoints or {}).get(i),
+            )  # fmt: skip
             posteriors.append(
                 ObjectPosterior(
                     base.object_id,
                     base.hypotheses,
                     probabilities,
-                    posterior_medoid(base.hypotheses, medoid_weight, tables.get(base.object_id)),
+                    best,
                     base.minimum,
                     method,
                     base.generation_s,
