@@ -6,7 +6,7 @@ hypotheses``), or on its own for a subset::
     python -m benchmarks.hypothesis_ceiling --suite ycb-dynamic --limit 4 [--scene DIR ...]
         [--perception-cache DIR] [--algorithm1-only] [--neighbour-surfaces] [--superquadric N]
         [--fitted-axis] [--unbounded-view] [--unbounded-support] [--medoid-weights W]
-        [--shrink-by-scatter]
+        [--shrink-by-scatter] [--revolution-radius wall_mean]
 
 Per scene: frame 0 is perceived, the hypotheses are prepared (``prepare_hypotheses``, the
 default configuration, seed 0, as the Collision Checker's run draws them) and the Collision
@@ -283,6 +283,14 @@ def main(argv: list[str] | None = None) -> int:
         help="surfaces of revolution also about the axis the surface normals meet (opt-in)",
     )
     parser.add_argument(
+        "--revolution-radius",
+        choices=("largest", "wall_mean"),
+        default=None,
+        help="the revolved shapes' radius (default: the config's, largest: any point's largest "
+        "distance from the axis; wall_mean: the side wall's mean distance, and the cylinder "
+        "only where it is one radius; opt-in)",
+    )
+    parser.add_argument(
         "--unbounded-view",
         action="store_true",
         help="no bound on the hidden extent beyond the camera's view (before 2026-11-27)",
@@ -338,6 +346,13 @@ def main(argv: list[str] | None = None) -> int:
         config = dataclasses.replace(
             config,
             hypotheses=dataclasses.replace(config.hypotheses, fitted_revolution_axis=True),
+        )
+    if args.revolution_radius is not None:
+        config = dataclasses.replace(
+            config,
+            hypotheses=dataclasses.replace(
+                config.hypotheses, revolution_radius=args.revolution_radius
+            ),
         )
     if args.unbounded_view:
         config = dataclasses.replace(

@@ -120,6 +120,49 @@ def test_a_lid_does_not_pull_the_circle_fit():
     assert fit is not None and np.linalg.norm(fit.centre) < 0.003
 
 
+@pytest.mark.parametrize("constant", [True, False])
+def test_stray_rim_points_do_not_widen_the_revolved_radius(constant):
+    """A can's side seen over 150 degrees with depth noise, its lid from above, and a few
+    mixed pixels at the rims (on the tangent rays behind the surface, further from the axis):
+    the cylinder's and each slice's radius is the side wall's mean distance from the fitted
+    axis (``mean_radius``, opt-in), within a millimetre or two of the truth; the largest distance of any point (before) is the
+    strays' reach."""
+    rng = np.random.default_rng(5)
+    radius = 0.04
+    side = arc_points(np.zeros(2), radius, 2, 0.1, 150, (0.0, -1.0), rng, noise=0.001)
+    r, angle = radius * 0.9 * np.sqrt(rng.uniform(0, 1, 800)), rng.uniform(0, 2 * np.pi, 800)
+    lid = np.column_stack([r * np.cos(angle), r * np.sin(angle), np.full(800, 0.1)])
+    # Mixed pixels: 1 % of the points, 4-12 mm behind the rims along the tangent (+y).
+    ends = np.radians(-90.0 + np.array([-75.0, 75.0]))
+    pick = rng.integers(0, 2, 40)
+    rims = np.column_stack([np.cos(ends[pick]), np.sin(ends[pick])]) * radius
+    strays = np.column_stack(
+        [rims + [0.0, 1.0] * rng.uniform(0.004, 0.012, (40, 1)), rng.uniform(0, 0.1, 40)]
+    )
+    points = np.concatenate([side, lid, strays])
+    normals = np.zeros_like(points)
+    normals[len(side) : len(side) + len(lid)] = [0.0, 0.0, 1.0]
+    towards = np.array([0.0, -0.6, 0.8])
+    upright = structure.upright_frame(points, [], np.array([0, 0, 1.0]), 0.0, towards)
+    found = structure.best_axis(upright, points, normals, towards, SETTINGS)
+    assert found is not None and found[0] is upright
+    frame, local, fit = found
+
+    def radii(settings):
+        out = structure.revolution_points(frame, local, points[:0], fit, 0.5, settings, constant)
+        ring = frame.local(out)
+        return np.linalg.norm(ring[:, :2] - fit.centre, axis=1) * np.cos(
+            np.pi / settings.ring_sides
+        )
+
+    # The cylinder within a millimetre; the revolution's top slice within 1.5 mm (the lid's
+    # outer ring counts as its wall).
+    mean = dataclasses.replace(SETTINGS, mean_radius=True)
+    assert np.all(np.abs(radii(mean) - radius) < (0.001 if constant else 0.0015))
+    largest = radii(SETTINGS)
+    assert largest.max() > radius + 0.003
+
+
 def leaning_can(tilt_deg, rng, noise=0.0005):
     """Points of a can (radius 4 cm, 10 cm long) seen from one side, its axis tilted by
     ``tilt_deg`` from z about x, centred at (0.1, 0.2, 0.3): the side's 150-degree arc facing
@@ -342,3 +385,62 @@ def test_the_families_candidates_do_not_depend_on_algorithm1s_count():
     for mine, before in zip(more[-4:], structured, strict=True):
         np.testing.assert_array_equal(mine.vertices, before.vertices)
         np.testing.assert_array_equal(mine.faces, before.faces)
+
+
+@pytest.mark.parametrize("option", ["largest", "wall_mean"])
+def test_the_revolution_radius_option_reaches_the_revolved_shapes(option, monkeypatch):
+    """``HypothesisConfig.revolution_radius`` selects the radius the revolution and the
+    cylinder are made with (``StructureSettings.mean_radius``)."""
+    seen = []
+    original = structure.revolution_points
+
+    def spy(*args, **kwargs):
+        seen.append(args[5].mean_radius)
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(structure, "revolution_points", spy)
+    mesh = trimesh.creation.cylinder(radius=0.035, height=0.1, sections=64)
+    mesh.apply_translation([0.0, 0.0, 0.05])
+    obj, space, truth = rendered(mesh, (0.0, -0.45, 0.4), (0.0, 0.0, 0.05))
+    config = dataclasses.replace(CONFIG, revolution_radius=option)
+    generated_best(obj, space, truth, config)
+    assert seen and set(seen) == {option == "wall_mean"}
+
+
+def test_only_a_constant_radius_is_a_cylinder():
+    """The cylinder applies (with the wall-mean radius) only when the slices' wall radii are
+    one radius within the circles' own share: a can's side and a short wide can's are, a
+    ball's front half (a surface of revolution about the view direction, slices from its
+    full circle to its rim) is not."""
+    settings = dataclasses.replace(SETTINGS, mean_radius=True)
+    towards = np.array([0.0, -0.6, 0.8])
+
+    def constant(points):
+        upright = structure.upright_frame(points, [], np.array([0, 0, 1.0]), 0.0, towards)
+        found = structure.best_axis(upright, points, np.zeros_like(points), towards, settings)
+        assert found is not None
+        return structure.constant_radius(found[1], found[2], settings)
+
+    rng = np.random.default_rng(0)
+    assert constant(arc_points(np.zeros(2), 0.04, 2, 0.1, 150, (0.0, -1.0), rng, noise=0.001))
+    assert constant(arc_points(np.zeros(2), 0.043, 2, 0.034, 150, (0.0, -1.0), rng, noise=0.001))
+    direction = rng.normal(size=(3000, 3))
+    direction /= np.linalg.norm(direction, axis=1)[:, None]
+    front = direction[direction[:, 1] < 0.2]
+    ball = front * 0.037 + [0.0, 0.0, 0.037] + rng.normal(0, 0.0005, front.shape)
+    assert not constant(ball)
+
+
+@pytest.mark.parametrize("option", ["largest", "wall_mean"])
+def test_a_ball_gets_a_cylinder_only_with_the_largest_radius(option):
+    """A rendered ball fits circles about some axis (a revolution applies); with the wall-mean
+    radius its slices' radii are no one radius and the cylinder family stays out; with the
+    largest radius (the default) it applies as before."""
+    mesh = trimesh.creation.icosphere(subdivisions=3, radius=0.037)
+    mesh.apply_translation([0.0, 0.0, 0.037])
+    obj, space, _ = rendered(mesh, (0.0, -0.45, 0.4), (0.0, 0.0, 0.037))
+    config = dataclasses.replace(CONFIG, revolution_radius=option)
+    hypotheses = generate_hypotheses(obj, space, (SUPPORT,), config, np.random.default_rng(0))
+    families = {h.generator for h in hypotheses}
+    assert "revolution" in families
+    assert ("cylinder" in families) == (option == "largest")

@@ -41,7 +41,8 @@ extension at all, and the others draw t = u^2 (u stratified): small extensions m
   fitted to 1 cm slices of the points along it (one linear least-squares problem:
   |p|^2 = 2 c.p + k_slice), for the vertical axis without the points of near-horizontal
   facets (a lid seen from above); the direction with the smallest RMS residual wins. Each
-  slice's radius is its points' largest distance from the axis. The
+  slice's radius is its points' largest distance from the axis (or, opt-in, its side wall's
+  mean distance: ``StructureSettings.mean_radius``). The
   candidate is the rings of the profile (circumscribed polygons). Variants move the axis
   along the hidden horizontal direction by up to two standard errors of the fitted centre (at
   least one voxel) either way.
@@ -144,6 +145,8 @@ class StructureSettings:
             the revolution and the cylinder do not apply.
         sphere_residual: the same for the sphere fit.
         pitch_m: the free-space grid's pitch (the smallest axis shift of the variants).
+        mean_radius: the revolved shapes' radii are their side wall's mean distance from the
+            axis (``revolution_points``), not the largest of any point's (default).
     """
 
     rim_m: float = 0.01
@@ -154,6 +157,7 @@ class StructureSettings:
     circle_residual: float = 0.1
     sphere_residual: float = 0.05
     pitch_m: float = 0.005
+    mean_radius: bool = False
 
 
 @dataclass(frozen=True, eq=False)
@@ -385,12 +389,26 @@ def _ranks(values: np.ndarray) -> np.ndarray:
     return (np.cumsum(present) - 1)[values]
 
 
+#: The share of a slice's largest distance from the axis at and beyond which a point counts
+#: as the side wall's (``_wall``): points well inside are a lid seen from above or a cup's
+#: inner wall, not the circle.
+WALL_SHARE = 0.85
+
+
+def _wall(radius: np.ndarray, slices: np.ndarray) -> np.ndarray:
+    """Which points (N,) of distances ``radius`` (N,) from the axis, in ``slices`` (N,)
+    (0, 1, ...), are on their slice's side wall: at least ``WALL_SHARE`` of the slice's
+    largest distance."""
+    outer = np.zeros(int(slices.max()) + 1)
+    np.maximum.at(outer, slices, radius)
+    return radius >= WALL_SHARE * outer[slices]
+
+
 def fit_axis(local: np.ndarray, keep: np.ndarray, s: StructureSettings) -> AxisFit | None:
     """The common centre of circles fitted to height slices of the points ``keep`` selects
     (module doc); None when fewer than 8 points remain.
 
-    Fitted twice: the second time only on each slice's outer points (distance at least 85 %
-    of the slice's largest), since points well inside a slice's circle are not on the side
+    Fitted twice: the second time only on each slice's outer points (``_wall``), since points well inside a slice's circle are not on the side
     wall (a lid seen from above, a cup's inner wall), the residual is that fit's; None when
     fewer than 70 % of the points are outer ones (a box's faces: only the corners and the ends
     are near a circle through them). None too when
@@ -402,9 +420,7 @@ def fit_axis(local: np.ndarray, keep: np.ndarray, s: StructureSettings) -> AxisF
     first = _circle_centre(pts, slices)
     if first is None:
         return None
-    outer = np.zeros(slices.max() + 1)
-    np.maximum.at(outer, slices, first[1])
-    wall = first[1] >= 0.85 * outer[slices]
+    wall = _wall(first[1], slices)
     if wall.mean() < 0.7:
         return None  # most points are not on one circle per slice (a polygon's corners are)
     pts, slices = _slices(pts[wall], s)
@@ -579,6 +595,25 @@ def _rings(centre: np.ndarray, heights: np.ndarray, radii: np.ndarray, sides: in
     return np.concatenate([xy, z], axis=2).reshape(-1, 3)
 
 
+def constant_radius(local: np.ndarray, fit: AxisFit, s: StructureSettings) -> bool:
+    """Whether the points' ``local`` (N, 3) coordinates in the fit's frame lie on one
+    cylinder: the side wall's mean distance from the axis per slice (``_wall``; slices of at
+    least 4 wall points, as the circle fit's) varies about the slices' mean by an RMS of at
+    most ``circle_residual`` of it, the share the circles themselves may miss by. A ball, a pear or a bottle's shoulder
+    are surfaces of revolution but no cylinder: a cylinder of their mean radius is no shape
+    of theirs and only moves the choice among the candidates."""
+    radius = np.linalg.norm(local[:, :2] - fit.centre, axis=1)
+    slices = _ranks(np.floor((local[:, 2] - local[:, 2].min()) / s.slice_m).astype(np.int64))
+    wall = _wall(radius, slices)
+    counts = np.bincount(slices[wall]).astype(float)
+    used = counts >= 4  # a circle's slice (``_slices``)
+    if not used.any():
+        return False
+    per_slice = np.bincount(slices[wall], weights=radius[wall])[used] / counts[used]
+    mean = float(per_slice.mean())
+    return mean > 0 and float(per_slice.std()) <= s.circle_residual * mean
+
+
 def revolution_points(
     frame: UprightFrame,
     local: np.ndarray,
@@ -595,14 +630,19 @@ def revolution_points(
     centre = _shifted(fit.centre, frame, fit.error_m, t, s.pitch_m)
     radius = np.linalg.norm(local[:, :2] - centre, axis=1)
     low, high = float(local[:, 2].min()), float(local[:, 2].max())
+    slices = np.floor((local[:, 2] - low) / s.slice_m).astype(np.int64)
+    count = int(slices.max()) + 1
+    wall = _wall(radius, slices) if s.mean_radius else np.ones(len(radius), bool)
     if constant:
         heights = np.array([low, high])
-        radii = np.full(2, radius.max())
+        radii = np.full(2, radius[wall].mean() if s.mean_radius else radius.max())
     else:
-        slices = np.floor((local[:, 2] - low) / s.slice_m).astype(np.int64)
-        count = int(slices.max()) + 1
-        per_slice = np.zeros(count)
-        np.maximum.at(per_slice, slices, radius)
+        if s.mean_radius:
+            per_slice = np.bincount(slices[wall], weights=radius[wall], minlength=count)
+            per_slice /= np.maximum(np.bincount(slices[wall], minlength=count), 1)
+        else:
+            per_slice = np.zeros(count)
+            np.maximum.at(per_slice, slices, radius)
         bottoms = low + np.arange(count) * s.slice_m
         tops = np.minimum(bottoms + s.slice_m, high)
         occupied = np.bincount(slices, minlength=count) > 0
