@@ -474,6 +474,23 @@ MUTANTS: tuple[Mutant, ...] = (
         "rng = np.random.default_rng(self.problem.seed)",
         _t("inference_method", "inference"),
     ),
+    Mutant(
+        "physics-medoid-base-ignored",
+        "inference",
+        "the physics methods' medoid starts from each candidate once, not from the Collision "
+        "Checker's medoid weights (medoid_base)",
+        'if medoid_base == "collision-checker":',
+        "if False:",
+        _t("inference"),
+    ),
+    Mutant(
+        "silhouette-cut-never-made",
+        "hypotheses",
+        "an object with no feasible hypothesis is not made again within its own silhouette",
+        "return _generate(obj, space, planes, config, again, bounds, True)",
+        "return hypotheses",
+        _t("hypotheses"),
+    ),
     # ---------------------------------------------------------------- collision checker
     Mutant(
         "collision-checker-mode-not-medoid",
