@@ -46,7 +46,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.common import markdown_table, median
-from benchmarks.hypothesis_ceiling import MIN_VISIBLE_PX, _iou, _perceive
+from benchmarks.hypothesis_ceiling import MIN_VISIBLE_PX, _iou, _perceive, checker_posteriors
 
 
 def _perceive_true_masks(path: Path, cache: Path | None):
@@ -96,7 +96,6 @@ def _perceive_true_masks(path: Path, cache: Path | None):
 def _candidates(perceived, config):
     """Prepared hypotheses, posteriors and carved outputs of one perception of frame 0."""
     from ipr_shapes.carving import carve_posteriors, surface_views
-    from ipr_shapes.collision_checker import uniform_posteriors
     from ipr_shapes.hypotheses import prepare_hypotheses
 
     scene, objects_per_frame, space, planes = perceived
@@ -105,7 +104,7 @@ def _candidates(perceived, config):
     prepared = prepare_hypotheses(
         objects, space, planes, config.hypotheses, config.constraints, rng=generation_rng
     )
-    posteriors = uniform_posteriors(prepared, config.collision_checker, rng=sampler_rng)
+    posteriors = checker_posteriors(scene, objects, prepared, config, sampler_rng)
     views = surface_views(scene.frames, objects_per_frame, None, config.carving)
     carved = carve_posteriors(posteriors, views) if config.carving.enabled else posteriors
     return prepared, posteriors, carved

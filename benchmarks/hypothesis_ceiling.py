@@ -77,17 +77,40 @@ def _perceive(path: Path, cache: Path | None):
     return out
 
 
+def checker_posteriors(scene, objects, prepared, config, rng):
+    """The Collision Checker's posteriors of frame 0's ``objects`` from ``prepared`` hypotheses,
+    with the medoid inputs its configured weights read (the hidden outline fractions, the
+    observed points and the camera they were seen from), as ``ipr-shapes infer`` hands them over:
+    benchmarks that call ``uniform_posteriors`` without them measure "candidate" weights."""
+    from ipr_shapes.collision_checker import object_viewpoints, uniform_posteriors
+    from ipr_shapes.perception.outline import hidden_outline_fractions
+
+    weights = config.collision_checker.medoid_weights
+    hidden = None
+    if weights in ("outline", "outline-fit"):
+        hidden = hidden_outline_fractions(
+            scene.frames[0].depth_m, objects, config.perception.segmentation.contour_gap_m
+        )
+    points = viewpoints = None
+    if weights in ("fit", "outline-fit"):
+        points = {o.id: o.points for o in objects}
+        camera = scene.frames[0].world_from_camera[:3, 3]
+        viewpoints = {o.id: object_viewpoints(o, camera) for o in objects}
+    return uniform_posteriors(
+        prepared, config.collision_checker, rng=rng, hidden=hidden, points=points,
+        viewpoints=viewpoints,
+    )  # fmt: skip
+
+
 def measure_scene(path: Path, config=None, cache: Path | None = None) -> dict:
     """One scene's rows: per visible ground-truth object its scores (module doc)."""
     from scipy.optimize import linear_sum_assignment
 
     from ipr_shapes import voxels
     from ipr_shapes.carving import carve_posteriors, surface_views
-    from ipr_shapes.collision_checker import object_viewpoints, uniform_posteriors
     from ipr_shapes.config import Config
     from ipr_shapes.ground_truth import frame0_ground_truth, visible_pixel_counts
     from ipr_shapes.hypotheses import prepare_hypotheses
-    from ipr_shapes.perception.outline import hidden_outline_fractions
 
     config = config or Config()
     scene, objects_per_frame, space, planes = _perceive(path, cache)
@@ -98,20 +121,7 @@ def measure_scene(path: Path, config=None, cache: Path | None = None) -> dict:
         objects, space, planes, config.hypotheses, config.constraints, rng=generation_rng
     )
     cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
-    hidden = None
-    if config.collision_checker.medoid_weights in ("outline", "outline-fit"):
-        hidden = hidden_outline_fractions(
-            scene.frames[0].depth_m, objects, config.perception.segmentation.contour_gap_m
-        )
-    points = viewpoints = None
-    if config.collision_checker.medoid_weights in ("fit", "outline-fit"):
-        points = {o.id: o.points for o in objects}
-        camera = scene.frames[0].world_from_camera[:3, 3]
-        viewpoints = {o.id: object_viewpoints(o, camera) for o in objects}
-    posteriors = uniform_posteriors(
-        prepared, config.collision_checker, rng=sampler_rng, hidden=hidden, points=points,
-        viewpoints=viewpoints,
-    )  # fmt: skip
+    posteriors = checker_posteriors(scene, objects, prepared, config, sampler_rng)
     views = surface_views(scene.frames, objects_per_frame, None, config.carving)
     carved = carve_posteriors(posteriors, views) if config.carving.enabled else posteriors
 
