@@ -962,19 +962,10 @@ def _shrunk(
     """The convex mesh with every face plane moved ``shrink_m`` (m) inwards (qhull's half-space
     intersection about ``interior``, a point that must stay strictly inside); None when the
     shrunk shape would not hold ``interior`` or qhull fails (the caller keeps the mesh)."""
-    vertices, faces, _ = mesh
-    tri = vertices[faces]
-    normals = triangle_cross(tri)
-    lengths = row_norms(normals)
-    keep = lengths > 1e-12
-    normals = normals[keep] / lengths[keep, None]
-    offsets = -np.einsum("ij,ij->i", normals, tri[keep, 0]) + shrink_m
-    halfspaces = unique_rows(np.round(np.column_stack([normals, offsets]), 9))
-    if float((halfspaces[:, :3] @ interior + halfspaces[:, 3]).max()) >= -1e-7:
-        return None
-    try:
-        corners = HalfspaceIntersection(halfspaces, interior).intersections
-    except (QhullError, ValueError):
+    halfspaces = _face_halfspaces(mesh)
+    halfspaces[:, 3] += shrink_m
+    corners = _halfspace_corners(halfspaces, interior)
+    if corners is None:
         return None
     # A noisy hull's many near-coplanar planes meet in clusters of corners a few micrometres
     # to nanometres apart, which would multiply the mesh's vertices for every later step:
@@ -985,6 +976,32 @@ def _shrunk(
         if result is not None and _is_convex(result):
             return result
     return None
+
+
+def _face_halfspaces(mesh: tuple[np.ndarray, np.ndarray, float]) -> np.ndarray:
+    """(F, 4) rows (n, b) of a convex mesh's face planes, n . x + b <= 0 inside (n unit, m;
+    one row per non-degenerate triangle, coplanar triangles repeating their plane)."""
+    vertices, faces, _ = mesh
+    tri = vertices[faces]
+    normals = triangle_cross(tri)
+    lengths = row_norms(normals)
+    keep = lengths > 1e-12
+    normals = normals[keep] / lengths[keep, None]
+    return np.column_stack([normals, -np.einsum("ij,ij->i", normals, tri[keep, 0])])
+
+
+def _halfspace_corners(halfspaces: np.ndarray, interior: np.ndarray) -> np.ndarray | None:
+    """(K, 3) corners of the intersection of ``halfspaces`` (H, 4) rows (a, b), a . x + b <= 0
+    inside, about ``interior`` (3,) (qhull); rows rounded to 1e-9 and made unique first, so
+    that coplanar triangles give one plane. None when ``interior`` is not strictly inside or
+    qhull fails."""
+    halfspaces = unique_rows(np.round(halfspaces, 9))  # np.unique(axis=0), the same rows
+    if float((halfspaces[:, :3] @ interior + halfspaces[:, 3]).max()) >= -1e-7:
+        return None
+    try:
+        return HalfspaceIntersection(halfspaces, interior).intersections
+    except (QhullError, ValueError):
+        return None
 
 
 def _is_convex(mesh: tuple[np.ndarray, np.ndarray, float]) -> bool:
@@ -1468,38 +1485,15 @@ def _cut_all(
     (qhull's half-space intersection about ``interior``, a point strictly inside all of them:
     the observed points' centroid); None when that point is not strictly inside or qhull
     fails (the caller cuts one by one)."""
-    vertices, faces, _ = mesh
-    tri = vertices[faces]
-    normals = triangle_cross(tri)
-    lengths = row_norms(normals)
-    keep = lengths > 1e-12
-    normals = normals[keep] / lengths[keep, None]
-    offsets = -np.einsum("ij,ij->i", normals, tri[keep, 0])
-    cut_array = np.asarray(cuts, float)
-    # Rows (a, b): a . x + b <= 0 inside; the hull's coplanar triangles give one plane each.
-    halfspaces = np.concatenate([np.column_stack([normals, offsets]), -cut_array])
-    halfspaces = unique_rows(np.round(halfspaces, 9))  # np.unique(axis=0), the same rows
-    if float((halfspaces[:, :3] @ interior + halfspaces[:, 3]).max()) >= -1e-7:
-        return None
-    try:
-        corners = HalfspaceIntersection(halfspaces, interior).intersections
-    except (QhullError, ValueError):
+    halfspaces = np.concatenate([_face_halfspaces(mesh), -np.asarray(cuts, float)])
+    corners = _halfspace_corners(halfspaces, interior)
+    if corners is None:
         return None
     # Planes meeting at one corner give copies of it a rounding apart: merge them (10 nm).
     result = convex_mesh(unique_rows(np.round(corners, 8)))
-    if result is None:
-        return None
     # Corners that stayed a hair apart can leave sliver faces whose planes other vertices
     # cross by more than rounding: then the one-cut-at-a-time path decides.
-    vertices, faces, _ = result
-    tri = vertices[faces]
-    normals = triangle_cross(tri)
-    lengths = row_norms(normals)
-    keep = lengths > 1e-15
-    normals = normals[keep] / lengths[keep, None]
-    excess = vertices @ normals.T - np.einsum("ij,ij->i", normals, tri[keep, 0])
-    scale = float(np.ptp(vertices, axis=0).max())
-    return result if float(excess.max()) <= 1e-9 * scale else None
+    return result if result is not None and _is_convex(result) else None
 
 
 def _evaluate(
