@@ -338,52 +338,25 @@ def main(argv: list[str] | None = None) -> int:
     from ipr_shapes.config import Config
     from ipr_shapes.suites import suite_scenes
 
-    config = Config()
-    if args.algorithm1_only:
-        config = dataclasses.replace(
-            config, hypotheses=dataclasses.replace(config.hypotheses, structure_share=0.0)
-        )
-    if args.neighbour_surfaces:
-        config = dataclasses.replace(
-            config, hypotheses=dataclasses.replace(config.hypotheses, neighbour_surfaces=True)
-        )
-    if args.superquadric is not None:
-        config = dataclasses.replace(
-            config,
-            hypotheses=dataclasses.replace(config.hypotheses, superquadric_count=args.superquadric),
-        )
-    if args.fitted_axis:
-        config = dataclasses.replace(
-            config,
-            hypotheses=dataclasses.replace(config.hypotheses, fitted_revolution_axis=True),
-        )
-    if args.revolution_radius is not None:
-        config = dataclasses.replace(
-            config,
-            hypotheses=dataclasses.replace(
-                config.hypotheses, revolution_radius=args.revolution_radius
-            ),
-        )
+    # Each flag overrides one hypothesis setting (None: the flag was not given).
+    overrides = {
+        "structure_share": 0.0 if args.algorithm1_only else None,
+        "neighbour_surfaces": True if args.neighbour_surfaces else None,
+        "superquadric_count": args.superquadric,
+        "fitted_revolution_axis": True if args.fitted_axis else None,
+        "revolution_radius": args.revolution_radius,
+        "silhouette_cut": args.silhouette_cut,
+        "shrink_by_scatter": True if args.shrink_by_scatter else None,
+    }
+    hypotheses = dataclasses.replace(
+        Config().hypotheses, **{k: v for k, v in overrides.items() if v is not None}
+    )
+    # These two flags set a bound to None (unbounded), so they cannot ride on the None above.
     if args.unbounded_view:
-        config = dataclasses.replace(
-            config,
-            hypotheses=dataclasses.replace(config.hypotheses, outside_view_ratio=None),
-        )
+        hypotheses = dataclasses.replace(hypotheses, outside_view_ratio=None)
     if args.unbounded_support:
-        config = dataclasses.replace(
-            config,
-            hypotheses=dataclasses.replace(config.hypotheses, outside_support_ratio=None),
-        )
-    if args.silhouette_cut is not None:
-        config = dataclasses.replace(
-            config,
-            hypotheses=dataclasses.replace(config.hypotheses, silhouette_cut=args.silhouette_cut),
-        )
-    if args.shrink_by_scatter:
-        config = dataclasses.replace(
-            config,
-            hypotheses=dataclasses.replace(config.hypotheses, shrink_by_scatter=True),
-        )
+        hypotheses = dataclasses.replace(hypotheses, outside_support_ratio=None)
+    config = dataclasses.replace(Config(), hypotheses=hypotheses)
     if args.medoid_weights is not None:
         config = dataclasses.replace(
             config,
