@@ -569,3 +569,42 @@ def test_the_collision_checker_hands_the_camera_as_the_points_viewpoint(scene, m
     for views in (ofit_views, fit_views):
         assert views[1] == pytest.approx(np.broadcast_to(camera, objects[0].points.shape))
     assert none is None
+
+
+@pytest.mark.parametrize("weights", ["outline-fit", "candidate"])
+def test_the_pipeline_hands_the_outline_and_camera_to_the_collision_checker(
+    scene_dir, monkeypatch, weights
+):
+    """``run_pipeline`` with the Collision Checker method gives it frame 0's camera centre and,
+    for the outline weights, each frame-0 object's hidden outline fraction (without them the
+    default medoid silently falls back to weights that ignore the outline and viewpoints)."""
+    import dataclasses
+
+    from ipr_shapes import pipeline
+    from ipr_shapes.config import Config
+    from ipr_shapes.scene import load_scene
+
+    seen = []
+    original = pipeline.collision_checker
+
+    def recording(*args, **kwargs):
+        seen.append({k: kwargs.get(k) for k in ("hidden", "camera_m")})
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(pipeline, "collision_checker", recording)
+    base = Config()
+    config = dataclasses.replace(
+        base,
+        collision_checker=dataclasses.replace(base.collision_checker, medoid_weights=weights),
+    )
+    scene = load_scene(scene_dir)
+    result = pipeline.run_pipeline(scene, config, method="collision-checker", workers=1)
+    (call,) = seen
+    camera = np.asarray(scene.frames[0].world_from_camera, float)[:3, 3]
+    assert call["camera_m"] == pytest.approx(camera)
+    if weights == "candidate":
+        assert call["hidden"] is None
+        return
+    ids = sorted(o.id for o in result.perception.objects[0])
+    assert ids and sorted(call["hidden"]) == ids
+    assert all(0.0 <= h <= 1.0 for h in call["hidden"].values())
