@@ -49,6 +49,8 @@ def measure_scene(path: Path) -> dict:
     from ipr_shapes.fusion import FusionConfig, fuse_views, tracked_free_spaces
     from ipr_shapes.ground_truth import frame0_ground_truth, visible_pixel_counts
     from ipr_shapes.perception import perceive_scene
+    from ipr_shapes.perception.config import SegmentationConfig
+    from ipr_shapes.perception.outline import hidden_outline_fractions
     from ipr_shapes.scene import load_scene
 
     scene = load_scene(path)
@@ -76,6 +78,13 @@ def measure_scene(path: Path) -> dict:
         scene.pusher,
         FusionConfig(pusher_free_space=True),
     )
+    # The default medoid weights read the hidden outline and the camera, as ``ipr-shapes infer``
+    # hands them over (without them the Collision Checker measures "candidate" weights).
+    hidden = hidden_outline_fractions(
+        scene.frames[0].depth_m,
+        perception.objects[0],
+        SegmentationConfig().contour_gap_m,
+    )
     scores = {}
     for name, objects, spaces in _variants(
         perception.objects[0], fused.objects, tracked, with_pushes
@@ -86,6 +95,8 @@ def measure_scene(path: Path) -> dict:
             perception.planes[0],
             rng=np.random.default_rng(0),
             object_spaces=spaces,
+            hidden=hidden,
+            camera_m=world_from_camera[:3, 3],
         )
         scores[name] = _matched_iou(posteriors, truths)
     return {
