@@ -13,11 +13,12 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 from threadpoolctl import ThreadpoolController
 
+from ipr_shapes.carving import SurfaceView, carve_hypotheses
 from ipr_shapes.hypotheses.constraints import (
     ConstraintConfig,
     OverlapCache,
@@ -55,6 +56,7 @@ def prepare_hypotheses(
     time_budget_s: float | None = None,
     object_spaces: Mapping[int, SeenSpace] | None = None,
     progress: ProgressCallback | None = None,
+    carve_views: Sequence[SurfaceView] | None = None,
 ) -> PreparedHypotheses:
     """Generate each object's hypotheses and minimum shape, keep the unary-feasible ones and
     measure the pairwise penetration depths between interacting objects' hypotheses.
@@ -67,7 +69,11 @@ def prepare_hypotheses(
     ``time_budget_s``: generation gets ``config.budget_share`` of it, split over the objects
     (capping their timeouts). ``rng`` defaults to one seeded from ``config.seed``; each object
     draws from its own child stream (``rng.spawn``). ``progress`` hears of each object done
-    (``ipr_shapes.progress``, stage ``hypotheses``).
+    (``ipr_shapes.progress``, stage ``hypotheses``). ``carve_views``: each object's hypotheses
+    and minimum shape are carved by these views (``ipr_shapes.carving.carve_hypotheses``: their
+    voxels lose what the views saw empty, their convex meshes stay) after the unary checks,
+    so that the choice among them weighs the shapes that are written
+    (``CarvingConfig.before_choice``); None: not carved.
 
     Returns the objects' hypotheses with their unary and pairwise constraints, in the order of
     ``objects``.
@@ -75,7 +81,7 @@ def prepare_hypotheses(
     with _BLAS.limit(limits=1, user_api="blas"):
         return _prepare(
             objects, space, planes, config, constraints, rng, time_budget_s, object_spaces,
-            progress,
+            progress, carve_views,
         )  # fmt: skip
 
 
@@ -89,6 +95,7 @@ def _prepare(
     time_budget_s: float | None,
     object_spaces: Mapping[int, SeenSpace] | None,
     progress: ProgressCallback | None,
+    carve_views: Sequence[SurfaceView] | None = None,
 ) -> PreparedHypotheses:
     """``prepare_hypotheses`` on one BLAS thread (its doc)."""
     config = config or HypothesisConfig()
@@ -131,6 +138,14 @@ def _prepare(
             logger.warning("object %d: no feasible hypothesis; using its minimum shape", obj.id)
             hyps = (minima[obj.id],)
             feasible = [0]
+        if carve_views:
+            # After the unary checks (they read the convex voxels generation measured).
+            minima[obj.id] = carve_hypotheses((minima[obj.id],), obj.id, carve_views)[0]
+            hyps = (
+                (minima[obj.id],)
+                if hyps[0].index == -1
+                else carve_hypotheses(hyps, obj.id, carve_views)
+            )
         generated[obj.id], candidates[obj.id] = hyps, feasible
         seconds[obj.id] = time.perf_counter() - begin
         report(progress, "hypotheses", done, len(objects))
