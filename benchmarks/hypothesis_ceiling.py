@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import pickle
 import sys
 import time
@@ -110,7 +111,12 @@ def measure_scene(path: Path, config=None, cache: Path | None = None) -> dict:
     from scipy.optimize import linear_sum_assignment
 
     from ipr_shapes import voxels
-    from ipr_shapes.carving import carve_posteriors, carve_voxels, surface_views
+    from ipr_shapes.carving import (
+        carve_hypotheses,
+        carve_posteriors,
+        carve_voxels,
+        surface_views,
+    )
     from ipr_shapes.config import Config
     from ipr_shapes.ground_truth import frame0_ground_truth, visible_pixel_counts
     from ipr_shapes.hypotheses import prepare_hypotheses
@@ -124,7 +130,7 @@ def measure_scene(path: Path, config=None, cache: Path | None = None) -> dict:
     cpu, wall = time.process_time(), time.perf_counter()
     prepared = prepare_hypotheses(
         objects, space, planes, config.hypotheses, config.constraints, rng=generation_rng,
-        carve_views=views if before_choice else None,
+        carve=functools.partial(carve_hypotheses, views=views) if before_choice else None,
     )  # fmt: skip
     cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
     posteriors = checker_posteriors(scene, objects, prepared, config, sampler_rng)

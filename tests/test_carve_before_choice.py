@@ -4,6 +4,9 @@ written shape is the carved one."""
 
 from __future__ import annotations
 
+import dataclasses
+import functools
+
 import numpy as np
 
 from ipr_shapes import voxels
@@ -81,8 +84,9 @@ def test_prepare_hypotheses_carves_after_the_same_unary_checks():
     config = HypothesisConfig(count=12)
     plain = prepare_hypotheses((obj,), space, (SUPPORT,), config, rng=np.random.default_rng(2))
     carved = prepare_hypotheses(
-        (obj,), space, (SUPPORT,), config, rng=np.random.default_rng(2), carve_views=[surface]
-    )
+        (obj,), space, (SUPPORT,), config, rng=np.random.default_rng(2),
+        carve=functools.partial(carve_hypotheses, views=[surface]),
+    )  # fmt: skip
     assert carved.candidates == plain.candidates  # the same feasible candidates
     before, after = plain.generated[obj.id], carved.generated[obj.id]
     assert len(before) == len(after)
@@ -90,3 +94,45 @@ def test_prepare_hypotheses_carves_after_the_same_unary_checks():
     for b, a in zip(before, after, strict=True):
         assert np.array_equal(a.vertices, b.vertices)
         assert np.array_equal(a.keys(PITCH), carve_voxels(b.keys(PITCH), obj.id, [surface]))
+
+
+def test_the_pipeline_carves_the_candidates_before_the_choice_only_when_asked(
+    scene_dir, monkeypatch
+):
+    """``CarvingConfig.before_choice`` hands the run's carving to the hypotheses of the
+    Collision Checker and of the physics methods, and the written best shape is the carved
+    candidate's voxels; off (the default), no carving reaches them."""
+    from ipr_shapes import pipeline
+    from ipr_shapes.config import Config
+    from ipr_shapes.scene import load_scene
+
+    seen = []
+    checker, prepare = pipeline.collision_checker, pipeline.prepare_hypotheses
+
+    def checker_recording(*args, **kwargs):
+        seen.append(kwargs.get("carve"))
+        return checker(*args, **kwargs)
+
+    def prepare_recording(*args, **kwargs):
+        seen.append(args[9] if len(args) > 9 else kwargs.get("carve"))
+        return prepare(*args, **kwargs)
+
+    monkeypatch.setattr(pipeline, "collision_checker", checker_recording)
+    monkeypatch.setattr(pipeline, "prepare_hypotheses", prepare_recording)
+    scene, base = load_scene(scene_dir), Config()
+    for before in (True, False):
+        config = dataclasses.replace(
+            base, carving=dataclasses.replace(base.carving, before_choice=before)
+        )
+        for method in ("collision-checker", "ipr+uniform"):
+            result = pipeline.run_pipeline(scene, config, method=method, samples=2, workers=1)
+            hyps = [h for p in result.posteriors for h in p.hypotheses]
+            assert any(h.carved for h in hyps) == before
+            for posterior in result.posteriors:
+                best = posterior.hypotheses[posterior.best]
+                if best.carved:  # written as its carved voxels (edge contacts joined)
+                    written = posterior.written_shape(posterior.best)
+                    assert np.isin(best.keys(PITCH), written).all()
+                    assert written.size < voxels.scanline_voxels(*best.mesh, PITCH).size
+    assert all(carve is not None for carve in seen[:2])
+    assert seen[2:] == [None, None]

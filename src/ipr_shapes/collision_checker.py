@@ -79,7 +79,6 @@ from typing import ClassVar
 
 import numpy as np
 
-from ipr_shapes.carving import SurfaceView
 from ipr_shapes.checks import Checks, Interval, Options, check_fields
 from ipr_shapes.factor_graph import (
     PairwiseIoU,
@@ -91,6 +90,7 @@ from ipr_shapes.factor_graph import (
     posterior_medoid,
 )
 from ipr_shapes.hypotheses import (
+    Carve,
     ConstraintConfig,
     HypothesisConfig,
     prepare_hypotheses,
@@ -469,7 +469,7 @@ def collision_checker(
     progress: ProgressCallback | None = None,
     hidden: Mapping[int, float] | None = None,
     camera_m: np.ndarray | None = None,
-    carve_views: Sequence[SurfaceView] | None = None,
+    carve: Carve | None = None,
 ) -> list[ObjectPosterior]:
     """Marginal shape posteriors of the objects of one frame (frame 0) under a uniform prior
     restricted to jointly feasible models (module doc).
@@ -492,7 +492,7 @@ def collision_checker(
         camera_m: (3,) frame 0's camera centre (world, m), from which the objects' own points
             (pixel index >= 0; fused points from later views have -1) were seen, for the fit
             weights (``surface_distances``); None: every face.
-        carve_views: the candidates are carved by these views before the medoid is chosen
+        carve: the candidates are carved by it before the medoid is chosen
             (``prepare_hypotheses``; ``CarvingConfig.before_choice``); None: not carved.
 
     Returns:
@@ -506,7 +506,7 @@ def collision_checker(
     generation_rng, sampler_rng = rng.spawn(2)
     prepared = prepare_hypotheses(
         objects, space, planes, hypotheses, constraints, generation_rng, time_budget_s,
-        object_spaces, progress, carve_views,
+        object_spaces, progress, carve,
     )  # fmt: skip
     points = viewpoints = None
     if config.medoid_weights in ("fit", "outline-fit"):
