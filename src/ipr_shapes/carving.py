@@ -21,6 +21,13 @@ later frame, where the object moved and its registration (``ipr_shapes.fusion``)
 off, when it is more than ``later_frame_margin_m`` in front. Later frames are used by the
 methods that use the pushes (their fused views carry the motions), frame 0 by every method.
 
+With ``CarvingConfig.before_choice`` the candidates are carved before inference chooses among
+them (``carve_hypotheses``, called by ``prepare_hypotheses``): each hypothesis keeps its convex
+mesh for the physics and the constraints, and its voxels (what the medoid's IoU and the
+written shape read) lose the voxels frame 0 saw empty. The medoid is the Bayes choice under
+IoU loss of the shapes that will be written, and the choice of a convex hull whose bulge the
+camera saw empty and of one whose hidden part differs are no longer the same question.
+
 Why the denoised surface and not the free-space map: that map is conservative by design (a
 voxel is free only when its whole footprint saw past it), whereas carving needs the best
 estimate of where the surface is, and against the denoised surface no noise margin is needed.
@@ -42,7 +49,7 @@ from ipr_shapes import voxels
 from ipr_shapes.camera import invert_transform
 from ipr_shapes.checks import Checks, Interval, Options, Predicate, check_fields
 from ipr_shapes.perception.types import PartialObject
-from ipr_shapes.products import ObjectPosterior
+from ipr_shapes.products import ObjectPosterior, ShapeHypothesis
 from ipr_shapes.scene import Frame
 
 
@@ -62,6 +69,9 @@ class CarvingConfig:
             discontinuities, so a missing pixel in front of a bulging hull would carve nothing;
             3 scored a little above 1 and 7 on development scenes (docs/DESIGN_NOTES.md,
             "Carving by what the camera saw empty").
+        before_choice: also carve every candidate by frame 0 before inference chooses among
+            them (``carve_hypotheses``; module doc), so that the medoid compares the shapes that
+            are written rather than their convex hulls.
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -69,6 +79,7 @@ class CarvingConfig:
         "first_frame_margin_m": Interval(0, None),
         "later_frame_margin_m": Interval(0, None),
         "later_frames": Options(True, False),
+        "before_choice": Options(True, False),
         "hole_fill_window_px": Predicate(
             lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 1 and v % 2 == 1,
             "a positive odd number of pixels",
@@ -80,6 +91,7 @@ class CarvingConfig:
     later_frame_margin_m: float = 0.005
     later_frames: bool = True
     hole_fill_window_px: int = 3
+    before_choice: bool = False
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -294,6 +306,27 @@ def carve_shape_voxels(
     return voxel_surface(kept, pitch_m, with_keys=with_keys)
 
 
+def carve_hypotheses(
+    hypotheses: Sequence[ShapeHypothesis],
+    object_id: int,
+    views: Sequence[SurfaceView],
+    pitch_m: float = voxels.DEFAULT_PITCH_M,
+) -> tuple[ShapeHypothesis, ...]:
+    """The hypotheses with their voxels at ``pitch_m`` carved by ``views`` (``carve_voxels``) and
+    ``carved`` set, their meshes (the convex hulls) unchanged. A hypothesis the views remove
+    nothing of, or everything of (they contradict it; keep it rather than nothing), is
+    returned as it is."""
+    carved = []
+    for hypothesis in hypotheses:
+        keys = hypothesis.keys(pitch_m)
+        kept = carve_voxels(keys, object_id, views, pitch_m)
+        if kept.size in (0, keys.size):
+            carved.append(hypothesis)
+            continue
+        carved.append(replace(hypothesis, voxel_keys=kept, voxel_pitch_m=pitch_m, carved=True))
+    return tuple(carved)
+
+
 def surface_views(
     frames: Sequence[Frame],
     objects_per_frame: Sequence[Sequence[PartialObject]],
@@ -349,13 +382,17 @@ def carve_posteriors(
         meshes, kept = [], []
         for k, hypothesis in enumerate(posterior.hypotheses):
             written = posterior.probabilities[k] > 0 or k == posterior.best
-            # The hypotheses' own voxels (cached at generation, the same voxelisation).
+            # The hypotheses' own voxels (cached at generation, the same voxelisation; carved
+            # already when they were carved before the choice).
             keys = hypothesis.keys(voxels.DEFAULT_PITCH_M) if written else None
             made = (
                 carve_shape_voxels(keys, posterior.object_id, views, with_keys=True)
                 if written
                 else None
             )
+            if made is None and written and hypothesis.carved:
+                # Nothing more to remove: write the voxels carved before the choice, not the hull.
+                made = voxel_surface(keys, with_keys=True)
             meshes.append(None if made is None else made[:2])
             kept.append(None if made is None else made[2])
         carved.append(replace(posterior, output_meshes=tuple(meshes), output_keys=tuple(kept)))

@@ -90,6 +90,7 @@ from ipr_shapes.factor_graph import (
     posterior_medoid,
 )
 from ipr_shapes.hypotheses import (
+    Carve,
     ConstraintConfig,
     HypothesisConfig,
     prepare_hypotheses,
@@ -468,6 +469,7 @@ def collision_checker(
     progress: ProgressCallback | None = None,
     hidden: Mapping[int, float] | None = None,
     camera_m: np.ndarray | None = None,
+    carve: Carve | None = None,
 ) -> list[ObjectPosterior]:
     """Marginal shape posteriors of the objects of one frame (frame 0) under a uniform prior
     restricted to jointly feasible models (module doc).
@@ -490,6 +492,8 @@ def collision_checker(
         camera_m: (3,) frame 0's camera centre (world, m), from which the objects' own points
             (pixel index >= 0; fused points from later views have -1) were seen, for the fit
             weights (``surface_distances``); None: every face.
+        carve: the candidates are carved by it before the medoid is chosen
+            (``prepare_hypotheses``; ``CarvingConfig.before_choice``); None: not carved.
 
     Returns:
         One ObjectPosterior per object, in the order of ``objects``.
@@ -502,7 +506,7 @@ def collision_checker(
     generation_rng, sampler_rng = rng.spawn(2)
     prepared = prepare_hypotheses(
         objects, space, planes, hypotheses, constraints, generation_rng, time_budget_s,
-        object_spaces, progress,
+        object_spaces, progress, carve,
     )  # fmt: skip
     points = viewpoints = None
     if config.medoid_weights in ("fit", "outline-fit"):

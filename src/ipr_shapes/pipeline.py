@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import functools
 import hashlib
 import logging
 import math
@@ -40,12 +41,12 @@ import numpy as np
 
 from ipr_shapes.atomic import check_output_location
 from ipr_shapes.baselines import zheng2013
-from ipr_shapes.carving import carve_posteriors, surface_views
+from ipr_shapes.carving import carve_hypotheses, carve_posteriors, surface_views
 from ipr_shapes.collision_checker import collision_checker, object_viewpoints
 from ipr_shapes.config import Config, config_digest, config_to_toml
 from ipr_shapes.errors import IprError
 from ipr_shapes.fusion import fuse_views, tracked_free_spaces
-from ipr_shapes.hypotheses import prepare_hypotheses
+from ipr_shapes.hypotheses import Carve, prepare_hypotheses
 from ipr_shapes.inference import InferenceOutcome, default_workers, infer_shapes
 from ipr_shapes.likelihood import observed_frames
 from ipr_shapes.methods import DEFAULT_METHOD, Method, get_method
@@ -301,11 +302,13 @@ def infer_with_physics(
     seed: int,
     workers: int | None,
     progress: ProgressCallback | None = None,
+    carve: Carve | None = None,
 ) -> tuple[InferenceOutcome, float]:
     """Hypotheses with their constraints, then a physics-based method's posteriors; also the
     seconds the hypotheses took. ``remaining_s``: the run's time left (hypotheses take their
     share); ``deadline``: ``time.perf_counter()`` time inference stops at (None: its default
-    budget)."""
+    budget); ``carve``: the candidates are carved by it before the choice
+    (``CarvingConfig.before_choice``; None: not)."""
     started = time.perf_counter()
     prepared = prepare_hypotheses(
         fused.objects,
@@ -317,6 +320,7 @@ def infer_with_physics(
         remaining_s,
         fused.object_spaces,
         progress,
+        carve,
     )
     hypotheses_s = time.perf_counter() - started
     observed = observed_frames(
@@ -407,6 +411,12 @@ def run_pipeline(
     fused_at = time.perf_counter()
     remaining = budget.remaining_s(fused_at)
     rng = np.random.default_rng(seed)
+    # The views that carve the written shapes; with ``before_choice`` they carve the candidates
+    # before inference chooses among them too (``ipr_shapes.carving``).
+    views = carve = None
+    if config.carving.enabled and config.carving.before_choice:
+        views = surface_views(scene.frames, perception.objects, fused.motions, config.carving)
+        carve = functools.partial(carve_hypotheses, views=views)
     summary = RunSummary(fused_views=fused.fused_views)
     if chosen.name == "zheng2013":
         outcome = zheng2013(
@@ -445,6 +455,7 @@ def run_pipeline(
             progress=progress,
             hidden=hidden,
             camera_m=np.asarray(scene.frames[0].world_from_camera, float)[:3, 3],
+            carve=carve,
         )
         generation = float(sum(p.generation_s for p in posteriors))
         timing = StageTimings(
@@ -456,7 +467,7 @@ def run_pipeline(
     else:
         outcome, hypotheses_s = infer_with_physics(
             scene, perception, fused, chosen, config, rng, remaining, budget.deadline,
-            seed=seed, workers=workers, progress=progress,
+            seed=seed, workers=workers, progress=progress, carve=carve,
         )  # fmt: skip
         posteriors = outcome.posteriors
         summary = dataclasses.replace(summary, sampling=outcome.summary)
@@ -471,7 +482,8 @@ def run_pipeline(
     if config.carving.enabled and posteriors:
         report(progress, "carving", 0, 1)
         carving_started = time.perf_counter()
-        views = surface_views(scene.frames, perception.objects, fused.motions, config.carving)
+        if views is None:
+            views = surface_views(scene.frames, perception.objects, fused.motions, config.carving)
         posteriors = carve_posteriors(posteriors, views)
         timing = dataclasses.replace(timing, carving=time.perf_counter() - carving_started)
         report(progress, "carving", 1, 1)

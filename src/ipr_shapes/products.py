@@ -52,6 +52,10 @@ class ShapeHypothesis:
             (rotational symmetry about the support normal), "box", "cylinder", "sphere"
             (primitives fitted to the observed points), "superquadric" (a superquadric with
             fitted exponents) or "minimum" (the minimum shape).
+        carved: ``voxel_keys`` are its hull's voxels minus those the camera saw empty
+            (``ipr_shapes.carving.carve_hypotheses``: carved before the choice, so that the
+            medoid weighs the shapes that will be written); ``vertices`` and ``faces`` stay the
+            convex hull the physics and the constraints use.
     """
 
     object_id: int
@@ -73,6 +77,7 @@ class ShapeHypothesis:
     voxel_keys: np.ndarray | None = None
     voxel_pitch_m: float = voxels.DEFAULT_PITCH_M
     generator: str = "algorithm1"
+    carved: bool = False
 
     @functools.cached_property
     def bounds(self) -> np.ndarray:

@@ -28,10 +28,11 @@ from ipr_shapes.hypotheses.generate import (
     generate_hypotheses,
     minimum_shape,
 )
-from ipr_shapes.hypotheses.prepare import prepare_hypotheses
+from ipr_shapes.hypotheses.prepare import Carve, prepare_hypotheses
 from ipr_shapes.products import PreparedHypotheses, ShapeHypothesis, volume_spread
 
 __all__ = [
+    "Carve",
     "ConstraintConfig",
     "HypothesisConfig",
     "OverlapCache",

@@ -13,7 +13,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 from threadpoolctl import ThreadpoolController
@@ -38,6 +38,11 @@ from ipr_shapes.progress import ProgressCallback, report
 
 logger = logging.getLogger(__name__)
 
+#: ``carve(hypotheses, object id)``: the hypotheses with their voxels carved
+#: (``ipr_shapes.carving.carve_hypotheses`` bound to a run's views; a callable, so that this
+#: stage does not import the later carving stage).
+Carve = Callable[[Sequence[ShapeHypothesis], int], tuple[ShapeHypothesis, ...]]
+
 #: The BLAS libraries loaded with numpy and scipy, found once. The stage's linear algebra is
 #: small (SVDs of 100 x 8 Jacobians in the superquadric fits, 3 x 3 frames, hulls' products):
 #: OpenBLAS threads spread it over every core and spin for nothing, and the last bits of a fit
@@ -55,6 +60,7 @@ def prepare_hypotheses(
     time_budget_s: float | None = None,
     object_spaces: Mapping[int, SeenSpace] | None = None,
     progress: ProgressCallback | None = None,
+    carve: Carve | None = None,
 ) -> PreparedHypotheses:
     """Generate each object's hypotheses and minimum shape, keep the unary-feasible ones and
     measure the pairwise penetration depths between interacting objects' hypotheses.
@@ -67,7 +73,11 @@ def prepare_hypotheses(
     ``time_budget_s``: generation gets ``config.budget_share`` of it, split over the objects
     (capping their timeouts). ``rng`` defaults to one seeded from ``config.seed``; each object
     draws from its own child stream (``rng.spawn``). ``progress`` hears of each object done
-    (``ipr_shapes.progress``, stage ``hypotheses``).
+    (``ipr_shapes.progress``, stage ``hypotheses``). ``carve``: each object's hypotheses and
+    minimum shape are passed through it after the unary checks, ``carve(hypotheses, object
+    id)`` (``ipr_shapes.carving.carve_hypotheses`` with the run's views: their voxels lose what
+    the camera saw empty, their convex meshes stay), so that the choice among them weighs the
+    shapes that are written (``CarvingConfig.before_choice``); None: not carved.
 
     Returns the objects' hypotheses with their unary and pairwise constraints, in the order of
     ``objects``.
@@ -75,7 +85,7 @@ def prepare_hypotheses(
     with _BLAS.limit(limits=1, user_api="blas"):
         return _prepare(
             objects, space, planes, config, constraints, rng, time_budget_s, object_spaces,
-            progress,
+            progress, carve,
         )  # fmt: skip
 
 
@@ -89,6 +99,7 @@ def _prepare(
     time_budget_s: float | None,
     object_spaces: Mapping[int, SeenSpace] | None,
     progress: ProgressCallback | None,
+    carve: Carve | None = None,
 ) -> PreparedHypotheses:
     """``prepare_hypotheses`` on one BLAS thread (its doc)."""
     config = config or HypothesisConfig()
@@ -131,6 +142,10 @@ def _prepare(
             logger.warning("object %d: no feasible hypothesis; using its minimum shape", obj.id)
             hyps = (minima[obj.id],)
             feasible = [0]
+        if carve is not None:
+            # After the unary checks (they read the convex voxels generation measured).
+            minima[obj.id] = carve((minima[obj.id],), obj.id)[0]
+            hyps = (minima[obj.id],) if hyps[0].index == -1 else carve(hyps, obj.id)
         generated[obj.id], candidates[obj.id] = hyps, feasible
         seconds[obj.id] = time.perf_counter() - begin
         report(progress, "hypotheses", done, len(objects))
