@@ -9,7 +9,7 @@ import pytest
 
 from ipr_shapes.perception import kernels
 from ipr_shapes.perception.config import PerceptionConfig
-from ipr_shapes.perception.fragments import join_fragments, lies_on
+from ipr_shapes.perception.fragments import continues_surface, join_fragments, lies_on
 from ipr_shapes.perception.types import KnownPlane, Supervoxels
 
 K = np.array([[500.0, 0.0, 40.0], [0.0, 500.0, 30.0], [0.0, 0.0, 1.0]])
@@ -296,6 +296,85 @@ def test_a_piece_lies_on_its_body_only_within_its_footprint_and_not_below_it():
         depth = np.ones(labels.shape)
         got = lies_on(labels, 2, 1, points, depth, SUPPORT, PerceptionConfig())
         assert got == on, name
+
+
+def _surface_scene(
+    piece: str, body_noise_m: float = 3e-4, seed: int = 0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, KnownPlane]:
+    """A grey body curved as a cylinder of 10 cm radius about a vertical axis (depth 0.5 m at
+    its middle column, 1 mm per pixel), with a red 2 x 2 cm segment 2 at its right edge (the
+    body around it on three sides): ``"band"`` on the body's surface (a printed band),
+    ``"ball"`` bending towards the camera away from it from the contact at its left side (a
+    ball of 2 cm radius touching the body tangentially). White noise of ``body_noise_m`` on
+    both; a support whose inliers scatter by 2 mm about it (the sensor's error). Returns
+    (labels, depth, segments, rgb, support)."""
+    rng = np.random.default_rng(seed)
+    labels = np.zeros((HEIGHT, WIDTH), dtype=np.int32)
+    labels[10:50, 0:60] = 1
+    labels[20:40, 40:60] = 2
+    x_m = (np.arange(WIDTH) - K[0, 2]) * 1e-3
+    depth = np.tile(0.5 + 0.1 - np.sqrt(0.1**2 - np.minimum(x_m, 0.09) ** 2), (HEIGHT, 1))
+    if piece == "ball":
+        away = np.clip(x_m - x_m[40], 0.0, None)
+        depth[labels == 2] -= np.tile(away**2 / (2 * 0.02), (HEIGHT, 1))[labels == 2]
+    depth += rng.normal(0.0, body_noise_m, depth.shape)
+    depth[labels == 0] = 0.8
+    rgb = RGB.copy()
+    rgb[labels == 2] = (200, 60, 60)
+    plane = rng.uniform(-0.2, 0.2, (400, 3))
+    plane[:, 1] = rng.normal(0.0, 0.002, 400)
+    support = KnownPlane("support", np.array([0.0, -1.0, 0.0]), 0.0, plane)
+    return labels, depth, np.array([1, 2, 0, 0], dtype=np.int32), rgb, support
+
+
+def _surface_config(surface: bool = True) -> PerceptionConfig:
+    config = _config(area_m2=16e-4)
+    return dataclasses.replace(
+        config,
+        segmentation=dataclasses.replace(config.segmentation, fragment_surface=surface),
+    )
+
+
+def _segments_after(labels, depth, segments, rgb, support, config) -> int:
+    joined, _ = join_fragments(
+        labels,
+        segments,
+        _points(depth),
+        depth,
+        K,
+        rgb,
+        _supervoxels(labels),
+        config,
+        support=support,
+    )
+    return len(np.unique(joined[joined > 0]))
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_piece_of_another_colour_on_its_body_s_smooth_surface_joins(seed):
+    # A printed band on a curved body: the colours differ, the surface runs on.
+    scene = _surface_scene("band", seed=seed)
+    assert _segments_after(*scene, _surface_config()) == 1
+    assert continues_surface(scene[0], 2, 1, _points(scene[1]), scene[1], scene[4])
+    # The switch off, or no support to read the sensor's error from: the colour gate holds.
+    assert _segments_after(*scene, _surface_config(False)) == 2
+    assert _segments_after(*scene[:4], None, _surface_config()) == 2
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_piece_bending_away_from_its_neighbour_is_kept(seed):
+    # A ball touching the body tangentially: continuous at the contact, normals alike there,
+    # but its surface leaves the body's by d^2 / 2R.
+    scene = _surface_scene("ball", seed=seed)
+    assert _segments_after(*scene, _surface_config()) == 2
+    assert not continues_surface(scene[0], 2, 1, _points(scene[1]), scene[1], scene[4])
+
+
+def test_a_piece_on_a_body_rougher_than_the_sensor_is_kept():
+    # The body scatters about its quadric by more than the support about its plane (3 mm
+    # against 2 mm): no single smooth surface around the piece to continue.
+    scene = _surface_scene("band", body_noise_m=0.003)
+    assert _segments_after(*scene, _surface_config()) == 2
 
 
 EYE = np.zeros(3)

@@ -372,6 +372,12 @@ class SegmentationConfig:
             height): a cap, a lid or a printed band carried by its body, where a separate
             object wedged under another lies below it. Off: a golf ball resting on a box
             lies on it too (docs/experiments/2026-11-28-lab-frames-joins.md).
+        fragment_surface: ... or, whatever the colours, the small segment's points lie on the
+            smooth surface of its neighbour around it (``fragments.continues_surface``: a
+            quadric fitted to the neighbour's points in a window three times the piece's
+            size, their scatter about it at most the support's about its plane, the piece's
+            median distance from it at most twice that scatter): a printed band or a label's
+            sliver runs on with its body; an object touching a face tangentially bends away.
         fragment_specks: after the fragments, a segment smaller than one supervoxel seed's
             square (``supervoxels.seed_size_m`` squared: below the graph's resolution) joins
             the segment it touches (points within ``fragment_gap_m``, any normals; colours
@@ -489,6 +495,7 @@ class SegmentationConfig:
     fragment_colour: float = 0.04
     fragment_bend_deg: float = 45.0
     fragment_on_body: bool = False
+    fragment_surface: bool = True
     fragment_specks: bool = True
     thin_radius_m: float = 0.0125
     thin_rms_m: float = 0.003

@@ -10,8 +10,11 @@ its surface continues, when that continuation is at least ``segmentation.fragmen
 of its outline. Continuing means no step between neighbouring points and no crease between
 their supervoxels' normals (two objects packed together touch along a crease), and the two
 segments must have alike colours (docs/DESIGN_NOTES.md, "Fragments of curved surfaces joined by
-their outline"), unless the piece lies on its neighbour (``segmentation.fragment_on_body``,
-opt-in: a cap, a lid; an object resting on another lies on it too).
+their outline"), unless the piece's points lie on the smooth surface its neighbour makes around
+it, within the sensor's scatter (``segmentation.fragment_surface``, on: a printed band, a label's
+sliver, a cap's edge; a separate object touching the neighbour tangentially bends away from it),
+or the piece lies on its neighbour (``segmentation.fragment_on_body``, opt-in: a cap, a lid; an
+object resting on another lies on it too).
 
 Then specks (``segmentation.fragment_specks``): a segment smaller than one supervoxel seed's
 square that is mixed pixels at one segment's silhouette (seen edge-on, bordering only that
@@ -49,16 +52,17 @@ def join_fragments(
     Smallest first, a segment whose area (its pixels' footprints facing the camera, m^2) is
     under ``segmentation.fragment_area_m2`` joins the neighbouring segment with which it shares
     the most continuous pixel pairs (world points closer than ``fragment_gap_m``, their
-    supervoxels' normals within ``fragment_bend_deg``: the surface runs on), when those are
-    at least ``fragment_contact_share`` of its outline (its pixel pairs with any other label,
-    the support and background included, both with depth) and the two mean chromaticities are
-    within ``fragment_colour`` (objects packed tightly touch along much of a small one's
-    outline; their colours tell them apart), or the segment lies on it (``fragment_on_body``,
-    ``lies_on``). Then each speck (under ``supervoxels.seed_size_m`` squared) that is mixed
-    pixels at one segment's silhouette joins it (module doc). Joined segments add their areas and
-    outlines, so a fragment of a fragment can join through it. A joined fragment takes its
-    neighbour's label; every other label is kept (as ``containers.join_container_insides``
-    does), so objects elsewhere keep their ids.
+    supervoxels' normals within ``fragment_bend_deg``: the surface runs on), when those are at
+    least ``fragment_contact_share`` of its outline (its pixel pairs with any other label, the
+    support and background included, both with depth) and the two mean chromaticities are within
+    ``fragment_colour`` (objects packed tightly touch along much of a small one's outline; their
+    colours tell them apart), or the segment's points continue the neighbour's smooth surface
+    (``fragment_surface``, ``continues_surface``), or the segment lies on it
+    (``fragment_on_body``, ``lies_on``). Then each speck (under ``supervoxels.seed_size_m``
+    squared) that is mixed pixels at one segment's silhouette joins it (module doc). Joined
+    segments add their areas and outlines, so a fragment of a fragment can join through it. A
+    joined fragment takes its neighbour's label; every other label is kept (as
+    ``containers.join_container_insides`` does), so objects elsewhere keep their ids.
 
     Args:
         labels: (H, W) int segment labels, 0 = none; segment_of_supervoxel: (M,) the segment of
@@ -69,7 +73,8 @@ def join_fragments(
         borders: ``fragment_borders(labels, ...)`` if already computed (its arrays change in
             place when a fragment joins).
         support: the support plane (``fragment_on_body`` measures footprints and heights on
-            it; None: that rule is off); viewpoint: (3,) camera centre, world (m) (the specks
+            it, ``fragment_surface`` reads the sensor's scatter from its inliers; None: those
+            rules are off); viewpoint: (3,) camera centre, world (m) (the specks
             are judged edge-on from it; None: no specks).
 
     Returns:
@@ -125,6 +130,11 @@ def join_fragments(
                     seg.fragment_on_body
                     and support is not None
                     and lies_on(root[labels], piece, best, points, depth_m, support, config)
+                )
+                and not (
+                    seg.fragment_surface
+                    and support is not None
+                    and continues_surface(root[labels], piece, best, points, depth_m, support)
                 )
             ):
                 continue
@@ -217,6 +227,81 @@ def lies_on(
         footprints[0], footprints[1], config.containers
     )
 
+
+def continues_surface(
+    labels: np.ndarray,
+    piece: int,
+    body: int,
+    points: np.ndarray,
+    depth_m: np.ndarray,
+    support: KnownPlane,
+) -> bool:
+    """Whether segment ``piece`` lies on the smooth surface of segment ``body`` around it.
+
+    The body's points in a window around the piece (the piece's image bounding box grown by its
+    own width and height on every side) are fitted with a quadric height field in their own
+    principal frame; the surface is smooth there when their robust scatter about it (1.4826 x
+    the median absolute deviation) is at most the support's scatter about its plane (the
+    sensor's error over the frame: on a real sensor smooth over centimetres, so a local quadric
+    absorbs most of it), and the piece continues it when its points' median distance from the
+    fitted quadric, extrapolated, is at most twice that scatter (``_EXTRAPOLATED_SCATTER``). A
+    printed band, a cap's edge or a sliver of a label runs on with its body's surface; a
+    separate object touching a face tangentially (a ball wedged against a block, one resting on
+    a box) bends away from it by d^2 / 2R at a distance d from the contact
+    (docs/DESIGN_NOTES.md, "Fragments of curved surfaces joined by their outline").
+
+    ``labels`` (H, W) int; ``points`` (H, W, 3) world (m); ``depth_m`` (H, W), 0: no reading
+    (left out); ``support`` the support plane (its inlier points give the sensor's scatter).
+    """
+    height, width = labels.shape
+    rows, cols = np.nonzero((labels == piece) & (depth_m > 0))
+    if rows.size < _MIN_FIT_POINTS or len(support.points) < _MIN_FIT_POINTS:
+        return False
+    tall, wide = rows.max() - rows.min() + 1, cols.max() - cols.min() + 1
+    r0, r1 = max(0, rows.min() - tall), min(height, rows.max() + tall + 1)
+    c0, c1 = max(0, cols.min() - wide), min(width, cols.max() + wide + 1)
+    near_rows, near_cols = np.nonzero((labels[r0:r1, c0:c1] == body) & (depth_m[r0:r1, c0:c1] > 0))
+    if near_rows.size < _MIN_FIT_POINTS:
+        return False
+    step = -(-near_rows.size // _MAX_POINTS)
+    near = points[near_rows[::step] + r0, near_cols[::step] + c0].astype(np.float64)
+    step = -(-rows.size // _MAX_POINTS)
+    own = points[rows[::step], cols[::step]].astype(np.float64)
+    centre = near.mean(axis=0)
+    axes = np.linalg.svd(near - centre, full_matrices=False)[2]
+
+    def design(world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        u, v, w = ((world - centre) @ axes.T).T
+        return np.stack([np.ones_like(u), u, v, u * u, u * v, v * v], axis=1), w
+
+    matrix, height_near = design(near)
+    try:  # normal equations: a 6 x 6 solve (lstsq's SVD of the whole design cost ~10 ms)
+        coefficients = np.linalg.solve(matrix.T @ matrix, matrix.T @ height_near)
+    except np.linalg.LinAlgError:
+        return False  # the window's points do not span a surface (a line of pixels)
+    scatter = _robust_scale(height_near - matrix @ coefficients)
+    sensor = _robust_scale(support.signed_distance(np.asarray(support.points, np.float64)))
+    if scatter > sensor:
+        return False  # the body is no single smooth surface around the piece
+    matrix, height_own = design(own)
+    residual = np.median(np.abs(height_own - matrix @ coefficients))
+    return bool(residual <= _EXTRAPOLATED_SCATTER * scatter)
+
+
+def _robust_scale(residuals: np.ndarray) -> float:
+    """1.4826 x the median absolute deviation of (N,) residuals (a Gaussian's sigma)."""
+    return float(1.4826 * np.median(np.abs(residuals - np.median(residuals))))
+
+
+#: The piece's median distance from its neighbour's quadric, in units of the neighbour's own
+#: scatter about it, that still continues it: the piece lies beyond the fitted points, where the
+#: quadric's error grows (a Gaussian's median absolute value is 0.67 sigma; twice the scatter
+#: leaves room for that growth, while a ball of radius R tangent to the surface leaves it by
+#: d^2 / 2R: 2.5 mm at 1 cm from the contact for R = 2 cm).
+_EXTRAPOLATED_SCATTER = 2.0
+
+#: Fewest points for a quadric fit (six coefficients, with room for the robust scale).
+_MIN_FIT_POINTS = 30
 
 #: Points of a segment used for its footprint (an even subset), as ``contours._MAX_POINTS``.
 _MAX_POINTS = 2000
