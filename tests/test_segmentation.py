@@ -631,7 +631,6 @@ def test_a_gently_concave_surface_of_one_colour_stays_joined_only_when_asked():
     assert edge_weights(_two_patches(-20.0, teal), join)[0] == 1.0  # convex: strong anyway
 
 
-
 def _pieces_on_a_hub(count: int, growth: float, size: int = 5):
     """A connected graph of ``count`` cliques of ``size`` nodes (weights 1), clique c > 0 joined
     to clique 0 by one weak edge of weight 0.001 exp(growth c^2): the pieces' eigenvalues rise
