@@ -27,6 +27,7 @@ from ipr_shapes.perception.segmentation import (
     fill_label_holes,
     kmeans_labels,
     segment_frame,
+    spectral_clusters,
 )
 from ipr_shapes.perception.supervoxels import compute_supervoxels, organised_normals
 from ipr_shapes.perception.types import Supervoxels
@@ -628,3 +629,44 @@ def test_a_gently_concave_surface_of_one_colour_stays_joined_only_when_asked():
     assert edge_weights(_two_patches(20.0, teal_red), join)[0] < 1.0
     assert edge_weights(_two_patches(60.0, teal), join)[0] < 1.0
     assert edge_weights(_two_patches(-20.0, teal), join)[0] == 1.0  # convex: strong anyway
+
+
+def _pieces_on_a_hub(count: int, growth: float, size: int = 5):
+    """A connected graph of ``count`` cliques of ``size`` nodes (weights 1), clique c > 0 joined
+    to clique 0 by one weak edge of weight 0.001 exp(growth c^2): the pieces' eigenvalues rise
+    faster and faster, then jump to the cliques' own (``count`` objects by the eigengap)."""
+    from scipy.sparse import csr_matrix
+
+    rows, cols, weights = [], [], []
+    for c in range(count):
+        nodes = range(c * size, (c + 1) * size)
+        for a in nodes:
+            for b in nodes:
+                if a != b:
+                    rows.append(a), cols.append(b), weights.append(1.0)
+        if c > 0:
+            weak = 1e-3 * np.exp(growth * c * c)
+            rows += [0, c * size]
+            cols += [c * size, 0]
+            weights += [weak, weak]
+    n = count * size
+    return csr_matrix((weights, (rows, cols)), shape=(n, n))
+
+
+def test_more_objects_than_max_objects_are_all_found_when_the_spectrum_is_extended():
+    # 30 pieces in one component, max_objects 20: the largest ratio among the first 21
+    # eigenvalues is the last one (a truncation, not the gap, which lies at 30).
+    graph = _pieces_on_a_hub(30, growth=0.0075)
+    config = PerceptionConfig(segmentation=SegmentationConfig(max_objects=20))
+    assert len(np.unique(spectral_clusters(graph, config))) == 30
+    truncated = PerceptionConfig(
+        segmentation=SegmentationConfig(max_objects=20, eigengap_extend=False)
+    )
+    assert len(np.unique(spectral_clusters(graph, truncated))) == 20
+
+
+def test_the_spectrum_is_not_extended_below_max_objects():
+    # 12 pieces: the gap lies inside the first 21 eigenvalues, found without extension.
+    graph = _pieces_on_a_hub(12, growth=0.045)
+    config = PerceptionConfig(segmentation=SegmentationConfig(max_objects=20))
+    assert len(np.unique(spectral_clusters(graph, config))) == 12

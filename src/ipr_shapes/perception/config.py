@@ -341,6 +341,9 @@ class SegmentationConfig:
             near-zero eigenvalues do not make huge ratios.
         kmeans_restarts: k-means initialisations (seeded) on the spectral embedding.
         max_objects: upper bound on the number of objects per frame.
+        eigengap_extend: when the eigengap's largest ratio is the last of the ``max_objects``
+            + 1 eigenvalues computed, twice as many are computed and the gap searched again
+            (a truncated spectrum, not a gap), until it lies inside them.
         min_object_pixels: segments with fewer pixels (with depth) are merged into a neighbour
             or dropped (an object peeking over a drawer front can show ~50).
         min_object_height_m: segments whose 90th-percentile height above the support is lower
@@ -483,6 +486,7 @@ class SegmentationConfig:
     eigengap_floor: float = 0.001
     kmeans_restarts: int = 4
     max_objects: int = 20
+    eigengap_extend: bool = True
     min_object_pixels: int = 40
     min_object_height_m: float = 0.015
     label_fill_px: float = 3.0

@@ -673,6 +673,29 @@ def spectral_clusters(weights: csr_matrix, config: PerceptionConfig) -> np.ndarr
     degree = np.asarray(weights.sum(axis=1)).ravel()
     scale = 1.0 / np.sqrt(np.maximum(degree, 1e-12))
     wanted = min(config.segmentation.max_objects + 1, m - 1)
+    values, vectors = _smallest_eigenpairs(weights, scale, wanted, config)
+    k = choose_cluster_count(values, config)
+    # The eigengap is searched among the eigenvalues computed; when its largest ratio is the
+    # last one, the search stopped at the truncation, not at a gap (a bin of more pieces
+    # than ``max_objects``): it is repeated on twice as many eigenvalues, until the largest
+    # ratio lies inside the computed spectrum (``segmentation.eigengap_extend``).
+    while config.segmentation.eigengap_extend and k == wanted - 1 and wanted < m - 1:
+        wanted = min(2 * wanted, m - 1)
+        values, vectors = _smallest_eigenpairs(weights, scale, wanted, config)
+        k = choose_cluster_count(values, config)
+    if k <= 1:
+        return np.zeros(m, dtype=np.int64)
+    embedding = vectors[:, :k]
+    embedding = embedding / np.maximum(np.linalg.norm(embedding, axis=1, keepdims=True), 1e-12)
+    return kmeans_labels(embedding, k, config.segmentation.kmeans_restarts, config.seed)
+
+
+def _smallest_eigenpairs(
+    weights: csr_matrix, scale: np.ndarray, wanted: int, config: PerceptionConfig
+) -> tuple[np.ndarray, np.ndarray]:
+    """The ``wanted`` smallest eigenvalues (ascending) and their eigenvectors (m, wanted) of
+    L_sym = I - D^-1/2 W D^-1/2 of the (m, m) graph ``weights``, ``scale`` = D^-1/2 (m,)."""
+    m = weights.shape[0]
     if m <= config.segmentation.dense_eigen_limit:
         if weights.format == "csr" and weights.data.dtype == np.float64:
             # Compiled (``kernels``): the dense L_sym in one pass, the same arithmetic.
@@ -682,32 +705,25 @@ def spectral_clusters(weights: csr_matrix, config: PerceptionConfig) -> np.ndarr
         else:
             normalised = (weights.toarray() * scale[:, None]) * scale[None, :]
             laplacian = np.eye(m) - normalised
-        values, vectors = eigh(laplacian, subset_by_index=[0, wanted - 1])
-    else:
-        normalised = csr_matrix(weights.multiply(scale[:, None]).multiply(scale[None, :]))
-        laplacian = (identity(m, format="csr") - normalised).tocsc()
-        # Shift-invert: the smallest eigenvalues of L_sym are the largest of (L_sym - shift
-        # I)^-1, which ARPACK finds in a few iterations with one sparse LU; L_sym's smallest
-        # eigenvalue is 0, so a small negative shift keeps the factor regular. Several times
-        # faster than ARPACK on D^-1/2 W D^-1/2 (whose wanted eigenvalues crowd near 1) and
-        # than the dense solver on the bins' graphs (experiment 2026-11-26-perception-speed).
-        start = np.full(m, 1.0 / np.sqrt(m))
-        values, vectors = eigsh(
-            laplacian,
-            k=wanted,
-            sigma=_EIGEN_SHIFT,
-            which="LM",
-            v0=start,
-            tol=config.segmentation.eigen_tolerance,
-        )
-        order = np.argsort(values)
-        values, vectors = values[order], vectors[:, order]
-    k = choose_cluster_count(values, config)
-    if k <= 1:
-        return np.zeros(m, dtype=np.int64)
-    embedding = vectors[:, :k]
-    embedding = embedding / np.maximum(np.linalg.norm(embedding, axis=1, keepdims=True), 1e-12)
-    return kmeans_labels(embedding, k, config.segmentation.kmeans_restarts, config.seed)
+        return eigh(laplacian, subset_by_index=[0, wanted - 1])
+    normalised = csr_matrix(weights.multiply(scale[:, None]).multiply(scale[None, :]))
+    laplacian = (identity(m, format="csr") - normalised).tocsc()
+    # Shift-invert: the smallest eigenvalues of L_sym are the largest of (L_sym - shift
+    # I)^-1, which ARPACK finds in a few iterations with one sparse LU; L_sym's smallest
+    # eigenvalue is 0, so a small negative shift keeps the factor regular. Several times
+    # faster than ARPACK on D^-1/2 W D^-1/2 (whose wanted eigenvalues crowd near 1) and
+    # than the dense solver on the bins' graphs (experiment 2026-11-26-perception-speed).
+    start = np.full(m, 1.0 / np.sqrt(m))
+    values, vectors = eigsh(
+        laplacian,
+        k=wanted,
+        sigma=_EIGEN_SHIFT,
+        which="LM",
+        v0=start,
+        tol=config.segmentation.eigen_tolerance,
+    )
+    order = np.argsort(values)
+    return values[order], vectors[:, order]
 
 
 def kmeans_labels(
