@@ -474,6 +474,32 @@ def test_two_objects_pushed_into_one_segment_are_split_between_their_ids():
     assert kept[0][70, 170] not in np.unique(kept[1])
 
 
+def test_a_pushed_object_merged_into_a_segment_is_split_up_to_the_second_stage_gate():
+    # A blue and grey box is pushed 6 cm against a still yellow box and topples (it now shows
+    # mostly blue); the segmentation gives the two one segment, matched to the yellow box.
+    # The blue box, left over after both stages, costs 1.75 as the blue pixels of the segment
+    # (above the first stage's gate, 1.5), the yellow box 0 without them (1.21 with them).
+    red = {1: (10, 10, 15, 15, RED)}
+    first = _boxes({**red, 2: (60, 100, 30, 30, YELLOW), 3: (60, 190, 20, 20, (BLUE, GREY, 0.5))})
+    labels, points, rgb = _boxes(
+        {**red, 2: (60, 100, 30, 30, YELLOW), 3: (60, 130, 20, 20, (BLUE, GREY, 0.9))}
+    )
+    merged = np.where(labels == 3, 2, labels)
+    frames = [first, (merged, points, rgb)]
+    blue, yellow = (_track(frames)[0][r, c] for r, c in ((70, 195), (75, 110)))
+    # By default the part is gated at max_match_cost: the union keeps the yellow box's id.
+    default = _track(frames)
+    assert default[1][75, 135] == default[1][75, 110] == yellow
+    # With the switch the part may cost up to elimination_cost, as a leftover pairing would,
+    # and the split explains the frame better (0 + 1.75 < 1.21 + 1.5): blue gets its id back.
+    split = _track(frames, TrackingConfig(segment_split_leftover_gate=True))
+    assert split[1][75, 135] == blue and split[1][75, 110] == yellow
+    # ... but not when the split explains the frame worse than the part as a new object would
+    # (0 + 1.75 against 1.21 + 0.5 with a first-stage gate of 0.5).
+    strict = _track(frames, TrackingConfig(segment_split_leftover_gate=True, max_match_cost=0.5))
+    assert strict[1][75, 135] == strict[1][75, 110] == yellow
+
+
 def test_contact_counts_neighbouring_pixel_pairs_whose_surfaces_meet():
     labels, points, _ = _boxes(
         {1: (10, 10, 5, 4, RED), 2: (15, 10, 5, 4, RED), 3: (10, 14, 3, 3, RED)}

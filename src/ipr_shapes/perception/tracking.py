@@ -963,9 +963,14 @@ def split_merged_segments(
     least ``segment_split_min_px``) is the candidate part of ``b``. The split is made when that
     part costs at most ``max_match_cost`` as ``b`` and the rest costs less as ``a`` than the
     whole segment did, by more than ``segment_split_margin`` (a real union resembles neither
-    object as well as its parts do). The part becomes a new segment (``segments`` updated in
-    place) assigned to ``b``; of the candidate segments for one object, the one whose part costs
-    least. Returns the new segment -> object assignment.
+    object as well as its parts do). With ``segment_split_leftover_gate`` (opt-in) the part may
+    cost up to ``elimination_cost``, the gate of the second stage, which pairs leftover objects
+    with leftover segments (a pushed object costs more than ``max_match_cost`` to its earlier
+    view, and after both stages ``b`` is a leftover object), when the split also passes
+    ``split_merged_objects``' test: the rest's and the part's costs together are below the
+    whole's plus ``max_match_cost`` (the part as a new object). The part becomes a new segment
+    (``segments`` updated in place) assigned to ``b``; of the candidate segments for one
+    object, the one whose part costs least. Returns the new segment -> object assignment.
 
     Args:
         shape: (H, W) of the frame; points: (H, W, 3) world points (m); rgb: (H, W, 3) uint8;
@@ -1010,13 +1015,23 @@ def split_merged_segments(
                 continue
             part_features = _pixel_features(part, points, rgb, depth_m)
             part_cost = min(pair_cost(part_features, seen, config) for seen in known)
-            if part_cost > config.max_match_cost or (best is not None and part_cost >= best[0]):
+            if config.segment_split_leftover_gate:
+                gate = config.elimination_cost
+            else:
+                gate = config.max_match_cost
+            if part_cost > gate or (best is not None and part_cost >= best[0]):
                 continue
             rest = np.setdiff1d(segment.pixels, part, assume_unique=True)
             rest_features = _pixel_features(rest, points, rgb, depth_m)
             whole_cost = min(pair_cost(segment, seen, config) for seen in sightings[kept])
             rest_cost = min(pair_cost(rest_features, seen, config) for seen in sightings[kept])
             if rest_cost >= whole_cost - config.segment_split_margin:
+                continue
+            if (
+                config.segment_split_leftover_gate
+                and rest_cost + part_cost
+                >= whole_cost + config.max_match_cost - config.segment_split_margin
+            ):
                 continue
             if best is None or part_cost < best[0]:
                 best = (part_cost, segment_id, part_features, rest_features)
