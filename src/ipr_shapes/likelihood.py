@@ -60,7 +60,10 @@ class LikelihoodConfig:
             pushes' divergence (the replay diverges from the data by about 27 mm per moved
             object, issue 29): summed, the pushes' chaotic term counts once per later frame
             and outweighs the frame at rest, whose ranking of the candidates is the better
-            one (docs/experiments/2026-11-28-push-evidence.md).
+            one. Opt-in: it gained on the development sets at 30 and 150 samples and on
+            ycb-dynamic at 50 and 100, but lost on one development set at 50 and 75 samples
+            (near-tie flips either way)
+            (docs/experiments/2026-11-28-push-evidence.md).
     """
 
     CHECKS: ClassVar[Checks] = {
