@@ -1058,3 +1058,39 @@ def test_the_pipeline_hands_the_outline_and_points_to_the_collision_checker_base
     for o in objects:
         assert np.array_equal(on["points"][o.id], o.points)
         assert on["viewpoints"][o.id][0] == pytest.approx(camera)
+
+
+@pytest.mark.parametrize("pushed_frames", ["each", "trajectory"])
+def test_the_pushed_frames_as_one_trajectory_weigh_as_much_as_the_frame_at_rest(pushed_frames):
+    from ipr_shapes.inference import marginals, medoid_weights
+
+    # Frame 0 at rest, then two frames after two pushes. Candidate 0 fits the frame at rest
+    # better by 0.3 of depth error norm; candidate 1 fits each pushed frame better by 0.2, the
+    # same divergence seen twice. Summed, the pushes outweigh the rest (0.4 > 0.3); as one
+    # trajectory (their mean, 0.2) they do not.
+    base = _fabricated_problem(1)
+    frame, labels = _frame(0, LOW_EYE)
+    observed = observed_frames(
+        [dataclasses.replace(frame, index=i) for i in range(3)], [labels] * 3, 4
+    )
+    config = dataclasses.replace(
+        base.config, likelihood=LikelihoodConfig(pushed_frames=pushed_frames)
+    )
+    pushes = tuple(dataclasses.replace(BEHIND, before_frame=i - 1, after_frame=i) for i in (1, 2))
+    problem = dataclasses.replace(
+        base, observed=observed, pushes=pushes, pusher=Pusher(), config=config
+    )
+    from ipr_shapes.inference import SampleResult
+
+    def result(index, choice, norms):
+        norms = np.asarray(norms, float)[None, :, None]
+        return SampleResult(index, (choice,), 0.0, -1.0, 0.0, 0.0, 0, norms, (0.0,))
+
+    results = [result(0, 0, [0.1, 0.5, 0.5]), result(1, 1, [0.4, 0.3, 0.3])]
+    scale = problem.config.likelihood.alpha_per_m * problem.observed.decimation
+    margin = 0.3 - (0.4 if pushed_frames == "each" else 0.2)
+    weights = medoid_weights(results, problem)[0]
+    assert weights[0] / weights[1] == pytest.approx(np.exp(scale * margin))
+    assert marginals(results, problem)[0][0] / marginals(results, problem)[0][1] == pytest.approx(
+        np.exp(scale * margin)
+    )

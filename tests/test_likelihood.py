@@ -88,3 +88,20 @@ def test_pixels_given_to_the_wrong_object_cost_nothing_when_the_geometry_explain
     ignore = np.zeros_like(labels, bool)
     norms = depth_error_norms(depth, labels, ignore, predicted, predicted_ids, [1, 2], CONFIG)
     assert norms == pytest.approx([0.0, 0.0])
+
+
+def test_the_pushed_frames_count_as_one_trajectory_when_asked():
+    from ipr_shapes.likelihood import frame_weights
+
+    frames, pushed = (0, 1, 2, 3), {1, 2, 3}
+    each = LikelihoodConfig(pushed_frames="each")
+    trajectory = LikelihoodConfig(pushed_frames="trajectory")
+    assert frame_weights(frames, pushed, each) == pytest.approx([1, 1, 1, 1])
+    # The frames before the first push keep their weight; the pushed ones share one.
+    assert frame_weights(frames, pushed, trajectory) == pytest.approx([1, 1 / 3, 1 / 3, 1 / 3])
+    assert frame_weights((0, 1, 2), {2}, trajectory) == pytest.approx([1, 1, 1])
+    assert frame_weights(frames, set(), trajectory) == pytest.approx([1, 1, 1, 1])
+    norms = np.array([[1.0, 2.0], [3.0, 0.0], [0.0, 3.0], [3.0, 3.0]])
+    weights = frame_weights(frames, pushed, trajectory)
+    assert log_likelihood(norms, 2, trajectory, weights) == pytest.approx(-0.2 * 2 * (3 + 4))
+    assert log_likelihood(norms, 2, each) == pytest.approx(-0.2 * 2 * 15)

@@ -24,13 +24,17 @@ def own_log_likelihoods(
     result: SampleResult, problem: InferenceProblem, *, rest: bool = True
 ) -> np.ndarray | None:
     """(F, n) each object's own term of Eq. 2 (log) per friction of ``result``: -alpha *
-    decimation * its norms summed over the frames, plus (``rest``) its chosen candidate's rest
-    term (``rest_log_likelihoods``, the same under every friction); -inf under a friction
-    whose simulation failed; None when it failed under every friction."""
+    decimation * its norms summed over the frames (each times its ``frame_weights``), plus
+    (``rest``) its chosen candidate's rest term (``rest_log_likelihoods``, the same under
+    every friction); -inf under a friction whose simulation failed; None when it failed under
+    every friction."""
     if result.norms is None:
         return None
     scale = problem.config.likelihood.alpha_per_m * problem.observed.decimation
-    sums = np.asarray(result.norms, float).sum(axis=1)
+    norms = np.asarray(result.norms, float)
+    if problem.config.likelihood.pushed_frames != "each":
+        norms = norms * problem.frame_weights()[None, : norms.shape[1], None]
+    sums = norms.sum(axis=1)
     failed = ~np.isfinite(sums).all(axis=1)
     own = -scale * np.where(np.isfinite(sums), sums, 0.0)
     if rest:

@@ -11,7 +11,7 @@ import numpy as np
 
 from ipr_shapes.collision_checker import fit_weights, surface_cells, surface_distances
 from ipr_shapes.inference.config import InferenceConfig
-from ipr_shapes.likelihood import ObservedFrames
+from ipr_shapes.likelihood import ObservedFrames, frame_weights
 from ipr_shapes.methods import Method
 from ipr_shapes.perception.types import KnownPlane
 from ipr_shapes.products import ObjectPosterior, PreparedHypotheses, ShapeHypothesis
@@ -60,6 +60,15 @@ class InferenceProblem:
     seed: int
     frictions: tuple[float, ...] = ()
     surface_log_likelihood: tuple[np.ndarray, ...] = ()
+
+    def frame_weights(self) -> np.ndarray:
+        """(T,) each observed frame's weight in Eq. 2's sum (``likelihood.frame_weights``,
+        ``LikelihoodConfig.pushed_frames``) given the pushes replayed."""
+        return frame_weights(
+            self.observed.frames,
+            {push.after_frame for push in self.pushes},
+            self.config.likelihood,
+        )
 
     def surface_term(self, k: int) -> np.ndarray:
         """(m_k,) object k's ``surface_log_likelihood`` (zeros when there is none)."""

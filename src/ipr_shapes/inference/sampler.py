@@ -607,8 +607,9 @@ class Sampler:
         if norms is None:
             return -math.inf
         problem = self.problem
+        weights = problem.frame_weights()
         per_friction = [
-            log_likelihood(n, problem.observed.decimation, problem.config.likelihood)
+            log_likelihood(n, problem.observed.decimation, problem.config.likelihood, weights)
             if np.isfinite(n).all()
             else -math.inf
             for n in norms
