@@ -339,8 +339,8 @@ def main(argv: list[str] | None = None) -> int:
         choices=("leave-one-out", "nearest"),
         default=None,
         help="what a candidate's own weight adds to its medoid score where the weights are "
-        "unequal (default: the config's, nearest: its weight times its IoU with its nearest "
-        "other candidate; leave-one-out: nothing, before 2026-11-28)",
+        "unequal (default: the config's, leave-one-out: nothing; nearest: its weight times its "
+        "IoU with its nearest other candidate, opt-in)",
     )
     args = parser.parse_args(argv)
     from ipr_shapes.config import Config

@@ -608,12 +608,12 @@ def test_nearest_medoid_still_does_not_let_a_lone_candidate_win_by_its_own_vote(
 
 
 def test_the_medoid_self_setting_chooses_the_unequal_weights_medoid():
-    """The settings "nearest" (the default) and "leave-one-out" route the unequal-weights medoid to
+    """The settings "nearest" (opt-in) and "leave-one-out" (the default) route the unequal-weights medoid to
     ``nearest_medoid`` and ``posterior_medoid``'s leave-one-out (cubes where they differ); with
     equal weights ("candidate") both keep the plain medoid."""
     from ipr_shapes.collision_checker import family_weights, nearest_medoid
 
-    assert CollisionCheckerConfig().medoid_self == "nearest"
+    assert CollisionCheckerConfig().medoid_self == "leave-one-out"
     sizes = [(0.050, "revolution"), (0.0525, "cylinder"), (0.070, "sphere")]
     prepared = _nested_cubes([*sizes, (0.080, "superquadric"), (0.060, "algorithm1")])
     hypotheses = prepared.generated[1]

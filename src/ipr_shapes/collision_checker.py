@@ -72,11 +72,13 @@ Constraints(X), and each object's output is read from its marginal over its own 
   leave-one-out, so that a heavy lone candidate does not win by matching itself), which also
   makes the choice blind to the candidate's own weight: it went to light candidates lying
   between heavier clusters (a ball's revolution of weight 0.03 and IoU 0.72 over its sphere of
-  0.11 and 0.98). "nearest" (the default since 2026-11-28, ``nearest_medoid``) credits each
-  candidate its own weight times its IoU with its nearest other candidate: the truth drawn at
-  a candidate is a shape like it, as close as the sample's nearest draw. It gains or holds on
-  every set; it does not stop a generator option's new, better-fitting candidates from moving
-  the medoid (docs/experiments/2026-11-28-medoid-self-vote.md).
+  0.11 and 0.98). "nearest" (opt-in, ``nearest_medoid``) credits each candidate its own
+  weight times its IoU with its nearest other candidate: the truth drawn at a candidate is a
+  shape like it, as close as the sample's nearest draw. It gains on six sets in the benchmark
+  and loses dev 9200 (0.656 -> 0.648: an object with two candidates, which both rules score by
+  their mutual IoU, a tie that floating-point rounding breaks), and it does not stop a
+  generator option's new, better-fitting candidates from moving the medoid
+  (docs/experiments/2026-11-28-medoid-self-vote.md).
 """
 
 from __future__ import annotations
@@ -137,10 +139,10 @@ class CollisionCheckerConfig:
             (an object without it, as in the physics methods' start, "candidate"). The
             written probabilities are the marginals either way (module doc).
         medoid_self: where the weights are unequal (``medoid_base_weights``' leave-one-out
-            objects), what a candidate's own weight adds to its score: "nearest" (default),
-            its weight times its IoU with its nearest other candidate (``nearest_medoid``);
-            "leave-one-out", nothing (``posterior_medoid``'s leave-one-out, before
-            2026-11-28). Equal weights: every candidate's own vote counts once, as before.
+            objects), what a candidate's own weight adds to its score: "leave-one-out"
+            (default), nothing (``posterior_medoid``'s leave-one-out); "nearest" (opt-in), its
+            weight times its IoU with its nearest other candidate (``nearest_medoid``). Equal
+            weights: every candidate's own vote counts once either way.
     """
 
     CHECKS: ClassVar[Checks] = {
@@ -159,7 +161,7 @@ class CollisionCheckerConfig:
     gibbs_burn_in: int = 30
     relax_steps: int = 3
     medoid_weights: str = "outline-fit"
-    medoid_self: str = "nearest"
+    medoid_self: str = "leave-one-out"
 
     def __post_init__(self) -> None:
         check_fields(self)
