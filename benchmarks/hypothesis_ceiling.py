@@ -7,6 +7,7 @@ hypotheses``), or on its own for a subset::
         [--perception-cache DIR] [--algorithm1-only] [--neighbour-surfaces] [--superquadric N]
         [--fitted-axis] [--unbounded-view] [--unbounded-support] [--medoid-weights W]
         [--shrink-by-scatter] [--revolution-radius wall_mean] [--carve-before-choice]
+        [--medoid-self nearest]
 
 Per scene: frame 0 is perceived, the hypotheses are prepared (``prepare_hypotheses``, the
 default configuration, seed 0, as the Collision Checker's run draws them) and the Collision
@@ -371,6 +372,14 @@ def main(argv: list[str] | None = None) -> int:
         help="the candidates carved by frame 0's free space before the Collision Checker's "
         "medoid is chosen (CarvingConfig.before_choice; opt-in)",
     )
+    parser.add_argument(
+        "--medoid-self",
+        choices=("leave-one-out", "nearest"),
+        default=None,
+        help="what a candidate's own weight adds to its medoid score where the weights are "
+        "unequal (default: the config's, leave-one-out: nothing; nearest: its weight times its "
+        "IoU with its nearest other candidate, opt-in)",
+    )
     args = parser.parse_args(argv)
     from ipr_shapes.config import Config
     from ipr_shapes.suites import suite_scenes
@@ -394,13 +403,14 @@ def main(argv: list[str] | None = None) -> int:
     if args.unbounded_support:
         hypotheses = dataclasses.replace(hypotheses, outside_support_ratio=None)
     config = dataclasses.replace(Config(), hypotheses=hypotheses)
-    if args.medoid_weights is not None:
-        config = dataclasses.replace(
-            config,
-            collision_checker=dataclasses.replace(
-                config.collision_checker, medoid_weights=args.medoid_weights
-            ),
-        )
+    # The Collision Checker's medoid settings (None: the flag was not given).
+    checker = {"medoid_weights": args.medoid_weights, "medoid_self": args.medoid_self}
+    config = dataclasses.replace(
+        config,
+        collision_checker=dataclasses.replace(
+            config.collision_checker, **{k: v for k, v in checker.items() if v is not None}
+        ),
+    )
     if args.carve_before_choice:
         config = dataclasses.replace(
             config, carving=dataclasses.replace(config.carving, before_choice=True)

@@ -509,6 +509,15 @@ MUTANTS: tuple[Mutant, ...] = (
         _t("collision_checker"),
     ),
     Mutant(
+        "nearest-medoid-leaves-its-own-vote-out",
+        "collision_checker",
+        "the unequal-weights medoid scores each candidate against the others only, blind to "
+        "its own weight, instead of crediting it as far as its nearest other candidate matches",
+        "expected = iou @ w - w + w * others.max(axis=1)",
+        "expected = (iou @ w - w) / np.maximum(w.sum() - w, 1e-300)",
+        _t("collision_checker"),
+    ),
+    Mutant(
         "family-medoid-counts-its-own-vote",
         "collision_checker",
         "the family-weighted medoid scores each candidate against itself too, so a family's "

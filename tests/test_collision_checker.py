@@ -608,3 +608,62 @@ def test_the_pipeline_hands_the_outline_and_camera_to_the_collision_checker(
     ids = sorted(o.id for o in result.perception.objects[0])
     assert ids and sorted(call["hidden"]) == ids
     assert all(0.0 <= h <= 1.0 for h in call["hidden"].values())
+
+
+def test_nearest_medoid_credits_a_candidate_its_own_weight_as_far_as_its_nearest_draw_matches():
+    """Three 5-5.5 cm near-copies (two revolutions and a cylinder, 0.12 each) and a 7 and an
+    8 cm cube (a well-fitting sphere family, 0.40 and 0.24). Left out of its own score, the 7 cm
+    cube gets no credit for its 0.40 while the near-copies vote for each other at IoU 0.75-1,
+    and a near-copy wins; with its own weight times its IoU with its nearest other candidate
+    (0.67, the 8 cm cube) the 7 cm cube wins, as it does with its whole own weight."""
+    from ipr_shapes.collision_checker import nearest_medoid
+
+    sizes = [(0.050, "revolution"), (0.0525, "revolution"), (0.055, "cylinder")]
+    prepared = _nested_cubes([*sizes, (0.070, "sphere"), (0.080, "sphere")])
+    hypotheses = prepared.generated[1]
+    weights = np.array([0.12, 0.12, 0.12, 0.40, 0.24])
+    # The test means something: left out, a near-copy wins.
+    assert posterior_medoid(hypotheses, weights, leave_one_out=True) == 2
+    assert posterior_medoid(hypotheses, weights) == 3
+    assert nearest_medoid(hypotheses, weights) == 3
+    # Zero weights are not candidates; a single candidate is the choice.
+    assert nearest_medoid(hypotheses, np.array([0.0, 0.0, 0.0, 0.0, 1.0])) == 4
+    assert nearest_medoid(hypotheses, np.array([0.5, 0.0, 0.0, 0.0, 0.5])) in (0, 4)
+
+
+def test_nearest_medoid_still_does_not_let_a_lone_candidate_win_by_its_own_vote():
+    """The lone 4.2 cm symmetry cube with its family's half against eight 5.0-6.05 cm
+    Algorithm 1 cubes: its nearest other candidate matches it at IoU 0.59, so its own half
+    counts 0.29, not 0.5, and an Algorithm 1 cube stays the choice (the whole own vote would
+    take the lone cube)."""
+    from ipr_shapes.collision_checker import family_weights, nearest_medoid
+
+    sizes = [(0.050 + 0.0015 * k, "algorithm1") for k in range(8)]
+    prepared = _nested_cubes([*sizes, (0.042, "symmetry")])
+    hypotheses = prepared.generated[1]
+    weights = family_weights([h.generator for h in hypotheses], np.ones(9, bool))
+    assert posterior_medoid(hypotheses, weights) == 8
+    assert hypotheses[nearest_medoid(hypotheses, weights)].generator == "algorithm1"
+
+
+def test_the_medoid_self_setting_chooses_the_unequal_weights_medoid():
+    """The settings "nearest" (opt-in) and "leave-one-out" (the default) route the unequal-weights medoid to
+    ``nearest_medoid`` and ``posterior_medoid``'s leave-one-out (cubes where they differ); with
+    equal weights ("candidate") both keep the plain medoid."""
+    from ipr_shapes.collision_checker import family_weights, nearest_medoid
+
+    assert CollisionCheckerConfig().medoid_self == "leave-one-out"
+    sizes = [(0.050, "revolution"), (0.0525, "cylinder"), (0.070, "sphere")]
+    prepared = _nested_cubes([*sizes, (0.080, "superquadric"), (0.060, "algorithm1")])
+    hypotheses = prepared.generated[1]
+    weights = family_weights([h.generator for h in hypotheses], np.ones(5, bool))
+    loo = posterior_medoid(hypotheses, weights, leave_one_out=True)
+    near = nearest_medoid(hypotheses, weights)
+    assert loo != near  # the test means something
+    for setting, expected in (("nearest", near), ("leave-one-out", loo)):
+        config = CollisionCheckerConfig(medoid_weights="family", medoid_self=setting)
+        (posterior,) = uniform_posteriors(prepared, config)
+        assert posterior.best == expected
+        config = CollisionCheckerConfig(medoid_weights="candidate", medoid_self=setting)
+        (posterior,) = uniform_posteriors(prepared, config)
+        assert posterior.best == posterior_medoid(hypotheses, np.ones(5))
