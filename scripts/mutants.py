@@ -869,6 +869,25 @@ MUTANTS: tuple[Mutant, ...] = (
         "for r, c in zip(rows, cols, strict=True) if True",
         _t("metrics"),
     ),
+    # ---------------------------------------------------------------- perception
+    Mutant(
+        "surface-continuation-never-joins",
+        "perception",
+        "a small piece of another colour never counts as continuing its neighbour's smooth "
+        "surface (the colour gate alone decides, as before 2026-11-28)",
+        "return bool(residual <= _EXTRAPOLATED_SCATTER * scatter)",
+        "return False",
+        _t("fragments"),
+    ),
+    Mutant(
+        "eigengap-never-extended",
+        "perception",
+        "the number of clusters is read from the first max_objects + 1 eigenvalues only, even "
+        "when their largest gap is the last one",
+        "while config.segmentation.eigengap_extend and k == wanted - 1 and wanted < m - 1:",
+        "while False:",
+        _t("segmentation"),
+    ),
 )
 
 
