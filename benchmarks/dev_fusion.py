@@ -46,11 +46,11 @@ def measure_scene(path: Path) -> dict:
     """Summed matched IoU without and with fusion, visible truths, fused objects, seconds."""
     from ipr_shapes import voxels
     from ipr_shapes.collision_checker import collision_checker
+    from ipr_shapes.config import Config
     from ipr_shapes.fusion import FusionConfig, fuse_views, tracked_free_spaces
     from ipr_shapes.ground_truth import frame0_ground_truth, visible_pixel_counts
     from ipr_shapes.perception import perceive_scene
-    from ipr_shapes.perception.config import SegmentationConfig
-    from ipr_shapes.perception.outline import hidden_outline_fractions
+    from ipr_shapes.pipeline import checker_hidden_fractions
     from ipr_shapes.scene import load_scene
 
     scene = load_scene(path)
@@ -80,11 +80,7 @@ def measure_scene(path: Path) -> dict:
     )
     # The default medoid weights read the hidden outline and the camera, as ``ipr-shapes infer``
     # hands them over (without them the Collision Checker measures "candidate" weights).
-    hidden = hidden_outline_fractions(
-        scene.frames[0].depth_m,
-        perception.objects[0],
-        SegmentationConfig().contour_gap_m,
-    )
+    hidden = checker_hidden_fractions(scene, perception, Config())
     scores = {}
     for name, objects, spaces in _variants(
         perception.objects[0], fused.objects, tracked, with_pushes

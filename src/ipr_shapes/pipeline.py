@@ -289,6 +289,21 @@ def fuse(
     return FusedObjects(fused.objects, object_spaces, fused.motions, fused_views)
 
 
+def checker_hidden_fractions(
+    scene: Scene, perception: Perception, config: Config
+) -> dict[int, float] | None:
+    """Each frame-0 object's hidden outline fraction (``perception.outline``), which the
+    Collision Checker's medoid weights read when they are "outline" or "outline-fit"; None for
+    weights that do not read it."""
+    if config.collision_checker.medoid_weights not in ("outline", "outline-fit"):
+        return None
+    return hidden_outline_fractions(
+        scene.frames[0].depth_m,
+        perception.objects[0],
+        config.perception.segmentation.contour_gap_m,
+    )
+
+
 def infer_with_physics(
     scene: Scene,
     perception: Perception,
@@ -329,13 +344,7 @@ def infer_with_physics(
     # The Collision Checker's medoid weights as the physics medoid's base measure
     # (``InferenceConfig.medoid_base``) read the frame-0 outline and the objects' points.
     judged = config.inference.medoid_base == "collision-checker"
-    hidden = None
-    if judged and config.collision_checker.medoid_weights in ("outline", "outline-fit"):
-        hidden = hidden_outline_fractions(
-            scene.frames[0].depth_m,
-            perception.objects[0],
-            config.perception.segmentation.contour_gap_m,
-        )
+    hidden = checker_hidden_fractions(scene, perception, config) if judged else None
     camera = np.asarray(scene.frames[0].world_from_camera, float)[:3, 3]
     try:
         outcome = infer_shapes(
@@ -435,13 +444,6 @@ def run_pipeline(
             ),
         )
     elif not chosen.physics:
-        hidden = None
-        if config.collision_checker.medoid_weights in ("outline", "outline-fit"):
-            hidden = hidden_outline_fractions(
-                scene.frames[0].depth_m,
-                perception.objects[0],
-                config.perception.segmentation.contour_gap_m,
-            )
         posteriors = collision_checker(
             fused.objects,
             perception.free_space[0],
@@ -453,7 +455,7 @@ def run_pipeline(
             hypotheses=config.hypotheses,
             constraints=config.constraints,
             progress=progress,
-            hidden=hidden,
+            hidden=checker_hidden_fractions(scene, perception, config),
             camera_m=np.asarray(scene.frames[0].world_from_camera, float)[:3, 3],
             carve=carve,
         )
